@@ -1,0 +1,86 @@
+//! Atomic file output: write a temporary file beside the target, sync it, then rename it into place.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use super::LoadError;
+
+fn temp_path(target: &Path) -> PathBuf {
+    let name = target
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    target.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+}
+
+/// Writes a file atomically through `fill`, which receives a buffered writer.
+///
+/// The target appears complete or not at all. Unless `overwrite` is true an existing
+/// target is an error and is left untouched.
+///
+/// # Errors
+/// [`LoadError::Io`] naming the target when it exists (and `overwrite` is false), or when
+/// any write fails (a full disk, for example); the temporary file is removed.
+pub fn write_atomic_with(
+    target: &Path,
+    overwrite: bool,
+    fill: impl FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+) -> Result<(), LoadError> {
+    if !overwrite && target.exists() {
+        return Err(LoadError::Io {
+            problem: "refusing to overwrite an existing file (use --force)".into(),
+            path: target.to_path_buf(),
+        });
+    }
+    let tmp = temp_path(target);
+    let result = (|| -> std::io::Result<()> {
+        let file = File::create(&tmp)?;
+        let mut w = BufWriter::new(file);
+        fill(&mut w)?;
+        w.flush()?;
+        let file = w
+            .into_inner()
+            .map_err(std::io::IntoInnerError::into_error)?;
+        file.sync_all()?;
+        drop(file);
+        std::fs::rename(&tmp, target)
+    })();
+    result.map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        LoadError::Io {
+            problem: format!("cannot write file: {e}"),
+            path: target.to_path_buf(),
+        }
+    })
+}
+
+/// Writes `bytes` to `target` atomically (see [`write_atomic_with`]).
+///
+/// # Errors
+/// As [`write_atomic_with`].
+pub fn write_atomic(target: &Path, bytes: &[u8], overwrite: bool) -> Result<(), LoadError> {
+    write_atomic_with(target, overwrite, |w| w.write_all(bytes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refuses_to_overwrite_and_leaves_no_temp_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.txt");
+        write_atomic(&p, b"one", false).unwrap();
+        let err = write_atomic(&p, b"two", false).unwrap_err();
+        assert!(err.to_string().contains("a.txt"));
+        assert_eq!(std::fs::read(&p).unwrap(), b"one");
+        write_atomic(&p, b"two", true).unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"two");
+        let failed = write_atomic_with(&dir.path().join("b.txt"), false, |_| {
+            Err(std::io::Error::other("disk full"))
+        });
+        assert!(failed.unwrap_err().to_string().contains("disk full"));
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(names.len(), 1, "only a.txt remains");
+    }
+}

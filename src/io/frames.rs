@@ -1,0 +1,150 @@
+//! Frame loading: PNG or TIFF, 8 or 16 bit, grey or colour, converted to grey `f32` in `[0, 1]`.
+
+use std::path::Path;
+
+use image::{DynamicImage, ImageBuffer, Luma};
+use rayon::prelude::*;
+
+use super::{LoadError, atomic::write_atomic_with, scan::GroupEntry};
+use crate::image::Image;
+
+/// Loads one frame as grey in `[0, 1]` (Rec. 709 luma for colour frames).
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming the file when it is missing or cannot be decoded.
+pub fn load_frame(path: &Path) -> Result<Image, LoadError> {
+    let dynimg = image::ImageReader::open(path)
+        .map_err(|e| LoadError::BadFrame {
+            problem: e.to_string(),
+            path: path.to_path_buf(),
+        })?
+        .with_guessed_format()
+        .map_err(|e| LoadError::BadFrame {
+            problem: e.to_string(),
+            path: path.to_path_buf(),
+        })?
+        .decode()
+        .map_err(|e| LoadError::BadFrame {
+            problem: e.to_string(),
+            path: path.to_path_buf(),
+        })?;
+    Ok(grey_from_dynamic(&dynimg))
+}
+
+fn grey_from_dynamic(img: &DynamicImage) -> Image {
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let data: Vec<f32> = match img {
+        DynamicImage::ImageLuma8(b) => b.as_raw().iter().map(|&v| f32::from(v) / 255.0).collect(),
+        DynamicImage::ImageLuma16(b) => {
+            b.as_raw().iter().map(|&v| f32::from(v) / 65535.0).collect()
+        }
+        other => {
+            let rgb = other.to_rgb32f();
+            rgb.pixels()
+                .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
+                .collect()
+        }
+    };
+    Image {
+        width: w,
+        height: h,
+        data,
+    }
+}
+
+/// Loads every frame of a group in parallel and checks they share one size.
+///
+/// # Errors
+/// The first unreadable frame, or the first frame whose size differs from the group's first.
+pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
+    let frames: Vec<Image> = group
+        .frames
+        .par_iter()
+        .map(|p| load_frame(p))
+        .collect::<Result<_, _>>()?;
+    if let Some(first) = frames.first() {
+        for (img, path) in frames.iter().zip(&group.frames) {
+            if !img.same_size(first) {
+                return Err(LoadError::MixedSizes {
+                    found_w: img.width,
+                    found_h: img.height,
+                    want_w: first.width,
+                    want_h: first.height,
+                    path: path.clone(),
+                });
+            }
+        }
+    }
+    Ok(frames)
+}
+
+/// Saves a grey image (values in `[0, 1]`, clamped) as an 8- or 16-bit PNG, atomically.
+///
+/// # Errors
+/// [`LoadError::Io`] when the file exists and `overwrite` is false, or the write fails.
+pub fn save_grey_png(
+    img: &Image,
+    path: &Path,
+    sixteen_bit: bool,
+    overwrite: bool,
+) -> Result<(), LoadError> {
+    let (w, h) = (img.width as u32, img.height as u32);
+    let encoded: DynamicImage = if sixteen_bit {
+        let raw: Vec<u16> = img
+            .data
+            .iter()
+            .map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16)
+            .collect();
+        let Some(buf) = ImageBuffer::<Luma<u16>, _>::from_raw(w, h, raw) else {
+            return Err(LoadError::Io {
+                problem: "image size does not match its data".into(),
+                path: path.to_path_buf(),
+            });
+        };
+        DynamicImage::ImageLuma16(buf)
+    } else {
+        let raw: Vec<u8> = img
+            .data
+            .iter()
+            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect();
+        let Some(buf) = ImageBuffer::<Luma<u8>, _>::from_raw(w, h, raw) else {
+            return Err(LoadError::Io {
+                problem: "image size does not match its data".into(),
+                path: path.to_path_buf(),
+            });
+        };
+        DynamicImage::ImageLuma8(buf)
+    };
+    write_atomic_with(path, overwrite, |wr| {
+        encoded
+            .write_to(wr, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sixteen_bit_png_round_trips_exactly() {
+        let dir = tempfile::tempdir().unwrap();
+        let img = Image::from_fn(5, 3, |x, y| (x * 3 + y) as f32 / 20.0);
+        let p = dir.path().join("f.png");
+        save_grey_png(&img, &p, true, false).unwrap();
+        let back = load_frame(&p).unwrap();
+        for (a, b) in img.data.iter().zip(&back.data) {
+            assert!((a - b).abs() < 1.0 / 65535.0);
+        }
+    }
+
+    #[test]
+    fn corrupt_frame_error_names_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("broken.png");
+        std::fs::write(&p, b"not a png at all").unwrap();
+        let msg = load_frame(&p).unwrap_err().to_string();
+        assert!(msg.contains("broken.png"), "{msg}");
+    }
+}

@@ -1,0 +1,82 @@
+//! Disk input and output: scans and frames, WAV files, `.flo` flow fields, atomic writes.
+
+pub mod atomic;
+pub mod flo;
+pub mod frames;
+pub mod scan;
+pub mod wav;
+
+use std::path::PathBuf;
+
+pub use atomic::{write_atomic, write_atomic_with};
+pub use frames::{load_frame, load_group, save_grey_png};
+pub use scan::{Cut, Geometry, GroupEntry, Scan, ScanMeta};
+
+/// Why a scan, frame or sound file could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    /// The folder is not a scan.
+    #[error("{problem}: {}", path.display())]
+    NotAScan {
+        /// What is wrong.
+        problem: String,
+        /// The folder.
+        path: PathBuf,
+    },
+    /// `scan.toml` is missing a key or holds an invalid value.
+    #[error("invalid scan metadata: {problem}: {}", path.display())]
+    Metadata {
+        /// What is wrong.
+        problem: String,
+        /// The metadata file.
+        path: PathBuf,
+    },
+    /// A group holds too few frames.
+    #[error("group has {found} frames, at least {needed} are needed: {}", path.display())]
+    TooFewFrames {
+        /// Frames found.
+        found: usize,
+        /// Frames needed.
+        needed: usize,
+        /// The group folder.
+        path: PathBuf,
+    },
+    /// A frame cannot be decoded.
+    #[error("cannot decode frame ({problem}): {}", path.display())]
+    BadFrame {
+        /// Decoder message.
+        problem: String,
+        /// The frame file.
+        path: PathBuf,
+    },
+    /// A frame differs in size from the first frame of its group.
+    #[error("frame is {found_w}x{found_h} but the group's first frame is {want_w}x{want_h}: {}", path.display())]
+    MixedSizes {
+        /// Width found.
+        found_w: usize,
+        /// Height found.
+        found_h: usize,
+        /// Width expected.
+        want_w: usize,
+        /// Height expected.
+        want_h: usize,
+        /// The frame file.
+        path: PathBuf,
+    },
+    /// A sound file is unusable.
+    #[error("{problem}: {}", path.display())]
+    Sound {
+        /// What is wrong.
+        problem: String,
+        /// The sound file.
+        path: PathBuf,
+    },
+    /// Any other file-system failure (including a full disk).
+    #[error("{problem}: {}", path.display())]
+    Io {
+        /// What failed.
+        problem: String,
+        /// The file or folder.
+        path: PathBuf,
+    },
+}

@@ -1,0 +1,233 @@
+//! WAV reading and atomic WAV writing (16/24-bit integer or 32-bit float, mono or stereo) via hound.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::{LoadError, atomic::write_atomic_with};
+
+/// Sample encoding of an exported WAV file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum WavBits {
+    /// 16-bit integer PCM.
+    #[serde(rename = "16")]
+    Int16,
+    /// 24-bit integer PCM.
+    #[default]
+    #[serde(rename = "24")]
+    Int24,
+    /// 32-bit IEEE float.
+    #[serde(rename = "32f")]
+    Float32,
+}
+
+impl std::str::FromStr for WavBits {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "16" => Ok(Self::Int16),
+            "24" => Ok(Self::Int24),
+            "32f" | "32" => Ok(Self::Float32),
+            _ => Err(format!(
+                "unknown WAV sample format {s:?} (use 16, 24 or 32f)"
+            )),
+        }
+    }
+}
+
+/// Audio held as one `Vec<f32>` per channel, values nominally in `[-1, 1]`.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct Audio {
+    /// Sample rate in Hz.
+    pub sample_rate_hz: u32,
+    /// One buffer per channel, all the same length.
+    pub channels: Vec<Vec<f32>>,
+}
+
+impl Audio {
+    /// Frames (samples per channel).
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.channels.first().map_or(0, Vec::len)
+    }
+
+    /// True when there are no samples.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Duration in seconds.
+    #[must_use]
+    pub fn duration_secs(&self) -> f64 {
+        if self.sample_rate_hz == 0 {
+            0.0
+        } else {
+            self.len() as f64 / f64::from(self.sample_rate_hz)
+        }
+    }
+
+    /// The mean of all channels.
+    #[must_use]
+    pub fn mono(&self) -> Vec<f32> {
+        let n = self.channels.len().max(1) as f32;
+        (0..self.len())
+            .map(|i| self.channels.iter().map(|c| c[i]).sum::<f32>() / n)
+            .collect()
+    }
+}
+
+/// Reads a WAV file (any integer depth or 32-bit float) into `[-1, 1]` floats.
+///
+/// # Errors
+/// [`LoadError::Sound`] naming the file when it is missing, not WAV, unsupported or empty.
+pub fn read_wav(path: &Path) -> Result<Audio, LoadError> {
+    let err = |problem: String| LoadError::Sound {
+        problem,
+        path: path.to_path_buf(),
+    };
+    let mut reader =
+        hound::WavReader::open(path).map_err(|e| err(format!("cannot read WAV: {e}")))?;
+    let spec = reader.spec();
+    if spec.channels == 0 || spec.sample_rate == 0 {
+        return Err(err(
+            "WAV header has no channels or a zero sample rate".into()
+        ));
+    }
+    let interleaved: Vec<f32> = match spec.sample_format {
+        hound::SampleFormat::Float => reader
+            .samples::<f32>()
+            .collect::<Result<_, _>>()
+            .map_err(|e| err(format!("cannot read WAV samples: {e}")))?,
+        hound::SampleFormat::Int => {
+            if spec.bits_per_sample == 0 || spec.bits_per_sample > 32 {
+                return Err(err(format!(
+                    "unsupported bit depth {}",
+                    spec.bits_per_sample
+                )));
+            }
+            let scale = 1.0 / (1u64 << (spec.bits_per_sample - 1)) as f32;
+            reader
+                .samples::<i32>()
+                .map(|s| s.map(|v| v as f32 * scale))
+                .collect::<Result<_, _>>()
+                .map_err(|e| err(format!("cannot read WAV samples: {e}")))?
+        }
+    };
+    let nch = usize::from(spec.channels);
+    let frames = interleaved.len() / nch;
+    if frames == 0 {
+        return Err(err("the WAV file holds no samples".into()));
+    }
+    let mut channels = vec![Vec::with_capacity(frames); nch];
+    for frame in interleaved.chunks_exact(nch) {
+        for (c, v) in channels.iter_mut().zip(frame) {
+            c.push(*v);
+        }
+    }
+    Ok(Audio {
+        sample_rate_hz: spec.sample_rate,
+        channels,
+    })
+}
+
+/// Writes audio as WAV atomically; never replaces an existing file unless `overwrite`.
+/// Samples outside `[-1, 1]` are clipped for integer formats.
+///
+/// # Errors
+/// [`LoadError::Io`] / [`LoadError::Sound`] naming the file.
+pub fn write_wav(
+    path: &Path,
+    audio: &Audio,
+    bits: WavBits,
+    overwrite: bool,
+) -> Result<(), LoadError> {
+    let nch = audio.channels.len();
+    if nch == 0 || nch > 2 || audio.channels.iter().any(|c| c.len() != audio.len()) {
+        return Err(LoadError::Sound {
+            problem: format!("cannot write {nch} channels of unequal or unsupported layout"),
+            path: path.to_path_buf(),
+        });
+    }
+    let spec = hound::WavSpec {
+        channels: nch as u16,
+        sample_rate: audio.sample_rate_hz,
+        bits_per_sample: match bits {
+            WavBits::Int16 => 16,
+            WavBits::Int24 => 24,
+            WavBits::Float32 => 32,
+        },
+        sample_format: if bits == WavBits::Float32 {
+            hound::SampleFormat::Float
+        } else {
+            hound::SampleFormat::Int
+        },
+    };
+    let mut bytes = std::io::Cursor::new(Vec::with_capacity(audio.len() * nch * 4 + 64));
+    {
+        let mut w = hound::WavWriter::new(&mut bytes, spec).map_err(|e| LoadError::Sound {
+            problem: format!("cannot encode WAV: {e}"),
+            path: path.to_path_buf(),
+        })?;
+        let full = match bits {
+            WavBits::Int16 => 32767.0,
+            WavBits::Int24 => 8_388_607.0,
+            WavBits::Float32 => 1.0,
+        };
+        let res: Result<(), hound::Error> = (|| {
+            for i in 0..audio.len() {
+                for c in &audio.channels {
+                    let v = if c[i].is_finite() { c[i] } else { 0.0 };
+                    if bits == WavBits::Float32 {
+                        w.write_sample(v)?;
+                    } else {
+                        w.write_sample((f64::from(v.clamp(-1.0, 1.0)) * full).round() as i32)?;
+                    }
+                }
+            }
+            w.finalize()
+        })();
+        res.map_err(|e| LoadError::Sound {
+            problem: format!("cannot encode WAV: {e}"),
+            path: path.to_path_buf(),
+        })?;
+    }
+    let data = bytes.into_inner();
+    write_atomic_with(path, overwrite, |w| std::io::Write::write_all(w, &data))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn all_formats_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let audio = Audio {
+            sample_rate_hz: 48_000,
+            channels: vec![vec![0.0, 0.5, -0.5, 0.25], vec![0.1, -0.1, 0.9, -0.9]],
+        };
+        for (i, bits) in [WavBits::Int16, WavBits::Int24, WavBits::Float32]
+            .into_iter()
+            .enumerate()
+        {
+            let p = dir.path().join(format!("{i}.wav"));
+            write_wav(&p, &audio, bits, false).unwrap();
+            let back = read_wav(&p).unwrap();
+            assert_eq!(back.sample_rate_hz, 48_000);
+            assert_eq!(back.channels.len(), 2);
+            for (a, b) in audio.channels[1].iter().zip(&back.channels[1]) {
+                assert!((a - b).abs() < 1e-4, "{bits:?}: {a} vs {b}");
+            }
+        }
+        assert!(write_wav(&dir.path().join("0.wav"), &audio, WavBits::Int16, false).is_err());
+    }
+
+    #[test]
+    fn non_wav_is_a_clear_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("x.wav");
+        std::fs::write(&p, b"hello").unwrap();
+        assert!(read_wav(&p).unwrap_err().to_string().contains("x.wav"));
+    }
+}

@@ -1,0 +1,8 @@
+//! groovescope: plays gramophone records from microscope image sequences by optical flow (Tian & Barron).
+//!
+//! The [`pipeline`] holds the pure stages; [`io`] reads scans and writes sound; [`synth`] renders
+//! ground-truth scans.
+
+pub mod image;
+pub mod io;
+pub mod pipeline;
