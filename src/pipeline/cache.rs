@@ -1,0 +1,334 @@
+//! The stage cache shared by the CLI and the workbench: one slot per [`Stage`], rerun from the first stale one.
+
+use std::sync::Arc;
+
+use super::audio_signal::{GroupSignal, SoundParams, group_signal};
+use super::depth::{DepthMap, estimate_depth};
+use super::derivatives::{Derivatives, compute_derivatives};
+use super::hough::{Stripes, segment_stripes};
+use super::optical_flow::{FlowField, compute_flow};
+use super::orientation::{Orientation, orient_from_depth, orient_from_lines};
+use super::walls::{WallLine, find_walls};
+use super::{PipelineParams, Stage, StageError};
+use crate::image::Image;
+use crate::io::ScanMeta;
+
+/// Columns kept clear of each frame edge when placing samples (px): pre-warping clamps there.
+pub const SAMPLE_MARGIN_PX: f64 = 8.0;
+
+/// What a group's stages run on.
+#[derive(Clone, Debug)]
+pub struct GroupInput {
+    /// Group index in the scan.
+    pub group: usize,
+    /// Grey frames of the group, in order.
+    pub frames: Arc<Vec<Image>>,
+    /// The scan's metadata.
+    pub meta: Arc<ScanMeta>,
+}
+
+/// Depth-path output: the Kalman depth map and the wall lines found on it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DepthOutput {
+    /// Depth and variance.
+    pub map: DepthMap,
+    /// One line per wall.
+    pub walls: Vec<WallLine>,
+}
+
+/// Where a group's samples fall: the groove position of each column of the reference frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SampleGrid {
+    /// Frame of the group whose columns are sampled.
+    pub frame_index: usize,
+    /// Groove position of column 0 (µm from the scan start).
+    pub column0_um: f64,
+    /// Groove length per column at the walls' depth (µm).
+    pub um_per_px: f64,
+    /// Columns of the samples (on the scan's global sample grid).
+    pub columns: Vec<f32>,
+}
+
+/// Orientation-stage output with the sample grid it used.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OrientationOutput {
+    /// Wall tilts per sample.
+    pub orientation: Orientation,
+    /// Sample placement.
+    pub grid: SampleGrid,
+}
+
+/// One slot per stage. `Arc`s make clones cheap, so a worker can take a copy, run, and send it back.
+#[derive(Clone, Debug, Default)]
+pub struct StageCache {
+    /// [`Stage::Derivatives`].
+    pub derivatives: Option<Arc<Vec<Derivatives>>>,
+    /// [`Stage::Flow`].
+    pub flows: Option<Arc<Vec<FlowField>>>,
+    /// [`Stage::Depth`] (depth path only).
+    pub depth: Option<Arc<DepthOutput>>,
+    /// [`Stage::Stripes`] (dual-focus path only).
+    pub stripes: Option<Arc<Stripes>>,
+    /// [`Stage::Orientation`].
+    pub orientation: Option<Arc<OrientationOutput>>,
+    /// [`Stage::Sound`].
+    pub signal: Option<Arc<GroupSignal>>,
+    /// Params each slot was produced with (None: never run or invalidated).
+    pub produced_with: [Option<PipelineParams>; 6],
+    /// Group the slots belong to.
+    pub group: Option<usize>,
+}
+
+/// Sample spacing along the groove (µm): the param, or one output sample at the scan's groove speed.
+#[must_use]
+pub fn native_spacing_um(meta: &ScanMeta, sound: &SoundParams) -> f64 {
+    if sound.native_spacing_um > 0.0 {
+        sound.native_spacing_um
+    } else {
+        meta.groove_speed_mm_s(0) * 1000.0 / f64::from(sound.output_rate_hz)
+    }
+}
+
+/// Places the scan's global sample grid on the columns of one frame of one group.
+#[must_use]
+pub fn sample_grid(
+    meta: &ScanMeta,
+    group: usize,
+    frame_index: usize,
+    width: usize,
+    projection_depth_um: f64,
+    sound: &SoundParams,
+) -> SampleGrid {
+    let geom = meta.geometry();
+    let cx = (width as f64 - 1.0) / 2.0;
+    let cam_s = group as f64 * meta.motion.group_step_um
+        + frame_index as f64 * meta.motion.frame_step_um
+        + cx * geom.pixel_pitch_um;
+    let um_per_px = geom.pixel_pitch_um * projection_depth_um / geom.working_distance_um;
+    let column0_um = cam_s - cx * um_per_px;
+    let spacing = native_spacing_um(meta, sound);
+    let lo = column0_um + SAMPLE_MARGIN_PX * um_per_px;
+    let hi = column0_um + (width as f64 - 1.0 - SAMPLE_MARGIN_PX) * um_per_px;
+    let mut columns = Vec::new();
+    if spacing > 0.0 && hi > lo {
+        let first = (lo / spacing).ceil() as i64;
+        let last = (hi / spacing).floor() as i64;
+        for j in first..=last {
+            columns.push(((j as f64 * spacing - column0_um) / um_per_px) as f32);
+        }
+    }
+    SampleGrid {
+        frame_index,
+        column0_um,
+        um_per_px,
+        columns,
+    }
+}
+
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    let mid = v.len() / 2;
+    v.select_nth_unstable_by(mid, f64::total_cmp);
+    Some(v[mid])
+}
+
+/// Median depth along the wall lines (µm); the scale of the sample grid for the depth path.
+fn wall_depth_um(depth: &DepthMap, walls: &[WallLine]) -> Option<f64> {
+    let mut zs = Vec::new();
+    for line in walls {
+        for (x, &row) in line.rows.iter().enumerate() {
+            if row.is_finite() && row >= 0.0 {
+                if let Some(z) = depth.z_um.get(x, row.round() as usize) {
+                    if z.is_finite() {
+                        zs.push(f64::from(z));
+                    }
+                }
+            }
+        }
+    }
+    median(zs)
+}
+
+fn missing(stage: Stage) -> StageError {
+    StageError::BadInput {
+        stage: stage.name(),
+        problem: "an earlier stage has no result".into(),
+    }
+}
+
+impl StageCache {
+    /// Marks `stage` and every later stage as needing a rerun (their results stay for display).
+    pub fn invalidate_from(&mut self, stage: Stage) {
+        for slot in &mut self.produced_with[stage.index()..] {
+            *slot = None;
+        }
+    }
+
+    /// True when `stage` holds a result produced with params whose relevant part equals `params`.
+    #[must_use]
+    pub fn is_fresh(&self, stage: Stage, params: &PipelineParams) -> bool {
+        self.produced_with[stage.index()]
+            .as_ref()
+            .is_some_and(|p| p.first_changed_stage(params).is_none_or(|s| s > stage))
+    }
+
+    /// The first stage that must run for `params` (None: everything is fresh).
+    #[must_use]
+    pub fn first_stale(&self, params: &PipelineParams) -> Option<Stage> {
+        Stage::ALL.into_iter().find(|s| !self.is_fresh(*s, params))
+    }
+
+    fn mark(&mut self, stage: Stage, params: &PipelineParams) {
+        self.produced_with[stage.index()] = Some(params.clone());
+    }
+
+    /// Runs `from` and every later stage for `input`, storing each result.
+    ///
+    /// After each stage `after_stage(stage, self)` is called; returning `false` stops the run
+    /// with [`StageError::Cancelled`] (a newer job superseded this one).
+    ///
+    /// # Errors
+    /// The first failing stage's error; earlier stages keep their fresh results.
+    pub fn run_from(
+        &mut self,
+        from: Stage,
+        input: &GroupInput,
+        params: &PipelineParams,
+        after_stage: &mut dyn FnMut(Stage, &StageCache) -> bool,
+    ) -> Result<(), StageError> {
+        params.validate()?;
+        if self.group != Some(input.group) {
+            self.invalidate_from(Stage::Derivatives);
+            self.group = Some(input.group);
+        }
+        let meta = &input.meta;
+        let geom = meta.geometry();
+        let dual = params.uses_dual_focus(meta);
+        for stage in Stage::ALL.into_iter().filter(|s| *s >= from) {
+            self.produced_with[stage.index()] = None;
+            match stage {
+                Stage::Derivatives => {
+                    let d = compute_derivatives(
+                        &input.frames,
+                        geom.land_flow_px(),
+                        &params.derivatives,
+                    )?;
+                    self.derivatives = Some(Arc::new(d));
+                }
+                Stage::Flow => {
+                    let derivs = self.derivatives.clone().ok_or_else(|| missing(stage))?;
+                    let flows = derivs
+                        .iter()
+                        .map(|d| compute_flow(d, geom.focal_px, None, &params.flow))
+                        .collect::<Result<Vec<_>, _>>()?;
+                    self.flows = Some(Arc::new(flows));
+                }
+                Stage::Depth => {
+                    if dual {
+                        self.depth = None;
+                    } else {
+                        let flows = self.flows.clone().ok_or_else(|| missing(stage))?;
+                        let map = estimate_depth(&flows, &geom, &params.depth)?;
+                        let walls = find_walls(&map, &geom, &params.walls)?;
+                        self.depth = Some(Arc::new(DepthOutput { map, walls }));
+                    }
+                }
+                Stage::Stripes => {
+                    if let (true, Some(df)) = (dual, meta.dual_focus.as_ref()) {
+                        let derivs = self.derivatives.clone().ok_or_else(|| missing(stage))?;
+                        let flows = self.flows.clone().ok_or_else(|| missing(stage))?;
+                        let mid = derivs.len() / 2;
+                        let (Some(d), Some(f)) = (derivs.get(mid), flows.get(mid)) else {
+                            return Err(missing(stage));
+                        };
+                        self.stripes = Some(Arc::new(segment_stripes(d, f, df, &params.hough)?));
+                    } else if dual {
+                        return Err(StageError::BadInput {
+                            stage: stage.name(),
+                            problem: "the dual-focus path needs a [dual_focus] table in scan.toml"
+                                .into(),
+                        });
+                    } else {
+                        self.stripes = None;
+                    }
+                }
+                Stage::Orientation => {
+                    let out = if dual {
+                        let stripes = self.stripes.clone().ok_or_else(|| missing(stage))?;
+                        let derivs = self.derivatives.clone().ok_or_else(|| missing(stage))?;
+                        let mid = derivs.len() / 2;
+                        let Some(d) = derivs.get(mid) else {
+                            return Err(missing(stage));
+                        };
+                        let zp = stripes
+                            .lines
+                            .iter()
+                            .find_map(|l| l.projection_depth_um.or(l.depth_um))
+                            .unwrap_or(geom.working_distance_um);
+                        let grid = sample_grid(
+                            meta,
+                            input.group,
+                            d.frame_index,
+                            d.ix.width,
+                            zp,
+                            &params.sound,
+                        );
+                        let orientation = orient_from_lines(
+                            &stripes.lines,
+                            d.ix.width,
+                            d.ix.height,
+                            &grid.columns,
+                            &geom,
+                            &params.orientation,
+                        )?;
+                        OrientationOutput { orientation, grid }
+                    } else {
+                        let depth = self.depth.clone().ok_or_else(|| missing(stage))?;
+                        let zp = wall_depth_um(&depth.map, &depth.walls).ok_or_else(|| {
+                            StageError::NotFound {
+                                stage: stage.name(),
+                                problem: "no depth on the wall lines".into(),
+                            }
+                        })?;
+                        let grid = sample_grid(
+                            meta,
+                            input.group,
+                            depth.map.frame_index,
+                            depth.map.z_um.width,
+                            zp,
+                            &params.sound,
+                        );
+                        let orientation = orient_from_depth(
+                            &depth.map,
+                            &depth.walls,
+                            &grid.columns,
+                            &geom,
+                            &params.orientation,
+                        )?;
+                        OrientationOutput { orientation, grid }
+                    };
+                    self.orientation = Some(Arc::new(out));
+                }
+                Stage::Sound => {
+                    let o = self.orientation.clone().ok_or_else(|| missing(stage))?;
+                    let signal = group_signal(
+                        input.group,
+                        &o.orientation,
+                        meta.record.cut,
+                        o.grid.column0_um,
+                        o.grid.um_per_px,
+                        meta.groove_speed_mm_s(input.group),
+                    )?;
+                    self.signal = Some(Arc::new(signal));
+                }
+            }
+            self.mark(stage, params);
+            if !after_stage(stage, self) {
+                return Err(StageError::Cancelled);
+            }
+        }
+        Ok(())
+    }
+}
