@@ -3,6 +3,7 @@
 //! The [`pipeline`] holds the pure stages; [`io`] reads scans and writes sound; [`synth`] renders
 //! ground-truth scans.
 
+pub mod cli;
 pub mod engine;
 pub mod image;
 pub mod io;
