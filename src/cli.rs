@@ -422,10 +422,10 @@ pub fn run_gui(scan: Option<PathBuf>) -> Result<()> {
 /// # Errors
 /// When serialisation fails.
 pub fn params_toml_documented() -> Result<String> {
-    let body = PipelineParams::default().to_toml_string()?;
+    let body = crate::pipeline::knobs::documented_toml(&PipelineParams::default())?;
     Ok(format!(
         "# groovescope pipeline parameters (defaults). Units are in the key names.\n\
          # Pass to `groovescope reconstruct --params FILE`; missing keys take these defaults.\n\
-         # See docs/PARAMS.md for what every knob does.\n\n{body}"
+         \n{body}"
     ))
 }
