@@ -8,3 +8,4 @@ pub mod engine;
 pub mod image;
 pub mod io;
 pub mod pipeline;
+pub mod synth;
