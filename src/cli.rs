@@ -46,6 +46,20 @@ pub enum Command {
     Flow(FlowArgs),
     /// Print the default parameters as TOML (every knob, units in names).
     Params,
+    /// Render a ground-truth scan from a sound (ray-traced groove under a microscope camera).
+    Synth(SynthArgs),
+    /// Render a depth-validation scene (cube, cylinder or sphere) with its true depth maps.
+    SynthScene {
+        /// cube, cylinder or sphere.
+        #[arg(value_parser = ["cube", "cylinder", "sphere"])]
+        kind: String,
+        /// Output folder (must not exist or be empty).
+        #[arg(long)]
+        out: PathBuf,
+        /// Scene settings TOML (missing keys take defaults).
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
     /// Open the workbench (optionally on a scan).
     Gui {
         /// Scan folder to open.
@@ -114,6 +128,168 @@ pub struct FlowArgs {
     /// Replace an existing output file.
     #[arg(long)]
     pub force: bool,
+}
+
+/// Arguments of `synth`.
+#[derive(Debug, clap::Args)]
+pub struct SynthArgs {
+    /// Sound to cut into the groove (WAV); or use --tone / --sweep / --melody.
+    pub sound: Option<PathBuf>,
+    /// Output scan folder (must not exist or be empty).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Generator settings TOML (the `[synth]` keys; missing keys take the preset's values).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Starting settings: paper (1280×1024, the paper's optics), quick (small frames), demo, dual-focus.
+    #[arg(long, value_parser = ["paper", "quick", "demo", "dual-focus"], default_value = "paper")]
+    pub preset: String,
+    /// A built-in test tone at this frequency (Hz).
+    #[arg(long, conflicts_with_all = ["sound", "sweep", "melody"])]
+    pub tone: Option<f64>,
+    /// A built-in exponential sweep F0:F1 (Hz).
+    #[arg(long, conflicts_with_all = ["sound", "melody"])]
+    pub sweep: Option<String>,
+    /// A built-in short melody.
+    #[arg(long, conflicts_with = "sound")]
+    pub melody: bool,
+    /// Duration of a built-in sound (s).
+    #[arg(long, default_value_t = 0.05)]
+    pub duration: f64,
+    /// Render at most this many groups.
+    #[arg(long)]
+    pub max_groups: Option<usize>,
+    /// Seed of texture, noise and damage (overrides the config).
+    #[arg(long)]
+    pub seed: Option<u32>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Sample rate of the built-in test sounds.
+const BUILTIN_RATE_HZ: u32 = 48_000;
+
+fn run_synth(args: &SynthArgs) -> Result<()> {
+    use crate::synth::{SynthConfig, melody, render_scan, render_scan_wav, sweep, tone};
+    let base = match args.preset.as_str() {
+        "quick" => SynthConfig::quick_test(),
+        "demo" => SynthConfig::demo(),
+        "dual-focus" => SynthConfig::dual_focus_demo(),
+        _ => SynthConfig::default(),
+    };
+    let mut cfg = match &args.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read synth settings: {}", p.display()))?;
+            let mut table: toml::Table = toml::to_string(&base)
+                .ok()
+                .and_then(|t| toml::from_str(&t).ok())
+                .unwrap_or_default();
+            let user: toml::Table = toml::from_str(&text).map_err(|e| {
+                anyhow::anyhow!("invalid synth settings: {}: {}", e.message(), p.display())
+            })?;
+            let user = match user.get("synth") {
+                Some(toml::Value::Table(t)) => t.clone(),
+                _ => user,
+            };
+            table.extend(user);
+            toml::Value::Table(table)
+                .try_into::<SynthConfig>()
+                .map_err(|e| {
+                    anyhow::anyhow!("invalid synth settings: {}: {}", e.message(), p.display())
+                })?
+        }
+        None => base,
+    };
+    if let Some(n) = args.max_groups {
+        cfg.max_groups = Some(n);
+    }
+    if let Some(seed) = args.seed {
+        cfg.seed = seed;
+        cfg.damage.seed = seed;
+    }
+    if !(args.duration.is_finite() && args.duration > 0.0) {
+        bail!(
+            "--duration must be a positive number of seconds, got {}",
+            args.duration
+        );
+    }
+    let pb = progress_bar(0, args.quiet);
+    let progress = |done: usize, total: usize| {
+        pb.set_length(total as u64);
+        pb.set_position(done as u64);
+    };
+    let cancel = AtomicBool::new(false);
+    let builtin = if let Some(f) = args.tone {
+        if !(f.is_finite() && f > 0.0) {
+            bail!("--tone must be a positive frequency, got {f}");
+        }
+        Some(tone(f, args.duration, BUILTIN_RATE_HZ))
+    } else if let Some(spec) = &args.sweep {
+        let Some((a, b)) = spec.split_once(':') else {
+            bail!("--sweep takes F0:F1 in Hz, got {spec}");
+        };
+        let (Ok(f0), Ok(f1)) = (a.parse::<f64>(), b.parse::<f64>()) else {
+            bail!("--sweep takes F0:F1 in Hz, got {spec}");
+        };
+        Some(sweep(f0, f1, args.duration, BUILTIN_RATE_HZ))
+    } else if args.melody {
+        let note = args.duration / 4.0;
+        Some(melody(
+            &[
+                (523.25, note),
+                (659.25, note),
+                (783.99, note),
+                (1046.5, note),
+            ],
+            BUILTIN_RATE_HZ,
+        ))
+    } else {
+        None
+    };
+    let summary = match (builtin, &args.sound) {
+        (Some(sound), _) => render_scan(&sound, &cfg, &args.out, &progress, &cancel)?,
+        (None, Some(path)) => render_scan_wav(path, &cfg, &args.out, &progress, &cancel)?,
+        (None, None) => bail!("give a sound file, --tone HZ, --sweep F0:F1 or --melody"),
+    };
+    pb.finish_and_clear();
+    if !args.quiet {
+        println!(
+            "wrote {} ({} groups of {} frames, {:.4} s of sound)",
+            summary.out_dir.display(),
+            summary.groups,
+            summary.frames_per_group,
+            summary.reference_secs
+        );
+    }
+    Ok(())
+}
+
+fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> {
+    use crate::synth::{SceneConfig, SceneKind, render_scene};
+    let kind = match kind {
+        "cube" => SceneKind::Cube,
+        "cylinder" => SceneKind::Cylinder,
+        _ => SceneKind::Sphere,
+    };
+    let cfg = match config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read scene settings: {}", p.display()))?;
+            toml::from_str::<SceneConfig>(&text).map_err(|e| {
+                anyhow::anyhow!("invalid scene settings: {}: {}", e.message(), p.display())
+            })?
+        }
+        None => SceneConfig::default(),
+    };
+    let meta = render_scene(kind, &cfg, out)?;
+    println!(
+        "wrote {} ({} frames with true depth)",
+        out.display(),
+        meta.frames
+    );
+    Ok(())
 }
 
 /// Loads params from TOML, or the defaults.
@@ -396,6 +572,10 @@ pub fn run(command: Command) -> Result<()> {
         Command::Params => {
             print!("{}", params_toml_documented()?);
             Ok(())
+        }
+        Command::Synth(args) => run_synth(&args),
+        Command::SynthScene { kind, out, config } => {
+            run_synth_scene(&kind, &out, config.as_deref())
         }
         Command::Gui { scan } => run_gui(scan),
     }
