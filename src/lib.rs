@@ -6,3 +6,4 @@
 pub mod image;
 pub mod io;
 pub mod pipeline;
+pub mod viz;
