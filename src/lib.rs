@@ -9,3 +9,4 @@ pub mod image;
 pub mod io;
 pub mod pipeline;
 pub mod synth;
+pub mod viz;
