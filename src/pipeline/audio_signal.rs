@@ -344,7 +344,7 @@ pub fn stitch(groups: &[GroupSignal], spacing_um: f64) -> Result<StitchedSignal,
         return Err(bad("no group has a positive groove speed".to_string()));
     }
     let steps = ((hi_um - lo_um) / spacing_um + SPAN_TOL_SPACINGS).floor();
-    if !(steps < MAX_STITCH_SAMPLES) {
+    if steps.is_nan() || steps >= MAX_STITCH_SAMPLES {
         return Err(StageError::InvalidParam {
             name: "sound.native_spacing_um".to_string(),
             problem: format!(
@@ -587,6 +587,7 @@ pub fn resample(samples: &[f32], from_hz: f64, to_hz: u32) -> Result<Vec<f32>, S
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests unwrap known-good results
 mod tests {
     use super::*;
     use crate::image::Image;
@@ -971,7 +972,7 @@ mod tests {
 
     #[test]
     fn resampler_delay_is_exact() {
-        // Several ratios, up and down: a 500 Hz tone must come out in phase to < 1/50 sample.
+        // Several ratios, up and down: a 500 Hz tone must come out in phase to < 1/100 sample.
         for &(from, to) in &[
             (44_714.285, 44_100u32),
             (43_800.0, 48_000),
@@ -987,7 +988,7 @@ mod tests {
             let (amp, phase, _) = fit_sine(&y, 500.0, f64::from(to), m / 4..3 * m / 4);
             let shift_samples = phase / (2.0 * PI * 500.0) * f64::from(to);
             assert!(
-                shift_samples.abs() < 0.02,
+                shift_samples.abs() < 0.01,
                 "{from}->{to}: {shift_samples} samples"
             );
             assert!((amp - 1.0).abs() < 0.005, "{from}->{to}: amplitude {amp}");
