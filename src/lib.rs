@@ -6,6 +6,7 @@
 pub mod cli;
 pub mod engine;
 pub mod image;
+pub mod inspect;
 pub mod io;
 pub mod pipeline;
 pub mod synth;
