@@ -17,7 +17,9 @@ use crate::pipeline::eval::{Scores, evaluate};
 use crate::pipeline::{GroupInput, PipelineParams, Stage, StageCache, StageError};
 
 /// Longest lag searched when scoring against the reference (seconds).
-pub const MAX_EVAL_LAG_SECS: f64 = 0.005;
+pub const MAX_EVAL_LAG_SECS: f64 = 0.0003;
+/// Gaps up to this many native samples are bridged by linear interpolation; longer ones stay silent.
+pub const BRIDGE_GAP_SAMPLES: usize = 4;
 
 /// Why a reconstruction failed as a whole.
 #[derive(Debug, thiserror::Error)]
@@ -288,7 +290,13 @@ pub fn reconstruct(
 
     let t_finish = Instant::now();
     let spacing = native_spacing_um(&scan.meta, &params.sound);
-    let stitched = stitch(&signals, spacing)?;
+    let mut stitched = stitch(&signals, spacing)?;
+    let bridged = bridge_short_gaps(&mut stitched);
+    if bridged > 0 {
+        warnings.push(format!(
+            "{bridged} short gaps (≤ {BRIDGE_GAP_SAMPLES} native samples) bridged by interpolation"
+        ));
+    }
     for gap in &stitched.gaps {
         warnings.push(format!(
             "gap of {} native samples at sample {} filled with silence",
@@ -352,6 +360,31 @@ pub fn reconstruct(
         scores,
         warnings,
     })
+}
+
+/// Bridges gaps of at most [`BRIDGE_GAP_SAMPLES`] with data on both sides by linear
+/// interpolation, removes them from `gaps`, and returns how many were bridged.
+pub fn bridge_short_gaps(signal: &mut StitchedSignal) -> usize {
+    let mut bridged = 0;
+    let mut kept = Vec::new();
+    for gap in std::mem::take(&mut signal.gaps) {
+        let n = signal.channels.first().map_or(0, Vec::len);
+        if gap.len() > BRIDGE_GAP_SAMPLES || gap.start == 0 || gap.end >= n {
+            kept.push(gap);
+            continue;
+        }
+        let (a, b) = (gap.start - 1, gap.end);
+        for ch in &mut signal.channels {
+            let (va, vb) = (ch[a], ch[b]);
+            for k in gap.clone() {
+                let t = (k - a) as f32 / (b - a) as f32;
+                ch[k] = va + (vb - va) * t;
+            }
+        }
+        bridged += 1;
+    }
+    signal.gaps = kept;
+    bridged
 }
 
 /// Reference sound aligned to the stretch a reconstruction covers, at the recovered rate.

@@ -22,7 +22,7 @@ const MAX_SNR_DB: f64 = 300.0;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Scores {
     /// Pearson r of the waveforms at the best lag (negative when the recovered signal is
-    /// inverted; the lag maximises |r|).
+    /// inverted; the lag maximises the signed r, so a polarity error shows).
     pub r: f64,
     /// Pearson r of the peak envelopes at the best lag (see [`peak_envelope`]).
     pub envelope_r: f64,
@@ -115,7 +115,7 @@ fn lag_correlation(reference: &[f64], recovered: &[f64], max_lag: usize) -> Vec<
 }
 
 /// Compares `recovered` with `reference` (same rate), searching lags within ±`max_lag` for the
-/// largest |Pearson r|. Lags whose overlap is shorter than half the shorter signal are not
+/// largest signed Pearson r. Lags whose overlap is shorter than half the shorter signal are not
 /// considered (a few samples can correlate by chance). Non-finite samples count as 0.
 /// `None` when fewer than 16 samples overlap.
 #[must_use]
@@ -184,8 +184,7 @@ pub fn evaluate(
         let better = match best {
             None => true,
             Some((br, bl)) => {
-                r.abs() > br.abs() + 1e-12
-                    || ((r.abs() - br.abs()).abs() <= 1e-12 && lag.abs() < bl.abs())
+                r > br + 1e-12 || ((r - br).abs() <= 1e-12 && lag.abs() < bl.abs())
             }
         };
         if better {
@@ -339,9 +338,12 @@ mod tests {
     fn inverted_and_scaled_signals() {
         let x = music(10_000);
         let inv: Vec<f32> = x.iter().map(|v| -0.3 * v + 0.1).collect();
+        // The lag maximises the signed r: a polarity error shows as a poor score rather than
+        // hiding behind a half-period lag on tonal material.
         let s = evaluate(&inv, &x, 30, FS).unwrap();
+        assert!(s.r < 0.5, "{s:?}");
+        let s = evaluate(&inv, &x, 0, FS).unwrap();
         assert!((s.r + 1.0).abs() < 1e-9, "{s:?}");
-        assert_eq!(s.lag_samples, 0);
         // The gain-only SNR does not remove a DC offset: it counts as noise.
         assert!(s.snr_db < 20.0, "{s:?}");
         let inv: Vec<f32> = x.iter().map(|v| -0.3 * v).collect();
@@ -402,7 +404,7 @@ mod tests {
         let max_lag = 40usize;
         let s = evaluate(&y, &x, max_lag, FS).unwrap();
         // Direct O(n·lag) search with pearson().
-        let mut best = (0.0f64, 0i64);
+        let mut best = (f64::NEG_INFINITY, 0i64);
         for lag in -(max_lag as i64)..=max_lag as i64 {
             let (lo, hi) = overlap(x.len(), y.len(), lag);
             if hi - lo < 1500 {
@@ -410,7 +412,7 @@ mod tests {
             }
             let ylo = (lo as i64 + lag) as usize;
             let r = pearson(&y[ylo..ylo + hi - lo], &x[lo..hi]);
-            if r.abs() > best.0.abs() + 1e-12 {
+            if r > best.0 + 1e-12 {
                 best = (r, lag);
             }
         }
