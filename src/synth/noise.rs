@@ -120,23 +120,31 @@ fn lerp(a: f64, b: f64, t: f64) -> f64 {
     a + (b - a) * t
 }
 
-/// Dot product of the corner gradient picked by `h` (12 cube-edge directions) with the offset.
+/// The 12 cube-edge gradient directions (4 repeated to make 16), as a table: branch-free.
+const GRADIENTS: [[f64; 3]; 16] = [
+    [1.0, 1.0, 0.0],
+    [-1.0, 1.0, 0.0],
+    [1.0, -1.0, 0.0],
+    [-1.0, -1.0, 0.0],
+    [1.0, 0.0, 1.0],
+    [-1.0, 0.0, 1.0],
+    [1.0, 0.0, -1.0],
+    [-1.0, 0.0, -1.0],
+    [0.0, 1.0, 1.0],
+    [0.0, -1.0, 1.0],
+    [0.0, 1.0, -1.0],
+    [0.0, -1.0, -1.0],
+    [1.0, 1.0, 0.0],
+    [-1.0, 1.0, 0.0],
+    [0.0, -1.0, 1.0],
+    [0.0, -1.0, -1.0],
+];
+
+/// Dot product of the corner gradient picked by the top 4 bits of `h` with the offset.
 #[inline]
 fn grad(h: u64, x: f64, y: f64, z: f64) -> f64 {
-    match (h >> 60) & 15 {
-        0 | 12 => x + y,
-        1 | 13 => -x + y,
-        2 => x - y,
-        3 => -x - y,
-        4 => x + z,
-        5 => -x + z,
-        6 => x - z,
-        7 => -x - z,
-        8 => y + z,
-        9 | 14 => -y + z,
-        10 => y - z,
-        _ => -y - z,
-    }
+    let g = GRADIENTS[(h >> 60) as usize & 15];
+    g[0] * x + g[1] * y + g[2] * z
 }
 
 /// 3-D gradient (Perlin) noise, roughly in `[-1, 1]`, unit lattice spacing.
