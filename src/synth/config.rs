@@ -282,6 +282,22 @@ impl SynthConfig {
         }
     }
 
+    /// Paper Fig. 20's case on the dual-focus set-up: the upper 45% of the right wall (where
+    /// the no-glass focus stripe lies) is missing from 300 µm to 1300 µm of the scan (frames of
+    /// groups 1–2 at the default frame size).
+    #[must_use]
+    pub fn dual_focus_fig20() -> Self {
+        let mut cfg = Self::dual_focus_demo();
+        cfg.damage.chunks.push(WallChunk {
+            start_um: 300.0,
+            length_um: 1000.0,
+            right_wall: true,
+            wall_fraction: 0.45,
+            depth_um: 8.0,
+        });
+        cfg
+    }
+
     /// Group step along the groove, (width − overlap)·pitch, in µm.
     #[must_use]
     pub fn group_step_um(&self) -> f64 {
@@ -522,6 +538,7 @@ mod tests {
         SynthConfig::quick_test().validate().unwrap();
         SynthConfig::demo().validate().unwrap();
         SynthConfig::dual_focus_demo().validate().unwrap();
+        SynthConfig::dual_focus_fig20().validate().unwrap();
         let c = SynthConfig::default();
         assert!((c.group_step_um() - 1180.0 * 0.39).abs() < 1e-9);
         assert!(

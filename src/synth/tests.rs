@@ -597,3 +597,59 @@ fn time_the_blur() {
         b.data[5]
     );
 }
+
+#[test]
+fn dual_focus_scan_metadata_and_a_missing_chunk_render_dark() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("df");
+    let cfg = SynthConfig {
+        width_px: 64,
+        height_px: 700,
+        group_overlap_px: 8,
+        frames_per_group: 7,
+        max_groups: Some(1),
+        ..SynthConfig::dual_focus_fig20()
+    };
+    let sum = render_scan(
+        &silence(0.01),
+        &cfg,
+        &out,
+        &no_progress,
+        &AtomicBool::new(false),
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(out.join("scan.toml")).unwrap();
+    if std::env::var("SYNTH_DEBUG").is_ok() {
+        eprintln!("{text}");
+    }
+    let scan = Scan::open(&out).unwrap();
+    let df = scan.meta.dual_focus.as_ref().unwrap();
+    assert_eq!(df.glass_side, crate::io::scan::GlassSide::Top);
+    assert_eq!(Some(df.glass_edge_row), sum.glass_edge_row);
+    assert!((df.focal_distances_mm().1 - 4.037).abs() < 0.001);
+    assert!(scan.meta.extra.contains_key("synth_info"));
+
+    // The preset's chunk removes the upper part of the right wall over a stretch: compare a
+    // sharp, texture-free render inside and outside it.
+    let chunk = &cfg.damage.chunks[0];
+    let flat = SynthConfig {
+        numerical_aperture: 0.0,
+        dual_focus: None,
+        texture_contrast: 0.0,
+        noise_sigma_8bit: 0.0,
+        max_groups: None,
+        ..cfg.clone()
+    };
+    let g = Groove::new(&silence(0.01), &flat).unwrap();
+    let group_of = |s: f64| (s / flat.group_step_um()).floor() as usize;
+    let inside = group_of(chunk.start_um + 0.5 * chunk.length_um);
+    let outside = group_of(chunk.start_um + chunk.length_um + 100.0);
+    let (a, b) = (g.render_frame(inside, 0), g.render_frame(outside, 0));
+    // Right wall 20 µm below the land (fraction 0.45 of 100 µm reaches 45 µm): row of y = 100 µm.
+    let row = (349.5 + 100.0 * 3970.0 / (0.39 * 3990.0)) as usize;
+    let (mean_in, mean_out) = (
+        a.row(row).iter().sum::<f32>() / 64.0,
+        b.row(row).iter().sum::<f32>() / 64.0,
+    );
+    assert!(mean_out > 0.7 && mean_in < 0.2, "{mean_in} {mean_out}");
+}
