@@ -187,7 +187,7 @@ fn hat(levels: &[f64], i: usize, s: f64) -> f32 {
 /// Level index below σ and the weight of the level above (hat interpolation).
 fn level_of(sigma: f64) -> (u8, f32) {
     let last = BLUR_LEVELS_PX.len() - 1;
-    if !(sigma > 0.0) {
+    if sigma.is_nan() || sigma <= 0.0 {
         return (0, 0.0);
     }
     if sigma >= BLUR_LEVELS_PX[last] {

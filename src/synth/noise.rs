@@ -11,6 +11,8 @@ const HASH_MUL_Y: u64 = 0xC2B2_AE3D_27D4_EB4F;
 const HASH_MUL_Z: u64 = 0x1656_67B1_9E37_79F9;
 /// Frequency ratio between fBm octaves (slightly off 2 so octaves do not share lattice lines).
 const FBM_LACUNARITY: f64 = 2.03;
+/// Phase turbulence of the marble veins (radians per unit of fBm): breaks their regularity.
+const VEIN_TURBULENCE: f64 = 6.0;
 /// Octaves of fine detail in [`marble`]: the finest has a lattice of scale/2 (≈ 4 px at 3 µm).
 const DETAIL_OCTAVES: u32 = 2;
 /// Amplitude ratio between fBm octaves.
@@ -198,8 +200,9 @@ pub fn marble(p: [f64; 3], scale_um: f64, seed: u64) -> f32 {
     let inv = 1.0 / scale_um;
     let q = [p[0] * inv, p[1] * inv, p[2] * inv];
     let turb = fbm3([q[0] * 0.5, q[1] * 0.5, q[2] * 0.5], 3, seed ^ 0x5EED_0001);
-    let veins =
-        (std::f64::consts::TAU * (0.31 * q[0] + 0.23 * q[1] + 0.17 * q[2]) + 4.0 * turb).sin();
+    let veins = (std::f64::consts::TAU * (0.31 * q[0] + 0.23 * q[1] + 0.17 * q[2])
+        + VEIN_TURBULENCE * turb)
+        .sin();
     let detail = fbm3(q, DETAIL_OCTAVES, seed ^ 0x5EED_0002);
     let v = 0.5 + 0.22 * veins + 0.55 * detail;
     v.clamp(0.0, 1.0) as f32

@@ -653,3 +653,53 @@ fn dual_focus_scan_metadata_and_a_missing_chunk_render_dark() {
     );
     assert!(mean_out > 0.7 && mean_in < 0.2, "{mean_in} {mean_out}");
 }
+
+/// Writes one-group demo scans for eyeballing: `SYNTH_PREVIEW_DIR=/tmp/x cargo test ... -- --ignored preview`.
+#[test]
+#[ignore = "writes preview scans"]
+fn preview_scans() {
+    let Ok(dir) = std::env::var("SYNTH_PREVIEW_DIR") else {
+        return;
+    };
+    let dir = Path::new(&dir);
+    let sound = chord(&[440.0, 1320.0], 0.05, 44_100);
+    let cancel = AtomicBool::new(false);
+    for (name, cfg) in [
+        ("demo", SynthConfig::demo()),
+        (
+            "paper",
+            SynthConfig {
+                max_groups: Some(1),
+                ..SynthConfig::default()
+            },
+        ),
+        (
+            "fig20",
+            SynthConfig {
+                max_groups: Some(3),
+                ..SynthConfig::dual_focus_fig20()
+            },
+        ),
+    ] {
+        let sum = render_scan(&sound, &cfg, &dir.join(name), &no_progress, &cancel).unwrap();
+        eprintln!("{name}: {sum:?}");
+        // A half-size 8-bit copy of one frame, and a full-resolution crop of its centre.
+        let g = if sum.groups > 1 { "g00001" } else { "g00000" };
+        let f = crate::io::load_frame(&dir.join(name).join(g).join("f000.png")).unwrap();
+        let half = Image::from_fn(f.width / 2, f.height / 2, |x, y| {
+            0.25 * (f.data[2 * y * f.width + 2 * x]
+                + f.data[2 * y * f.width + 2 * x + 1]
+                + f.data[(2 * y + 1) * f.width + 2 * x]
+                + f.data[(2 * y + 1) * f.width + 2 * x + 1])
+        });
+        save_grey_png(&half, &dir.join(format!("{name}_half.png")), false, true).unwrap();
+        let crop = Image::from_fn(256, 256, |x, y| {
+            f.data[(y + f.height / 2 - 128) * f.width + x + f.width / 2 - 128]
+        });
+        save_grey_png(&crop, &dir.join(format!("{name}_crop.png")), false, true).unwrap();
+    }
+    for kind in [SceneKind::Cube, SceneKind::Cylinder, SceneKind::Sphere] {
+        let (img, _) = scene::render_scene_frame(kind, &SceneConfig::default(), 0).unwrap();
+        save_grey_png(&img, &dir.join(format!("{kind:?}.png")), false, true).unwrap();
+    }
+}
