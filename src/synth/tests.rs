@@ -496,7 +496,8 @@ fn time_a_paper_sized_group() {
             "plain",
             SynthConfig {
                 max_groups: Some(1),
-                ..SynthConfig::demo()
+                damage: SynthConfig::demo().damage,
+                ..SynthConfig::default()
             },
         ),
         (
