@@ -15,23 +15,6 @@ const EXACT_GAUSS_MAX_SIGMA_PX: f64 = 3.0;
 /// Namespace of the blur-stack renderer.
 pub struct BlurStack;
 
-fn transpose(img: &Image) -> Image {
-    let (w, h) = (img.width, img.height);
-    let mut out = vec![0.0f32; w * h];
-    out.par_chunks_mut(h.max(1))
-        .enumerate()
-        .for_each(|(x, col)| {
-            for (y, v) in col.iter_mut().enumerate() {
-                *v = img.data[y * w + x];
-            }
-        });
-    Image {
-        width: h,
-        height: w,
-        data: out,
-    }
-}
-
 /// Convolves every row with a symmetric kernel (clamped borders).
 fn rows_kernel(img: &mut Image, kernel: &[f32]) {
     let w = img.width;
@@ -100,23 +83,90 @@ fn rows_gauss(img: &mut Image, sigma: f64) {
         rows_kernel(img, &gauss_kernel(sigma));
     } else {
         // Three boxes of half-width r have variance 3·((2r+1)² − 1)/12 = r(r+1).
-        let r = ((0.25 + sigma * sigma).sqrt() - 0.5).round().max(1.0) as usize;
+        let r = box_radius(sigma);
         for _ in 0..3 {
             rows_box(img, r);
         }
     }
 }
 
-/// Gaussian blur of σ px in both directions.
-#[must_use]
-pub fn gaussian_blur(img: &Image, sigma: f64) -> Image {
-    let mut a = img.clone();
-    rows_gauss(&mut a, sigma);
-    let mut t = transpose(&a);
-    rows_gauss(&mut t, sigma);
-    transpose(&t)
+/// Convolves every column with a symmetric kernel (clamped borders), whole rows at a time.
+fn cols_kernel(img: &Image, kernel: &[f32]) -> Image {
+    let (w, h) = (img.width, img.height);
+    let r = kernel.len() / 2;
+    let mut out = Image::zeros(w, h);
+    out.data
+        .par_chunks_mut(w.max(1))
+        .enumerate()
+        .for_each(|(y, orow)| {
+            for (k, &wk) in kernel.iter().enumerate() {
+                let src = (y + k).saturating_sub(r).min(h - 1);
+                for (o, &v) in orow.iter_mut().zip(img.row(src)) {
+                    *o += wk * v;
+                }
+            }
+        });
+    out
 }
 
+/// Box filter of half-width `r` along every column (clamped borders): a running sum of whole
+/// rows, down the image.
+fn cols_box(img: &Image, r: usize) -> Image {
+    let (w, h) = (img.width, img.height);
+    let row = |y: isize| img.row(y.clamp(0, h as isize - 1) as usize);
+    let mut acc = vec![0.0f64; w];
+    for k in -(r as isize)..=(r as isize) {
+        for (a, &v) in acc.iter_mut().zip(row(k)) {
+            *a += f64::from(v);
+        }
+    }
+    let norm = 1.0 / (2 * r + 1) as f64;
+    let mut out = Image::zeros(w, h);
+    for (y, orow) in out.data.chunks_mut(w.max(1)).enumerate() {
+        let (add, sub) = (
+            row(y as isize + r as isize + 1),
+            row(y as isize - r as isize),
+        );
+        for (((o, a), &p), &m) in orow.iter_mut().zip(acc.iter_mut()).zip(add).zip(sub) {
+            *o = (*a * norm) as f32;
+            *a += f64::from(p) - f64::from(m);
+        }
+    }
+    out
+}
+
+/// Blurs columns by σ: exact Gaussian when small, else three boxes of matching variance.
+fn cols_gauss(img: &Image, sigma: f64) -> Image {
+    if sigma <= 0.0 {
+        return img.clone();
+    }
+    if sigma <= EXACT_GAUSS_MAX_SIGMA_PX {
+        cols_kernel(img, &gauss_kernel(sigma))
+    } else {
+        let r = box_radius(sigma);
+        let a = cols_box(img, r);
+        let b = cols_box(&a, r);
+        cols_box(&b, r)
+    }
+}
+
+/// Half-width of three boxes with the variance of a Gaussian of σ: r(r+1) = σ².
+fn box_radius(sigma: f64) -> usize {
+    ((0.25 + sigma * sigma).sqrt() - 0.5).round().max(1.0) as usize
+}
+
+/// Gaussian blur of σ px in both directions (clamped borders).
+#[must_use]
+pub fn gaussian_blur(img: &Image, sigma: f64) -> Image {
+    if img.data.is_empty() {
+        return img.clone();
+    }
+    let mut a = img.clone();
+    rows_gauss(&mut a, sigma);
+    cols_gauss(&a, sigma)
+}
+
+#[cfg(test)]
 fn hat(levels: &[f64], i: usize, s: f64) -> f32 {
     let c = levels[i];
     let last = levels.len() - 1;
@@ -134,12 +184,31 @@ fn hat(levels: &[f64], i: usize, s: f64) -> f32 {
     w.clamp(0.0, 1.0) as f32
 }
 
+/// Level index below σ and the weight of the level above (hat interpolation).
+fn level_of(sigma: f64) -> (u8, f32) {
+    let last = BLUR_LEVELS_PX.len() - 1;
+    if sigma.is_nan() || sigma <= 0.0 {
+        return (0, 0.0);
+    }
+    if sigma >= BLUR_LEVELS_PX[last] {
+        return (last as u8, 0.0);
+    }
+    let i = BLUR_LEVELS_PX.partition_point(|&l| l <= sigma) - 1;
+    let f = (sigma - BLUR_LEVELS_PX[i]) / (BLUR_LEVELS_PX[i + 1] - BLUR_LEVELS_PX[i]);
+    (i as u8, f as f32)
+}
+
 impl BlurStack {
     /// Blurs `sharp` with a per-pixel Gaussian σ (px) from `sigma`, interpolating between the
     /// levels of [`BLUR_LEVELS_PX`]. Levels above the largest σ present are skipped.
     #[must_use]
     pub fn apply(sharp: &Image, sigma: &Image) -> Image {
         let max_sigma = sigma.data.iter().fold(0.0f32, |m, &v| m.max(v));
+        let slots: Vec<(u8, f32)> = sigma
+            .data
+            .par_iter()
+            .map(|&s| level_of(f64::from(s)))
+            .collect();
         let mut out = Image::zeros(sharp.width, sharp.height);
         let mut level = sharp.clone();
         let mut prev_sigma = 0.0;
@@ -152,14 +221,16 @@ impl BlurStack {
                 level = gaussian_blur(&level, inc);
             }
             prev_sigma = s;
+            let i = i as u8;
             out.data
                 .par_iter_mut()
                 .zip(level.data.par_iter())
-                .zip(sigma.data.par_iter())
-                .for_each(|((o, &l), &sp)| {
-                    let wgt = hat(&BLUR_LEVELS_PX, i, f64::from(sp));
-                    if wgt > 0.0 {
-                        *o += wgt * l;
+                .zip(slots.par_iter())
+                .for_each(|((o, &l), &(k, f))| {
+                    if k == i {
+                        *o += (1.0 - f) * l;
+                    } else if k.wrapping_add(1) == i {
+                        *o += f * l;
                     }
                 });
         }
@@ -171,6 +242,24 @@ impl BlurStack {
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
+
+    #[test]
+    fn level_slots_match_the_hat_weights() {
+        for s in [0.0, 0.3, 1.0, 2.7, 9.0, 31.0, 40.0] {
+            let (k, f) = level_of(s);
+            for i in 0..BLUR_LEVELS_PX.len() {
+                let want = hat(&BLUR_LEVELS_PX, i, s);
+                let got = if i == usize::from(k) {
+                    1.0 - f
+                } else if i == usize::from(k) + 1 {
+                    f
+                } else {
+                    0.0
+                };
+                assert!((got - want).abs() < 1e-6, "{s} level {i}: {got} {want}");
+            }
+        }
+    }
 
     #[test]
     fn hat_weights_sum_to_one() {

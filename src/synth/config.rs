@@ -246,20 +246,26 @@ impl SynthConfig {
         }
     }
 
-    /// A demo scan with the paper's camera (1280×1024, 0.39 µm/px, 4 mm, 12 frames of 0.78 µm),
-    /// 16-bit frames, light damage; pair it with a short sound and `max_groups` of about 20.
+    /// A few-MB demo scan: the paper's optics (0.39 µm/px, 4 mm, 12 frames of 0.78 µm) on
+    /// 640×512 px 8-bit frames, a 140 µm wide, 55 µm deep groove with rounded corners, 30 mm/s
+    /// peak, light damage, 2 groups (≈ 0.3 MB per frame).
     #[must_use]
     pub fn demo() -> Self {
         Self {
-            bit_depth: 16,
-            noise_sigma_8bit: 0.5,
+            width_px: 640,
+            height_px: 512,
+            group_overlap_px: 60,
+            groove_top_width_um: 140.0,
+            groove_depth_um: 55.0,
+            bottom_radius_um: 8.0,
+            peak_velocity_mm_s: 30.0,
             damage: DamageConfig {
                 scratches_per_mm: 2.0,
                 dust_per_mm2: 20.0,
                 missing_wall_chunks_per_mm: 0.3,
                 ..DamageConfig::default()
             },
-            max_groups: Some(20),
+            max_groups: Some(2),
             ..Self::default()
         }
     }
@@ -280,6 +286,22 @@ impl SynthConfig {
             max_groups: Some(10),
             ..Self::default()
         }
+    }
+
+    /// Paper Fig. 20's case on the dual-focus set-up: the upper 45% of the right wall (where
+    /// the no-glass focus stripe lies) is missing from 300 µm to 1300 µm of the scan (frames of
+    /// groups 1–2 at the default frame size).
+    #[must_use]
+    pub fn dual_focus_fig20() -> Self {
+        let mut cfg = Self::dual_focus_demo();
+        cfg.damage.chunks.push(WallChunk {
+            start_um: 300.0,
+            length_um: 1000.0,
+            right_wall: true,
+            wall_fraction: 0.45,
+            depth_um: 8.0,
+        });
+        cfg
     }
 
     /// Group step along the groove, (width − overlap)·pitch, in µm.
@@ -522,6 +544,7 @@ mod tests {
         SynthConfig::quick_test().validate().unwrap();
         SynthConfig::demo().validate().unwrap();
         SynthConfig::dual_focus_demo().validate().unwrap();
+        SynthConfig::dual_focus_fig20().validate().unwrap();
         let c = SynthConfig::default();
         assert!((c.group_step_um() - 1180.0 * 0.39).abs() < 1e-9);
         assert!(

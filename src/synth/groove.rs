@@ -145,6 +145,102 @@ pub struct Groove {
     warnings: Vec<String>,
 }
 
+/// The sound with each channel's mean removed, read without copying it.
+struct Centred<'a> {
+    channels: &'a [Vec<f32>],
+    means: Vec<f64>,
+    /// The cut is stereo (two wall channels).
+    stereo_cut: bool,
+    /// A stereo cut of a sound with two channels (otherwise both walls get the mono mix).
+    stereo: bool,
+}
+
+impl<'a> Centred<'a> {
+    fn new(sound: &'a Audio, stereo_cut: bool) -> Self {
+        let means = sound
+            .channels
+            .iter()
+            .map(|c| c.iter().map(|&v| f64::from(v)).sum::<f64>() / c.len().max(1) as f64)
+            .collect();
+        Self {
+            channels: &sound.channels,
+            means,
+            stereo_cut,
+            stereo: stereo_cut && sound.channels.len() >= 2,
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.channels.first().map_or(0, Vec::len)
+    }
+
+    /// Channel `c` at sample `n`, mean removed; 0 outside the sound.
+    #[inline]
+    fn at(&self, c: usize, n: i64) -> f64 {
+        if n < 0 {
+            return 0.0;
+        }
+        match (self.channels.get(c), self.means.get(c)) {
+            (Some(ch), Some(m)) => ch.get(n as usize).map_or(0.0, |&v| f64::from(v) - m),
+            _ => 0.0,
+        }
+    }
+
+    fn mono(&self, n: i64) -> f64 {
+        let k = self.channels.len().max(1);
+        (0..k).map(|c| self.at(c, n)).sum::<f64>() / k as f64
+    }
+
+    /// Left channel of a stereo cut (the mono mix when the sound is mono).
+    fn left(&self, n: i64) -> f64 {
+        if self.stereo {
+            self.at(0, n)
+        } else {
+            self.mono(n)
+        }
+    }
+
+    /// Right channel of a stereo cut (the mono mix when the sound is mono).
+    fn right(&self, n: i64) -> f64 {
+        if self.stereo {
+            self.at(1, n)
+        } else {
+            self.mono(n)
+        }
+    }
+
+    /// Largest |sample| of what is cut: both channels for stereo, the mono mix otherwise.
+    fn peak(&self) -> f64 {
+        (0..self.len() as i64).fold(0.0f64, |m, n| {
+            if self.stereo {
+                m.max(self.at(0, n).abs()).max(self.at(1, n).abs())
+            } else {
+                m.max(self.mono(n).abs())
+            }
+        })
+    }
+
+    /// The cut's channels from `start` over the scan, divided by `peak_in` (velocity / peak).
+    fn reference(&self, rate: u32, start: i64, scan_samples: f64, peak_in: f64) -> Audio {
+        let n = (scan_samples.floor() as usize + 1).min(self.len().saturating_sub(start as usize));
+        let norm = if peak_in > 0.0 { 1.0 / peak_in } else { 0.0 };
+        let take = |f: &dyn Fn(i64) -> f64| -> Vec<f32> {
+            (0..n as i64)
+                .map(|i| (f(start + i) * norm) as f32)
+                .collect()
+        };
+        let channels = if self.stereo_cut {
+            vec![take(&|n| self.left(n)), take(&|n| self.right(n))]
+        } else {
+            vec![take(&|n| self.mono(n))]
+        };
+        Audio {
+            sample_rate_hz: rate,
+            channels,
+        }
+    }
+}
+
 fn sound_err(problem: impl Into<String>) -> SynthError {
     SynthError::Sound {
         problem: problem.into(),
@@ -203,28 +299,8 @@ impl Groove {
         let scan_end_um = (groups - 1) as f64 * group_step_um + span_um;
 
         // Velocities: DC removed per channel, one common scale so max |V| = peak.
-        let centred: Vec<Vec<f64>> = sound
-            .channels
-            .iter()
-            .map(|c| {
-                let mean = c.iter().map(|&v| f64::from(v)).sum::<f64>() / c.len() as f64;
-                c.iter().map(|&v| f64::from(v) - mean).collect()
-            })
-            .collect();
-        let mono: Vec<f64> = (0..sound.len())
-            .map(|i| centred.iter().map(|c| c[i]).sum::<f64>() / centred.len() as f64)
-            .collect();
-        let (left, right): (&[f64], &[f64]) = match (cfg.cut, centred.as_slice()) {
-            (Cut::Stereo, [l, r, ..]) => (l, r),
-            _ => (&mono, &mono),
-        };
-        let peak_in = match cfg.cut {
-            Cut::Stereo => left
-                .iter()
-                .chain(right.iter())
-                .fold(0.0f64, |m, v| m.max(v.abs())),
-            _ => mono.iter().fold(0.0f64, |m, v| m.max(v.abs())),
-        };
+        let src = Centred::new(sound, cfg.cut == Cut::Stereo);
+        let peak_in = src.peak();
         let peak_um_s = cfg.peak_velocity_mm_s * 1000.0;
         let scale = if peak_in > 0.0 {
             peak_um_s / peak_in
@@ -232,22 +308,15 @@ impl Groove {
             0.0
         };
         let alpha = cfg.wall_angle_deg.to_radians();
-        let get = |c: &[f64], n: i64| -> f64 {
-            if n < 0 {
-                0.0
-            } else {
-                c.get(n as usize).copied().unwrap_or(0.0)
-            }
-        };
         let lat_vel = |n: i64| match cfg.cut {
-            Cut::Lateral => get(&mono, n) * scale,
+            Cut::Lateral => src.mono(n) * scale,
             Cut::Vertical => 0.0,
-            Cut::Stereo => (get(left, n) + get(right, n)) * scale / (2.0 * alpha.sin()),
+            Cut::Stereo => (src.left(n) + src.right(n)) * scale / (2.0 * alpha.sin()),
         };
         let vert_vel = |n: i64| match cfg.cut {
             Cut::Lateral => 0.0,
-            Cut::Vertical => get(&mono, n) * scale,
-            Cut::Stereo => (get(right, n) - get(left, n)) * scale / (2.0 * alpha.cos()),
+            Cut::Vertical => src.mono(n) * scale,
+            Cut::Stereo => (src.right(n) - src.left(n)) * scale / (2.0 * alpha.cos()),
         };
 
         let geo_reach = cfg.width_px as f64 * cfg.pixel_pitch_um * (cfg.groove_depth_um + 100.0)
@@ -264,7 +333,11 @@ impl Groove {
         lateral.shift(-0.5 * (lo + hi) + cfg.groove_offset_um);
         let lat_swing = 0.5 * (hi - lo);
         let has_vertical = cfg.cut != Cut::Lateral;
-        let mut vertical = Track::new(n_lo, n_hi, start_sample, rate_hz, vert_vel);
+        let mut vertical = if has_vertical {
+            Track::new(n_lo, n_hi, start_sample, rate_hz, vert_vel)
+        } else {
+            Track::new(0, 1, 0, rate_hz, |_| 0.0)
+        };
         let (vlo, vhi) = vertical.range_between(start_sample, n_end);
         vertical.shift(-0.5 * (vlo + vhi));
         let vert_swing = 0.5 * (vhi - vlo);
@@ -318,14 +391,10 @@ impl Groove {
 
         let mut warnings = Vec::new();
         let optics = Self::place_optics(cfg, &profile, wd_um, cy, lat_swing, &mut warnings);
-        let reference = Self::reference_audio(
-            cfg,
+        let reference = src.reference(
             sound.sample_rate_hz,
             start_sample,
             scan_end_um * samples_per_um,
-            left,
-            right,
-            &mono,
             peak_in,
         );
         Ok(Self {
@@ -385,36 +454,6 @@ impl Groove {
             glass_edge_row: Some(row),
             glass_thickness_um: df.glass_thickness_mm * 1000.0,
             glass_index: df.glass_index,
-        }
-    }
-
-    #[allow(clippy::too_many_arguments)] // private helper fed from one place
-    fn reference_audio(
-        cfg: &SynthConfig,
-        rate: u32,
-        start: i64,
-        scan_samples: f64,
-        left: &[f64],
-        right: &[f64],
-        mono: &[f64],
-        peak_in: f64,
-    ) -> Audio {
-        let n = (scan_samples.floor() as usize + 1).min(mono.len().saturating_sub(start as usize));
-        let norm = if peak_in > 0.0 { 1.0 / peak_in } else { 0.0 };
-        let take = |c: &[f64]| -> Vec<f32> {
-            c.iter()
-                .skip(start as usize)
-                .take(n)
-                .map(|v| (v * norm) as f32)
-                .collect()
-        };
-        let channels = match cfg.cut {
-            Cut::Stereo => vec![take(left), take(right)],
-            _ => vec![take(mono)],
-        };
-        Audio {
-            sample_rate_hz: rate,
-            channels,
         }
     }
 

@@ -11,6 +11,8 @@ const HASH_MUL_Y: u64 = 0xC2B2_AE3D_27D4_EB4F;
 const HASH_MUL_Z: u64 = 0x1656_67B1_9E37_79F9;
 /// Frequency ratio between fBm octaves (slightly off 2 so octaves do not share lattice lines).
 const FBM_LACUNARITY: f64 = 2.03;
+/// Phase turbulence of the marble veins (radians per unit of fBm): breaks their regularity.
+const VEIN_TURBULENCE: f64 = 6.0;
 /// Octaves of fine detail in [`marble`]: the finest has a lattice of scale/2 (≈ 4 px at 3 µm).
 const DETAIL_OCTAVES: u32 = 2;
 /// Amplitude ratio between fBm octaves.
@@ -120,23 +122,31 @@ fn lerp(a: f64, b: f64, t: f64) -> f64 {
     a + (b - a) * t
 }
 
-/// Dot product of the corner gradient picked by `h` (12 cube-edge directions) with the offset.
+/// The 12 cube-edge gradient directions (4 repeated to make 16), as a table: branch-free.
+const GRADIENTS: [[f64; 3]; 16] = [
+    [1.0, 1.0, 0.0],
+    [-1.0, 1.0, 0.0],
+    [1.0, -1.0, 0.0],
+    [-1.0, -1.0, 0.0],
+    [1.0, 0.0, 1.0],
+    [-1.0, 0.0, 1.0],
+    [1.0, 0.0, -1.0],
+    [-1.0, 0.0, -1.0],
+    [0.0, 1.0, 1.0],
+    [0.0, -1.0, 1.0],
+    [0.0, 1.0, -1.0],
+    [0.0, -1.0, -1.0],
+    [1.0, 1.0, 0.0],
+    [-1.0, 1.0, 0.0],
+    [0.0, -1.0, 1.0],
+    [0.0, -1.0, -1.0],
+];
+
+/// Dot product of the corner gradient picked by the top 4 bits of `h` with the offset.
 #[inline]
 fn grad(h: u64, x: f64, y: f64, z: f64) -> f64 {
-    match (h >> 60) & 15 {
-        0 | 12 => x + y,
-        1 | 13 => -x + y,
-        2 => x - y,
-        3 => -x - y,
-        4 => x + z,
-        5 => -x + z,
-        6 => x - z,
-        7 => -x - z,
-        8 => y + z,
-        9 | 14 => -y + z,
-        10 => y - z,
-        _ => -y - z,
-    }
+    let g = GRADIENTS[(h >> 60) as usize & 15];
+    g[0] * x + g[1] * y + g[2] * z
 }
 
 /// 3-D gradient (Perlin) noise, roughly in `[-1, 1]`, unit lattice spacing.
@@ -190,8 +200,9 @@ pub fn marble(p: [f64; 3], scale_um: f64, seed: u64) -> f32 {
     let inv = 1.0 / scale_um;
     let q = [p[0] * inv, p[1] * inv, p[2] * inv];
     let turb = fbm3([q[0] * 0.5, q[1] * 0.5, q[2] * 0.5], 3, seed ^ 0x5EED_0001);
-    let veins =
-        (std::f64::consts::TAU * (0.31 * q[0] + 0.23 * q[1] + 0.17 * q[2]) + 4.0 * turb).sin();
+    let veins = (std::f64::consts::TAU * (0.31 * q[0] + 0.23 * q[1] + 0.17 * q[2])
+        + VEIN_TURBULENCE * turb)
+        .sin();
     let detail = fbm3(q, DETAIL_OCTAVES, seed ^ 0x5EED_0002);
     let v = 0.5 + 0.22 * veins + 0.55 * detail;
     v.clamp(0.0, 1.0) as f32

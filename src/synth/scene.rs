@@ -83,7 +83,7 @@ impl Default for SceneConfig {
             frames: 36,
             plane_distance_um: 400.0,
             object_distance_um: 300.0,
-            object_size_um: 110.0,
+            object_size_um: 90.0,
             texture_scale_um: 3.0,
             texture_contrast: 0.8,
             noise_sigma_8bit: 0.0,
