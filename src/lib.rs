@@ -3,7 +3,11 @@
 //! The [`pipeline`] holds the pure stages; [`io`] reads scans and writes sound; [`synth`] renders
 //! ground-truth scans.
 
+#[cfg(feature = "gui")]
+pub mod app;
 pub mod engine;
 pub mod image;
 pub mod io;
 pub mod pipeline;
+#[cfg(feature = "gui")]
+pub mod playback;

@@ -1,0 +1,397 @@
+//! Workbench UI tests: egui_kittest drives the real app (open, navigate, tune, rerun, reconstruct,
+//! export, play) headless, and snapshots every view (`UPDATE_SNAPSHOTS=1` rewrites them).
+
+#![cfg(feature = "gui")]
+
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Once};
+use std::time::{Duration, Instant};
+
+use egui_kittest::kittest::Queryable;
+use egui_kittest::{Harness, SnapshotOptions};
+use groovescope::app::{View, Workbench, WorkbenchOptions};
+use groovescope::image::Image;
+use groovescope::io::wav::WavBits;
+use groovescope::pipeline::Stage;
+use groovescope::playback::{AudioStatus, DeviceChoice};
+
+/// Longest wait for the worker or a reconstruction.
+const TIMEOUT: Duration = Duration::from_secs(300);
+/// Window size of every harness (points).
+const SIZE: [f32; 2] = [1280.0, 800.0];
+
+static ALSA: Once = Once::new();
+
+/// Points ALSA at a silent null sink (no sound card here; never assert on timing).
+fn quiet_audio() {
+    ALSA.call_once(|| {
+        let conf = Path::new(env!("CARGO_TARGET_TMPDIR")).join("alsa-null.conf");
+        std::fs::write(
+            &conf,
+            "</usr/share/alsa/alsa.conf>\npcm.!default { type null }\n",
+        )
+        .unwrap();
+        // SAFETY: runs once, before any test touches ALSA or reads the environment.
+        unsafe { std::env::set_var("ALSA_CONFIG_PATH", &conf) };
+    });
+}
+
+const SCAN_TOML: &str = "format = 1
+[record]
+rpm = 78.0
+radius_mm = 115.0
+cut = \"lateral\"
+[camera]
+pixel_pitch_um = 0.39
+working_distance_mm = 4.0
+[motion]
+frame_step_um = 0.78
+group_step_um = 40.0
+";
+
+/// Texture of the groove surface at (x, y) in land-plane pixels.
+fn texture(x: f64, y: f64) -> f64 {
+    0.5 + 0.2 * (0.37 * x + 0.11 * y).sin()
+        + 0.15 * (0.23 * x - 0.31 * y + 1.0).sin()
+        + 0.1 * (0.71 * x + 0.05 * y + 2.0).sin()
+}
+
+/// A small V-groove scan: bright 45° walls, dark land; deeper rows move slower (u = f·U/Z).
+fn write_scan(dir: &Path, groups: usize) {
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join("scan.toml"), SCAN_TOML).unwrap();
+    let (w, h) = (160usize, 96usize);
+    let pitch_um = 0.39;
+    let wd_um = 4000.0;
+    let depth_um = |y: f64| -> f64 {
+        let d = if (30.0..48.0).contains(&y) {
+            y - 30.0
+        } else if (48.0..66.0).contains(&y) {
+            66.0 - y
+        } else {
+            0.0
+        };
+        wd_um + d * pitch_um
+    };
+    for g in 0..groups {
+        let gdir = dir.join(format!("group_{g:03}"));
+        std::fs::create_dir_all(&gdir).unwrap();
+        for t in 0..7 {
+            let img = Image::from_fn(w, h, |x, y| {
+                let yf = y as f64;
+                let z = depth_um(yf);
+                let shift = (g as f64 * 40.0 / pitch_um) + t as f64 * 2.0 * wd_um / z;
+                let wall = z > wd_um + 0.5 * pitch_um;
+                let gain = if wall { 0.95 } else { 0.35 };
+                (gain * texture(x as f64 + shift, yf)).clamp(0.0, 1.0) as f32
+            });
+            groovescope::io::save_grey_png(&img, &gdir.join(format!("f{t:02}.png")), true, true)
+                .unwrap();
+        }
+    }
+}
+
+/// The scan the tests run on: the bundled demo when present, else a small synthetic one.
+fn test_scan(tmp: &Path) -> PathBuf {
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
+    if demo.join("scan.toml").is_file() {
+        return demo;
+    }
+    let dir = tmp.join("scan");
+    write_scan(&dir, 3);
+    dir
+}
+
+fn options(tmp: &Path, scan: Option<PathBuf>, audio: DeviceChoice) -> WorkbenchOptions {
+    WorkbenchOptions {
+        scan,
+        config_dir: Some(tmp.join("config")),
+        audio,
+        ..WorkbenchOptions::default()
+    }
+}
+
+fn harness(opts: WorkbenchOptions) -> Harness<'static, Workbench> {
+    quiet_audio();
+    Harness::builder()
+        .with_size(egui::vec2(SIZE[0], SIZE[1]))
+        .with_max_steps(40)
+        .build_eframe(move |cc| Workbench::new(&cc.egui_ctx, opts).unwrap())
+}
+
+/// Steps the app until the worker (and any reconstruction) is done.
+fn settle(h: &mut Harness<'static, Workbench>) {
+    let t0 = Instant::now();
+    loop {
+        h.step();
+        let s = h.state();
+        if s.is_idle() && !s.is_reconstructing() {
+            break;
+        }
+        assert!(t0.elapsed() < TIMEOUT, "the workbench did not settle");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    h.run_ok();
+}
+
+fn last_message(h: &Harness<'static, Workbench>) -> String {
+    h.state()
+        .messages()
+        .last()
+        .map(|m| m.text.clone())
+        .unwrap_or_default()
+}
+
+#[test]
+fn opens_a_scan_and_steps_through_groups() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = test_scan(tmp.path());
+    let mut h = harness(options(tmp.path(), Some(scan.clone()), DeviceChoice::Off));
+    settle(&mut h);
+    let groups = h.state().scan().unwrap().groups.len();
+    assert!(groups >= 2);
+    assert_eq!(h.state().group(), 0);
+    assert!(h.state().frames().is_some(), "frames of group 0 are loaded");
+    h.get_by_label("next ▶").click();
+    settle(&mut h);
+    assert_eq!(h.state().group(), 1);
+    h.get_by_label(&format!("group 1 / {}", groups - 1));
+    assert_eq!(h.state().cache().group, Some(1));
+    h.get_by_label("◀ previous").click();
+    settle(&mut h);
+    assert_eq!(h.state().group(), 0);
+    // The scan is remembered for next time.
+    assert_eq!(
+        h.state().recent().first().cloned(),
+        Some(scan.canonicalize().unwrap())
+    );
+}
+
+#[test]
+fn bad_input_gives_a_message_and_keeps_the_scan() {
+    let tmp = tempfile::tempdir().unwrap();
+    let good = test_scan(tmp.path());
+    let mut h = harness(options(tmp.path(), Some(good.clone()), DeviceChoice::Off));
+    settle(&mut h);
+    // Not a scan.
+    let not_scan = tmp.path().join("holiday_photos");
+    std::fs::create_dir_all(&not_scan).unwrap();
+    assert!(h.state_mut().open_scan(&not_scan).is_err());
+    settle(&mut h);
+    assert!(
+        last_message(&h).contains("scan.toml is missing"),
+        "{}",
+        last_message(&h)
+    );
+    assert_eq!(h.state().scan().unwrap().dir, good);
+    h.get_by_label_contains("scan.toml is missing");
+    // A broken frame in the first group.
+    let broken = tmp.path().join("broken");
+    write_scan(&broken, 2);
+    std::fs::write(broken.join("group_000/f03.png"), b"not a png").unwrap();
+    h.state_mut().open_scan(&broken).unwrap();
+    settle(&mut h);
+    let msg = last_message(&h);
+    assert!(
+        msg.contains("f03.png") && msg.contains("stays open"),
+        "{msg}"
+    );
+    assert_eq!(h.state().scan().unwrap().dir, good);
+    // An invalid preset.
+    let preset = tmp.path().join("bad.toml");
+    std::fs::write(&preset, "[flow]\nlambda = \"soft\"\n").unwrap();
+    let before = h.state().params().clone();
+    assert!(h.state_mut().load_preset_from(&preset).is_err());
+    h.run_ok();
+    assert!(last_message(&h).contains("bad.toml"));
+    assert_eq!(h.state().params(), &before);
+}
+
+#[test]
+fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = test_scan(tmp.path());
+    let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
+    settle(&mut h);
+    h.state_mut().set_view(View::Flow);
+    h.run_ok();
+    for s in [Stage::Derivatives, Stage::Flow] {
+        assert_eq!(h.state().stage_status(s).word(), "fresh", "{s:?}");
+    }
+    let derivs = h.state().cache().derivatives.clone().unwrap();
+    let flows = h.state().cache().flows.clone().unwrap();
+    let runs = Stage::ALL.map(|s| h.state().stage_runs(s));
+    let lambda = h.state().params().flow.lambda;
+    h.get_by_label("λ (smoothness)")
+        .set_value_accesskit(f64::from(lambda) * 4.0);
+    h.step();
+    assert!((h.state().params().flow.lambda - lambda * 4.0).abs() < 1e-6);
+    assert_ne!(h.state().stage_status(Stage::Flow).word(), "fresh");
+    assert_eq!(h.state().stage_status(Stage::Derivatives).word(), "fresh");
+    settle(&mut h);
+    let c = h.state().cache();
+    assert!(
+        Arc::ptr_eq(&derivs, c.derivatives.as_ref().unwrap()),
+        "derivatives kept"
+    );
+    assert!(
+        !Arc::ptr_eq(&flows, c.flows.as_ref().unwrap()),
+        "flow recomputed"
+    );
+    assert_eq!(h.state().stage_runs(Stage::Derivatives), runs[0]);
+    assert_eq!(h.state().stage_runs(Stage::Flow), runs[1] + 1);
+    assert_eq!(h.state().stage_status(Stage::Flow).word(), "fresh");
+    h.get_by_label("flow: fresh");
+    // Undo brings the old λ back and reruns flow again.
+    h.state_mut().undo();
+    settle(&mut h);
+    assert_eq!(h.state().params().flow.lambda, lambda);
+    assert_eq!(h.state().stage_runs(Stage::Flow), runs[1] + 2);
+}
+
+#[test]
+fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = test_scan(tmp.path());
+    let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
+    settle(&mut h);
+    let runs = Stage::ALL.map(|s| h.state().stage_runs(s));
+    let flows = h.state().cache().flows.clone().unwrap();
+    let mut p = h.state().params().clone();
+    p.hough.theta_min_deg += 5.0;
+    h.state_mut().set_params(p);
+    assert_eq!(
+        h.state().cache().first_stale(h.state().params()),
+        Some(Stage::Stripes)
+    );
+    settle(&mut h);
+    let after = Stage::ALL.map(|s| h.state().stage_runs(s));
+    assert_eq!(
+        &after[..3],
+        &runs[..3],
+        "derivatives, flow and depth did not rerun"
+    );
+    assert_eq!(
+        after[Stage::Stripes.index()],
+        runs[Stage::Stripes.index()] + 1
+    );
+    assert!(Arc::ptr_eq(
+        &flows,
+        h.state().cache().flows.as_ref().unwrap()
+    ));
+}
+
+#[test]
+fn reconstructs_exports_a_wav_and_reads_it_back() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = test_scan(tmp.path());
+    let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
+    settle(&mut h);
+    h.state_mut().set_view(View::Waveform);
+    h.run_ok();
+    h.get_by_label("Reconstruct clip").click();
+    h.step();
+    assert!(h.state().is_reconstructing());
+    settle(&mut h);
+    let clip_len = h.state().clip().expect("a clip").recon.audio.len();
+    assert!(clip_len > 0);
+    let wav = tmp.path().join("out.wav");
+    h.state_mut().set_export_bits(WavBits::Int16);
+    h.state_mut().request_export_wav(wav.clone(), false);
+    h.run_ok();
+    let reader = hound::WavReader::open(&wav).unwrap();
+    assert_eq!(reader.spec().bits_per_sample, 16);
+    assert_eq!(
+        reader.len() as usize,
+        clip_len * usize::from(reader.spec().channels)
+    );
+    let sidecar = std::fs::read_to_string(wav.with_extension("json")).unwrap();
+    assert!(
+        sidecar.contains("[flow]") && sidecar.contains("lambda"),
+        "{sidecar}"
+    );
+    // A second export asks before replacing; "no" leaves the file alone.
+    let before = std::fs::read(&wav).unwrap();
+    h.state_mut().set_export_bits(WavBits::Float32);
+    h.state_mut().request_export_wav(wav.clone(), false);
+    h.run_ok();
+    h.get_by_label("Replace");
+    h.get_by_label("Cancel").click();
+    h.run_ok();
+    assert!(h.state().confirm().is_none());
+    assert_eq!(std::fs::read(&wav).unwrap(), before);
+    // "Replace" writes the new encoding.
+    h.state_mut().request_export_wav(wav.clone(), false);
+    h.run_ok();
+    h.get_by_label("Replace").click();
+    h.run_ok();
+    assert_eq!(
+        hound::WavReader::open(&wav).unwrap().spec().bits_per_sample,
+        32
+    );
+}
+
+#[test]
+fn without_an_audio_device_the_play_controls_say_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = test_scan(tmp.path());
+    let mut h = harness(options(
+        tmp.path(),
+        Some(scan),
+        DeviceChoice::Named("groovescope-no-such-device".into()),
+    ));
+    settle(&mut h);
+    assert!(matches!(
+        h.state().player().status(),
+        AudioStatus::Unavailable(_)
+    ));
+    h.state_mut().set_view(View::Waveform);
+    h.run_ok();
+    h.get_by_label_contains("audio unavailable:");
+    // Everything else still works.
+    h.get_by_label("next ▶").click();
+    settle(&mut h);
+    assert_eq!(h.state().group(), 1);
+}
+
+#[test]
+fn plays_through_the_null_sink() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = test_scan(tmp.path());
+    let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Default));
+    settle(&mut h);
+    if let AudioStatus::Unavailable(why) = h.state().player().status() {
+        // Some machines have no ALSA at all; the message path is covered above.
+        eprintln!("skipping playback: {why}");
+        return;
+    }
+    h.state_mut().reconstruct(None);
+    settle(&mut h);
+    h.state_mut().set_view(View::Waveform);
+    h.run_ok();
+    h.get_by_label("▶ Play").click();
+    h.step();
+    assert!(h.state().player().is_playing() || h.state().player().position_secs() == 0.0);
+    h.get_by_label("⏹ Stop").click();
+    h.step();
+    assert!(!h.state().player().is_playing());
+}
+
+/// Snapshots of every view with a tolerance (software rendering varies a little).
+#[test]
+fn snapshots_of_every_view() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = test_scan(tmp.path());
+    let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
+    settle(&mut h);
+    h.state_mut().reconstruct(None);
+    settle(&mut h);
+    let opts = SnapshotOptions::new()
+        .threshold(4.0)
+        .failed_pixel_count_threshold(4000);
+    for v in View::ALL {
+        h.state_mut().set_view(v);
+        h.run_ok();
+        h.snapshot_options(v.name(), &opts);
+    }
+}
