@@ -11,7 +11,7 @@ use crate::image::Image;
 use crate::pipeline::hough::{Accumulator, Stripes, label};
 use crate::pipeline::optical_flow::FlowField;
 
-/// Stops of the heat colour map (dark blue → cyan → yellow → red), evenly spaced over `[0, 1]`.
+/// Stops of the heat colour map (dark blue, cyan, yellow, red), evenly spaced over `[0, 1]`.
 const HEAT_STOPS: [[u8; 3]; 6] = [
     [10, 10, 40],
     [30, 60, 170],

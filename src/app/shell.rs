@@ -257,7 +257,7 @@ impl Workbench {
             let title = match (&self.scan, &self.pending_open) {
                 (_, Some(p)) => format!("opening {} …", p.scan.dir.display()),
                 (Some(s), None) => s.dir.display().to_string(),
-                (None, None) => "no scan: File ▸ Open scan…, or drop a folder here".into(),
+                (None, None) => "no scan: File > Open scan…, or drop a folder here".into(),
             };
             ui.weak(title);
         });
@@ -379,7 +379,7 @@ impl Workbench {
         if no_scan && !matches!(self.view, View::Waveform) {
             empty_note(
                 ui,
-                "no scan open: File ▸ Open scan…, a recent scan, or drop a scan folder here",
+                "no scan open: File > Open scan…, a recent scan, or drop a scan folder here",
             );
         } else {
             let v = &mut self.views;

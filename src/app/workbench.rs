@@ -119,6 +119,8 @@ pub struct Workbench {
     pub(super) preset_file: Option<PathBuf>,
     pub(super) cache: StageCache,
     pub(super) stage_errors: [Option<String>; 6],
+    /// Params and group each failed stage failed with (not retried until one of them changes).
+    pub(super) failed_with: [Option<(PipelineParams, usize)>; 6],
     pub(super) stage_times: [Option<Duration>; 6],
     pub(super) stage_runs: [u64; 6],
     pub(super) textures: Textures,
@@ -185,6 +187,7 @@ impl Workbench {
             preset_file: None,
             cache: StageCache::default(),
             stage_errors: Default::default(),
+            failed_with: Default::default(),
             stage_times: [None; 6],
             stage_runs: [0; 6],
             textures: Textures::default(),
@@ -434,6 +437,7 @@ impl Workbench {
         self.load_error = None;
         self.cache = StageCache::default();
         self.stage_errors = Default::default();
+        self.failed_with = Default::default();
         self.stage_times = [None; 6];
         self.stage_runs = [0; 6];
         self.textures.clear();
@@ -472,6 +476,7 @@ impl Workbench {
         self.views.nav.jump = g;
         self.cache.invalidate_from(Stage::Derivatives);
         self.stage_errors = Default::default();
+        self.failed_with = Default::default();
         self.load_error = None;
         self.schedule();
     }
@@ -537,8 +542,12 @@ impl Workbench {
     /// Reruns `stage` and every later stage of the current group.
     pub fn rerun(&mut self, stage: Stage) {
         self.cache.invalidate_from(stage);
+        for f in &mut self.failed_with[stage.index()..] {
+            *f = None;
+        }
         if stage == Stage::Derivatives {
             self.frames = None;
+            self.load_error = None;
         }
         self.schedule();
     }
@@ -634,6 +643,15 @@ impl Workbench {
         let Some(from) = from else {
             return;
         };
+        if loaded.is_none() && self.load_error.is_some() {
+            return; // the group's frames cannot be read: nothing to retry until a rerun
+        }
+        if let Some((p, g)) = &self.failed_with[from.index()]
+            && *g == self.group
+            && p.first_changed_stage(&self.params).is_none_or(|s| s > from)
+        {
+            return; // it failed with these very inputs: wait for a change or a rerun
+        }
         self.generation += 1;
         self.worker.supersede(self.generation);
         for e in &mut self.stage_errors[from.index()..] {
@@ -716,6 +734,7 @@ impl Workbench {
                     done.stage.name()
                 ));
                 self.stage_errors[done.stage.index()] = Some(msg);
+                self.failed_with[done.stage.index()] = Some((self.params.clone(), self.group));
             }
             Err(_) => {}
         }

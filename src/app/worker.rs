@@ -403,6 +403,48 @@ mod tests {
         Scan::open(dir).unwrap()
     }
 
+    /// The cache the workbench and the engine share decides what reruns: a Hough range makes
+    /// Stripes onward stale (not Derivatives, Flow or Depth); λ makes Flow onward stale.
+    #[test]
+    fn hough_range_stales_stripes_onward_and_lambda_stales_flow_onward() {
+        let p = PipelineParams::default();
+        let mut cache = StageCache::default();
+        cache.produced_with = std::array::from_fn(|_| Some(p.clone()));
+        cache.group = Some(0);
+        assert_eq!(cache.first_stale(&p), None);
+        let mut hough = p.clone();
+        hough.hough.theta_max_deg -= 5.0;
+        assert_eq!(cache.first_stale(&hough), Some(Stage::Stripes));
+        for s in Stage::ALL {
+            assert_eq!(cache.is_fresh(s, &hough), s < Stage::Stripes, "{s:?}");
+        }
+        let mut lambda = p.clone();
+        lambda.flow.lambda *= 2.0;
+        assert_eq!(cache.first_stale(&lambda), Some(Stage::Flow));
+        for s in Stage::ALL {
+            assert_eq!(cache.is_fresh(s, &lambda), s < Stage::Flow, "{s:?}");
+        }
+        // A job from the first stale stage starts there: the worker is handed exactly that.
+        let job = Job {
+            from: cache.first_stale(&hough).unwrap(),
+            params: hough,
+            generation: 1,
+            input: JobInput::Ready(GroupInput {
+                group: 0,
+                frames: Arc::new(Vec::new()),
+                meta: Arc::new(
+                    crate::io::ScanMeta::from_toml_str(
+                        "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\n[camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n[motion]\nframe_step_um = 0.78\ngroup_step_um = 20.0\n",
+                        std::path::Path::new("scan.toml"),
+                    )
+                    .unwrap(),
+                ),
+            }),
+            cache,
+        };
+        assert_eq!(job.from, Stage::Stripes);
+    }
+
     #[test]
     fn broken_frame_is_reported_with_its_file() {
         let dir = tempfile::tempdir().unwrap();

@@ -40,7 +40,7 @@ pub fn flow_ui(
     }
     let mut window = state.window.unwrap_or(flows.len() / 2).min(flows.len() - 1);
     ui.horizontal(|ui| {
-        ui.label("window");
+        let l = ui.label("window");
         egui::ComboBox::from_id_salt("flow_window")
             .selected_text(format!(
                 "{} (frame {})",
@@ -51,7 +51,9 @@ pub fn flow_ui(
                 for (i, f) in flows.iter().enumerate() {
                     ui.selectable_value(&mut window, i, format!("{i} (frame {})", f.frame_index));
                 }
-            });
+            })
+            .response
+            .labelled_by(l.id);
         ui.separator();
         ui.selectable_value(&mut state.arrows_over_frame, false, "colour");
         ui.selectable_value(&mut state.arrows_over_frame, true, "arrows over frame");
@@ -97,7 +99,7 @@ pub fn flow_ui(
     };
     if let Some(hi) = hi {
         ui.weak(format!(
-            "hue = direction (red → +x, cyan → −x), saturation = magnitude up to {hi:.3} px/frame; black = no confidence"
+            "hue = direction (red: +x, cyan: −x), saturation = magnitude up to {hi:.3} px/frame; black = no confidence"
         ));
     }
     let resp = image_plot("flow_view", height).show(ui, |plot_ui| {

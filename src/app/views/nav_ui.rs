@@ -49,14 +49,14 @@ pub fn nav_ui(
     let last = groups - 1;
     ui.horizontal(|ui| {
         if ui
-            .add_enabled(group > 0, egui::Button::new("◀ previous"))
+            .add_enabled(group > 0, egui::Button::new("< previous"))
             .clicked()
         {
             out.push(NavAction::Group(group - 1));
         }
         ui.label(format!("group {group} / {last}"));
         if ui
-            .add_enabled(group < last, egui::Button::new("next ▶"))
+            .add_enabled(group < last, egui::Button::new("next >"))
             .clicked()
         {
             out.push(NavAction::Group(group + 1));
@@ -91,9 +91,9 @@ pub fn nav_ui(
                 out.push(NavAction::Frame(f));
             }
             let label = if state.movie {
-                "⏸ movie"
+                "pause movie"
             } else {
-                "▶ movie"
+                "play movie"
             };
             if ui.button(label).clicked() {
                 state.movie = !state.movie;
@@ -128,7 +128,7 @@ pub fn stages_ui(
                 ui.weak(format!("{:.0} ms", t.as_secs_f64() * 1000.0));
             }
             if ui
-                .small_button("⟳")
+                .small_button("rerun")
                 .on_hover_text(format!("rerun {} and later stages", s.name()))
                 .clicked()
             {

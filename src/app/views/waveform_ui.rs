@@ -180,15 +180,15 @@ fn transport_ui(
         }
         let ready = clip.is_some();
         if player.is_playing() {
-            if ui.button("⏸ Pause").clicked() {
+            if ui.button("Pause").clicked() {
                 player.pause();
             }
-        } else if ui.add_enabled(ready, egui::Button::new("▶ Play")).clicked()
+        } else if ui.add_enabled(ready, egui::Button::new("Play")).clicked()
             && let Err(e) = player.play()
         {
             actions.push(WaveAction::Message(e));
         }
-        if ui.add_enabled(ready, egui::Button::new("⏹ Stop")).clicked() {
+        if ui.add_enabled(ready, egui::Button::new("Stop")).clicked() {
             player.stop();
         }
         let has_ref = clip.is_some_and(|c| c.reference.is_some());
@@ -263,19 +263,23 @@ fn clip_controls_ui(
                 });
                 actions.push(WaveAction::Reconstruct(range));
             }
-            ui.checkbox(&mut state.use_range, "groups");
+            ui.checkbox(&mut state.use_range, "only groups");
             let last = groups.saturating_sub(1);
+            let from = ui.label("from");
             ui.add_enabled(
                 state.use_range,
                 egui::DragValue::new(&mut state.range.0).range(0..=last),
-            );
-            ui.label("to");
+            )
+            .labelled_by(from.id);
+            let to = ui.label("to");
             ui.add_enabled(
                 state.use_range,
                 egui::DragValue::new(&mut state.range.1).range(0..=last),
-            );
+            )
+            .labelled_by(to.id);
         }
         ui.separator();
+        let wav = ui.label("WAV");
         egui::ComboBox::from_id_salt("wav_bits")
             .selected_text(match state.bits {
                 WavBits::Int16 => "16-bit",
@@ -286,7 +290,9 @@ fn clip_controls_ui(
                 ui.selectable_value(&mut state.bits, WavBits::Int16, "16-bit");
                 ui.selectable_value(&mut state.bits, WavBits::Int24, "24-bit");
                 ui.selectable_value(&mut state.bits, WavBits::Float32, "32-bit float");
-            });
+            })
+            .response
+            .labelled_by(wav.id);
         let ready = clip.is_some();
         if ui
             .add_enabled(ready, egui::Button::new("Export WAV…"))
