@@ -313,11 +313,9 @@ impl ReconRun {
 }
 
 impl Drop for ReconRun {
+    /// Asks the run to stop and lets the thread finish on its own (never blocks the UI).
     fn drop(&mut self) {
         self.cancel();
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
     }
 }
 

@@ -37,30 +37,35 @@ pub struct HoughViewState {
 /// Number controls of the windows and ranges; edits `draft`.
 pub fn hough_controls(ui: &mut Ui, draft: &mut HoughParams) {
     ui.horizontal(|ui| {
-        ui.label("window ±θ°");
+        let l = ui.label("window ±θ°");
         ui.add(
             egui::DragValue::new(&mut draft.window_theta_deg)
                 .speed(0.1)
                 .range(0.1..=90.0),
-        );
-        ui.label("±ρ px");
+        )
+        .labelled_by(l.id);
+        let l = ui.label("±ρ px");
         ui.add(
             egui::DragValue::new(&mut draft.window_rho_px)
                 .speed(0.5)
                 .range(0.5..=2000.0),
-        );
+        )
+        .labelled_by(l.id);
         ui.separator();
-        ui.label("θ range°");
+        let l = ui.label("θ from°");
         ui.add(
             egui::DragValue::new(&mut draft.theta_min_deg)
                 .speed(0.5)
                 .range(-90.0..=90.0),
-        );
+        )
+        .labelled_by(l.id);
+        let l = ui.label("to°");
         ui.add(
             egui::DragValue::new(&mut draft.theta_max_deg)
                 .speed(0.5)
                 .range(-90.0..=90.0),
-        );
+        )
+        .labelled_by(l.id);
     });
 }
 
