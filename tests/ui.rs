@@ -2,6 +2,7 @@
 //! export, play) headless, and snapshots every view (`UPDATE_SNAPSHOTS=1` rewrites them).
 
 #![cfg(feature = "gui")]
+#![allow(clippy::unwrap_used)] // tests may panic
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Once};

@@ -168,6 +168,7 @@ pub fn save_color_image(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
 

@@ -320,6 +320,7 @@ impl Drop for ReconRun {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
 

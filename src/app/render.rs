@@ -203,6 +203,7 @@ pub fn labels(stripes: &Stripes) -> ColorImage {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
 

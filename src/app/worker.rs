@@ -364,6 +364,7 @@ impl Drop for Worker {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
     use crate::io::Scan;
@@ -408,9 +409,11 @@ mod tests {
     #[test]
     fn hough_range_stales_stripes_onward_and_lambda_stales_flow_onward() {
         let p = PipelineParams::default();
-        let mut cache = StageCache::default();
-        cache.produced_with = std::array::from_fn(|_| Some(p.clone()));
-        cache.group = Some(0);
+        let cache = StageCache {
+            produced_with: std::array::from_fn(|_| Some(p.clone())),
+            group: Some(0),
+            ..StageCache::default()
+        };
         assert_eq!(cache.first_stale(&p), None);
         let mut hough = p.clone();
         hough.hough.theta_max_deg -= 5.0;

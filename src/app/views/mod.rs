@@ -262,6 +262,7 @@ pub fn empty_note(ui: &mut Ui, text: &str) {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
 

@@ -500,6 +500,7 @@ pub fn waveform_ui(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
 
