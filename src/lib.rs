@@ -5,9 +5,12 @@
 
 #[cfg(feature = "gui")]
 pub mod app;
+pub mod cli;
 pub mod engine;
 pub mod image;
 pub mod io;
 pub mod pipeline;
 #[cfg(feature = "gui")]
 pub mod playback;
+pub mod synth;
+pub mod viz;

@@ -1,23 +1,144 @@
 //! Evaluation against a reference sound: Pearson r (best lag), peak-envelope r and SNR after best gain.
+//!
+//! Lag convention: `reference[i] ≈ g · recovered[i + lag]`, so a positive lag means the
+//! recovered signal is late by `lag` samples. All lags within ±`max_lag` are scored at once:
+//! the cross-correlation comes from an FFT and the per-lag means and energies of the overlapping
+//! parts from prefix sums, so the search costs O(N log N) whatever `max_lag` is.
 
 use serde::{Deserialize, Serialize};
+
+use super::dsp::fft_in_place;
+
+/// Fewest overlapping samples for any score.
+const MIN_OVERLAP_SAMPLES: usize = 16;
+/// Peak-envelope window (s): the peak of |x| over each 5 ms block.
+const ENVELOPE_WINDOW_S: f64 = 0.005;
+/// Blocks on each side averaged when smoothing the block peaks (1 → a 3-block moving mean).
+const ENVELOPE_SMOOTH_BLOCKS: usize = 1;
+/// SNR reported when the residual is exactly zero (keeps the score finite for JSON).
+const MAX_SNR_DB: f64 = 300.0;
 
 /// Scores of a recovered signal against its reference.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Scores {
-    /// Pearson r of the waveforms at the best lag.
+    /// Pearson r of the waveforms at the best lag (negative when the recovered signal is
+    /// inverted; the lag maximises |r|).
     pub r: f64,
-    /// Pearson r of the peak envelopes.
+    /// Pearson r of the peak envelopes at the best lag (see [`peak_envelope`]).
     pub envelope_r: f64,
-    /// SNR (dB) of the recovered signal after best gain and lag.
+    /// SNR (dB) of the recovered signal after best gain and lag:
+    /// 10·log10(Σref² / Σ(ref − g·rec)²) with the least-squares g. For rec = ref + noise this
+    /// reads 10·log10(1 + S/N), within 0.05 dB of the true S/N above 20 dB.
     pub snr_db: f64,
-    /// Best lag in samples (recovered shifted by this matches the reference).
+    /// Best lag in samples: `reference[i] ≈ g·recovered[i + lag]` (positive: recovered is late).
     pub lag_samples: i64,
-    /// Samples compared.
+    /// Samples compared (the overlap at the best lag).
     pub samples: usize,
 }
 
-/// Compares `recovered` with `reference` (same rate), searching lags within ±`max_lag`.
+/// Pearson correlation of `a` and `b` over their common length (the shorter one's). 0 when it
+/// is undefined (fewer than 2 samples or a constant input). Non-finite samples count as 0.
+#[must_use]
+pub fn pearson(a: &[f32], b: &[f32]) -> f64 {
+    let n = a.len().min(b.len());
+    if n < 2 {
+        return 0.0;
+    }
+    let val = |v: f32| if v.is_finite() { f64::from(v) } else { 0.0 };
+    #[allow(clippy::cast_precision_loss)] // lengths ≤ 2^52
+    let nf = n as f64;
+    let ma = a[..n].iter().map(|&v| val(v)).sum::<f64>() / nf;
+    let mb = b[..n].iter().map(|&v| val(v)).sum::<f64>() / nf;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (&x, &y) in a[..n].iter().zip(&b[..n]) {
+        let (dx, dy) = (val(x) - ma, val(y) - mb);
+        sab += dx * dy;
+        saa += dx * dx;
+        sbb += dy * dy;
+    }
+    let den = (saa * sbb).sqrt();
+    if den > 0.0 && den.is_finite() {
+        (sab / den).clamp(-1.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// Peak envelope used by [`Scores::envelope_r`]: |x| is reduced to its maximum over
+/// consecutive blocks of `window` samples (the last block may be shorter), then each block peak
+/// is replaced by the mean of itself and its neighbour blocks (a 3-block moving average).
+/// One value per block.
+#[must_use]
+pub fn peak_envelope(samples: &[f32], window: usize) -> Vec<f32> {
+    let window = window.max(1);
+    let peaks: Vec<f32> = samples
+        .chunks(window)
+        .map(|c| {
+            c.iter()
+                .map(|v| if v.is_finite() { v.abs() } else { 0.0 })
+                .fold(0.0f32, f32::max)
+        })
+        .collect();
+    let n = peaks.len();
+    (0..n)
+        .map(|k| {
+            let lo = k.saturating_sub(ENVELOPE_SMOOTH_BLOCKS);
+            let hi = (k + ENVELOPE_SMOOTH_BLOCKS + 1).min(n);
+            let slice = &peaks[lo..hi];
+            #[allow(clippy::cast_precision_loss)] // a handful of blocks
+            let mean = slice.iter().sum::<f32>() / slice.len() as f32;
+            mean
+        })
+        .collect()
+}
+
+/// Overlap of reference indices for a lag: `i ∈ [lo, hi)` with `i + lag` inside `recovered`.
+fn overlap(n_ref: usize, n_rec: usize, lag: i64) -> (usize, usize) {
+    let (Ok(n_ref_i), Ok(n_rec_i)) = (i64::try_from(n_ref), i64::try_from(n_rec)) else {
+        return (0, 0);
+    };
+    let lo = (-lag).clamp(0, n_ref_i);
+    let hi = (n_rec_i - lag).clamp(lo, n_ref_i);
+    (
+        usize::try_from(lo).unwrap_or(0),
+        usize::try_from(hi).unwrap_or(0),
+    )
+}
+
+/// Σ ref[i]·rec[i + lag] for every lag in −max_lag..=max_lag, by FFT.
+fn cross_correlation(reference: &[f64], recovered: &[f64], max_lag: usize) -> Vec<f64> {
+    let n = (reference.len() + recovered.len())
+        .next_power_of_two()
+        .max(2);
+    let (mut ar, mut ai) = (vec![0.0; n], vec![0.0; n]);
+    let (mut br, mut bi) = (vec![0.0; n], vec![0.0; n]);
+    ar[..reference.len()].copy_from_slice(reference);
+    br[..recovered.len()].copy_from_slice(recovered);
+    fft_in_place(&mut ar, &mut ai);
+    fft_in_place(&mut br, &mut bi);
+    // conj(A)·B, then an inverse FFT via conj(FFT(conj(x))).
+    for k in 0..n {
+        let (xr, xi) = (ar[k], -ai[k]);
+        let re = xr * br[k] - xi * bi[k];
+        let im = xr * bi[k] + xi * br[k];
+        ar[k] = re;
+        ai[k] = -im;
+    }
+    fft_in_place(&mut ar, &mut ai);
+    #[allow(clippy::cast_precision_loss)] // n ≤ 2^52
+    let scale = 1.0 / n as f64;
+    // c[lag] = Σ_i a[i]·b[i + lag], found at index lag mod n.
+    (0..=2 * max_lag)
+        .map(|j| {
+            let idx = (j + n - max_lag % n) % n;
+            ar[idx] * scale
+        })
+        .collect()
+}
+
+/// Compares `recovered` with `reference` (same rate), searching lags within ±`max_lag` for the
+/// largest |Pearson r|. Lags whose overlap is shorter than half the shorter signal are not
+/// considered (a few samples can correlate by chance). Non-finite samples count as 0.
 /// `None` when fewer than 16 samples overlap.
 #[must_use]
 pub fn evaluate(
@@ -26,6 +147,303 @@ pub fn evaluate(
     max_lag: usize,
     sample_rate_hz: u32,
 ) -> Option<Scores> {
-    let _ = (recovered, reference, max_lag, sample_rate_hz);
-    todo!("eval helper")
+    let val = |v: &f32| if v.is_finite() { f64::from(*v) } else { 0.0 };
+    let (n_ref, n_rec) = (reference.len(), recovered.len());
+    let min_overlap = MIN_OVERLAP_SAMPLES.max(n_ref.min(n_rec) / 2);
+    if n_ref.min(n_rec) < MIN_OVERLAP_SAMPLES {
+        return None;
+    }
+    let max_lag = max_lag.min(n_ref.max(n_rec));
+    // Remove the global means first: Pearson is shift-invariant and this avoids cancellation.
+    #[allow(clippy::cast_precision_loss)]
+    let mean = |s: &[f32]| s.iter().map(val).sum::<f64>() / s.len() as f64;
+    let (m_ref, m_rec) = (mean(reference), mean(recovered));
+    let x: Vec<f64> = reference.iter().map(|v| val(v) - m_ref).collect();
+    let y: Vec<f64> = recovered.iter().map(|v| val(v) - m_rec).collect();
+    let prefix = |s: &[f64], sq: bool| {
+        let mut p = Vec::with_capacity(s.len() + 1);
+        let mut acc = 0.0;
+        p.push(0.0);
+        for &v in s {
+            acc += if sq { v * v } else { v };
+            p.push(acc);
+        }
+        p
+    };
+    let (px, pxx) = (prefix(&x, false), prefix(&x, true));
+    let (py, pyy) = (prefix(&y, false), prefix(&y, true));
+    let xcorr = cross_correlation(&x, &y, max_lag);
+
+    let mut best: Option<(f64, i64)> = None;
+    for (j, &sxy) in xcorr.iter().enumerate() {
+        let (Ok(j), Ok(m)) = (i64::try_from(j), i64::try_from(max_lag)) else {
+            return None;
+        };
+        let lag = j - m;
+        let (lo, hi) = overlap(n_ref, n_rec, lag);
+        let len = hi - lo;
+        if len < min_overlap {
+            continue;
+        }
+        // Recovered indices lo+lag..hi+lag.
+        let Some(ylo) = lo.checked_add_signed(isize::try_from(lag).ok()?) else {
+            continue;
+        };
+        let yhi = ylo + len;
+        #[allow(clippy::cast_precision_loss)]
+        let nf = len as f64;
+        let (sx, sxx) = (px[hi] - px[lo], pxx[hi] - pxx[lo]);
+        let (sy, syy) = (py[yhi] - py[ylo], pyy[yhi] - pyy[ylo]);
+        let cov = sxy - sx * sy / nf;
+        let vx = sxx - sx * sx / nf;
+        let vy = syy - sy * sy / nf;
+        let den = (vx * vy).sqrt();
+        let r = if den > 0.0 && den.is_finite() {
+            (cov / den).clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+        let better = match best {
+            None => true,
+            Some((br, bl)) => {
+                r.abs() > br.abs() + 1e-12
+                    || ((r.abs() - br.abs()).abs() <= 1e-12 && lag.abs() < bl.abs())
+            }
+        };
+        if better {
+            best = Some((r, lag));
+        }
+    }
+    let (_, lag) = best?;
+
+    // Exact scores on the aligned overlap (direct sums: no prefix-sum rounding).
+    let (lo, hi) = overlap(n_ref, n_rec, lag);
+    let ylo = lo.checked_add_signed(isize::try_from(lag).ok()?)?;
+    let len = hi - lo;
+    let ref_part = reference.get(lo..hi)?;
+    let rec_part = recovered.get(ylo..ylo + len)?;
+    let r = pearson(rec_part, ref_part);
+    let (mut srr, mut sry, mut syy) = (0.0, 0.0, 0.0);
+    for (a, b) in ref_part.iter().zip(rec_part) {
+        let (a, b) = (val(a), val(b));
+        srr += a * a;
+        sry += a * b;
+        syy += b * b;
+    }
+    let gain = if syy > 0.0 { sry / syy } else { 0.0 };
+    let noise: f64 = ref_part
+        .iter()
+        .zip(rec_part)
+        .map(|(a, b)| (val(a) - gain * val(b)).powi(2))
+        .sum();
+    let snr_db = if noise > 0.0 && srr > 0.0 {
+        (10.0 * (srr / noise).log10()).min(MAX_SNR_DB)
+    } else if srr > 0.0 {
+        MAX_SNR_DB
+    } else {
+        0.0
+    };
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // a few hundred samples
+    let window = (f64::from(sample_rate_hz) * ENVELOPE_WINDOW_S)
+        .round()
+        .max(1.0) as usize;
+    let envelope_r = pearson(
+        &peak_envelope(rec_part, window),
+        &peak_envelope(ref_part, window),
+    );
+    Some(Scores {
+        r,
+        envelope_r,
+        snr_db,
+        lag_samples: lag,
+        samples: len,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    const FS: u32 = 44_100;
+
+    /// A deterministic broadband test signal: an amplitude-modulated chord.
+    fn music(n: usize) -> Vec<f32> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / f64::from(FS);
+                let env = 0.6 + 0.4 * (2.0 * PI * 3.0 * t).sin();
+                (env * (0.5 * (2.0 * PI * 440.0 * t).sin()
+                    + 0.3 * (2.0 * PI * 1234.5 * t).sin()
+                    + 0.2 * (2.0 * PI * 97.0 * t).sin())) as f32
+            })
+            .collect()
+    }
+
+    /// Deterministic white-ish noise (xorshift), zero mean, unit variance.
+    fn noise(n: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed.max(1);
+        (0..n)
+            .map(|_| {
+                // Sum of 4 uniforms ≈ Gaussian; variance 4/12 → scale by √3.
+                let mut acc = 0.0;
+                for _ in 0..4 {
+                    s ^= s << 13;
+                    s ^= s >> 7;
+                    s ^= s << 17;
+                    acc += (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+                }
+                (acc * 3f64.sqrt()) as f32
+            })
+            .collect()
+    }
+
+    fn energy(s: &[f32]) -> f64 {
+        s.iter().map(|&v| f64::from(v).powi(2)).sum()
+    }
+
+    #[test]
+    fn identical_signals_score_perfectly() {
+        let x = music(22_050);
+        let s = evaluate(&x, &x, 100, FS).unwrap();
+        assert!((s.r - 1.0).abs() < 1e-9, "{s:?}");
+        assert!((s.envelope_r - 1.0).abs() < 1e-9, "{s:?}");
+        assert!(s.snr_db > 100.0, "{s:?}");
+        assert_eq!(s.lag_samples, 0);
+        assert_eq!(s.samples, x.len());
+    }
+
+    #[test]
+    fn a_delay_is_found_with_its_sign() {
+        let x = music(22_050);
+        for d in [7usize, 1, 33] {
+            // Recovered is late by d samples.
+            let mut late = vec![0.0f32; d];
+            late.extend_from_slice(&x);
+            let s = evaluate(&late, &x, 50, FS).unwrap();
+            assert_eq!(s.lag_samples, d as i64, "{s:?}");
+            assert!(s.r > 0.999_999 && s.snr_db > 100.0, "{s:?}");
+            // Recovered is early by d samples.
+            let s = evaluate(&x[d..], &x, 50, FS).unwrap();
+            assert_eq!(s.lag_samples, -(d as i64), "{s:?}");
+            assert!(s.r > 0.999_999, "{s:?}");
+        }
+        // A delay outside the search range is not found.
+        let mut late = vec![0.0f32; 60];
+        late.extend_from_slice(&x);
+        let s = evaluate(&late, &x, 50, FS).unwrap();
+        assert!(s.r < 0.99, "{s:?}");
+    }
+
+    #[test]
+    fn known_snr_is_measured() {
+        let x = music(44_100);
+        let e = energy(&x) / x.len() as f64;
+        for target_db in [10.0, 20.0, 30.0] {
+            let nz = noise(x.len(), 7);
+            let en = energy(&nz) / nz.len() as f64;
+            let k = (e / en / 10f64.powf(target_db / 10.0)).sqrt() as f32;
+            let rec: Vec<f32> = x.iter().zip(&nz).map(|(a, b)| 2.5 * (a + k * b)).collect();
+            let s = evaluate(&rec, &x, 20, FS).unwrap();
+            assert!(
+                (s.snr_db - target_db).abs() < 0.5,
+                "{target_db}: {} ({s:?})",
+                s.snr_db
+            );
+            assert_eq!(s.lag_samples, 0);
+            let expected_r = (1.0 / (1.0 + 10f64.powf(-target_db / 10.0))).sqrt();
+            assert!((s.r - expected_r).abs() < 0.01, "{s:?} vs {expected_r}");
+        }
+    }
+
+    #[test]
+    fn inverted_and_scaled_signals() {
+        let x = music(10_000);
+        let inv: Vec<f32> = x.iter().map(|v| -0.3 * v + 0.1).collect();
+        let s = evaluate(&inv, &x, 30, FS).unwrap();
+        assert!((s.r + 1.0).abs() < 1e-9, "{s:?}");
+        assert_eq!(s.lag_samples, 0);
+        // The gain-only SNR does not remove a DC offset: it counts as noise.
+        assert!(s.snr_db < 20.0, "{s:?}");
+        let inv: Vec<f32> = x.iter().map(|v| -0.3 * v).collect();
+        let s = evaluate(&inv, &x, 30, FS).unwrap();
+        assert!(s.snr_db > 100.0, "{s:?}");
+        // Envelopes of an inverted signal match.
+        assert!(s.envelope_r > 0.999, "{s:?}");
+    }
+
+    #[test]
+    fn unrelated_signals_score_low() {
+        let a = noise(20_000, 1);
+        let b = noise(20_000, 99);
+        let s = evaluate(&a, &b, 40, FS).unwrap();
+        assert!(s.r.abs() < 0.05, "{s:?}");
+        assert!(s.snr_db < 0.1, "{s:?}");
+    }
+
+    #[test]
+    fn envelope_r_tracks_loudness_not_waveform() {
+        // Same envelope, different carrier: waveform r is low, envelope r high.
+        let n = 44_100;
+        let env = |t: f64| 0.5 + 0.45 * (2.0 * PI * 2.0 * t).sin();
+        let a: Vec<f32> = (0..n)
+            .map(|i| {
+                let t = i as f64 / f64::from(FS);
+                (env(t) * (2.0 * PI * 500.0 * t).sin()) as f32
+            })
+            .collect();
+        let b: Vec<f32> = (0..n)
+            .map(|i| {
+                let t = i as f64 / f64::from(FS);
+                (env(t) * (2.0 * PI * 733.0 * t).sin()) as f32
+            })
+            .collect();
+        let s = evaluate(&a, &b, 10, FS).unwrap();
+        assert!(s.r.abs() < 0.1, "{s:?}");
+        assert!(s.envelope_r > 0.98, "{s:?}");
+    }
+
+    #[test]
+    fn too_short_or_empty_is_none() {
+        assert!(evaluate(&[1.0; 10], &[1.0; 10], 2, FS).is_none());
+        assert!(evaluate(&[], &[1.0; 100], 2, FS).is_none());
+        // Constant inputs: defined, r = 0 (no variance), no panic.
+        let s = evaluate(&[1.0; 100], &[1.0; 100], 5, FS).unwrap();
+        assert_eq!(s.r, 0.0);
+    }
+
+    #[test]
+    fn fft_search_matches_direct_search() {
+        let x = music(3000);
+        let y: Vec<f32> = x
+            .iter()
+            .zip(noise(3000, 5))
+            .map(|(a, b)| 0.7 * a + 0.5 * b)
+            .collect();
+        let max_lag = 40usize;
+        let s = evaluate(&y, &x, max_lag, FS).unwrap();
+        // Direct O(n·lag) search with pearson().
+        let mut best = (0.0f64, 0i64);
+        for lag in -(max_lag as i64)..=max_lag as i64 {
+            let (lo, hi) = overlap(x.len(), y.len(), lag);
+            if hi - lo < 1500 {
+                continue;
+            }
+            let ylo = (lo as i64 + lag) as usize;
+            let r = pearson(&y[ylo..ylo + hi - lo], &x[lo..hi]);
+            if r.abs() > best.0.abs() + 1e-12 {
+                best = (r, lag);
+            }
+        }
+        assert_eq!(s.lag_samples, best.1);
+        assert!((s.r - best.0).abs() < 1e-9, "{} vs {}", s.r, best.0);
+    }
+
+    #[test]
+    fn pearson_basics() {
+        assert!((pearson(&[1.0, 2.0, 3.0], &[2.0, 4.0, 6.5]) - 0.9986).abs() < 1e-3);
+        assert!((pearson(&[1.0, 2.0, 3.0], &[3.0, 2.0, 1.0]) + 1.0).abs() < 1e-12);
+        assert_eq!(pearson(&[1.0], &[1.0]), 0.0);
+        assert_eq!(pearson(&[1.0, 1.0, 1.0], &[1.0, 2.0, 3.0]), 0.0);
+    }
 }

@@ -7,6 +7,7 @@ pub mod derivatives;
 pub mod dsp;
 pub mod eval;
 pub mod hough;
+pub mod knobs;
 pub mod optical_flow;
 pub mod orientation;
 pub mod walls;

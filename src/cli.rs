@@ -1,0 +1,611 @@
+//! The command-line front end: clap subcommands over the engine (reconstruct, eval, flow, params, synth, inspect, gui).
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+
+use crate::engine::{ReconstructOptions, Reconstruction, reconstruct};
+use crate::io::wav::{WavBits, read_wav, write_wav};
+use crate::io::{Scan, write_atomic};
+use crate::pipeline::PathChoice;
+use crate::pipeline::PipelineParams;
+
+/// Plays gramophone records from microscope image sequences (Tian & Barron's optical-flow method).
+#[derive(Debug, Parser)]
+#[command(name = "groovescope", version, about, long_about = None)]
+pub struct Cli {
+    /// What to do; with none, the workbench opens on the demo scan when a display exists,
+    /// otherwise the demo scan is reconstructed to a WAV file with a report.
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+/// Subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Reconstruct a scan's sound to a WAV file.
+    Reconstruct(ReconstructArgs),
+    /// Score a recovered WAV against a reference WAV (r, envelope r, SNR).
+    Eval {
+        /// The recovered sound.
+        recovered: PathBuf,
+        /// The reference sound.
+        reference: PathBuf,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Longest lag searched, in milliseconds.
+        #[arg(long, default_value_t = 5.0)]
+        max_lag_ms: f64,
+    },
+    /// Run the derivative and flow stages on a frame sequence and write a Middlebury .flo file.
+    Flow(FlowArgs),
+    /// Print the default parameters as TOML (every knob, units in names).
+    Params,
+    /// Render a ground-truth scan from a sound (ray-traced groove under a microscope camera).
+    Synth(SynthArgs),
+    /// Render a depth-validation scene (cube, cylinder or sphere) with its true depth maps.
+    SynthScene {
+        /// cube, cylinder or sphere.
+        #[arg(value_parser = ["cube", "cylinder", "sphere"])]
+        kind: String,
+        /// Output folder (must not exist or be empty).
+        #[arg(long)]
+        out: PathBuf,
+        /// Scene settings TOML (missing keys take defaults).
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
+    /// Open the workbench (optionally on a scan).
+    Gui {
+        /// Scan folder to open.
+        scan: Option<PathBuf>,
+    },
+}
+
+/// Arguments of `reconstruct`.
+#[derive(Debug, clap::Args)]
+pub struct ReconstructArgs {
+    /// Scan folder (holds scan.toml).
+    pub scan: PathBuf,
+    /// Output WAV file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Parameters TOML (see `groovescope params`).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// JSON report (timings, per-group outliers, scores against reference.wav).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Force a path instead of choosing by the [dual_focus] table.
+    #[arg(long, value_parser = ["auto", "depth", "dual-focus"], default_value = "auto")]
+    pub path: String,
+    /// WAV sample format: 16, 24 or 32f.
+    #[arg(long, default_value = "24")]
+    pub bits: WavBits,
+    /// First group to run.
+    #[arg(long)]
+    pub first_group: Option<usize>,
+    /// Number of groups to run.
+    #[arg(long)]
+    pub groups: Option<usize>,
+    /// Treat unreadable frames as silent gaps instead of failing.
+    #[arg(long)]
+    pub keep_going: bool,
+    /// Replace existing output files.
+    #[arg(long)]
+    pub force: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Arguments of `flow`.
+#[derive(Debug, clap::Args)]
+pub struct FlowArgs {
+    /// Frames in order (7 or more for the Simoncelli filters, 2 or more with --two-frame).
+    #[arg(required = true)]
+    pub frames: Vec<PathBuf>,
+    /// Output .flo file (the flow of the middle window).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Known land motion per frame in px (content moving toward −x is negative); 0 = none.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub land_flow_px: f64,
+    /// Focal length in px (for the groove constraint).
+    #[arg(long, default_value_t = 10_256.0)]
+    pub focal_px: f64,
+    /// Parameters TOML.
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// Use two-frame differences.
+    #[arg(long)]
+    pub two_frame: bool,
+    /// Replace an existing output file.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Arguments of `synth`.
+#[derive(Debug, clap::Args)]
+pub struct SynthArgs {
+    /// Sound to cut into the groove (WAV); or use --tone / --sweep / --melody.
+    pub sound: Option<PathBuf>,
+    /// Output scan folder (must not exist or be empty).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Generator settings TOML (the `[synth]` keys; missing keys take the preset's values).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Starting settings: paper (1280×1024, the paper's optics), quick (small frames), demo, dual-focus.
+    #[arg(long, value_parser = ["paper", "quick", "demo", "dual-focus"], default_value = "paper")]
+    pub preset: String,
+    /// A built-in test tone at this frequency (Hz).
+    #[arg(long, conflicts_with_all = ["sound", "sweep", "melody"])]
+    pub tone: Option<f64>,
+    /// A built-in exponential sweep F0:F1 (Hz).
+    #[arg(long, conflicts_with_all = ["sound", "melody"])]
+    pub sweep: Option<String>,
+    /// A built-in short melody.
+    #[arg(long, conflicts_with = "sound")]
+    pub melody: bool,
+    /// Duration of a built-in sound (s).
+    #[arg(long, default_value_t = 0.05)]
+    pub duration: f64,
+    /// Render at most this many groups.
+    #[arg(long)]
+    pub max_groups: Option<usize>,
+    /// Seed of texture, noise and damage (overrides the config).
+    #[arg(long)]
+    pub seed: Option<u32>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Sample rate of the built-in test sounds.
+const BUILTIN_RATE_HZ: u32 = 48_000;
+
+fn run_synth(args: &SynthArgs) -> Result<()> {
+    use crate::synth::{SynthConfig, melody, render_scan, render_scan_wav, sweep, tone};
+    let base = match args.preset.as_str() {
+        "quick" => SynthConfig::quick_test(),
+        "demo" => SynthConfig::demo(),
+        "dual-focus" => SynthConfig::dual_focus_demo(),
+        _ => SynthConfig::default(),
+    };
+    let mut cfg = match &args.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read synth settings: {}", p.display()))?;
+            let mut table: toml::Table = toml::to_string(&base)
+                .ok()
+                .and_then(|t| toml::from_str(&t).ok())
+                .unwrap_or_default();
+            let user: toml::Table = toml::from_str(&text).map_err(|e| {
+                anyhow::anyhow!("invalid synth settings: {}: {}", e.message(), p.display())
+            })?;
+            let user = match user.get("synth") {
+                Some(toml::Value::Table(t)) => t.clone(),
+                _ => user,
+            };
+            table.extend(user);
+            toml::Value::Table(table)
+                .try_into::<SynthConfig>()
+                .map_err(|e| {
+                    anyhow::anyhow!("invalid synth settings: {}: {}", e.message(), p.display())
+                })?
+        }
+        None => base,
+    };
+    if let Some(n) = args.max_groups {
+        cfg.max_groups = Some(n);
+    }
+    if let Some(seed) = args.seed {
+        cfg.seed = seed;
+        cfg.damage.seed = seed;
+    }
+    if !(args.duration.is_finite() && args.duration > 0.0) {
+        bail!(
+            "--duration must be a positive number of seconds, got {}",
+            args.duration
+        );
+    }
+    let pb = progress_bar(0, args.quiet);
+    let progress = |done: usize, total: usize| {
+        pb.set_length(total as u64);
+        pb.set_position(done as u64);
+    };
+    let cancel = AtomicBool::new(false);
+    let builtin = if let Some(f) = args.tone {
+        if !(f.is_finite() && f > 0.0) {
+            bail!("--tone must be a positive frequency, got {f}");
+        }
+        Some(tone(f, args.duration, BUILTIN_RATE_HZ))
+    } else if let Some(spec) = &args.sweep {
+        let Some((a, b)) = spec.split_once(':') else {
+            bail!("--sweep takes F0:F1 in Hz, got {spec}");
+        };
+        let (Ok(f0), Ok(f1)) = (a.parse::<f64>(), b.parse::<f64>()) else {
+            bail!("--sweep takes F0:F1 in Hz, got {spec}");
+        };
+        Some(sweep(f0, f1, args.duration, BUILTIN_RATE_HZ))
+    } else if args.melody {
+        let note = args.duration / 4.0;
+        Some(melody(
+            &[
+                (523.25, note),
+                (659.25, note),
+                (783.99, note),
+                (1046.5, note),
+            ],
+            BUILTIN_RATE_HZ,
+        ))
+    } else {
+        None
+    };
+    let summary = match (builtin, &args.sound) {
+        (Some(sound), _) => render_scan(&sound, &cfg, &args.out, &progress, &cancel)?,
+        (None, Some(path)) => render_scan_wav(path, &cfg, &args.out, &progress, &cancel)?,
+        (None, None) => bail!("give a sound file, --tone HZ, --sweep F0:F1 or --melody"),
+    };
+    pb.finish_and_clear();
+    if !args.quiet {
+        println!(
+            "wrote {} ({} groups of {} frames, {:.4} s of sound)",
+            summary.out_dir.display(),
+            summary.groups,
+            summary.frames_per_group,
+            summary.reference_secs
+        );
+    }
+    Ok(())
+}
+
+fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> {
+    use crate::synth::{SceneConfig, SceneKind, render_scene};
+    let kind = match kind {
+        "cube" => SceneKind::Cube,
+        "cylinder" => SceneKind::Cylinder,
+        _ => SceneKind::Sphere,
+    };
+    let cfg = match config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read scene settings: {}", p.display()))?;
+            toml::from_str::<SceneConfig>(&text).map_err(|e| {
+                anyhow::anyhow!("invalid scene settings: {}: {}", e.message(), p.display())
+            })?
+        }
+        None => SceneConfig::default(),
+    };
+    let meta = render_scene(kind, &cfg, out)?;
+    println!(
+        "wrote {} ({} frames with true depth)",
+        out.display(),
+        meta.frames
+    );
+    Ok(())
+}
+
+/// Loads params from TOML, or the defaults.
+///
+/// # Errors
+/// When the file cannot be read or holds an invalid key or value (NaN, negative).
+pub fn load_params(path: Option<&Path>) -> Result<PipelineParams> {
+    let params = match path {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("cannot read parameters: {}", p.display()))?;
+            PipelineParams::from_toml_str(&text)
+                .map_err(|e| anyhow::anyhow!("invalid parameters: {e}: {}", p.display()))?
+        }
+        None => PipelineParams::default(),
+    };
+    if let Err(e) = params.validate() {
+        match path {
+            Some(p) => bail!("{e}: {}", p.display()),
+            None => bail!("{e}"),
+        }
+    }
+    Ok(params)
+}
+
+/// The JSON report written beside a reconstruction.
+#[derive(Debug, Serialize)]
+pub struct Report<'a> {
+    /// groovescope version.
+    pub version: &'static str,
+    /// Scan folder.
+    pub scan: String,
+    /// Output WAV.
+    pub output: String,
+    /// Params file used (None: defaults).
+    pub params_file: Option<String>,
+    /// Params used.
+    pub params: &'a PipelineParams,
+    /// Reconstruction path that ran.
+    pub path: &'static str,
+    /// Output duration.
+    pub duration_secs: f64,
+    /// Output sample rate.
+    pub sample_rate_hz: u32,
+    /// Native sample rate before resampling.
+    pub native_rate_hz: f64,
+    /// Gain from velocity (mm/s) to output units.
+    pub gain_per_mm_s: f64,
+    /// Timings.
+    pub timings: &'a crate::engine::StageTimings,
+    /// Per group.
+    pub groups: &'a [crate::engine::GroupReport],
+    /// Scores against reference.wav.
+    pub scores: Option<crate::pipeline::eval::Scores>,
+    /// Warnings.
+    pub warnings: &'a [String],
+}
+
+fn progress_bar(total: usize, quiet: bool) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let pb = ProgressBar::new(total as u64);
+    if let Ok(style) = ProgressStyle::with_template(
+        "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} groups ({per_sec}, ETA {eta})",
+    ) {
+        pb.set_style(style);
+    }
+    pb
+}
+
+/// Builds the report for a finished reconstruction.
+#[must_use]
+pub fn make_report<'a>(
+    scan: &Scan,
+    out: &Path,
+    params_file: Option<&Path>,
+    params: &'a PipelineParams,
+    rec: &'a Reconstruction,
+) -> Report<'a> {
+    Report {
+        version: env!("CARGO_PKG_VERSION"),
+        scan: scan.dir.display().to_string(),
+        output: out.display().to_string(),
+        params_file: params_file.map(|p| p.display().to_string()),
+        params,
+        path: if params.uses_dual_focus(&scan.meta) {
+            "dual-focus"
+        } else {
+            "depth"
+        },
+        duration_secs: rec.audio.duration_secs(),
+        sample_rate_hz: rec.audio.sample_rate_hz,
+        native_rate_hz: rec.stitched.native_rate_hz,
+        gain_per_mm_s: rec.gain_per_mm_s,
+        timings: &rec.timings,
+        groups: &rec.groups,
+        scores: rec.scores,
+        warnings: &rec.warnings,
+    }
+}
+
+/// Runs `reconstruct`.
+///
+/// # Errors
+/// Any failure, with the file named.
+pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
+    for out in std::iter::once(&args.out).chain(args.report.as_ref()) {
+        if out.exists() && !args.force {
+            bail!(
+                "refusing to overwrite an existing file (use --force): {}",
+                out.display()
+            );
+        }
+    }
+    let mut params = load_params(args.params.as_deref())?;
+    params.path = match args.path.as_str() {
+        "depth" => PathChoice::Depth,
+        "dual-focus" => PathChoice::DualFocus,
+        _ => params.path,
+    };
+    let scan = Scan::open(&args.scan)?;
+    let first = args.first_group.unwrap_or(0);
+    let end = args
+        .groups
+        .map_or(scan.groups.len(), |n| first.saturating_add(n));
+    if first >= scan.groups.len() {
+        bail!(
+            "--first-group {first} is past the last group ({} groups): {}",
+            scan.groups.len(),
+            scan.dir.display()
+        );
+    }
+    let opts = ReconstructOptions {
+        params: params.clone(),
+        groups: Some(first..end),
+        keep_going: args.keep_going,
+    };
+    let pb = progress_bar(end.min(scan.groups.len()) - first, args.quiet);
+    let cancel = AtomicBool::new(false);
+    let rec = reconstruct(
+        &scan,
+        &opts,
+        &mut |p| pb.set_position(p.done as u64),
+        &cancel,
+    );
+    pb.finish_and_clear();
+    let rec = rec?;
+    write_wav(&args.out, &rec.audio, args.bits, args.force)?;
+    if let Some(report_path) = &args.report {
+        let report = make_report(&scan, &args.out, args.params.as_deref(), &params, &rec);
+        let json = serde_json::to_vec_pretty(&report)?;
+        write_atomic(report_path, &json, args.force)?;
+    }
+    if !args.quiet {
+        for w in &rec.warnings {
+            eprintln!("warning: {w}");
+        }
+        println!(
+            "wrote {} ({:.3} s at {} Hz, {} groups in {:.1} s)",
+            args.out.display(),
+            rec.audio.duration_secs(),
+            rec.audio.sample_rate_hz,
+            rec.groups.len(),
+            rec.timings.total_secs
+        );
+        if let Some(s) = rec.scores {
+            println!(
+                "vs reference: r = {:.3}, envelope r = {:.3}, SNR = {:.1} dB",
+                s.r, s.envelope_r, s.snr_db
+            );
+        }
+    }
+    Ok(rec)
+}
+
+fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64) -> Result<()> {
+    if !(max_lag_ms.is_finite() && max_lag_ms >= 0.0) {
+        bail!("--max-lag-ms must be a non-negative number, got {max_lag_ms}");
+    }
+    let rec = read_wav(recovered)?;
+    let refa = read_wav(reference)?;
+    let ref_mono = if refa.sample_rate_hz == rec.sample_rate_hz {
+        refa.mono()
+    } else {
+        crate::pipeline::audio_signal::resample(
+            &refa.mono(),
+            f64::from(refa.sample_rate_hz),
+            rec.sample_rate_hz,
+        )?
+    };
+    let max_lag = (max_lag_ms / 1000.0 * f64::from(rec.sample_rate_hz)) as usize;
+    let Some(scores) =
+        crate::pipeline::eval::evaluate(&rec.mono(), &ref_mono, max_lag, rec.sample_rate_hz)
+    else {
+        bail!(
+            "too few overlapping samples to compare: {}",
+            recovered.display()
+        );
+    };
+    if json {
+        println!("{}", serde_json::to_string_pretty(&scores)?);
+    } else {
+        println!("r            {:.4}", scores.r);
+        println!("envelope r   {:.4}", scores.envelope_r);
+        println!("SNR          {:.2} dB", scores.snr_db);
+        println!("lag          {} samples", scores.lag_samples);
+        println!("samples      {}", scores.samples);
+    }
+    Ok(())
+}
+
+fn run_flow(args: &FlowArgs) -> Result<()> {
+    use crate::pipeline::derivatives::{DerivativeMode, compute_derivatives};
+    use crate::pipeline::optical_flow::compute_flow;
+    if args.out.exists() && !args.force {
+        bail!(
+            "refusing to overwrite an existing file (use --force): {}",
+            args.out.display()
+        );
+    }
+    if !args.land_flow_px.is_finite() || !(args.focal_px.is_finite() && args.focal_px > 0.0) {
+        bail!("--land-flow-px and --focal-px must be finite (focal length positive)");
+    }
+    let mut params = load_params(args.params.as_deref())?;
+    if args.two_frame {
+        params.derivatives.mode = DerivativeMode::TwoFrame;
+    }
+    let frames = args
+        .frames
+        .iter()
+        .map(|p| crate::io::load_frame(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    if let Some(first) = frames.first() {
+        for (f, p) in frames.iter().zip(&args.frames) {
+            if !f.same_size(first) {
+                bail!(
+                    "frame is {}x{} but the first frame is {}x{}: {}",
+                    f.width,
+                    f.height,
+                    first.width,
+                    first.height,
+                    p.display()
+                );
+            }
+        }
+    }
+    let derivs = compute_derivatives(&frames, args.land_flow_px, &params.derivatives)?;
+    let Some(mid) = derivs.get(derivs.len() / 2) else {
+        bail!("too few frames for the derivative filters");
+    };
+    let flow = compute_flow(mid, args.focal_px, None, &params.flow)?;
+    crate::io::flo::write_flo(&args.out, &flow.u, &flow.v, args.force)?;
+    println!(
+        "wrote {} ({}x{}, frame {}, {} iterations{})",
+        args.out.display(),
+        flow.u.width,
+        flow.u.height,
+        flow.frame_index,
+        flow.iterations,
+        if flow.converged { ", converged" } else { "" }
+    );
+    Ok(())
+}
+
+/// Runs a parsed command line (`None` means the default action was handled by the caller).
+///
+/// # Errors
+/// Any failure, with the file named.
+pub fn run(command: Command) -> Result<()> {
+    match command {
+        Command::Reconstruct(args) => run_reconstruct(&args).map(|_| ()),
+        Command::Eval {
+            recovered,
+            reference,
+            json,
+            max_lag_ms,
+        } => run_eval(&recovered, &reference, json, max_lag_ms),
+        Command::Flow(args) => run_flow(&args),
+        Command::Params => {
+            print!("{}", params_toml_documented()?);
+            Ok(())
+        }
+        Command::Synth(args) => run_synth(&args),
+        Command::SynthScene { kind, out, config } => {
+            run_synth_scene(&kind, &out, config.as_deref())
+        }
+        Command::Gui { scan } => run_gui(scan),
+    }
+}
+
+/// Opens the workbench.
+///
+/// # Errors
+/// When no display is available or the GUI was not built.
+pub fn run_gui(scan: Option<PathBuf>) -> Result<()> {
+    #[cfg(feature = "gui")]
+    {
+        crate::app::run(scan)
+    }
+    #[cfg(not(feature = "gui"))]
+    {
+        let _ = scan;
+        bail!("this groovescope was built without the `gui` feature")
+    }
+}
+
+/// The default params as TOML, preceded by a header comment.
+///
+/// # Errors
+/// When serialisation fails.
+pub fn params_toml_documented() -> Result<String> {
+    let body = crate::pipeline::knobs::documented_toml(&PipelineParams::default())?;
+    Ok(format!(
+        "# groovescope pipeline parameters (defaults). Units are in the key names.\n\
+         # Pass to `groovescope reconstruct --params FILE`; missing keys take these defaults.\n\
+         \n{body}"
+    ))
+}

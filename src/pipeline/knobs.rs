@@ -1,0 +1,203 @@
+//! One-line documentation of every pipeline knob, printed by `groovescope params` and shown as GUI tooltips.
+
+/// `(table.key, what it does)` for every key of [`super::PipelineParams`]; a test keeps it complete.
+pub const KNOB_DOCS: &[(&str, &str)] = &[
+    (
+        "path",
+        "reconstruction path: auto (dual focus when scan.toml has [dual_focus]), depth, dual_focus",
+    ),
+    (
+        "derivatives.mode",
+        "simoncelli: 7-frame pre-blur + p5/d5 filters; two_frame: simple differences of frame pairs",
+    ),
+    (
+        "derivatives.prewarp",
+        "shift frames back by the known land motion before filtering (keeps steps > 1 px linear)",
+    ),
+    (
+        "flow.method",
+        "groove_horn_schunck (with ∂u/∂y = −u/(c·f) on the walls), horn_schunck, lucas_kanade",
+    ),
+    (
+        "flow.solver",
+        "gauss_seidel or jacobi iteration for the Horn–Schunck variants",
+    ),
+    (
+        "flow.lambda",
+        "smoothness weight λ (α); larger = smoother flow",
+    ),
+    ("flow.max_iterations", "iteration cap (paper: 100)"),
+    (
+        "flow.tolerance_px",
+        "convergence threshold τ on the mean flow update, px",
+    ),
+    (
+        "flow.gradient_threshold",
+        "pixels with a weaker gradient carry no flow (grey levels per px)",
+    ),
+    ("flow.lk_window_px", "Lucas–Kanade window side, px (odd)"),
+    (
+        "depth.kalman",
+        "run the Barron–Ngai–Spies Kalman filter (false: average per-frame depths)",
+    ),
+    (
+        "depth.process_noise",
+        "Kalman process noise of the planar-orientation state, per frame",
+    ),
+    (
+        "depth.measurement_noise_px2",
+        "Kalman measurement noise of one flow value, px²",
+    ),
+    (
+        "depth.median_px",
+        "side of the median filter on the state µ (paper: 5)",
+    ),
+    (
+        "depth.min_confidence",
+        "flow values with lower confidence are ignored",
+    ),
+    (
+        "walls.min_slope",
+        "|∂Z/∂Y| above this marks a wall pixel (45° walls give 1)",
+    ),
+    (
+        "walls.trim_px",
+        "rows trimmed from each end of a wall band, px",
+    ),
+    (
+        "hough.gradient_threshold",
+        "in-focus pixels have a gradient magnitude above this",
+    ),
+    (
+        "hough.theta_min_deg",
+        "start of the θ range of the Hough transform, degrees",
+    ),
+    ("hough.theta_max_deg", "end of the θ range, degrees"),
+    (
+        "hough.theta_step_deg",
+        "θ bin width, degrees (coarser is faster)",
+    ),
+    (
+        "hough.rho_step_px",
+        "ρ bin width, px (ρ runs from 0 to the image height)",
+    ),
+    ("hough.peak_count", "peaks searched for (paper: 3)"),
+    (
+        "hough.window_theta_deg",
+        "half-width of a peak's window in θ, degrees",
+    ),
+    (
+        "hough.window_rho_px",
+        "half-width of a peak's window in ρ, px",
+    ),
+    (
+        "hough.line_smoothing_px",
+        "moving-average half-width of the centroid lines, px",
+    ),
+    (
+        "orientation.robust",
+        "Lorentzian M-estimator (false: plain least squares)",
+    ),
+    (
+        "orientation.neighbourhood_px",
+        "side of the fitting neighbourhood about each sample on a wall line, px (paper: 100)",
+    ),
+    (
+        "orientation.sigma_start_um",
+        "starting Lorentzian scale σ, µm of residual",
+    ),
+    (
+        "orientation.sigma_decay",
+        "σ is multiplied by this each round (0 < f ≤ 1)",
+    ),
+    ("orientation.sigma_min_um", "σ never falls below this, µm"),
+    (
+        "orientation.residual_tolerance_um",
+        "τ1: stop when the weighted mean residual falls below this, µm",
+    ),
+    (
+        "orientation.divergence_factor",
+        "τ2: stop (diverged) when the residual grows by more than this factor",
+    ),
+    (
+        "orientation.max_iterations",
+        "iteration cap of the robust fit",
+    ),
+    (
+        "orientation.outlier_sigmas",
+        "residuals beyond this many σ count as outliers in the report",
+    ),
+    (
+        "sound.output_rate_hz",
+        "output sample rate, Hz (44100 or 48000)",
+    ),
+    (
+        "sound.native_spacing_um",
+        "spacing of the native samples along the groove, µm (0: one output sample)",
+    ),
+    (
+        "sound.normalize_peak",
+        "peak level after normalisation (0 < p ≤ 1); 0 scales velocity by full_scale_mm_s",
+    ),
+    (
+        "sound.full_scale_mm_s",
+        "groove velocity mapped to full scale when not normalising, mm/s",
+    ),
+    ("dsp.lowpass", "apply the 2nd-order Butterworth low-pass"),
+    ("dsp.lowpass_hz", "its −3 dB cutoff, Hz"),
+    ("dsp.eq", "playback EQ: flat, riaa, turnover500"),
+];
+
+/// The documentation line of `key` (`table.key`), if any.
+#[must_use]
+pub fn knob_doc(key: &str) -> Option<&'static str> {
+    KNOB_DOCS.iter().find(|(k, _)| *k == key).map(|(_, d)| *d)
+}
+
+/// TOML of `params` with each key preceded by its documentation comment.
+///
+/// # Errors
+/// When serialisation fails.
+pub fn documented_toml(params: &super::PipelineParams) -> Result<String, toml::ser::Error> {
+    let plain = params.to_toml_string()?;
+    let mut out = String::with_capacity(plain.len() * 3);
+    let mut table = String::new();
+    for line in plain.lines() {
+        let trimmed = line.trim();
+        if let Some(name) = trimmed.strip_prefix('[').and_then(|t| t.strip_suffix(']')) {
+            table = name.to_string();
+        } else if let Some((key, _)) = trimmed.split_once(" = ") {
+            let full = if table.is_empty() {
+                key.to_string()
+            } else {
+                format!("{table}.{key}")
+            };
+            if let Some(doc) = knob_doc(&full) {
+                out.push_str("# ");
+                out.push_str(doc);
+                out.push('\n');
+            }
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_default_key_is_documented() {
+        let plain = super::super::PipelineParams::default()
+            .to_toml_string()
+            .unwrap();
+        let doc = documented_toml(&super::super::PipelineParams::default()).unwrap();
+        let keys = plain.lines().filter(|l| l.contains(" = ")).count();
+        let comments = doc.lines().filter(|l| l.starts_with("# ")).count();
+        assert_eq!(keys, comments, "undocumented keys in:\n{doc}");
+        let back = super::super::PipelineParams::from_toml_str(&doc).unwrap();
+        assert_eq!(back, super::super::PipelineParams::default());
+    }
+}

@@ -1,0 +1,189 @@
+//! Bad input through the CLI: one clear line naming the file and the problem, a failing exit code, no partial output.
+
+mod common;
+
+use common::{SCAN_TOML, groovescope, stderr, write_scan};
+
+fn s(p: &std::path::Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn params_prints_toml_that_parses_back() {
+    let out = groovescope(&["params"]);
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    let parsed = groovescope::pipeline::PipelineParams::from_toml_str(&text).unwrap();
+    assert_eq!(parsed, groovescope::pipeline::PipelineParams::default());
+    assert!(text.contains("lambda"));
+}
+
+#[test]
+fn missing_scan_folder_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("nope");
+    let wav = dir.path().join("o.wav");
+    let out = groovescope(&["reconstruct", s(&scan), "--out", s(&wav), "--quiet"]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(
+        err.contains("nope") && err.contains("no such folder"),
+        "{err}"
+    );
+    assert!(!wav.exists());
+}
+
+#[test]
+fn missing_metadata_key_names_key_and_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    std::fs::write(
+        scan.join("scan.toml"),
+        SCAN_TOML.replace("rpm = 78.0\n", ""),
+    )
+    .unwrap();
+    let wav = dir.path().join("o.wav");
+    let out = groovescope(&["reconstruct", s(&scan), "--out", s(&wav), "--quiet"]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(err.contains("rpm") && err.contains("scan.toml"), "{err}");
+    assert_eq!(err.lines().count(), 1, "one line: {err}");
+    assert!(!wav.exists());
+}
+
+#[test]
+fn nan_parameter_names_key_and_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let params = dir.path().join("p.toml");
+    std::fs::write(&params, "[flow]\nlambda = nan\n").unwrap();
+    let wav = dir.path().join("o.wav");
+    let out = groovescope(&[
+        "reconstruct",
+        s(&scan),
+        "--out",
+        s(&wav),
+        "--params",
+        s(&params),
+        "--quiet",
+    ]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(
+        err.contains("flow.lambda") && err.contains("p.toml"),
+        "{err}"
+    );
+    let neg = dir.path().join("n.toml");
+    std::fs::write(&neg, "[orientation]\nsigma_start_um = -1.0\n").unwrap();
+    let out = groovescope(&[
+        "reconstruct",
+        s(&scan),
+        "--out",
+        s(&wav),
+        "--params",
+        s(&neg),
+        "--quiet",
+    ]);
+    assert!(
+        stderr(&out).contains("orientation.sigma_start_um"),
+        "{}",
+        stderr(&out)
+    );
+    let unknown = dir.path().join("u.toml");
+    std::fs::write(&unknown, "[flow]\nlamda = 1.0\n").unwrap();
+    let out = groovescope(&[
+        "reconstruct",
+        s(&scan),
+        "--out",
+        s(&wav),
+        "--params",
+        s(&unknown),
+        "--quiet",
+    ]);
+    assert!(stderr(&out).contains("lamda"), "{}", stderr(&out));
+    assert!(!wav.exists());
+}
+
+#[test]
+fn corrupt_frame_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 2, 7, 32, 16);
+    let bad = scan.join("g00001").join("f003.png");
+    std::fs::write(&bad, b"\x89PNG garbage").unwrap();
+    let wav = dir.path().join("o.wav");
+    let out = groovescope(&["reconstruct", s(&scan), "--out", s(&wav), "--quiet"]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(err.contains("f003.png") && err.contains("g00001"), "{err}");
+    assert!(!wav.exists(), "no partial output");
+}
+
+#[test]
+fn mixed_sizes_and_too_few_frames_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let odd = groovescope::image::Image::filled(20, 16, 0.5);
+    let p = scan.join("g00000").join("f006.png");
+    std::fs::remove_file(&p).unwrap();
+    groovescope::io::save_grey_png(&odd, &p, false, false).unwrap();
+    let wav = dir.path().join("o.wav");
+    let out = groovescope(&["reconstruct", s(&scan), "--out", s(&wav), "--quiet"]);
+    let err = stderr(&out);
+    assert!(
+        !out.status.success() && err.contains("f006.png") && err.contains("20x16"),
+        "{err}"
+    );
+
+    let few = write_scan(&dir.path().join("few"), 1, 5, 32, 16);
+    let out = groovescope(&["reconstruct", s(&few), "--out", s(&wav), "--quiet"]);
+    let err = stderr(&out);
+    assert!(
+        !out.status.success() && err.contains("5 frames") && err.contains("g00000"),
+        "{err}"
+    );
+}
+
+#[test]
+fn empty_scan_and_not_a_scan() {
+    let dir = tempfile::tempdir().unwrap();
+    let empty = dir.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    std::fs::write(empty.join("scan.toml"), SCAN_TOML).unwrap();
+    let wav = dir.path().join("o.wav");
+    let out = groovescope(&["reconstruct", s(&empty), "--out", s(&wav), "--quiet"]);
+    assert!(
+        stderr(&out).contains("no group folders"),
+        "{}",
+        stderr(&out)
+    );
+    let plain = dir.path().join("plain");
+    std::fs::create_dir_all(&plain).unwrap();
+    let out = groovescope(&["reconstruct", s(&plain), "--out", s(&wav), "--quiet"]);
+    assert!(
+        stderr(&out).contains("scan.toml is missing"),
+        "{}",
+        stderr(&out)
+    );
+}
+
+#[test]
+fn existing_output_is_never_overwritten_without_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let wav = dir.path().join("keep.wav");
+    std::fs::write(&wav, b"precious").unwrap();
+    let out = groovescope(&["reconstruct", s(&scan), "--out", s(&wav), "--quiet"]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("keep.wav") && stderr(&out).contains("--force"));
+    assert_eq!(std::fs::read(&wav).unwrap(), b"precious");
+}
+
+#[test]
+fn eval_rejects_non_wav() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = dir.path().join("a.wav");
+    std::fs::write(&a, b"RIFFjunk").unwrap();
+    let out = groovescope(&["eval", s(&a), s(&a)]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("a.wav"), "{}", stderr(&out));
+}
