@@ -3,76 +3,46 @@
 //!
 //! `cargo bench --bench gui` (add `-- --quick` for a short run). Targets (issue 5): flow onward
 //! ≤ 0.5 s, Hough or orientation onward ≤ 100 ms, no UI frame over 50 ms while the worker runs.
+//! The groups are rendered by the synth generator (the paper's camera) into a temporary folder.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use criterion::Criterion;
-use groovescope::image::Image;
-use groovescope::io::ScanMeta;
+use groovescope::io::{Scan, load_group};
 use groovescope::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
+use groovescope::synth::{SynthConfig, render_scan, tone};
 
-/// Frame size and count of the benchmark group (the paper's camera).
-const WIDTH: usize = 1280;
-const HEIGHT: usize = 1024;
-const FRAMES: usize = 12;
-
-const SCAN_TOML: &str = "format = 1
-[record]
-rpm = 78.0
-radius_mm = 115.0
-[camera]
-pixel_pitch_um = 0.39
-working_distance_mm = 4.0
-[motion]
-frame_step_um = 0.78
-group_step_um = 460.2
-";
-
-fn texture(x: f64, y: f64) -> f64 {
-    0.5 + 0.2 * (0.37 * x + 0.11 * y).sin()
-        + 0.15 * (0.23 * x - 0.31 * y + 1.0).sin()
-        + 0.1 * (0.71 * x + 0.05 * y + 2.0).sin()
-}
-
-/// A V-groove across the middle of the frame: 45° walls 160 rows each, content moving by
-/// f·U/Z px per frame (2 px on the land).
-fn groove_frames() -> Vec<Image> {
-    let (pitch, wd) = (0.39, 4000.0);
-    let (top, mid, bottom) = (352.0, 512.0, 672.0);
-    let depth = |y: f64| {
-        let d = if (top..mid).contains(&y) {
-            y - top
-        } else if (mid..bottom).contains(&y) {
-            bottom - y
-        } else {
-            0.0
-        };
-        wd + d * pitch
+/// Renders one group of `cfg` (12 frames of 1280×1024 by default) into `dir`.
+fn render(dir: &Path, cfg: SynthConfig) -> PathBuf {
+    let cfg = SynthConfig {
+        max_groups: Some(1),
+        ..cfg
     };
-    (0..FRAMES)
-        .map(|t| {
-            Image::from_fn(WIDTH, HEIGHT, |x, y| {
-                let z = depth(y as f64);
-                let gain = if z > wd + 0.2 { 0.95 } else { 0.35 };
-                let shift = t as f64 * 2.0 * wd / z;
-                (gain * texture(x as f64 + shift, y as f64)).clamp(0.0, 1.0) as f32
-            })
-        })
-        .collect()
+    render_scan(
+        &tone(440.0, 0.05, 44_100),
+        &cfg,
+        dir,
+        &|_, _| {},
+        &AtomicBool::new(false),
+    )
+    .expect("synthetic scan");
+    dir.to_path_buf()
 }
 
-fn input(meta_text: &str) -> GroupInput {
-    let meta = ScanMeta::from_toml_str(meta_text, Path::new("bench.toml")).expect("bench metadata");
+fn input(dir: &Path) -> GroupInput {
+    let scan = Scan::open(dir).expect("scan");
+    let frames = load_group(&scan.groups[0]).expect("frames");
     GroupInput {
         group: 0,
-        frames: Arc::new(groove_frames()),
-        meta: Arc::new(meta),
+        frames: Arc::new(frames),
+        meta: Arc::new(scan.meta),
     }
 }
 
-/// Runs every stage once; returns the filled cache and the stage that failed, if any.
+/// Runs every stage once; returns the filled cache and the error that stopped it, if any.
 fn full_cache(input: &GroupInput, params: &PipelineParams) -> (StageCache, Option<String>) {
     let mut cache = StageCache::default();
     let err = cache
@@ -94,23 +64,15 @@ fn rerun_from(c: &mut Criterion, name: &str, from: Stage, input: &GroupInput, ba
     });
 }
 
-/// UI frame times while the worker reruns flow onward (the harness does not render).
-fn ui_frame_times() {
+/// UI frame times while the worker reruns flow onward (the harness does not render, so this is
+/// the app's own work per frame: polling, texture uploads, layout, plots).
+fn ui_frame_times(scan: PathBuf) {
     use egui_kittest::Harness;
-    use groovescope::app::{Workbench, WorkbenchOptions};
+    use groovescope::app::{View, Workbench, WorkbenchOptions};
     use groovescope::playback::DeviceChoice;
 
-    let tmp = tempfile::tempdir().expect("tempdir");
-    let dir = tmp.path().join("scan");
-    let gdir = dir.join("group_000");
-    std::fs::create_dir_all(&gdir).expect("scan folder");
-    std::fs::write(dir.join("scan.toml"), SCAN_TOML).expect("scan.toml");
-    for (i, f) in groove_frames().iter().enumerate() {
-        groovescope::io::save_grey_png(f, &gdir.join(format!("f{i:02}.png")), true, true)
-            .expect("frame");
-    }
     let opts = WorkbenchOptions {
-        scan: Some(dir),
+        scan: Some(scan),
         audio: DeviceChoice::Off,
         ..WorkbenchOptions::default()
     };
@@ -127,19 +89,17 @@ fn ui_frame_times() {
         );
     let ctx = h.ctx.clone();
     h.state_mut().0 = Some(Workbench::new(&ctx, opts).expect("workbench"));
+    let busy = |h: &Harness<'_, (Option<Workbench>, eframe::Frame)>| {
+        h.state().0.as_ref().is_some_and(|w| !w.is_idle())
+    };
     let t0 = Instant::now();
-    while h.state().0.as_ref().is_some_and(|w| !w.is_idle())
-        && t0.elapsed() < Duration::from_secs(600)
-    {
+    while busy(&h) && t0.elapsed() < Duration::from_secs(600) {
         h.step();
         std::thread::sleep(Duration::from_millis(2));
     }
     let mut worst = Duration::ZERO;
     let mut frames = 0;
-    for view in [
-        groovescope::app::View::Flow,
-        groovescope::app::View::Overview,
-    ] {
+    for view in [View::Flow, View::Overview, View::Depth] {
         let Some(wb) = h.state_mut().0.as_mut() else {
             return;
         };
@@ -148,9 +108,7 @@ fn ui_frame_times() {
         p.flow.lambda *= 1.5;
         wb.set_params(p);
         let t0 = Instant::now();
-        while h.state().0.as_ref().is_some_and(|w| !w.is_idle())
-            && t0.elapsed() < Duration::from_secs(600)
-        {
+        while busy(&h) && t0.elapsed() < Duration::from_secs(600) {
             let s = Instant::now();
             h.step();
             worst = worst.max(s.elapsed());
@@ -158,27 +116,31 @@ fn ui_frame_times() {
             std::thread::sleep(Duration::from_millis(5));
         }
     }
+    let in_app = h
+        .state()
+        .0
+        .as_ref()
+        .map_or(0.0, |w| w.max_busy_frame().as_secs_f64() * 1e3);
     println!(
-        "ui frames while the worker reran flow onward: {frames} frames, worst {:.1} ms (in-app max {:.1} ms)",
-        worst.as_secs_f64() * 1e3,
-        h.state()
-            .0
-            .as_ref()
-            .map_or(0.0, |w| w.max_busy_frame().as_secs_f64() * 1e3)
+        "UI frames while the worker reran flow onward: {frames} frames, worst step {:.1} ms (in-app worst {in_app:.1} ms)",
+        worst.as_secs_f64() * 1e3
     );
 }
 
 fn main() {
     let mut c = Criterion::default().sample_size(10).configure_from_args();
+    let tmp = tempfile::tempdir().expect("tempdir");
     let params = PipelineParams::default();
-    let depth_input = input(SCAN_TOML);
+
+    let depth_dir = render(&tmp.path().join("depth"), SynthConfig::default());
+    let depth_input = input(&depth_dir);
     let (cache, err) = full_cache(&depth_input, &params);
     if let Some(e) = &err {
-        println!("note: the synthetic group stops at: {e}");
+        println!("note: the depth-path group stops at: {e}");
     }
     rerun_from(
         &mut c,
-        "depth path: flow onward (12×1280×1024)",
+        "depth path: flow onward (12x1280x1024)",
         Stage::Flow,
         &depth_input,
         &cache,
@@ -190,14 +152,20 @@ fn main() {
         &depth_input,
         &cache,
     );
-    let dual_text = format!(
-        "{SCAN_TOML}\n[dual_focus]\nfocus_distance_mm = 4.0\nglass_thickness_mm = 0.11\nglass_index = 1.515\nglass_edge_row = 300\n"
-    );
-    let dual_input = input(&dual_text);
+
+    let dual_dir = render(&tmp.path().join("dual"), SynthConfig::dual_focus_demo());
+    let dual_input = input(&dual_dir);
     let (dual_cache, err) = full_cache(&dual_input, &params);
     if let Some(e) = &err {
-        println!("note: the synthetic dual-focus group stops at: {e}");
+        println!("note: the dual-focus group stops at: {e}");
     }
+    rerun_from(
+        &mut c,
+        "dual focus: flow onward (12x1280x1024)",
+        Stage::Flow,
+        &dual_input,
+        &dual_cache,
+    );
     rerun_from(
         &mut c,
         "dual focus: Hough (stripes) onward",
@@ -205,6 +173,14 @@ fn main() {
         &dual_input,
         &dual_cache,
     );
-    ui_frame_times();
+    rerun_from(
+        &mut c,
+        "dual focus: orientation onward",
+        Stage::Orientation,
+        &dual_input,
+        &dual_cache,
+    );
+
+    ui_frame_times(depth_dir);
     c.final_summary();
 }

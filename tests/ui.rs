@@ -5,7 +5,8 @@
 #![allow(clippy::unwrap_used)] // tests may panic
 
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Once};
+use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Once, OnceLock};
 use std::time::{Duration, Instant};
 
 use egui_kittest::kittest::Queryable;
@@ -15,6 +16,7 @@ use groovescope::image::Image;
 use groovescope::io::wav::WavBits;
 use groovescope::pipeline::Stage;
 use groovescope::playback::{AudioStatus, DeviceChoice};
+use groovescope::synth::SynthConfig;
 
 /// Longest wait for the worker or a reconstruction.
 const TIMEOUT: Duration = Duration::from_secs(300);
@@ -50,57 +52,73 @@ frame_step_um = 0.78
 group_step_um = 40.0
 ";
 
-/// Texture of the groove surface at (x, y) in land-plane pixels.
-fn texture(x: f64, y: f64) -> f64 {
-    0.5 + 0.2 * (0.37 * x + 0.11 * y).sin()
-        + 0.15 * (0.23 * x - 0.31 * y + 1.0).sin()
-        + 0.1 * (0.71 * x + 0.05 * y + 2.0).sin()
-}
-
-/// A small V-groove scan: bright 45° walls, dark land; deeper rows move slower (u = f·U/Z).
+/// A hand-made scan for bad-input tests: `groups` groups of 7 textured frames.
 fn write_scan(dir: &Path, groups: usize) {
     std::fs::create_dir_all(dir).unwrap();
     std::fs::write(dir.join("scan.toml"), SCAN_TOML).unwrap();
-    let (w, h) = (160usize, 96usize);
-    let pitch_um = 0.39;
-    let wd_um = 4000.0;
-    let depth_um = |y: f64| -> f64 {
-        let d = if (30.0..48.0).contains(&y) {
-            y - 30.0
-        } else if (48.0..66.0).contains(&y) {
-            66.0 - y
-        } else {
-            0.0
-        };
-        wd_um + d * pitch_um
-    };
     for g in 0..groups {
         let gdir = dir.join(format!("group_{g:03}"));
         std::fs::create_dir_all(&gdir).unwrap();
         for t in 0..7 {
-            let img = Image::from_fn(w, h, |x, y| {
-                let yf = y as f64;
-                let z = depth_um(yf);
-                let shift = (g as f64 * 40.0 / pitch_um) + t as f64 * 2.0 * wd_um / z;
-                let wall = z > wd_um + 0.5 * pitch_um;
-                let gain = if wall { 0.95 } else { 0.35 };
-                (gain * texture(x as f64 + shift, yf)).clamp(0.0, 1.0) as f32
+            let img = Image::from_fn(64, 48, |x, y| {
+                (0.5 + 0.3 * ((x + 2 * t) as f32 * 0.37 + y as f32 * 0.11).sin()).clamp(0.0, 1.0)
             });
-            groovescope::io::save_grey_png(&img, &gdir.join(format!("f{t:02}.png")), true, true)
+            groovescope::io::save_grey_png(&img, &gdir.join(format!("f{t:02}.png")), false, true)
                 .unwrap();
         }
     }
 }
 
-/// The scan the tests run on: the bundled demo when present, else a small synthetic one.
-fn test_scan(tmp: &Path) -> PathBuf {
-    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
-    if demo.join("scan.toml").is_file() {
-        return demo;
-    }
-    let dir = tmp.join("scan");
-    write_scan(&dir, 3);
+/// Renders a synthetic scan once per test process (under the target's temporary folder).
+fn rendered_scan(name: &str, cfg: SynthConfig) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("ui-scans-{}", std::process::id()))
+        .join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    let sound = groovescope::synth::tone(440.0, 0.2, 44_100);
+    groovescope::synth::render_scan(&sound, &cfg, &dir, &|_, _| {}, &AtomicBool::new(false))
+        .unwrap();
     dir
+}
+
+/// The scan most tests run on: the bundled demo when present, else a small synthetic lateral
+/// scan (3 groups of 8 frames of 256×320 px, 440 Hz tone, with `reference.wav`).
+fn test_scan() -> PathBuf {
+    static SCAN: OnceLock<PathBuf> = OnceLock::new();
+    SCAN.get_or_init(|| {
+        let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
+        if demo.join("scan.toml").is_file() {
+            return demo;
+        }
+        rendered_scan(
+            "lateral",
+            SynthConfig {
+                frames_per_group: 8,
+                max_groups: Some(3),
+                ..SynthConfig::quick_test()
+            },
+        )
+    })
+    .clone()
+}
+
+/// A small dual-focus scan (cover glass, three in-focus stripes): 2 groups of 8 frames of 160×700 px.
+fn dual_scan() -> PathBuf {
+    static SCAN: OnceLock<PathBuf> = OnceLock::new();
+    SCAN.get_or_init(|| {
+        rendered_scan(
+            "dual",
+            SynthConfig {
+                width_px: 160,
+                height_px: 700,
+                group_overlap_px: 10,
+                frames_per_group: 8,
+                max_groups: Some(2),
+                ..SynthConfig::dual_focus_demo()
+            },
+        )
+    })
+    .clone()
 }
 
 fn options(tmp: &Path, scan: Option<PathBuf>, audio: DeviceChoice) -> WorkbenchOptions {
@@ -178,7 +196,7 @@ fn last_message(h: &H) -> String {
 #[test]
 fn opens_a_scan_and_steps_through_groups() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan(tmp.path());
+    let scan = test_scan();
     let mut h = harness(options(tmp.path(), Some(scan.clone()), DeviceChoice::Off));
     settle(&mut h);
     let groups = wb(&h).scan().unwrap().groups.len();
@@ -204,7 +222,7 @@ fn opens_a_scan_and_steps_through_groups() {
 #[test]
 fn bad_input_gives_a_message_and_keeps_the_scan() {
     let tmp = tempfile::tempdir().unwrap();
-    let good = test_scan(tmp.path());
+    let good = test_scan();
     let mut h = harness(options(tmp.path(), Some(good.clone()), DeviceChoice::Off));
     settle(&mut h);
     // Not a scan.
@@ -244,7 +262,7 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
 #[test]
 fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan(tmp.path());
+    let scan = test_scan();
     let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
     settle(&mut h);
     wb_mut(&mut h).set_view(View::Flow);
@@ -286,7 +304,7 @@ fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
 #[test]
 fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan(tmp.path());
+    let scan = dual_scan();
     let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
     settle(&mut h);
     let runs = Stage::ALL.map(|s| wb(&h).stage_runs(s));
@@ -299,6 +317,7 @@ fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
         Some(Stage::Stripes)
     );
     settle(&mut h);
+    assert!(wb(&h).cache().stripes.is_some(), "the dual-focus path ran");
     let after = Stage::ALL.map(|s| wb(&h).stage_runs(s));
     assert_eq!(
         &after[..3],
@@ -315,7 +334,7 @@ fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
 #[test]
 fn reconstructs_exports_a_wav_and_reads_it_back() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan(tmp.path());
+    let scan = test_scan();
     let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
     settle(&mut h);
     wb_mut(&mut h).set_view(View::Waveform);
@@ -365,7 +384,7 @@ fn reconstructs_exports_a_wav_and_reads_it_back() {
 #[test]
 fn without_an_audio_device_the_play_controls_say_so() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan(tmp.path());
+    let scan = test_scan();
     let mut h = harness(options(
         tmp.path(),
         Some(scan),
@@ -391,7 +410,7 @@ fn without_an_audio_device_the_play_controls_say_so() {
 #[test]
 fn plays_through_the_null_sink() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan(tmp.path());
+    let scan = test_scan();
     let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Default));
     settle(&mut h);
     if let AudioStatus::Unavailable(why) = wb(&h).player().status() {
@@ -415,7 +434,7 @@ fn plays_through_the_null_sink() {
 #[test]
 fn snapshots_of_every_view() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan(tmp.path());
+    let scan = test_scan();
     let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
     settle(&mut h);
     wb_mut(&mut h).reconstruct(None);

@@ -13,20 +13,19 @@ use crate::engine::{Progress, ReconstructOptions, Reconstruction, aligned_refere
 use crate::io::Scan;
 use crate::pipeline::PipelineParams;
 use crate::pipeline::audio_signal::GroupSignal;
+use crate::pipeline::dsp::magnitude_spectrum;
 
 /// Length of one envelope block (seconds).
 pub const ENVELOPE_BLOCK_SECS: f64 = 0.005;
-/// Samples per spectrum segment (Welch average).
-pub const SPECTRUM_SEGMENT: usize = 1024;
-/// Most segments averaged into a spectrum (spread over the clip).
-pub const SPECTRUM_MAX_SEGMENTS: usize = 256;
+/// Most points of a displayed spectrum.
+pub const SPECTRUM_POINTS: usize = 4096;
 
 /// An averaged magnitude spectrum.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Spectrum {
     /// Bin frequencies (Hz).
     pub freqs_hz: Vec<f64>,
-    /// Magnitude per bin (dB, relative to full scale).
+    /// Level per bin (dB; a full-scale sine reads 0 dB).
     pub db: Vec<f64>,
 }
 
@@ -81,57 +80,18 @@ pub fn peak_envelope(samples: &[f32], block: usize) -> Vec<f32> {
         .collect()
 }
 
-/// Welch-averaged magnitude spectrum (Hann window) of `samples` at `rate_hz`.
+/// Magnitude spectrum of `samples` (`crate::pipeline::dsp::magnitude_spectrum`, amplitude
+/// calibrated: a full-scale sine reads 0 dB), reduced to at most [`SPECTRUM_POINTS`] bands by
+/// keeping each band's loudest bin, so peaks survive.
 #[must_use]
-pub fn welch_spectrum(samples: &[f32], rate_hz: u32) -> Spectrum {
-    let n = SPECTRUM_SEGMENT; // a power of two: indices wrap with a mask
-    if samples.len() < n || rate_hz == 0 {
-        return Spectrum::default();
-    }
-    let bins = n / 2 + 1;
-    let window: Vec<f64> = (0..n)
-        .map(|i| 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / n as f64).cos())
-        .collect();
-    let (cos, sin): (Vec<f64>, Vec<f64>) = (0..n)
-        .map(|i| {
-            let a = std::f64::consts::TAU * i as f64 / n as f64;
-            (a.cos(), a.sin())
-        })
+pub fn clip_spectrum(samples: &[f32], rate_hz: u32) -> Spectrum {
+    let full = magnitude_spectrum(samples, f64::from(rate_hz));
+    let per = full.len().div_ceil(SPECTRUM_POINTS).max(1);
+    let (freqs_hz, db) = full
+        .chunks(per)
+        .filter_map(|c| c.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1)))
         .unzip();
-    let hop = n / 2;
-    let starts = (samples.len() - n) / hop + 1;
-    let stride = starts.div_ceil(SPECTRUM_MAX_SEGMENTS).max(1);
-    let mut power = vec![0.0_f64; bins];
-    let mut count = 0usize;
-    let mut seg = vec![0.0_f64; n];
-    for s in (0..starts).step_by(stride) {
-        let chunk = &samples[s * hop..s * hop + n];
-        for ((o, &x), w) in seg.iter_mut().zip(chunk).zip(&window) {
-            *o = if x.is_finite() { f64::from(x) * w } else { 0.0 };
-        }
-        for (k, p) in power.iter_mut().enumerate() {
-            let (mut re, mut im) = (0.0, 0.0);
-            let mut idx = 0usize;
-            for &x in &seg {
-                re += x * cos[idx];
-                im -= x * sin[idx];
-                idx = (idx + k) & (n - 1);
-            }
-            *p += re * re + im * im;
-        }
-        count += 1;
-    }
-    let wsum: f64 = window.iter().sum();
-    let norm = 2.0 / (wsum * wsum * count.max(1) as f64);
-    Spectrum {
-        freqs_hz: (0..bins)
-            .map(|k| k as f64 * f64::from(rate_hz) / n as f64)
-            .collect(),
-        db: power
-            .iter()
-            .map(|p| 10.0 * (p * norm).max(1e-20).log10())
-            .collect(),
-    }
+    Spectrum { freqs_hz, db }
 }
 
 /// Builds the display data of a finished reconstruction.
@@ -163,8 +123,8 @@ pub fn make_clip(
     Clip {
         recovered_envelope: peak_envelope(&recovered, block),
         reference_envelope: reference.as_ref().map(|r| peak_envelope(r, block)),
-        recovered_spectrum: welch_spectrum(&recovered, rate),
-        reference_spectrum: reference.as_ref().map(|r| welch_spectrum(r, rate)),
+        recovered_spectrum: clip_spectrum(&recovered, rate),
+        reference_spectrum: reference.as_ref().map(|r| clip_spectrum(r, rate)),
         recovered: Arc::new(recovered),
         reference: reference.map(Arc::new),
         envelope_block: block,
@@ -337,15 +297,16 @@ mod tests {
         let x: Vec<f32> = (0..8000)
             .map(|i| (std::f64::consts::TAU * f * f64::from(i) / f64::from(rate)).sin() as f32)
             .collect();
-        let s = welch_spectrum(&x, rate);
+        let s = clip_spectrum(&x, rate);
         let (k, _) =
             s.db.iter()
                 .enumerate()
                 .max_by(|a, b| a.1.total_cmp(b.1))
                 .unwrap();
-        assert!((s.freqs_hz[k] - f).abs() < 8.0, "{}", s.freqs_hz[k]);
-        // A full-scale sine reads about −3 dB (its RMS) give or take the window's scalloping.
-        assert!(s.db[k] > -6.0 && s.db[k] < 1.0, "{}", s.db[k]);
-        assert!(welch_spectrum(&x[..10], rate).db.is_empty());
+        assert!((s.freqs_hz[k] - f).abs() < 2.0, "{}", s.freqs_hz[k]);
+        // Amplitude calibrated: a full-scale sine reads about 0 dB (less the Hann scalloping).
+        assert!(s.db[k] > -2.0 && s.db[k] < 0.5, "{}", s.db[k]);
+        assert!(s.db.len() <= SPECTRUM_POINTS);
+        assert!(clip_spectrum(&[], rate).db.is_empty());
     }
 }

@@ -1,38 +1,27 @@
-//! Stage results turned into textures (`egui::ColorImage`): grey frames, heat maps, flow colours, labels.
+//! Stage results turned into textures: `crate::viz` renderings wrapped as `egui::ColorImage`s,
+//! with the value range each colour map spans (for colour bars and legends).
 //!
 //! These run on the worker thread right after a stage finishes (and on the UI thread only for a
-//! single frame when the operator scrubs), so the UI thread never converts whole stages.
+//! single frame or flow window the operator picks), so the UI thread never converts whole stages.
 
 use std::sync::Arc;
 
 use egui::{Color32, ColorImage};
 
 use crate::image::Image;
-use crate::pipeline::hough::{Accumulator, Stripes, label};
+use crate::pipeline::hough::{Accumulator, Stripes};
 use crate::pipeline::optical_flow::FlowField;
+use crate::viz::{self, ColorMap, Rgba8Image};
 
-/// Stops of the heat colour map (dark blue, cyan, yellow, red), evenly spaced over `[0, 1]`.
-const HEAT_STOPS: [[u8; 3]; 6] = [
-    [10, 10, 40],
-    [30, 60, 170],
-    [20, 170, 200],
-    [120, 220, 90],
-    [250, 210, 40],
-    [210, 40, 30],
-];
+/// Colour map of heat maps (depth, weights, accumulator).
+pub const HEAT_MAP: ColorMap = ColorMap::Inferno;
 
-/// Colour of NaN (unknown) pixels in heat maps.
-pub const UNKNOWN_COLOUR: Color32 = Color32::from_rgb(60, 60, 60);
-
-/// Distinct colours for stripe labels (index = peak).
-pub const LABEL_COLOURS: [Color32; 6] = [
-    Color32::from_rgb(230, 80, 80),
-    Color32::from_rgb(80, 200, 90),
-    Color32::from_rgb(80, 140, 240),
-    Color32::from_rgb(230, 190, 60),
-    Color32::from_rgb(190, 90, 220),
-    Color32::from_rgb(60, 210, 210),
-];
+/// Colour of stripe region `k` (the same colours as `viz::stripes_overlay`).
+#[must_use]
+pub fn region_colour(k: usize) -> Color32 {
+    let [r, g, b, _] = viz::REGION_RGBA[k % viz::REGION_RGBA.len()];
+    Color32::from_rgb(r, g, b)
+}
 
 /// A texture with the value range its colours span (for colour bars).
 #[derive(Clone, Debug)]
@@ -45,20 +34,29 @@ pub struct Rendered {
     pub hi: f32,
 }
 
-/// The heat colour of `t` in `[0, 1]` (clamped).
+/// A `viz` raster as an egui image.
+#[must_use]
+pub fn color_image(img: &Rgba8Image) -> ColorImage {
+    if img.pixels.len() == img.width * img.height * 4 {
+        ColorImage::from_rgba_unmultiplied([img.width, img.height], &img.pixels)
+    } else {
+        ColorImage::filled([img.width, img.height], Color32::TRANSPARENT)
+    }
+}
+
+fn rendered(img: &Rgba8Image, lo: f32, hi: f32) -> Rendered {
+    Rendered {
+        image: Arc::new(color_image(img)),
+        lo,
+        hi,
+    }
+}
+
+/// The heat colour of `t` in `[0, 1]` (clamped; NaN gives the map's NaN colour).
 #[must_use]
 pub fn heat_colour(t: f32) -> Color32 {
-    let t = if t.is_finite() {
-        t.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let pos = t * (HEAT_STOPS.len() - 1) as f32;
-    let i = (pos.floor() as usize).min(HEAT_STOPS.len() - 2);
-    let f = pos - i as f32;
-    let (a, b) = (HEAT_STOPS[i], HEAT_STOPS[i + 1]);
-    let mix = |k: usize| (f32::from(a[k]) + (f32::from(b[k]) - f32::from(a[k])) * f).round() as u8;
-    Color32::from_rgb(mix(0), mix(1), mix(2))
+    let [r, g, b, a] = HEAT_MAP.rgba(t);
+    Color32::from_rgba_unmultiplied(r, g, b, a)
 }
 
 /// Finite minimum and maximum of `values` (None when none is finite).
@@ -75,131 +73,48 @@ pub fn finite_range(values: &[f32]) -> Option<(f32, f32)> {
     (lo <= hi).then_some((lo, hi))
 }
 
-/// A grey frame with values in `[0, 1]` as an opaque texture.
+/// A grey frame (contrast stretched to its range) as a texture.
 #[must_use]
 pub fn grey(img: &Image) -> ColorImage {
-    let pixels = img
-        .data
-        .iter()
-        .map(|&v| {
-            let g = if v.is_finite() {
-                (v.clamp(0.0, 1.0) * 255.0).round() as u8
-            } else {
-                0
-            };
-            Color32::from_gray(g)
-        })
-        .collect();
-    ColorImage::new([img.width, img.height], pixels)
+    color_image(&viz::grey_image(img))
 }
 
-/// A heat map of `img` over its finite range (or `range` when given); NaN pixels are grey.
+/// A heat map of `img` over its finite range (or `range` when given); NaN pixels are clear.
 #[must_use]
 pub fn heat(img: &Image, range: Option<(f32, f32)>) -> Rendered {
     let (lo, hi) = range
         .or_else(|| finite_range(&img.data))
         .unwrap_or((0.0, 1.0));
-    let span = if hi > lo { hi - lo } else { 1.0 };
-    let pixels = img
-        .data
-        .iter()
-        .map(|&v| {
-            if v.is_finite() {
-                heat_colour((v - lo) / span)
-            } else {
-                UNKNOWN_COLOUR
-            }
-        })
-        .collect();
-    Rendered {
-        image: Arc::new(ColorImage::new([img.width, img.height], pixels)),
-        lo,
-        hi,
-    }
+    rendered(&viz::heat_map(img, Some((lo, hi)), HEAT_MAP), lo, hi)
 }
 
-/// Flow as colour: hue from direction, saturation from magnitude over `max_px` (None: the field's
-/// largest magnitude); pixels without confidence are black.
+/// Flow as colour (Middlebury wheel) after subtracting `subtract_u_px` from u, so the residual
+/// that depth causes shows; `hi` is the largest residual magnitude (full saturation).
 #[must_use]
-pub fn flow_colour(flow: &FlowField, max_px: Option<f32>) -> Rendered {
-    let mags: Vec<f32> = flow
+pub fn flow_colour(flow: &FlowField, subtract_u_px: f32) -> Rendered {
+    let hi = flow
         .u
         .data
         .iter()
         .zip(&flow.v.data)
-        .map(|(u, v)| u.hypot(*v))
-        .collect();
-    let max = max_px
-        .filter(|m| *m > 0.0)
-        .or_else(|| finite_range(&mags).map(|(_, hi)| hi))
-        .filter(|m| *m > 0.0)
-        .unwrap_or(1.0);
-    let pixels = flow
-        .u
-        .data
-        .iter()
-        .zip(&flow.v.data)
-        .zip(mags.iter().zip(&flow.confidence.data))
-        .map(|((&u, &v), (&m, &c))| {
-            if !(u.is_finite() && v.is_finite()) || c <= 0.0 {
-                return Color32::BLACK;
-            }
-            let hue = (v.atan2(u) / std::f32::consts::TAU).rem_euclid(1.0);
-            let sat = (m / max).clamp(0.0, 1.0);
-            egui::ecolor::Hsva::new(hue, sat, 1.0, 1.0).into()
-        })
-        .collect();
-    Rendered {
-        image: Arc::new(ColorImage::new([flow.u.width, flow.u.height], pixels)),
-        lo: 0.0,
-        hi: max,
-    }
+        .map(|(u, v)| (u - subtract_u_px).hypot(*v))
+        .filter(|m| m.is_finite())
+        .fold(0.0_f32, f32::max);
+    rendered(&viz::flow_image(flow, subtract_u_px), 0.0, hi)
 }
 
-/// The Hough accumulator as a heat map on a log scale: width = θ bins, height = ρ bins.
+/// The Hough accumulator as a log-scaled heat map: width = θ bins, height = ρ bins (the
+/// windows are drawn by the view, so they follow edits).
 #[must_use]
 pub fn accumulator(acc: &Accumulator) -> Rendered {
-    let tb = acc.thetas_rad.len();
-    let rb = acc.rho_bins;
     let max = acc.votes.iter().copied().max().unwrap_or(0);
-    let norm = (f64::from(max) + 1.0).ln().max(f64::MIN_POSITIVE);
-    let mut pixels = vec![UNKNOWN_COLOUR; tb * rb];
-    for t in 0..tb {
-        for r in 0..rb {
-            let votes = acc.votes.get(t * rb + r).copied().unwrap_or(0);
-            let v = ((f64::from(votes) + 1.0).ln() / norm) as f32;
-            pixels[r * tb + t] = heat_colour(v);
-        }
-    }
-    Rendered {
-        image: Arc::new(ColorImage::new([tb, rb], pixels)),
-        lo: 0.0,
-        hi: max as f32,
-    }
+    rendered(&viz::hough_image(acc, &[], None), 0.0, max as f32)
 }
 
-/// Stripe labels as a translucent overlay: peak colours, discarded pixels white, others clear.
+/// The segmentation over the frame with the centroid lines (`viz::stripes_overlay`).
 #[must_use]
-pub fn labels(stripes: &Stripes) -> ColorImage {
-    let (w, h) = (stripes.in_focus.width, stripes.in_focus.height);
-    let pixels = (0..w * h)
-        .map(
-            |i| match stripes.labels.get(i).copied().unwrap_or(label::NONE) {
-                l if l >= 0 => {
-                    let c = LABEL_COLOURS[l as usize % LABEL_COLOURS.len()];
-                    if l as usize == stripes.dropped {
-                        Color32::from_rgba_unmultiplied(c.r(), c.g(), c.b(), 70)
-                    } else {
-                        Color32::from_rgba_unmultiplied(c.r(), c.g(), c.b(), 160)
-                    }
-                }
-                label::DISCARDED => Color32::from_rgba_unmultiplied(255, 255, 255, 140),
-                label::UNASSIGNED => Color32::from_rgba_unmultiplied(120, 120, 120, 90),
-                _ => Color32::TRANSPARENT,
-            },
-        )
-        .collect();
-    ColorImage::new([w, h], pixels)
+pub fn stripes(frame: &Image, stripes: &Stripes) -> Rendered {
+    rendered(&viz::stripes_overlay(frame, stripes), 0.0, 1.0)
 }
 
 #[cfg(test)]
@@ -208,38 +123,29 @@ mod tests {
     use super::*;
 
     #[test]
-    fn heat_runs_from_dark_to_red_and_marks_nan() {
-        assert_eq!(heat_colour(0.0), Color32::from_rgb(10, 10, 40));
-        assert_eq!(heat_colour(1.0), Color32::from_rgb(210, 40, 30));
-        assert_eq!(heat_colour(f32::NAN), heat_colour(0.0));
+    fn heat_spans_the_range_and_clears_nan() {
         let img = Image::from_vec(3, 1, vec![1.0, f32::NAN, 3.0]).unwrap();
         let r = heat(&img, None);
         assert_eq!((r.lo, r.hi), (1.0, 3.0));
-        assert_eq!(r.image.pixels[1], UNKNOWN_COLOUR);
+        assert_eq!(r.image.pixels[1].a(), 0, "NaN is transparent");
         assert_eq!(r.image.pixels[2], heat_colour(1.0));
+        assert_ne!(r.image.pixels[0], r.image.pixels[2]);
     }
 
     #[test]
-    fn flow_colour_hue_follows_direction() {
-        let u = Image::from_vec(2, 1, vec![1.0, -1.0]).unwrap();
-        let v = Image::zeros(2, 1);
+    fn flow_colour_reports_the_residual_magnitude() {
         let flow = FlowField {
-            u,
-            v,
+            u: Image::from_vec(2, 1, vec![-2.0, -1.5]).unwrap(),
+            v: Image::zeros(2, 1),
             confidence: Image::filled(2, 1, 1.0),
             iterations: 1,
             converged: true,
             frame_index: 0,
         };
-        let r = flow_colour(&flow, None);
-        let right = r.image.pixels[0];
-        let left = r.image.pixels[1];
-        assert!(right.r() > right.b(), "+x is red: {right:?}");
-        assert!(
-            left.r() < left.b() || left.g() > left.r(),
-            "-x is cyan: {left:?}"
-        );
-        assert!((r.hi - 1.0).abs() < 1e-6);
+        let r = flow_colour(&flow, -2.0);
+        assert!((r.hi - 0.5).abs() < 1e-6);
+        assert_eq!(r.image.size, [2, 1]);
+        assert_ne!(r.image.pixels[0], r.image.pixels[1]);
     }
 
     #[test]
@@ -250,11 +156,14 @@ mod tests {
             rho_step_px: 1.0,
             rho_bins: 2,
             votes: vec![0, 0, 0, 9, 0, 0],
+            x_origin_px: 0.0,
+            vote_stride: 1,
         };
         let r = accumulator(&acc);
         assert_eq!(r.image.size, [3, 2]);
-        // θ bin 1, ρ bin 1 holds the maximum: pixel (x=1, y=1).
-        assert_eq!(r.image.pixels[3 + 1], heat_colour(1.0));
         assert_eq!(r.hi, 9.0);
+        // θ bin 1, ρ bin 1 holds the maximum: pixel (x = 1, y = 1) is the brightest.
+        let bright = r.image.pixels[3 + 1];
+        assert!(r.image.pixels.iter().all(|p| p.r() <= bright.r()));
     }
 }

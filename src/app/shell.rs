@@ -17,7 +17,7 @@ use super::views::meta_ui::{MetaAction, MetaForm, meta_ui};
 use super::views::nav_ui::{NavAction, nav_ui, stages_ui};
 use super::views::orientation_ui::orientation_ui;
 use super::views::overview_ui::overview_ui;
-use super::views::params_ui::params_ui;
+use super::views::params_ui::{params_ui, toml_ui};
 use super::views::stripes_ui::stripes_ui;
 use super::views::waveform_ui::{WaveAction, waveform_ui};
 use super::views::{View, empty_note};
@@ -308,6 +308,10 @@ impl Workbench {
             }
             let mut draft = self.params.clone();
             params_ui(ui, &mut draft, statuses);
+            if let Some(p) = toml_ui(ui, &self.params, &mut self.views.toml) {
+                draft = p;
+                self.history.seal();
+            }
             self.set_params(draft);
         });
     }

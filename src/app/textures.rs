@@ -76,19 +76,25 @@ impl Textures {
         self.views.get(&key)
     }
 
-    /// The flow-colour texture of field `index`, rendered here when the worker did not
-    /// (the operator picked another window).
+    /// The flow-colour texture of field `index` (residual after `land_px`), rendered here when
+    /// the worker did not (the operator picked another window).
     pub fn flow(
         &mut self,
         ctx: &egui::Context,
         flows: &Arc<Vec<FlowField>>,
         index: usize,
+        land_px: f32,
     ) -> Option<&ViewTexture> {
         let source = Arc::as_ptr(flows) as usize;
         let key = ViewImage::FlowColour(index);
         if self.views.get(&key).is_none_or(|t| t.source != source) {
             let field = flows.get(index)?;
-            self.set(ctx, key, Arc::new(render::flow_colour(field, None)), source);
+            self.set(
+                ctx,
+                key,
+                Arc::new(render::flow_colour(field, land_px)),
+                source,
+            );
         }
         self.views.get(&key)
     }

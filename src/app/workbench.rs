@@ -102,6 +102,7 @@ pub(super) struct ViewStates {
     pub orientation: OrientationViewState,
     pub wave: WaveViewState,
     pub nav: NavState,
+    pub toml: super::views::params_ui::TomlEditor,
 }
 
 /// The workbench.

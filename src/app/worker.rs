@@ -9,6 +9,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use super::render::{self, Rendered};
+
 use crate::image::Image;
 use crate::io::{GroupEntry, ScanMeta, load_group};
 use crate::pipeline::{GroupInput, PipelineParams, Stage, StageCache, StageError};
@@ -65,8 +66,8 @@ pub enum ViewImage {
     Depth,
     /// Hough accumulator.
     Accumulator,
-    /// Stripe labels overlay.
-    Labels,
+    /// Segmentation and centroid lines over the frame.
+    Segmentation,
     /// In-focus map.
     InFocus,
     /// Robust-fit weights (outlier map).
@@ -147,9 +148,14 @@ impl std::fmt::Debug for Worker {
     }
 }
 
-/// Renders the views of `stage` from `cache` (empty for stages without textures).
+/// Renders the views of `stage` from `cache` (empty for stages without textures); flow colours
+/// show the residual after subtracting the land flow `land_px` (px/frame).
 #[must_use]
-pub fn render_stage(stage: Stage, cache: &StageCache) -> Vec<(ViewImage, Arc<Rendered>)> {
+pub fn render_stage(
+    stage: Stage,
+    cache: &StageCache,
+    land_px: f32,
+) -> Vec<(ViewImage, Arc<Rendered>)> {
     let mut out = Vec::new();
     match stage {
         Stage::Flow => {
@@ -158,7 +164,7 @@ pub fn render_stage(stage: Stage, cache: &StageCache) -> Vec<(ViewImage, Arc<Ren
                 if let Some(f) = flows.get(mid) {
                     out.push((
                         ViewImage::FlowColour(mid),
-                        Arc::new(render::flow_colour(f, None)),
+                        Arc::new(render::flow_colour(f, land_px)),
                     ));
                 }
             }
@@ -174,14 +180,14 @@ pub fn render_stage(stage: Stage, cache: &StageCache) -> Vec<(ViewImage, Arc<Ren
                     ViewImage::Accumulator,
                     Arc::new(render::accumulator(&s.accumulator)),
                 ));
-                out.push((
-                    ViewImage::Labels,
-                    Arc::new(Rendered {
-                        image: Arc::new(render::labels(s)),
-                        lo: 0.0,
-                        hi: 1.0,
-                    }),
-                ));
+                let frame = cache
+                    .derivatives
+                    .as_ref()
+                    .and_then(|d| d.get(d.len() / 2))
+                    .map(|d| &d.image);
+                if let Some(f) = frame {
+                    out.push((ViewImage::Segmentation, Arc::new(render::stripes(f, s))));
+                }
                 out.push((
                     ViewImage::InFocus,
                     Arc::new(render::heat(&s.in_focus, Some((0.0, 1.0)))),
@@ -253,6 +259,7 @@ pub fn run_job(
     if !current() {
         return finish(Outcome::Cancelled);
     }
+    let land_px = input.meta.geometry().land_flow_px() as f32;
     let mut cache = job.cache;
     let mut next = Some(job.from);
     let mut started = Instant::now();
@@ -261,7 +268,7 @@ pub fn run_job(
             let elapsed = started.elapsed();
             let result = StageResult {
                 cache: c.clone(),
-                renders: render_stage(stage, c),
+                renders: render_stage(stage, c, land_px),
             };
             let _ = tx.send(WorkerEvent::StageDone(Box::new(StageDone {
                 stage,

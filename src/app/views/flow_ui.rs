@@ -92,7 +92,7 @@ pub fn flow_ui(
         };
         (t, None)
     } else {
-        let Some(t) = textures.flow(ui.ctx(), &flows, window) else {
+        let Some(t) = textures.flow(ui.ctx(), &flows, window, land as f32) else {
             return;
         };
         (t.handle.clone(), Some(t.rendered.hi))

@@ -5,7 +5,7 @@ use egui_plot::{LineStyle, Plot, PlotImage, PlotPoint, PlotPoints, Points, Polyg
 
 use super::frame_ui::StageData;
 use super::{empty_note, stage_banner, tint};
-use crate::app::render::LABEL_COLOURS;
+use crate::app::render::region_colour;
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
 use crate::pipeline::Stage;
@@ -107,8 +107,10 @@ pub fn hough_ui(
     } else {
         1.0
     };
-    let rho0 = f64::from(acc.rho_min_px);
-    let rho_span = f64::from(acc.rho_step_px) * acc.rho_bins as f64;
+    // ρ bin r is centred on rho_min + r·step.
+    let rho_step = f64::from(acc.rho_step_px);
+    let rho0 = f64::from(acc.rho_min_px) - rho_step / 2.0;
+    let rho_span = rho_step * acc.rho_bins as f64;
     let (lo_t, hi_t) = (t0 - dt / 2.0, t1 + dt / 2.0);
     let peaks: Vec<(f64, f64)> = stripes
         .peaks
@@ -154,7 +156,7 @@ pub fn hough_ui(
                 );
             }
             for (i, &(t, r)) in peaks.iter().enumerate() {
-                let c = LABEL_COLOURS[i % LABEL_COLOURS.len()];
+                let c = region_colour(i);
                 let style = if i == stripes.dropped {
                     LineStyle::dashed_dense()
                 } else {
@@ -238,13 +240,9 @@ pub fn hough_ui(
     if let Some(p) = resp.response.hover_pos() {
         let v = tr.value_from_position(p);
         let ti = ((v.x - t0) / dt).round();
-        let ri = ((v.y - rho0) / f64::from(acc.rho_step_px)).floor();
+        let ri = ((v.y - rho0) / rho_step).floor();
         if ti >= 0.0 && ri >= 0.0 && (ti as usize) < thetas.len() && (ri as usize) < acc.rho_bins {
-            let votes = acc
-                .votes
-                .get(ti as usize * acc.rho_bins + ri as usize)
-                .copied()
-                .unwrap_or(0);
+            let votes = acc.get(ti as usize, ri as usize);
             state.readout = Some(format!("θ {:.2}°  ρ {:.1} px  ·  {votes} votes", v.x, v.y));
         }
     }

@@ -5,7 +5,7 @@ use egui_plot::{Legend, Line, Plot, PlotPoints};
 
 use super::frame_ui::StageData;
 use super::{empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines};
-use crate::app::render::LABEL_COLOURS;
+use crate::app::render::region_colour;
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
 use crate::pipeline::Stage;
@@ -66,7 +66,7 @@ pub fn orientation_ui(
         .y_axis_label("tan θ (= V / Vt)")
         .show(ui, |plot_ui| {
             for (i, w) in o.walls.iter().enumerate() {
-                let c = LABEL_COLOURS[i % LABEL_COLOURS.len()];
+                let c = region_colour(i);
                 let name = format!("{:?} wall", w.side);
                 for (k, seg) in tan_segments(w).into_iter().enumerate() {
                     plot_ui.line(

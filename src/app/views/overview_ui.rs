@@ -8,7 +8,7 @@ use super::orientation_ui::tan_segments;
 use super::waveform_ui::{RECOVERED_COLOUR, REFERENCE_COLOUR, decimate};
 use super::{View, image_item, wall_lines};
 use crate::app::recon::Clip;
-use crate::app::render::LABEL_COLOURS;
+use crate::app::render::region_colour;
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
 use crate::pipeline::Stage;
@@ -66,10 +66,14 @@ pub fn overview_ui(
         .and_then(|f| textures.frame(ui.ctx(), data.group, data.frame, f).cloned());
     let flow_tex = data.cache.flows.clone().and_then(|f| {
         let mid = f.len() / 2;
-        textures.flow(ui.ctx(), &f, mid).map(|t| t.handle.clone())
+        textures
+            .flow(ui.ctx(), &f, mid, data.land_flow_px() as f32)
+            .map(|t| t.handle.clone())
     });
     let third = if dual {
-        textures.get(ViewImage::Labels).map(|t| t.handle.clone())
+        textures
+            .get(ViewImage::Segmentation)
+            .map(|t| t.handle.clone())
     } else {
         textures.get(ViewImage::Depth).map(|t| t.handle.clone())
     };
@@ -129,17 +133,11 @@ pub fn overview_ui(
                     .data_aspect(1.0)
                     .invert_y(true)
                     .show(ui, |p| {
-                        if dual && let Some(t) = &frame_tex {
-                            p.image(image_item("frame", t, dim));
-                        }
                         if let Some(t) = &third {
                             p.image(image_item(name, t, dim));
                         }
-                        if let Some(d) = &data.cache.depth {
+                        if let (false, Some(d)) = (dual, &data.cache.depth) {
                             wall_lines(p, &d.walls, Color32::WHITE);
-                        }
-                        if let Some(s) = &data.cache.stripes {
-                            wall_lines(p, &s.lines, Color32::from_rgb(255, 240, 80));
                         }
                     });
             });
@@ -199,7 +197,7 @@ pub fn overview_ui(
                                     p.line(
                                         Line::new(format!("{:?}", w.side), PlotPoints::from(seg))
                                             .id(format!("ov{i}/{k}"))
-                                            .color(LABEL_COLOURS[i % LABEL_COLOURS.len()]),
+                                            .color(region_colour(i)),
                                     );
                                 }
                             }

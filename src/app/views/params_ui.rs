@@ -5,14 +5,17 @@ use egui::{Grid, Response, Ui, emath::Numeric};
 use super::StageStatus;
 use crate::pipeline::derivatives::DerivativeMode;
 use crate::pipeline::dsp::EqCurve;
+use crate::pipeline::knobs::knob_doc;
 use crate::pipeline::optical_flow::{FlowMethod, Solver};
 use crate::pipeline::{PathChoice, PipelineParams, Stage};
 
 /// Drag speed of decade-spanning values, as a share of the value per point dragged.
 const LOG_SPEED: f64 = 0.01;
 
+/// The row label; hovering shows the knob's TOML key and its documentation line.
 fn label(ui: &mut Ui, text: &str, key: &str) -> Response {
-    ui.label(text).on_hover_text(key)
+    let doc = knob_doc(key).unwrap_or("");
+    ui.label(text).on_hover_text(format!("{key}\n{doc}"))
 }
 
 /// A number row: label (hover shows the TOML key) and a drag value labelled by it.
@@ -237,6 +240,14 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; 6])
             &mut d.min_confidence,
             1e-8..=10.0,
         );
+        num(
+            ui,
+            "neighbourhood (px)",
+            "depth.neighbourhood_px",
+            &mut d.neighbourhood_px,
+            0.5,
+            1..=63,
+        );
         let w = &mut p.walls;
         num(
             ui,
@@ -253,6 +264,22 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; 6])
             &mut w.trim_px,
             0.5,
             0..=100,
+        );
+        num(
+            ui,
+            "wall smoothing (px)",
+            "walls.smooth_px",
+            &mut w.smooth_px,
+            0.5,
+            0..=100,
+        );
+        num(
+            ui,
+            "wall column window (px)",
+            "walls.column_window_px",
+            &mut w.column_window_px,
+            1.0,
+            1..=10_001,
         );
     });
     section(ui, "hough / stripes", st(Stage::Stripes), false, |ui| {
@@ -327,6 +354,22 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; 6])
             &mut h.line_smoothing_px,
             0.5,
             0..=200,
+        );
+        num(
+            ui,
+            "min votes per column",
+            "hough.min_votes_per_column",
+            &mut h.min_votes_per_column,
+            0.01,
+            0.0..=100.0,
+        );
+        num(
+            ui,
+            "max voting pixels (0 = all)",
+            "hough.max_vote_points",
+            &mut h.max_vote_points,
+            1000.0,
+            0..=100_000_000,
         );
     });
     section(ui, "orientation", st(Stage::Orientation), false, |ui| {
@@ -439,6 +482,15 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; 6])
     });
     section(ui, "filter / EQ (clip)", None, false, |ui| {
         let d = &mut p.dsp;
+        check(ui, "DC block", "dsp.dc_block", &mut d.dc_block);
+        num(
+            ui,
+            "DC block corner (Hz)",
+            "dsp.dc_block_hz",
+            &mut d.dc_block_hz,
+            0.5,
+            0.1..=1000.0,
+        );
         check(ui, "low-pass", "dsp.lowpass", &mut d.lowpass);
         num(
             ui,
@@ -460,4 +512,65 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; 6])
             ],
         );
     });
+}
+
+/// State of the all-knobs TOML editor.
+#[derive(Clone, Debug, Default)]
+pub struct TomlEditor {
+    /// The text being edited (None: follow the params).
+    pub text: Option<String>,
+    /// The text as generated from the params (while `text` equals it, it follows them).
+    pub generated: String,
+    /// Why the last apply failed.
+    pub error: Option<String>,
+}
+
+/// Every knob as TOML (documented), editable as text; returns params to apply when the
+/// operator presses Apply and the text parses and validates.
+pub fn toml_ui(ui: &mut Ui, p: &PipelineParams, ed: &mut TomlEditor) -> Option<PipelineParams> {
+    let mut out = None;
+    egui::CollapsingHeader::new("all knobs (TOML)")
+        .id_salt("params_toml")
+        .default_open(false)
+        .show(ui, |ui| {
+            let current = crate::pipeline::knobs::documented_toml(p).unwrap_or_default();
+            let mut text = match ed.text.take() {
+                Some(t) if t != ed.generated => t,
+                _ => current.clone(),
+            };
+            ed.generated.clone_from(&current);
+            let l = ui.weak("edit any key, then Apply (missing keys take defaults)");
+            ui.add(
+                egui::TextEdit::multiline(&mut text)
+                    .code_editor()
+                    .desired_rows(12)
+                    .desired_width(f32::INFINITY),
+            )
+            .labelled_by(l.id);
+            ui.horizontal(|ui| {
+                if ui.button("Apply").clicked() {
+                    let parsed = PipelineParams::from_toml_str(&text)
+                        .and_then(|q| q.validate().map(|()| q).map_err(|e| e.to_string()));
+                    match parsed {
+                        Ok(q) => {
+                            ed.error = None;
+                            out = Some(q);
+                        }
+                        Err(e) => ed.error = Some(e),
+                    }
+                }
+                if ui.button("Reset to current").clicked() {
+                    ed.error = None;
+                    text.clone_from(&current);
+                }
+            });
+            ed.text = Some(text);
+            if let Some(e) = &ed.error {
+                ui.colored_label(egui::Color32::from_rgb(235, 80, 70), e);
+            }
+        });
+    if out.is_some() {
+        ed.text = None;
+    }
+    out
 }

@@ -10,25 +10,25 @@ use crate::app::worker::ViewImage;
 use crate::pipeline::Stage;
 use crate::pipeline::hough::label;
 
-/// State of the stripes view.
-#[derive(Clone, Debug)]
-pub struct StripesViewState {
-    /// Show the in-focus map instead of the frame.
-    pub in_focus: bool,
-    /// Show the label overlay.
-    pub labels: bool,
-    /// Last read-out.
-    pub readout: Option<String>,
+/// What the stripes view shows under the lines.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StripesBase {
+    /// Regions coloured over the dimmed frame, centroid lines drawn in (magenta = filled voids).
+    #[default]
+    Segmentation,
+    /// The frame, with the centroid lines drawn over it.
+    Frame,
+    /// The in-focus map, with the centroid lines drawn over it.
+    InFocus,
 }
 
-impl Default for StripesViewState {
-    fn default() -> Self {
-        Self {
-            in_focus: false,
-            labels: true,
-            readout: None,
-        }
-    }
+/// State of the stripes view.
+#[derive(Clone, Debug, Default)]
+pub struct StripesViewState {
+    /// The base image.
+    pub base: StripesBase,
+    /// Last read-out.
+    pub readout: Option<String>,
 }
 
 /// The stripes view.
@@ -49,10 +49,10 @@ pub fn stripes_ui(
         return;
     };
     ui.horizontal(|ui| {
-        ui.checkbox(&mut state.labels, "labels");
-        ui.selectable_value(&mut state.in_focus, false, "frame");
-        ui.selectable_value(&mut state.in_focus, true, "in-focus map");
-        ui.weak("lines: centroid lines (magenta dots = filled voids); dashed: glass edge");
+        ui.selectable_value(&mut state.base, StripesBase::Segmentation, "segmentation");
+        ui.selectable_value(&mut state.base, StripesBase::Frame, "frame");
+        ui.selectable_value(&mut state.base, StripesBase::InFocus, "in-focus map");
+        ui.weak("regions: one colour per stripe (red: in two windows); lines: centroids (magenta = filled voids); dashed: glass edge");
     });
     let frame_index = data
         .cache
@@ -60,20 +60,22 @@ pub fn stripes_ui(
         .as_ref()
         .and_then(|d| d.get(d.len() / 2))
         .map_or(data.frame, |d| d.frame_index);
-    let base = if state.in_focus {
-        textures.get(ViewImage::InFocus).map(|t| t.handle.clone())
-    } else {
-        data.frames.and_then(|f| {
+    let base = match state.base {
+        StripesBase::Segmentation => textures
+            .get(ViewImage::Segmentation)
+            .map(|t| t.handle.clone()),
+        StripesBase::InFocus => textures.get(ViewImage::InFocus).map(|t| t.handle.clone()),
+        StripesBase::Frame => data.frames.and_then(|f| {
             textures
                 .frame(ui.ctx(), data.group, frame_index, f)
                 .cloned()
-        })
+        }),
     };
     let Some(base) = base else {
-        empty_note(ui, "frame not loaded");
+        empty_note(ui, "not rendered yet");
         return;
     };
-    let overlay = textures.get(ViewImage::Labels).map(|t| t.handle.clone());
+    let vector_lines = state.base != StripesBase::Segmentation;
     let dim = status.dim();
     let glass = data
         .meta
@@ -81,10 +83,9 @@ pub fn stripes_ui(
         .map(|d| d.glass_edge_row);
     let resp = image_plot("stripes_view", height).show(ui, |plot_ui| {
         plot_ui.image(image_item("base", &base, dim));
-        if let (true, Some(o)) = (state.labels, &overlay) {
-            plot_ui.image(image_item("labels", o, dim));
+        if vector_lines {
+            wall_lines(plot_ui, &stripes.lines, Color32::from_rgb(255, 240, 80));
         }
-        wall_lines(plot_ui, &stripes.lines, Color32::from_rgb(255, 240, 80));
         if let Some(row) = glass {
             plot_ui.hline(
                 HLine::new("glass edge", row)
