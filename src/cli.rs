@@ -60,6 +60,27 @@ pub enum Command {
         #[arg(long)]
         config: Option<PathBuf>,
     },
+    /// Run one group through every stage and dump each intermediate output (PNG) and the
+    /// per-sample wall tilts (samples.csv) into a folder.
+    Inspect {
+        /// Scan folder.
+        scan: PathBuf,
+        /// Group index.
+        #[arg(long, default_value_t = 0)]
+        group: usize,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Parameters TOML.
+        #[arg(long)]
+        params: Option<PathBuf>,
+        /// Force a path instead of choosing by the [dual_focus] table.
+        #[arg(long, value_parser = ["auto", "depth", "dual-focus"], default_value = "auto")]
+        path: String,
+        /// Replace existing files.
+        #[arg(long)]
+        force: bool,
+    },
     /// Open the workbench (optionally on a scan).
     Gui {
         /// Scan folder to open.
@@ -292,6 +313,14 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
     Ok(())
 }
 
+fn path_choice(arg: &str, default: PathChoice) -> PathChoice {
+    match arg {
+        "depth" => PathChoice::Depth,
+        "dual-focus" => PathChoice::DualFocus,
+        _ => default,
+    }
+}
+
 /// Loads params from TOML, or the defaults.
 ///
 /// # Errors
@@ -406,11 +435,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         }
     }
     let mut params = load_params(args.params.as_deref())?;
-    params.path = match args.path.as_str() {
-        "depth" => PathChoice::Depth,
-        "dual-focus" => PathChoice::DualFocus,
-        _ => params.path,
-    };
+    params.path = path_choice(&args.path, params.path);
     let scan = Scan::open(&args.scan)?;
     let first = args.first_group.unwrap_or(0);
     let end = args
@@ -576,6 +601,18 @@ pub fn run(command: Command) -> Result<()> {
         Command::Synth(args) => run_synth(&args),
         Command::SynthScene { kind, out, config } => {
             run_synth_scene(&kind, &out, config.as_deref())
+        }
+        Command::Inspect {
+            scan,
+            group,
+            out,
+            params,
+            path,
+            force,
+        } => {
+            let mut p = load_params(params.as_deref())?;
+            p.path = path_choice(&path, p.path);
+            crate::inspect::run_inspect(&scan, group, &out, &p, force)
         }
         Command::Gui { scan } => run_gui(scan),
     }

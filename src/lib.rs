@@ -8,6 +8,7 @@ pub mod app;
 pub mod cli;
 pub mod engine;
 pub mod image;
+pub mod inspect;
 pub mod io;
 pub mod pipeline;
 #[cfg(feature = "gui")]

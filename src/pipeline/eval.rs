@@ -7,7 +7,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::dsp::fft_in_place;
+use super::dsp::cross_correlation;
 
 /// Fewest overlapping samples for any score.
 const MIN_OVERLAP_SAMPLES: usize = 16;
@@ -105,34 +105,12 @@ fn overlap(n_ref: usize, n_rec: usize, lag: i64) -> (usize, usize) {
     )
 }
 
-/// Σ ref[i]·rec[i + lag] for every lag in −max_lag..=max_lag, by FFT.
-fn cross_correlation(reference: &[f64], recovered: &[f64], max_lag: usize) -> Vec<f64> {
-    let n = (reference.len() + recovered.len())
-        .next_power_of_two()
-        .max(2);
-    let (mut ar, mut ai) = (vec![0.0; n], vec![0.0; n]);
-    let (mut br, mut bi) = (vec![0.0; n], vec![0.0; n]);
-    ar[..reference.len()].copy_from_slice(reference);
-    br[..recovered.len()].copy_from_slice(recovered);
-    fft_in_place(&mut ar, &mut ai);
-    fft_in_place(&mut br, &mut bi);
-    // conj(A)·B, then an inverse FFT via conj(FFT(conj(x))).
-    for k in 0..n {
-        let (xr, xi) = (ar[k], -ai[k]);
-        let re = xr * br[k] - xi * bi[k];
-        let im = xr * bi[k] + xi * br[k];
-        ar[k] = re;
-        ai[k] = -im;
-    }
-    fft_in_place(&mut ar, &mut ai);
-    #[allow(clippy::cast_precision_loss)] // n ≤ 2^52
-    let scale = 1.0 / n as f64;
-    // c[lag] = Σ_i a[i]·b[i + lag], found at index lag mod n.
+/// Σ ref[i]·rec[i + lag] for every lag in −max_lag..=max_lag, by FFT (`max_lag` must be below
+/// both lengths' sum, which the caller's clamp ensures).
+fn lag_correlation(reference: &[f64], recovered: &[f64], max_lag: usize) -> Vec<f64> {
+    let (c, n) = cross_correlation(reference, recovered);
     (0..=2 * max_lag)
-        .map(|j| {
-            let idx = (j + n - max_lag % n) % n;
-            ar[idx] * scale
-        })
+        .map(|j| c.get((j + n - max_lag % n) % n).copied().unwrap_or(0.0))
         .collect()
 }
 
@@ -172,7 +150,7 @@ pub fn evaluate(
     };
     let (px, pxx) = (prefix(&x, false), prefix(&x, true));
     let (py, pyy) = (prefix(&y, false), prefix(&y, true));
-    let xcorr = cross_correlation(&x, &y, max_lag);
+    let xcorr = lag_correlation(&x, &y, max_lag);
 
     let mut best: Option<(f64, i64)> = None;
     for (j, &sxy) in xcorr.iter().enumerate() {
@@ -261,6 +239,7 @@ pub fn evaluate(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests unwrap known-good results
 mod tests {
     use super::*;
     use std::f64::consts::PI;

@@ -53,6 +53,9 @@ const RHO_REFINE_FRACTION: f32 = 0.5;
 const CENTROID_GATE_MARGIN_PX: f32 = 1.0;
 /// Smallest half-width of the running median that rejects outlier columns (px).
 const MIN_MEDIAN_HALF_PX: usize = 3;
+/// Points whose ρ bins are computed together before their votes are cast (lets the bin
+/// arithmetic vectorise).
+const VOTE_BATCH: usize = 8;
 /// Micrometres per millimetre.
 const UM_PER_MM: f64 = 1000.0;
 
@@ -81,6 +84,15 @@ pub struct HoughParams {
     /// A peak needs at least this many votes per image column (a one-pixel-thick line across the
     /// whole width gives 1); weaker maxima are not stripes.
     pub min_votes_per_column: f32,
+    /// A peak also needs at least this fraction of the strongest peak's votes (keeps the
+    /// "butterfly" flanks of a strong stripe and noise from passing for a missing stripe).
+    pub min_peak_ratio: f32,
+    /// Peaks are searched on the votes summed over ±this many px of ρ (0: single bins, the
+    /// paper's plain Hough). A stripe that wiggles by ±A px with the sound spreads its votes over
+    /// about 2A px of ρ; summing over a band of about ±A makes its mean line win over chance
+    /// tangents. The sums also collect more noise: raise `min_votes_per_column` with it.
+    /// Peak votes and the thresholds then refer to the band sums.
+    pub peak_rho_band_px: f32,
     /// At most this many in-focus pixels vote (0 = all); above it every k-th pixel (row-major)
     /// votes, and the vote threshold is scaled by 1/k. Segmentation always uses every pixel.
     pub max_vote_points: usize,
@@ -98,7 +110,9 @@ impl Default for HoughParams {
             window_theta_deg: 4.0,
             window_rho_px: 15.0,
             line_smoothing_px: 3,
-            min_votes_per_column: 0.25,
+            min_votes_per_column: 0.1,
+            min_peak_ratio: 0.25,
+            peak_rho_band_px: 0.0,
             max_vote_points: 100_000,
         }
     }
@@ -197,15 +211,63 @@ impl Peak {
     /// in the window gives a ρ in the window.
     #[must_use]
     pub fn window_contains_curve_of(&self, x: f32, y: f32) -> bool {
-        let (lo, hi) = curve_rho_range(
-            f64::from(x - self.x_origin_px),
-            f64::from(y),
-            f64::from(self.theta_rad - self.window_theta_rad),
-            f64::from(self.theta_rad + self.window_theta_rad),
-        );
-        let rho = f64::from(self.rho_px);
-        let w = f64::from(self.window_rho_px);
-        hi >= rho - w && lo <= rho + w
+        WindowTest::new(self).contains(f64::from(x - self.x_origin_px), f64::from(y))
+    }
+}
+
+/// A peak's window with its θ ends' sines and cosines precomputed, for the per-pixel test.
+#[derive(Clone, Copy, Debug)]
+struct WindowTest {
+    /// sin, cos of θ − wθ.
+    sa: f64,
+    ca: f64,
+    /// sin, cos of θ + wθ.
+    sb: f64,
+    cb: f64,
+    rho_lo: f64,
+    rho_hi: f64,
+}
+
+impl WindowTest {
+    fn new(p: &Peak) -> Self {
+        let (sa, ca) = f64::from(p.theta_rad - p.window_theta_rad).sin_cos();
+        let (sb, cb) = f64::from(p.theta_rad + p.window_theta_rad).sin_cos();
+        let rho = f64::from(p.rho_px);
+        let w = f64::from(p.window_rho_px);
+        Self {
+            sa,
+            ca,
+            sb,
+            cb,
+            rho_lo: rho - w,
+            rho_hi: rho + w,
+        }
+    }
+
+    /// Range of ρ(θ) = −xc·sin θ + y·cos θ over the window's θ interval (shorter than π).
+    ///
+    /// ρ(θ) = r·cos(θ − θ*) has its maximum r where dρ/dθ = −xc·cos θ − y·sin θ turns from
+    /// positive to negative and its minimum −r where it turns the other way; an interval shorter
+    /// than π holds at most one of them, found from the derivative's signs at the two ends.
+    fn rho_range(&self, xc: f64, y: f64) -> (f64, f64) {
+        let ra = -xc * self.sa + y * self.ca;
+        let rb = -xc * self.sb + y * self.cb;
+        let da = -xc * self.ca - y * self.sa;
+        let db = -xc * self.cb - y * self.sb;
+        let mut lo = ra.min(rb);
+        let mut hi = ra.max(rb);
+        if da > 0.0 && db < 0.0 {
+            hi = xc.hypot(y);
+        } else if da < 0.0 && db > 0.0 {
+            lo = -xc.hypot(y);
+        }
+        (lo, hi)
+    }
+
+    /// True when the curve of the pixel at centred column `xc`, row `y` meets the window.
+    fn contains(&self, xc: f64, y: f64) -> bool {
+        let (lo, hi) = self.rho_range(xc, y);
+        hi >= self.rho_lo && lo <= self.rho_hi
     }
 }
 
@@ -274,7 +336,7 @@ pub fn segment_stripes(
             w, h, derivs.iy.width, derivs.iy.height, flow.confidence.width, flow.confidence.height
         )));
     }
-    if w * h > u32::MAX as usize {
+    if w > usize::from(u16::MAX) || h > usize::from(u16::MAX) {
         return Err(bad_input(format!("image {w}×{h} is too large")));
     }
 
@@ -427,17 +489,24 @@ pub fn validate_params(p: &HoughParams) -> Result<(), StageError> {
             ),
         ));
     }
+    // Below 90° so a window's θ interval is shorter than π (see `WindowTest::rho_range`).
     check_range(
         "hough.window_theta_deg",
         f64::from(p.window_theta_deg),
         0.0,
-        90.0,
+        89.0,
     )?;
     check_range(
         "hough.window_rho_px",
         f64::from(p.window_rho_px),
         0.0,
         f64::MAX,
+    )?;
+    check_range(
+        "hough.min_peak_ratio",
+        f64::from(p.min_peak_ratio),
+        0.0,
+        1.0,
     )?;
     check_range(
         "hough.min_votes_per_column",
@@ -539,20 +608,39 @@ fn vote(
     let rho_min_px = 0.0_f32;
     let inv_step = 1.0 / p.rho_step_px;
     let mut votes = vec![0u32; nt * nr];
+    let positions: Vec<[f32; 2]> = points
+        .iter()
+        .step_by(stride)
+        .map(|pt| [pt.xc, pt.y])
+        .collect();
     votes
         .par_chunks_mut(nr)
         .zip(thetas_rad.par_iter())
         .for_each(|(row, &theta)| {
             let (s, c) = theta.sin_cos();
-            // ρ bin = round((ρ − ρ_min)/step) = floor(a·xc + b·y + off) with the 0.5 in `off`.
+            // ρ bin = round((ρ − ρ_min)/step) = floor(a·xc + b·y + off), with the rounding 0.5
+            // and a further +1 folded into `off` so that truncation toward zero acts as floor for
+            // every bin ≥ −1; the 1 is taken off after the cast and negative bins wrap to huge
+            // u32 values that fall outside the row.
             let a = -s * inv_step;
             let b = c * inv_step;
-            let off = -rho_min_px * inv_step + 0.5;
-            for pt in points.iter().step_by(stride) {
-                let r = pt.xc * a + pt.y * b + off;
-                if r >= 0.0
-                    && let Some(v) = row.get_mut(r as usize)
-                {
+            let off = -rho_min_px * inv_step + 0.5 + 1.0;
+            let bin = |p: &[f32; 2]| ((p[0] * a + p[1] * b + off) as i32).wrapping_sub(1) as u32;
+            let mut chunks = positions.chunks_exact(VOTE_BATCH);
+            for batch in &mut chunks {
+                // Bins first (vectorises), then the scattered increments.
+                let mut ks = [0u32; VOTE_BATCH];
+                for (k, p) in ks.iter_mut().zip(batch) {
+                    *k = bin(p);
+                }
+                for &k in &ks {
+                    if let Some(v) = row.get_mut(k as usize) {
+                        *v += 1;
+                    }
+                }
+            }
+            for p in chunks.remainder() {
+                if let Some(v) = row.get_mut(bin(p) as usize) {
                     *v += 1;
                 }
             }
@@ -568,7 +656,8 @@ fn vote(
     }
 }
 
-/// Finds up to `params.peak_count` global maxima with at least `min_votes` votes, suppressing
+/// Finds up to `params.peak_count` global maxima with at least `min_votes` votes (and at least
+/// `params.min_peak_ratio` of the first peak's votes), suppressing
 /// each peak's window (±window_theta_deg, ±window_rho_px) before looking for the next, and
 /// returns them sorted top to bottom (by row at the centre column).
 #[must_use]
@@ -580,7 +669,12 @@ pub fn find_peaks(acc: &Accumulator, params: &HoughParams, min_votes: u32) -> Ve
     }
     let wt = (params.window_theta_deg / params.theta_step_deg).round() as usize;
     let wr = (params.window_rho_px / acc.rho_step_px).round() as usize;
-    let mut work = acc.votes.clone();
+    let band = (params.peak_rho_band_px / acc.rho_step_px).round() as usize;
+    let mut work = if band == 0 {
+        acc.votes.clone()
+    } else {
+        band_sums(acc, band)
+    };
     let mut peaks = Vec::with_capacity(params.peak_count);
     for _ in 0..params.peak_count {
         let Some((best, &votes)) = work
@@ -590,7 +684,10 @@ pub fn find_peaks(acc: &Accumulator, params: &HoughParams, min_votes: u32) -> Ve
         else {
             break;
         };
-        if votes < min_votes || votes == 0 {
+        let ratio_floor = peaks
+            .first()
+            .map_or(0.0, |p: &Peak| p.votes as f32 * params.min_peak_ratio);
+        if votes < min_votes || votes == 0 || (votes as f32) < ratio_floor {
             break;
         }
         let (t, r) = (best / nr, best % nr);
@@ -605,7 +702,11 @@ pub fn find_peaks(acc: &Accumulator, params: &HoughParams, min_votes: u32) -> Ve
         let theta_rad = acc.thetas_rad.get(t).copied().unwrap_or(0.0);
         peaks.push(Peak {
             theta_rad,
-            rho_px: refine_rho(acc, t, r, wr),
+            rho_px: if band == 0 {
+                refine_rho(acc, t, r, wr)
+            } else {
+                band_centroid(acc, t, r, band)
+            },
             votes,
             x_origin_px: acc.x_origin_px,
             window_theta_rad: params.window_theta_deg.to_radians(),
@@ -615,6 +716,45 @@ pub fn find_peaks(acc: &Accumulator, params: &HoughParams, min_votes: u32) -> Ve
     let x0 = acc.x_origin_px;
     peaks.sort_by(|a, b| a.row_at_px(x0).total_cmp(&b.row_at_px(x0)));
     peaks
+}
+
+/// Each θ row's votes summed over ±`band` ρ bins (clipped at the ends).
+fn band_sums(acc: &Accumulator, band: usize) -> Vec<u32> {
+    let nr = acc.rho_bins;
+    let mut out = vec![0u32; acc.votes.len()];
+    out.par_chunks_mut(nr)
+        .zip(acc.votes.par_chunks(nr))
+        .for_each(|(o, row)| {
+            let mut prefix = Vec::with_capacity(nr + 1);
+            prefix.push(0u64);
+            let mut total = 0u64;
+            for &v in row {
+                total += u64::from(v);
+                prefix.push(total);
+            }
+            for (r, slot) in o.iter_mut().enumerate() {
+                let lo = r.saturating_sub(band);
+                let hi = (r + band + 1).min(nr);
+                let sum =
+                    prefix.get(hi).copied().unwrap_or(0) - prefix.get(lo).copied().unwrap_or(0);
+                *slot = u32::try_from(sum).unwrap_or(u32::MAX);
+            }
+        });
+    out
+}
+
+/// Vote-weighted mean ρ of the bins within ±`band` of bin `r` at θ bin `t` (the centre of a
+/// wiggling stripe's votes).
+fn band_centroid(acc: &Accumulator, t: usize, r: usize, band: usize) -> f32 {
+    let mut sum = 0.0_f64;
+    let mut weight = 0.0_f64;
+    for rr in r.saturating_sub(band)..=(r + band).min(acc.rho_bins.saturating_sub(1)) {
+        let v = f64::from(acc.get(t, rr));
+        sum += v * rr as f64;
+        weight += v;
+    }
+    let bin = if weight > 0.0 { sum / weight } else { r as f64 };
+    acc.rho_min_px + bin as f32 * acc.rho_step_px
 }
 
 /// Vote-weighted centroid of the contiguous ρ bins (within ±`wr`) around peak bin `r` at θ bin `t`
@@ -653,40 +793,17 @@ fn refine_rho(acc: &Accumulator, t: usize, r: usize, wr: usize) -> f32 {
     acc.rho_min_px + bin * acc.rho_step_px
 }
 
-/// Range [min, max] of ρ(θ) = −xc·sin θ + y·cos θ over θ ∈ [a, b] (radians, a ≤ b < a + 2π).
-fn curve_rho_range(xc: f64, y: f64, a: f64, b: f64) -> (f64, f64) {
-    use std::f64::consts::{PI, TAU};
-    // ρ(θ) = r·cos(θ − θ*) with r = |(xc, y)| and θ* = atan2(−xc, y).
-    let rho = |t: f64| -xc * t.sin() + y * t.cos();
-    let (ra, rb) = (rho(a), rho(b));
-    let mut lo = ra.min(rb);
-    let mut hi = ra.max(rb);
-    let r = xc.hypot(y);
-    let star = (-xc).atan2(y);
-    let inside = |phi: f64| {
-        let k = ((a - phi) / TAU).ceil();
-        phi + k * TAU <= b
-    };
-    if inside(star) {
-        hi = r;
-    }
-    if inside(star + PI) {
-        lo = -r;
-    }
-    (lo, hi)
-}
-
 /// Labels every point: the index of the single window its curve passes through, else
 /// [`label::DISCARDED`] (two or more) or [`label::UNASSIGNED`] (none).
 fn label_points(points: &[FocusPoint], peaks: &[Peak]) -> Vec<i8> {
+    let windows: Vec<WindowTest> = peaks.iter().map(WindowTest::new).collect();
     points
         .par_iter()
         .map(|pt| {
-            let x = pt.xc;
+            let (xc, y) = (f64::from(pt.xc), f64::from(pt.y));
             let mut found = label::UNASSIGNED;
-            for (k, peak) in peaks.iter().enumerate() {
-                // The window test wants absolute columns; FocusPoint holds x − x₀.
-                if peak.window_contains_curve_of(x + peak.x_origin_px, pt.y) {
+            for (k, window) in windows.iter().enumerate() {
+                if window.contains(xc, y) {
                     if found != label::UNASSIGNED {
                         return label::DISCARDED;
                     }
@@ -1121,8 +1238,20 @@ mod tests {
             (-300.0, 10.0, -0.5, 0.5),
             (0.0, 80.0, -0.1, 0.1),
             (500.0, 1.0, -1.5, -1.4),
+            (500.0, 1.0, -1.5, 1.4),
+            (-20.0, -600.0, -1.0, 1.0),
+            (3.0, 0.0, 1.0, 2.0),
         ] {
-            let (lo, hi) = curve_rho_range(xc, y, a, b);
+            let half = (b - a) / 2.0;
+            let peak = Peak {
+                theta_rad: (a + half) as f32,
+                rho_px: 0.0,
+                votes: 1,
+                x_origin_px: 0.0,
+                window_theta_rad: half as f32,
+                window_rho_px: 1.0,
+            };
+            let (lo, hi) = WindowTest::new(&peak).rho_range(xc, y);
             let mut blo = f64::MAX;
             let mut bhi = f64::MIN;
             for i in 0..=10_000 {
@@ -1135,6 +1264,47 @@ mod tests {
                 (lo - blo).abs() < 1e-3 && (hi - bhi).abs() < 1e-3,
                 "{xc} {y}"
             );
+        }
+    }
+
+    #[test]
+    fn a_rho_band_finds_the_mean_line_of_wiggling_stripes() {
+        // Three 3-px stripes that wiggle ±6 px (two periods across 1280 px), in 4% noise.
+        let (w, h) = (1280, 800);
+        let rows = [200.0_f32, 420.0, 540.0];
+        let mut rng = Lcg(11);
+        let iy = Image::from_fn(w, h, |x, y| {
+            let wave = 6.0 * (x as f32 * 0.01).sin();
+            let on = rows.iter().any(|&r| (y as f32 - r - wave).abs() <= 1.0);
+            if on || rng.next_f32() < 0.04 {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        let (mut d, f) = scene(w, h, &[], 1.0, 0.0, 0..0);
+        d.iy = iy;
+        let params = HoughParams {
+            peak_rho_band_px: 8.0,
+            min_votes_per_column: 1.0,
+            ..HoughParams::default()
+        };
+        let s = segment_stripes(&d, &f, &dual(GlassSide::Top), &params).unwrap();
+        // The mean of 6·sin(0.01·x) over the frame is about 0.3 px.
+        for (p, &r) in s.peaks.iter().zip(&rows) {
+            assert!(p.theta_rad.abs() <= 1f32.to_radians() + 1e-6, "{p:?}");
+            assert!((p.row_at_px(639.5) - r).abs() < 2.0, "{p:?} vs {r}");
+        }
+        // The centroid lines follow the wiggle itself.
+        for (line, &k) in s.lines.iter().zip(&s.line_peaks) {
+            for x in (0..w).step_by(50) {
+                let truth = rows[k] + 6.0 * (x as f32 * 0.01).sin();
+                assert!(
+                    (line.rows[x] - truth).abs() < 1.0,
+                    "x {x}: {} vs {truth}",
+                    line.rows[x]
+                );
+            }
         }
     }
 

@@ -1,0 +1,170 @@
+//! `groovescope inspect`: runs one group through every stage and dumps each intermediate output as PNG plus numbers.
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::sync::Arc;
+
+use anyhow::{Context, Result, bail};
+
+use crate::io::{Scan, load_group, write_atomic};
+use crate::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
+use crate::viz::{
+    ColorMap, Rgba8Image, grey_image, heat_map, hough_image, save_png, stripes_overlay,
+};
+
+fn save(
+    dir: &Path,
+    name: &str,
+    img: &Rgba8Image,
+    force: bool,
+    written: &mut Vec<String>,
+) -> Result<()> {
+    save_png(img, &dir.join(name), force)?;
+    written.push(name.to_string());
+    Ok(())
+}
+
+/// Runs group `group` of `scan_dir` and writes PNGs and `samples.csv` into `out_dir`.
+///
+/// Stages that fail are reported, and the outputs of the stages before them are still written,
+/// so an operator can see where a disc fails.
+///
+/// # Errors
+/// When the scan or group cannot be read, or a file cannot be written.
+pub fn run_inspect(
+    scan_dir: &Path,
+    group: usize,
+    out_dir: &Path,
+    params: &PipelineParams,
+    force: bool,
+) -> Result<()> {
+    let scan = Scan::open(scan_dir)?;
+    let Some(entry) = scan.groups.get(group) else {
+        bail!(
+            "group {group} does not exist (the scan has {} groups): {}",
+            scan.groups.len(),
+            scan_dir.display()
+        );
+    };
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("cannot create folder: {}", out_dir.display()))?;
+    let frames = load_group(entry)?;
+    let input = GroupInput {
+        group,
+        frames: Arc::new(frames),
+        meta: Arc::new(scan.meta.clone()),
+    };
+    let mut cache = StageCache::default();
+    let outcome = cache.run_from(Stage::Derivatives, &input, params, &mut |_, _| true);
+    let mut written = Vec::new();
+    if let Some(d) = cache.derivatives.as_ref().and_then(|d| d.get(d.len() / 2)) {
+        save(
+            out_dir,
+            "frame.png",
+            &grey_image(&d.image),
+            force,
+            &mut written,
+        )?;
+    }
+    if let Some(f) = cache.flows.as_ref().and_then(|f| f.get(f.len() / 2)) {
+        let land = scan.meta.geometry().land_flow_px() as f32;
+        save(
+            out_dir,
+            "flow.png",
+            &crate::viz::flow_image(f, land),
+            force,
+            &mut written,
+        )?;
+        save(
+            out_dir,
+            "flow_u.png",
+            &heat_map(&f.u, None, ColorMap::Viridis),
+            force,
+            &mut written,
+        )?;
+        save(
+            out_dir,
+            "confidence.png",
+            &heat_map(&f.confidence, None, ColorMap::Inferno),
+            force,
+            &mut written,
+        )?;
+    }
+    if let Some(depth) = &cache.depth {
+        save(
+            out_dir,
+            "depth.png",
+            &heat_map(&depth.map.z_um, None, ColorMap::Viridis),
+            force,
+            &mut written,
+        )?;
+    }
+    if let Some(st) = &cache.stripes {
+        let frame = cache
+            .derivatives
+            .as_ref()
+            .and_then(|d| d.get(d.len() / 2))
+            .map(|d| d.image.clone())
+            .unwrap_or_default();
+        save(
+            out_dir,
+            "in_focus.png",
+            &grey_image(&st.in_focus),
+            force,
+            &mut written,
+        )?;
+        save(
+            out_dir,
+            "hough.png",
+            &hough_image(&st.accumulator, &st.peaks, Some(st.dropped)),
+            force,
+            &mut written,
+        )?;
+        save(
+            out_dir,
+            "stripes.png",
+            &stripes_overlay(&frame, st),
+            force,
+            &mut written,
+        )?;
+    }
+    if let Some(o) = &cache.orientation {
+        save(
+            out_dir,
+            "weights.png",
+            &heat_map(
+                &o.orientation.weight_map,
+                Some((0.0, 1.0)),
+                ColorMap::Inferno,
+            ),
+            force,
+            &mut written,
+        )?;
+        let mut csv = String::from("wall,x_px,s_um,tan_theta,outlier_fraction,a,b\n");
+        for wall in &o.orientation.walls {
+            for smp in &wall.samples {
+                let s_um = o.grid.column0_um + f64::from(smp.x_px) * o.grid.um_per_px;
+                let (of, a, b) = smp.fit.map_or((f64::NAN, f64::NAN, f64::NAN), |f| {
+                    (f.outlier_fraction, f.a, f.b)
+                });
+                let _ = writeln!(
+                    csv,
+                    "{:?},{},{s_um},{},{of},{a},{b}",
+                    wall.side, smp.x_px, smp.tan_theta
+                );
+            }
+        }
+        write_atomic(&out_dir.join("samples.csv"), csv.as_bytes(), force)?;
+        written.push("samples.csv".into());
+    }
+    println!(
+        "wrote {} files into {}: {}",
+        written.len(),
+        out_dir.display(),
+        written.join(", ")
+    );
+    if let Err(e) = outcome {
+        bail!("group {group}: {e}");
+    }
+    Ok(())
+}
