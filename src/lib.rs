@@ -3,11 +3,15 @@
 //! The [`pipeline`] holds the pure stages; [`io`] reads scans and writes sound; [`synth`] renders
 //! ground-truth scans.
 
+#[cfg(feature = "gui")]
+pub mod app;
 pub mod cli;
 pub mod engine;
 pub mod image;
 pub mod inspect;
 pub mod io;
 pub mod pipeline;
+#[cfg(feature = "gui")]
+pub mod playback;
 pub mod synth;
 pub mod viz;

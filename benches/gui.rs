@@ -1,0 +1,186 @@
+//! Workbench responsiveness: rerunning flow onward and Hough/orientation onward for one 12-frame
+//! 1280×1024 group through the shared stage cache, and UI frame times while the worker runs.
+//!
+//! `cargo bench --bench gui` (add `-- --quick` for a short run). Targets (issue 5): flow onward
+//! ≤ 0.5 s, Hough or orientation onward ≤ 100 ms, no UI frame over 50 ms while the worker runs.
+//! The groups are rendered by the synth generator (the paper's camera) into a temporary folder.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use criterion::Criterion;
+use groovescope::io::{Scan, load_group};
+use groovescope::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
+use groovescope::synth::{SynthConfig, render_scan, tone};
+
+/// Renders one group of `cfg` (12 frames of 1280×1024 by default) into `dir`.
+fn render(dir: &Path, cfg: SynthConfig) -> PathBuf {
+    let cfg = SynthConfig {
+        max_groups: Some(1),
+        ..cfg
+    };
+    render_scan(
+        &tone(440.0, 0.05, 44_100),
+        &cfg,
+        dir,
+        &|_, _| {},
+        &AtomicBool::new(false),
+    )
+    .expect("synthetic scan");
+    dir.to_path_buf()
+}
+
+fn input(dir: &Path) -> GroupInput {
+    let scan = Scan::open(dir).expect("scan");
+    let frames = load_group(&scan.groups[0]).expect("frames");
+    GroupInput {
+        group: 0,
+        frames: Arc::new(frames),
+        meta: Arc::new(scan.meta),
+    }
+}
+
+/// Runs every stage once; returns the filled cache and the error that stopped it, if any.
+fn full_cache(input: &GroupInput, params: &PipelineParams) -> (StageCache, Option<String>) {
+    let mut cache = StageCache::default();
+    let err = cache
+        .run_from(Stage::Derivatives, input, params, &mut |_, _| true)
+        .err()
+        .map(|e| e.to_string());
+    (cache, err)
+}
+
+fn rerun_from(c: &mut Criterion, name: &str, from: Stage, input: &GroupInput, base: &StageCache) {
+    let params = PipelineParams::default();
+    c.bench_function(name, |b| {
+        b.iter(|| {
+            let mut cache = base.clone();
+            cache.invalidate_from(from);
+            let _ = cache.run_from(from, input, &params, &mut |_, _| true);
+            cache
+        });
+    });
+}
+
+/// UI frame times while the worker reruns flow onward (the harness does not render, so this is
+/// the app's own work per frame: polling, texture uploads, layout, plots).
+fn ui_frame_times(scan: PathBuf) {
+    use egui_kittest::Harness;
+    use groovescope::app::{View, Workbench, WorkbenchOptions};
+    use groovescope::playback::DeviceChoice;
+
+    let opts = WorkbenchOptions {
+        scan: Some(scan),
+        audio: DeviceChoice::Off,
+        ..WorkbenchOptions::default()
+    };
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1600.0, 1000.0))
+        .with_accessibility_check(false)
+        .build_ui_state(
+            |ui, app: &mut (Option<Workbench>, eframe::Frame)| {
+                if let Some(wb) = &mut app.0 {
+                    eframe::App::ui(wb, ui, &mut app.1);
+                }
+            },
+            (None, eframe::Frame::_new_kittest()),
+        );
+    let ctx = h.ctx.clone();
+    h.state_mut().0 = Some(Workbench::new(&ctx, opts).expect("workbench"));
+    let busy = |h: &Harness<'_, (Option<Workbench>, eframe::Frame)>| {
+        h.state().0.as_ref().is_some_and(|w| !w.is_idle())
+    };
+    let t0 = Instant::now();
+    while busy(&h) && t0.elapsed() < Duration::from_secs(600) {
+        h.step();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let mut worst = Duration::ZERO;
+    let mut frames = 0;
+    for view in [View::Flow, View::Overview, View::Depth] {
+        let Some(wb) = h.state_mut().0.as_mut() else {
+            return;
+        };
+        wb.set_view(view);
+        let mut p = wb.params().clone();
+        p.flow.lambda *= 1.5;
+        wb.set_params(p);
+        let t0 = Instant::now();
+        while busy(&h) && t0.elapsed() < Duration::from_secs(600) {
+            let s = Instant::now();
+            h.step();
+            worst = worst.max(s.elapsed());
+            frames += 1;
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+    let in_app = h
+        .state()
+        .0
+        .as_ref()
+        .map_or(0.0, |w| w.max_busy_frame().as_secs_f64() * 1e3);
+    println!(
+        "UI frames while the worker reran flow onward: {frames} frames, worst step {:.1} ms (in-app worst {in_app:.1} ms)",
+        worst.as_secs_f64() * 1e3
+    );
+}
+
+fn main() {
+    let mut c = Criterion::default().sample_size(10).configure_from_args();
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let params = PipelineParams::default();
+
+    let depth_dir = render(&tmp.path().join("depth"), SynthConfig::default());
+    let depth_input = input(&depth_dir);
+    let (cache, err) = full_cache(&depth_input, &params);
+    if let Some(e) = &err {
+        println!("note: the depth-path group stops at: {e}");
+    }
+    rerun_from(
+        &mut c,
+        "depth path: flow onward (12x1280x1024)",
+        Stage::Flow,
+        &depth_input,
+        &cache,
+    );
+    rerun_from(
+        &mut c,
+        "depth path: orientation onward",
+        Stage::Orientation,
+        &depth_input,
+        &cache,
+    );
+
+    let dual_dir = render(&tmp.path().join("dual"), SynthConfig::dual_focus_demo());
+    let dual_input = input(&dual_dir);
+    let (dual_cache, err) = full_cache(&dual_input, &params);
+    if let Some(e) = &err {
+        println!("note: the dual-focus group stops at: {e}");
+    }
+    rerun_from(
+        &mut c,
+        "dual focus: flow onward (12x1280x1024)",
+        Stage::Flow,
+        &dual_input,
+        &dual_cache,
+    );
+    rerun_from(
+        &mut c,
+        "dual focus: Hough (stripes) onward",
+        Stage::Stripes,
+        &dual_input,
+        &dual_cache,
+    );
+    rerun_from(
+        &mut c,
+        "dual focus: orientation onward",
+        Stage::Orientation,
+        &dual_input,
+        &dual_cache,
+    );
+
+    ui_frame_times(depth_dir);
+    c.final_summary();
+}

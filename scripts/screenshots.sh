@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Runs the workbench for real in an X window under Xvfb and saves a screenshot of each view
+# into screenshots/ (the app captures itself: GROOVESCOPE_SCREENSHOT, then closes).
+#
+# usage: scripts/screenshots.sh [SCAN] [DUAL_FOCUS_SCAN]
+#   SCAN             scan for overview, flow, depth and waveform (default assets/demo)
+#   DUAL_FOCUS_SCAN  scan with a [dual_focus] table for hough and stripes (default assets/demo_dual,
+#                    else SCAN)
+# env: GROOVESCOPE_BIN (default target/debug/groovescope, built when missing), VIEWS (names).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scan="${1:-assets/demo}"
+dual="${2:-assets/demo_dual}"
+[ -f "$dual/scan.toml" ] || dual="$scan"
+bin="${GROOVESCOPE_BIN:-target/debug/groovescope}"
+if [ ! -x "$bin" ]; then
+    cargo build --locked
+fi
+for tool in Xvfb; do
+    command -v "$tool" >/dev/null || { echo "missing $tool (apt-get install xvfb)" >&2; exit 1; }
+done
+mkdir -p screenshots
+XDG_RUNTIME_DIR="$(mktemp -d)"
+chmod 700 "$XDG_RUNTIME_DIR"
+export XDG_RUNTIME_DIR
+GROOVESCOPE_CONFIG_DIR="$(mktemp -d)"   # leave the user's recent-scans list alone
+export GROOVESCOPE_CONFIG_DIR
+export GROOVESCOPE_AUDIO_DEVICE=off
+display=":${XVFB_DISPLAY:-99}"
+Xvfb "$display" -screen 0 1600x1000x24 -nolisten tcp >/dev/null 2>&1 &
+xvfb_pid=$!
+trap 'kill "$xvfb_pid" 2>/dev/null || true; rm -rf "$XDG_RUNTIME_DIR" "$GROOVESCOPE_CONFIG_DIR"' EXIT
+export DISPLAY="$display"
+sleep 1
+status=0
+for view in ${VIEWS:-overview flow hough stripes depth waveform}; do
+    case "$view" in
+        hough|stripes) s="$dual" ;;
+        *) s="$scan" ;;
+    esac
+    out="screenshots/$view.png"
+    echo "== $view ($s) -> $out"
+    if ! GROOVESCOPE_VIEW="$view" GROOVESCOPE_SCREENSHOT="$out" timeout 900 "$bin" gui "$s"; then
+        echo "screenshot of $view failed" >&2
+        status=1
+    fi
+done
+exit "$status"

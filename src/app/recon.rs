@@ -1,0 +1,312 @@
+//! Whole-clip reconstruction on a named background thread, with progress, ETA and cancel, plus
+//! the display data of the finished clip (aligned reference, envelopes, spectra).
+
+use std::ops::Range;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crate::engine::{Progress, ReconstructOptions, Reconstruction, aligned_reference, reconstruct};
+use crate::io::Scan;
+use crate::pipeline::PipelineParams;
+use crate::pipeline::audio_signal::GroupSignal;
+use crate::pipeline::dsp::magnitude_spectrum;
+
+/// Length of one envelope block (seconds).
+pub const ENVELOPE_BLOCK_SECS: f64 = 0.005;
+/// Most points of a displayed spectrum.
+pub const SPECTRUM_POINTS: usize = 4096;
+
+/// An averaged magnitude spectrum.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Spectrum {
+    /// Bin frequencies (Hz).
+    pub freqs_hz: Vec<f64>,
+    /// Level per bin (dB; a full-scale sine reads 0 dB).
+    pub db: Vec<f64>,
+}
+
+/// A finished reconstruction with everything the waveform view draws.
+#[derive(Clone, Debug)]
+pub struct Clip {
+    /// The engine's result.
+    pub recon: Reconstruction,
+    /// Mono mix of the recovered audio.
+    pub recovered: Arc<Vec<f32>>,
+    /// The reference aligned to the recovered audio (same rate), when the scan has one.
+    pub reference: Option<Arc<Vec<f32>>>,
+    /// Samples per envelope block.
+    pub envelope_block: usize,
+    /// Peak |x| per block of the recovered audio.
+    pub recovered_envelope: Vec<f32>,
+    /// Peak |x| per block of the reference.
+    pub reference_envelope: Option<Vec<f32>>,
+    /// Spectrum of the recovered audio.
+    pub recovered_spectrum: Spectrum,
+    /// Spectrum of the reference.
+    pub reference_spectrum: Option<Spectrum>,
+    /// Params the clip was made with (recorded in exports).
+    pub params: PipelineParams,
+    /// Groups it covers.
+    pub groups: Range<usize>,
+    /// Scan folder.
+    pub scan_dir: PathBuf,
+    /// Why the reference is missing, when `scan.reference` exists but could not be read.
+    pub reference_problem: Option<String>,
+}
+
+impl Clip {
+    /// Sample rate of the recovered audio (Hz).
+    #[must_use]
+    pub fn rate_hz(&self) -> u32 {
+        self.recon.audio.sample_rate_hz
+    }
+}
+
+/// Peak |x| over consecutive blocks of `block` samples.
+#[must_use]
+pub fn peak_envelope(samples: &[f32], block: usize) -> Vec<f32> {
+    samples
+        .chunks(block.max(1))
+        .map(|c| {
+            c.iter().fold(
+                0.0_f32,
+                |m, v| if v.is_finite() { m.max(v.abs()) } else { m },
+            )
+        })
+        .collect()
+}
+
+/// Magnitude spectrum of `samples` (`crate::pipeline::dsp::magnitude_spectrum`, amplitude
+/// calibrated: a full-scale sine reads 0 dB), reduced to at most [`SPECTRUM_POINTS`] bands by
+/// keeping each band's loudest bin, so peaks survive.
+#[must_use]
+pub fn clip_spectrum(samples: &[f32], rate_hz: u32) -> Spectrum {
+    let full = magnitude_spectrum(samples, f64::from(rate_hz));
+    let per = full.len().div_ceil(SPECTRUM_POINTS).max(1);
+    let (freqs_hz, db) = full
+        .chunks(per)
+        .filter_map(|c| c.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1)))
+        .unzip();
+    Spectrum { freqs_hz, db }
+}
+
+/// Builds the display data of a finished reconstruction.
+#[must_use]
+pub fn make_clip(
+    scan: &Scan,
+    recon: Reconstruction,
+    params: PipelineParams,
+    groups: Range<usize>,
+) -> Clip {
+    let rate = recon.audio.sample_rate_hz;
+    let recovered = recon.audio.mono();
+    let block = ((ENVELOPE_BLOCK_SECS * f64::from(rate)).round() as usize).max(1);
+    let (reference, reference_problem) = match &scan.reference {
+        Some(path) => match aligned_reference(
+            &recon.audio,
+            &recon.stitched,
+            scan.meta.groove_speed_mm_s(groups.start),
+            path,
+        ) {
+            Ok(mut r) => {
+                r.truncate(recovered.len());
+                (Some(r), None)
+            }
+            Err(e) => (None, Some(e.to_string())),
+        },
+        None => (None, None),
+    };
+    Clip {
+        recovered_envelope: peak_envelope(&recovered, block),
+        reference_envelope: reference.as_ref().map(|r| peak_envelope(r, block)),
+        recovered_spectrum: clip_spectrum(&recovered, rate),
+        reference_spectrum: reference.as_ref().map(|r| clip_spectrum(r, rate)),
+        recovered: Arc::new(recovered),
+        reference: reference.map(Arc::new),
+        envelope_block: block,
+        recon,
+        params,
+        groups,
+        scan_dir: scan.dir.clone(),
+        reference_problem,
+    }
+}
+
+/// Messages from the reconstruction thread.
+#[derive(Debug)]
+enum ReconEvent {
+    Progress(Progress),
+    Finished(Result<Box<Clip>, String>),
+}
+
+/// A reconstruction running in the background.
+#[derive(Debug)]
+pub struct ReconRun {
+    cancel: Arc<AtomicBool>,
+    rx: Receiver<ReconEvent>,
+    thread: Option<JoinHandle<()>>,
+    /// When it started.
+    pub started: Instant,
+    /// Groups finished.
+    pub done: usize,
+    /// Groups to run.
+    pub total: usize,
+    /// Signals of the groups finished so far (for the live waveform).
+    pub partial: Vec<Arc<GroupSignal>>,
+}
+
+impl ReconRun {
+    /// Starts reconstructing `scan` with `opts` on a named thread; `repaint` wakes the UI.
+    ///
+    /// # Errors
+    /// When the thread cannot be started.
+    pub fn start(
+        scan: Scan,
+        opts: ReconstructOptions,
+        repaint: Box<dyn Fn() + Send + Sync>,
+    ) -> std::io::Result<Self> {
+        let cancel = Arc::new(AtomicBool::new(false));
+        let (tx, rx) = mpsc::channel();
+        let flag = cancel.clone();
+        let groups = opts.groups.clone().unwrap_or(0..scan.groups.len());
+        let total = groups
+            .end
+            .min(scan.groups.len())
+            .saturating_sub(groups.start);
+        let thread = std::thread::Builder::new()
+            .name("groovescope-reconstruct".into())
+            .spawn(move || {
+                let ptx = tx.clone();
+                let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    reconstruct(
+                        &scan,
+                        &opts,
+                        &mut |p| {
+                            let _ = ptx.send(ReconEvent::Progress(p.clone()));
+                            repaint();
+                        },
+                        &flag,
+                    )
+                }));
+                let outcome = match result {
+                    Ok(Ok(recon)) => Ok(Box::new(make_clip(
+                        &scan,
+                        recon,
+                        opts.params.clone(),
+                        groups,
+                    ))),
+                    Ok(Err(e)) => Err(e.to_string()),
+                    Err(_) => Err("the reconstruction panicked (see the log)".into()),
+                };
+                let _ = tx.send(ReconEvent::Finished(outcome));
+                repaint();
+            })?;
+        Ok(Self {
+            cancel,
+            rx,
+            thread: Some(thread),
+            started: Instant::now(),
+            done: 0,
+            total,
+            partial: Vec::new(),
+        })
+    }
+
+    /// Asks the run to stop after the current group.
+    pub fn cancel(&self) {
+        self.cancel.store(true, Ordering::Relaxed);
+    }
+
+    /// True once cancel was asked for.
+    #[must_use]
+    pub fn cancelling(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+
+    /// Takes the waiting progress reports; returns the outcome once the run ended.
+    pub fn poll(&mut self) -> Option<Result<Box<Clip>, String>> {
+        while let Ok(ev) = self.rx.try_recv() {
+            match ev {
+                ReconEvent::Progress(p) => {
+                    self.done = p.done;
+                    self.total = p.total;
+                    if let Some(s) = p.signal {
+                        self.partial.push(s);
+                    }
+                }
+                ReconEvent::Finished(outcome) => {
+                    if let Some(t) = self.thread.take() {
+                        let _ = t.join();
+                    }
+                    return Some(outcome);
+                }
+            }
+        }
+        None
+    }
+
+    /// Share done, in `[0, 1]`.
+    #[must_use]
+    pub fn fraction(&self) -> f32 {
+        if self.total == 0 {
+            0.0
+        } else {
+            self.done as f32 / self.total as f32
+        }
+    }
+
+    /// Estimated time left, from the mean time per finished group.
+    #[must_use]
+    pub fn eta(&self) -> Option<Duration> {
+        if self.done == 0 || self.done >= self.total {
+            return None;
+        }
+        let per = self.started.elapsed().as_secs_f64() / self.done as f64;
+        Some(Duration::from_secs_f64(
+            per * (self.total - self.done) as f64,
+        ))
+    }
+}
+
+impl Drop for ReconRun {
+    /// Asks the run to stop and lets the thread finish on its own (never blocks the UI).
+    fn drop(&mut self) {
+        self.cancel();
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+
+    #[test]
+    fn envelope_takes_block_peaks() {
+        let e = peak_envelope(&[0.1, -0.5, 0.2, 0.3, f32::NAN, -0.1], 2);
+        assert_eq!(e, vec![0.5, 0.3, 0.1]);
+    }
+
+    #[test]
+    fn spectrum_peaks_at_the_tone() {
+        let rate = 8000;
+        let f = 1000.0;
+        let x: Vec<f32> = (0..8000)
+            .map(|i| (std::f64::consts::TAU * f * f64::from(i) / f64::from(rate)).sin() as f32)
+            .collect();
+        let s = clip_spectrum(&x, rate);
+        let (k, _) =
+            s.db.iter()
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(b.1))
+                .unwrap();
+        assert!((s.freqs_hz[k] - f).abs() < 2.0, "{}", s.freqs_hz[k]);
+        // Amplitude calibrated: a full-scale sine reads about 0 dB (less the Hann scalloping).
+        assert!(s.db[k] > -2.0 && s.db[k] < 0.5, "{}", s.db[k]);
+        assert!(s.db.len() <= SPECTRUM_POINTS);
+        assert!(clip_spectrum(&[], rate).db.is_empty());
+    }
+}

@@ -1,0 +1,130 @@
+//! GPU textures of the current group's views, uploaded when new renderings arrive.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use egui::{TextureHandle, TextureOptions};
+
+use super::render::{self, Rendered};
+use super::worker::ViewImage;
+use crate::image::Image;
+use crate::pipeline::optical_flow::FlowField;
+
+/// One uploaded view texture and the rendering it came from.
+#[derive(Clone)]
+pub struct ViewTexture {
+    /// The rendering (value range for colour bars).
+    pub rendered: Arc<Rendered>,
+    /// The texture.
+    pub handle: TextureHandle,
+    /// Identity of the stage output it shows (address of its `Arc`).
+    pub source: usize,
+}
+
+/// Textures of the views and of the frame on screen.
+#[derive(Default)]
+pub struct Textures {
+    views: HashMap<ViewImage, ViewTexture>,
+    frame: Option<((usize, usize, usize), TextureHandle)>,
+}
+
+impl std::fmt::Debug for Textures {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Textures")
+            .field("views", &self.views.keys().collect::<Vec<_>>())
+            .finish_non_exhaustive()
+    }
+}
+
+fn options() -> TextureOptions {
+    TextureOptions::NEAREST
+}
+
+impl Textures {
+    /// Uploads a rendering of `key` made from the stage output at address `source`.
+    pub fn set(
+        &mut self,
+        ctx: &egui::Context,
+        key: ViewImage,
+        rendered: Arc<Rendered>,
+        source: usize,
+    ) {
+        let name = format!("{key:?}");
+        match self.views.get_mut(&key) {
+            Some(t) => {
+                t.handle.set(rendered.image.clone(), options());
+                t.rendered = rendered;
+                t.source = source;
+            }
+            None => {
+                let handle = ctx.load_texture(name, rendered.image.clone(), options());
+                self.views.insert(
+                    key,
+                    ViewTexture {
+                        rendered,
+                        handle,
+                        source,
+                    },
+                );
+            }
+        }
+    }
+
+    /// The texture of `key`, if one was uploaded.
+    #[must_use]
+    pub fn get(&self, key: ViewImage) -> Option<&ViewTexture> {
+        self.views.get(&key)
+    }
+
+    /// The flow-colour texture of field `index` (residual after `land_px`), rendered here when
+    /// the worker did not (the operator picked another window).
+    pub fn flow(
+        &mut self,
+        ctx: &egui::Context,
+        flows: &Arc<Vec<FlowField>>,
+        index: usize,
+        land_px: f32,
+    ) -> Option<&ViewTexture> {
+        let source = Arc::as_ptr(flows) as usize;
+        let key = ViewImage::FlowColour(index);
+        if self.views.get(&key).is_none_or(|t| t.source != source) {
+            let field = flows.get(index)?;
+            self.set(
+                ctx,
+                key,
+                Arc::new(render::flow_colour(field, land_px)),
+                source,
+            );
+        }
+        self.views.get(&key)
+    }
+
+    /// The texture of frame `index` of group `group` (converted on first use).
+    pub fn frame(
+        &mut self,
+        ctx: &egui::Context,
+        group: usize,
+        index: usize,
+        frames: &Arc<Vec<Image>>,
+    ) -> Option<&TextureHandle> {
+        let id = (group, index, Arc::as_ptr(frames) as usize);
+        if self.frame.as_ref().is_none_or(|(k, _)| *k != id) {
+            let img = frames.get(index)?;
+            let colour = render::grey(img);
+            match &mut self.frame {
+                Some((k, h)) => {
+                    h.set(colour, options());
+                    *k = id;
+                }
+                None => self.frame = Some((id, ctx.load_texture("frame", colour, options()))),
+            }
+        }
+        self.frame.as_ref().map(|(_, h)| h)
+    }
+
+    /// Forgets every texture (a new scan).
+    pub fn clear(&mut self) {
+        self.views.clear();
+        self.frame = None;
+    }
+}

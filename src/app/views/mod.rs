@@ -1,0 +1,281 @@
+//! The workbench's views: each draws one stage of the current group from cached results, never computing it.
+
+pub mod depth_ui;
+pub mod flow_ui;
+pub mod frame_ui;
+pub mod hough_ui;
+pub mod meta_ui;
+pub mod nav_ui;
+pub mod orientation_ui;
+pub mod overview_ui;
+pub mod params_ui;
+pub mod stripes_ui;
+pub mod waveform_ui;
+
+use egui::{Color32, TextureHandle, Ui};
+use egui_plot::{Line, Plot, PlotImage, PlotPoint, PlotPoints, PlotResponse, PlotUi};
+
+use crate::pipeline::Stage;
+use crate::pipeline::walls::WallLine;
+
+/// The views the central area can show.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum View {
+    /// All stages at a glance.
+    Overview,
+    /// The frames, with pixel read-out and flow arrows.
+    Frame,
+    /// Flow field: colours or arrows.
+    Flow,
+    /// Hough accumulator with peaks and windows.
+    Hough,
+    /// Segmented stripes and centroid lines.
+    Stripes,
+    /// Depth map, colour bar and cross-section.
+    Depth,
+    /// Wall orientation and robust-fit outliers.
+    Orientation,
+    /// The whole clip: waveform, reference, envelopes, spectrum, playback.
+    Waveform,
+    /// The scan's metadata form.
+    Metadata,
+}
+
+impl View {
+    /// Every view, in tab order.
+    pub const ALL: [View; 9] = [
+        View::Overview,
+        View::Frame,
+        View::Flow,
+        View::Hough,
+        View::Stripes,
+        View::Depth,
+        View::Orientation,
+        View::Waveform,
+        View::Metadata,
+    ];
+
+    /// Tab label (also the name used by `GROOVESCOPE_VIEW`).
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            View::Overview => "overview",
+            View::Frame => "frame",
+            View::Flow => "flow",
+            View::Hough => "hough",
+            View::Stripes => "stripes",
+            View::Depth => "depth",
+            View::Orientation => "orientation",
+            View::Waveform => "waveform",
+            View::Metadata => "metadata",
+        }
+    }
+
+    /// The view named `name` (case-insensitive).
+    #[must_use]
+    pub fn from_name(name: &str) -> Option<View> {
+        View::ALL
+            .into_iter()
+            .find(|v| v.name().eq_ignore_ascii_case(name.trim()))
+    }
+
+    /// The stage whose result the view shows (None for views of the whole scan).
+    #[must_use]
+    pub fn stage(self) -> Option<Stage> {
+        match self {
+            View::Frame => Some(Stage::Derivatives),
+            View::Flow => Some(Stage::Flow),
+            View::Hough | View::Stripes => Some(Stage::Stripes),
+            View::Depth => Some(Stage::Depth),
+            View::Orientation => Some(Stage::Orientation),
+            View::Overview | View::Waveform | View::Metadata => None,
+        }
+    }
+}
+
+/// State of one stage of the current group, as the UI shows it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StageStatus {
+    /// The result matches the current params and group.
+    Fresh,
+    /// The result (if any) is out of date; it waits for the worker.
+    Stale,
+    /// The worker is running it now.
+    Running,
+    /// It failed with this message.
+    Failed(String),
+    /// The current path does not use it.
+    Unused,
+}
+
+impl StageStatus {
+    /// One word for labels.
+    #[must_use]
+    pub fn word(&self) -> &'static str {
+        match self {
+            StageStatus::Fresh => "fresh",
+            StageStatus::Stale => "stale",
+            StageStatus::Running => "running",
+            StageStatus::Failed(_) => "failed",
+            StageStatus::Unused => "not used",
+        }
+    }
+
+    /// Colour for the status word.
+    #[must_use]
+    pub fn colour(&self) -> Color32 {
+        match self {
+            StageStatus::Fresh => Color32::from_rgb(90, 200, 110),
+            StageStatus::Stale => Color32::from_rgb(200, 170, 60),
+            StageStatus::Running => Color32::from_rgb(90, 160, 240),
+            StageStatus::Failed(_) => Color32::from_rgb(235, 80, 70),
+            StageStatus::Unused => Color32::GRAY,
+        }
+    }
+
+    /// True when views of this stage should be dimmed.
+    #[must_use]
+    pub fn dim(&self) -> bool {
+        !matches!(self, StageStatus::Fresh | StageStatus::Unused)
+    }
+}
+
+/// Tint of stale images.
+pub const STALE_TINT: Color32 = Color32::from_gray(110);
+
+/// Tint for an image: white when fresh, grey when stale.
+#[must_use]
+pub fn tint(dim: bool) -> Color32 {
+    if dim { STALE_TINT } else { Color32::WHITE }
+}
+
+/// A plot showing an image in pixel coordinates (row 0 at the top), with pan and zoom.
+#[must_use]
+pub fn image_plot<'a>(id: &str, height: f32) -> Plot<'a> {
+    Plot::new(id)
+        .data_aspect(1.0)
+        .invert_y(true)
+        .height(height)
+        .allow_boxed_zoom(false)
+        .show_grid(false)
+        .x_axis_label("x (px)")
+        .y_axis_label("y (px)")
+}
+
+/// The image item covering pixels `[0, w] × [0, h]`.
+#[must_use]
+pub fn image_item(name: &str, tex: &TextureHandle, dim: bool) -> PlotImage {
+    let [w, h] = tex.size();
+    PlotImage::new(
+        name.to_string(),
+        tex.id(),
+        PlotPoint::new(w as f64 / 2.0, h as f64 / 2.0),
+        [w as f32, h as f32],
+    )
+    .tint(tint(dim))
+}
+
+/// Splits a per-column row list into plot lines (pixel centres), breaking at NaN.
+#[must_use]
+pub fn row_segments(rows: &[f32]) -> Vec<Vec<[f64; 2]>> {
+    let mut out = Vec::new();
+    let mut cur: Vec<[f64; 2]> = Vec::new();
+    for (x, &r) in rows.iter().enumerate() {
+        if r.is_finite() {
+            cur.push([x as f64 + 0.5, f64::from(r) + 0.5]);
+        } else if !cur.is_empty() {
+            out.push(std::mem::take(&mut cur));
+        }
+    }
+    if !cur.is_empty() {
+        out.push(cur);
+    }
+    out
+}
+
+/// Draws wall or centroid lines (and their filled voids) over an image plot.
+pub fn wall_lines(plot_ui: &mut PlotUi<'_>, lines: &[WallLine], colour: Color32) {
+    for (i, line) in lines.iter().enumerate() {
+        let name = format!("{:?} wall {i}", line.side);
+        for (k, seg) in row_segments(&line.rows).into_iter().enumerate() {
+            plot_ui.line(
+                Line::new(name.clone(), PlotPoints::from(seg))
+                    .id(format!("{name}/{k}"))
+                    .color(colour)
+                    .width(1.5),
+            );
+        }
+        let voids: Vec<[f64; 2]> = line
+            .filled
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| **f)
+            .filter_map(|(x, _)| {
+                let r = *line.rows.get(x)?;
+                r.is_finite()
+                    .then_some([x as f64 + 0.5, f64::from(r) + 0.5])
+            })
+            .collect();
+        if !voids.is_empty() {
+            plot_ui.add(
+                egui_plot::Points::new(format!("{name} filled"), PlotPoints::from(voids))
+                    .color(Color32::from_rgb(255, 0, 200))
+                    .radius(1.5),
+            );
+        }
+    }
+}
+
+/// Pixel under the pointer of an image plot, when inside `[0, w) × [0, h)`.
+#[must_use]
+pub fn hovered_pixel<R>(resp: &PlotResponse<R>, size: [usize; 2]) -> Option<(usize, usize)> {
+    if !resp.response.hovered() {
+        return None;
+    }
+    let p = resp.response.hover_pos()?;
+    let v = resp.transform.value_from_position(p);
+    (v.x >= 0.0 && v.y >= 0.0 && v.x < size[0] as f64 && v.y < size[1] as f64)
+        .then_some((v.x as usize, v.y as usize))
+}
+
+/// A status line above a stage view: the stage's state, dimmed note and error text.
+pub fn stage_banner(ui: &mut Ui, stage: Stage, status: &StageStatus) {
+    ui.horizontal(|ui| {
+        ui.label(format!("{}:", stage.name()));
+        ui.colored_label(status.colour(), status.word());
+        match status {
+            StageStatus::Failed(msg) => {
+                ui.colored_label(StageStatus::Failed(String::new()).colour(), msg);
+            }
+            StageStatus::Stale | StageStatus::Running => {
+                ui.weak("(showing the previous result, dimmed)");
+            }
+            _ => {}
+        }
+    });
+}
+
+/// A placeholder message inside a view that has nothing to draw yet.
+pub fn empty_note(ui: &mut Ui, text: &str) {
+    ui.add_space(20.0);
+    ui.vertical_centered(|ui| ui.weak(text));
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+
+    #[test]
+    fn segments_break_at_nan_and_names_round_trip() {
+        let s = row_segments(&[1.0, 2.0, f32::NAN, f32::NAN, 5.0]);
+        assert_eq!(s.len(), 2);
+        assert_eq!(s[0], vec![[0.5, 1.5], [1.5, 2.5]]);
+        assert_eq!(s[1], vec![[4.5, 5.5]]);
+        for v in View::ALL {
+            assert_eq!(View::from_name(v.name()), Some(v));
+        }
+        assert_eq!(View::from_name("Hough"), Some(View::Hough));
+        assert!(View::from_name("nope").is_none());
+    }
+}

@@ -1,0 +1,133 @@
+//! Orientation view: wall tilt tan θ along x per wall, and the robust fit's weight (outlier) map.
+
+use egui::{Color32, Ui};
+use egui_plot::{Legend, Line, Plot, PlotPoints};
+
+use super::frame_ui::StageData;
+use super::{empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines};
+use crate::app::render::region_colour;
+use crate::app::textures::Textures;
+use crate::app::worker::ViewImage;
+use crate::pipeline::Stage;
+use crate::pipeline::orientation::WallOrientation;
+
+/// State of the orientation view.
+#[derive(Clone, Debug, Default)]
+pub struct OrientationViewState {
+    /// Last read-out.
+    pub readout: Option<String>,
+}
+
+/// Splits a wall's samples into lines of (x, tan θ), breaking where a fit is missing.
+#[must_use]
+pub fn tan_segments(wall: &WallOrientation) -> Vec<Vec<[f64; 2]>> {
+    let mut out = Vec::new();
+    let mut cur = Vec::new();
+    for s in &wall.samples {
+        if s.fit.is_some() && s.tan_theta.is_finite() {
+            cur.push([f64::from(s.x_px), s.tan_theta]);
+        } else if !cur.is_empty() {
+            out.push(std::mem::take(&mut cur));
+        }
+    }
+    if !cur.is_empty() {
+        out.push(cur);
+    }
+    out
+}
+
+/// The orientation view.
+pub fn orientation_ui(
+    ui: &mut Ui,
+    data: &StageData<'_>,
+    textures: &Textures,
+    state: &mut OrientationViewState,
+    height: f32,
+) {
+    let status = data.status(Stage::Orientation).clone();
+    stage_banner(ui, Stage::Orientation, &status);
+    let Some(out) = data.cache.orientation.clone() else {
+        empty_note(ui, "no orientation yet");
+        return;
+    };
+    let o = &out.orientation;
+    ui.label(format!(
+        "{} walls  ·  {} sample columns  ·  mean outlier fraction {:.1} %  ·  {:.4} µm per column",
+        o.walls.len(),
+        out.grid.columns.len(),
+        100.0 * o.outlier_fraction,
+        out.grid.um_per_px
+    ));
+    let plot_h = height * 0.4;
+    Plot::new("orientation_plot")
+        .height(plot_h)
+        .legend(Legend::default())
+        .x_axis_label("x (px)")
+        .y_axis_label("tan θ (= V / Vt)")
+        .show(ui, |plot_ui| {
+            for (i, w) in o.walls.iter().enumerate() {
+                let c = region_colour(i);
+                let name = format!("{:?} wall", w.side);
+                for (k, seg) in tan_segments(w).into_iter().enumerate() {
+                    plot_ui.line(
+                        Line::new(name.clone(), PlotPoints::from(seg))
+                            .id(format!("{name}/{k}"))
+                            .color(c),
+                    );
+                }
+            }
+        });
+    let Some(tex) = textures.get(ViewImage::Weights) else {
+        empty_note(ui, "weight map not rendered yet");
+        return;
+    };
+    ui.weak("robust-fit weight per pixel (dark = outlier, grey = not used); lines: walls");
+    let handle = tex.handle.clone();
+    let dim = status.dim();
+    let lines = data
+        .cache
+        .depth
+        .as_ref()
+        .map(|d| d.walls.clone())
+        .or_else(|| data.cache.stripes.as_ref().map(|s| s.lines.clone()))
+        .unwrap_or_default();
+    let resp = image_plot("orientation_weights", (height - plot_h - 70.0).max(100.0)).show(
+        ui,
+        |plot_ui| {
+            plot_ui.image(image_item("weights", &handle, dim));
+            wall_lines(plot_ui, &lines, Color32::WHITE);
+        },
+    );
+    if let Some((x, y)) = hovered_pixel(&resp, handle.size()) {
+        let w = o.weight_map.get(x, y).unwrap_or(f32::NAN);
+        let near = o.walls.iter().filter_map(|wall| {
+            wall.samples
+                .iter()
+                .min_by(|a, b| {
+                    (a.x_px - x as f32)
+                        .abs()
+                        .total_cmp(&(b.x_px - x as f32).abs())
+                })
+                .map(|s| (wall.side, s))
+        });
+        let mut text = format!("x {x}  y {y}  ·  weight {w:.3}");
+        for (side, s) in near {
+            text += &format!("  ·  {side:?}: tan θ {:+.5}", s.tan_theta);
+            if let Some(f) = s.fit {
+                text += &format!(
+                    " ({:?}, {} rounds, {:.0} % outliers)",
+                    f.stop,
+                    f.iterations,
+                    100.0 * f.outlier_fraction
+                );
+            }
+        }
+        state.readout = Some(text);
+    }
+    ui.label(
+        state
+            .readout
+            .as_deref()
+            .unwrap_or("hover the map for a read-out"),
+    );
+}
