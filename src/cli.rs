@@ -536,7 +536,7 @@ fn run_flow(args: &FlowArgs) -> Result<()> {
             args.out.display()
         );
     }
-    if !args.land_flow_px.is_finite() || !(args.focal_px.is_finite() && args.focal_px > 0.0) {
+    if !(args.land_flow_px.is_finite() && args.focal_px.is_finite() && args.focal_px > 0.0) {
         bail!("--land-flow-px and --focal-px must be finite (focal length positive)");
     }
     let mut params = load_params(args.params.as_deref())?;
