@@ -74,7 +74,7 @@ pub enum Command {
         /// Parameters TOML.
         #[arg(long)]
         params: Option<PathBuf>,
-        /// Force a path instead of choosing by the [dual_focus] table.
+        /// Force a path instead of choosing by the `[dual_focus]` table.
         #[arg(long, value_parser = ["auto", "depth", "dual-focus"], default_value = "auto")]
         path: String,
         /// Replace existing files.
@@ -102,7 +102,7 @@ pub struct ReconstructArgs {
     /// JSON report (timings, per-group outliers, scores against reference.wav).
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// Force a path instead of choosing by the [dual_focus] table.
+    /// Force a path instead of choosing by the `[dual_focus]` table.
     #[arg(long, value_parser = ["auto", "depth", "dual-focus"], default_value = "auto")]
     pub path: String,
     /// WAV sample format: 16, 24 or 32f.
