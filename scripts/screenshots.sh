@@ -41,7 +41,10 @@ for view in ${VIEWS:-overview flow hough stripes depth waveform}; do
     esac
     out="$outdir/$view.png"
     echo "== $view ($s) -> $out"
-    if ! GROOVESCOPE_VIEW="$view" GROOVESCOPE_SCREENSHOT="$out" timeout 900 "$bin" gui "$s"; then
+    # The overview and the waveform show the reconstructed clip.
+    case "$view" in overview|waveform) recon=1 ;; *) recon=0 ;; esac
+    if ! GROOVESCOPE_RECONSTRUCT="$recon" GROOVESCOPE_VIEW="$view" GROOVESCOPE_SCREENSHOT="$out" \
+        timeout 900 "$bin" gui "$s"; then
         echo "screenshot of $view failed" >&2
         status=1
     fi

@@ -15,8 +15,10 @@ use crate::pipeline::PipelineParams;
 use crate::pipeline::audio_signal::GroupSignal;
 use crate::pipeline::dsp::magnitude_spectrum;
 
-/// Length of one envelope block (seconds).
+/// Longest envelope block (seconds).
 pub const ENVELOPE_BLOCK_SECS: f64 = 0.005;
+/// Fewest envelope blocks over a clip (short clips get shorter blocks).
+pub const ENVELOPE_MIN_BLOCKS: usize = 100;
 /// Most points of a displayed spectrum.
 pub const SPECTRUM_POINTS: usize = 4096;
 
@@ -104,7 +106,9 @@ pub fn make_clip(
 ) -> Clip {
     let rate = recon.audio.sample_rate_hz;
     let recovered = recon.audio.mono();
-    let block = ((ENVELOPE_BLOCK_SECS * f64::from(rate)).round() as usize).max(1);
+    let block = ((ENVELOPE_BLOCK_SECS * f64::from(rate)).round() as usize)
+        .min(recovered.len() / ENVELOPE_MIN_BLOCKS)
+        .max(1);
     let (reference, reference_problem) = match &scan.reference {
         Some(path) => match aligned_reference(
             &recon.audio,

@@ -73,6 +73,31 @@ pub fn finite_range(values: &[f32]) -> Option<(f32, f32)> {
     (lo <= hi).then_some((lo, hi))
 }
 
+/// Share of values left out at each end by [`robust_range`].
+pub const ROBUST_TAIL: f64 = 0.01;
+
+/// The range between the [`ROBUST_TAIL`] and 1 − [`ROBUST_TAIL`] quantiles of the finite values
+/// (sampled), so a few outliers do not flatten a heat map.
+#[must_use]
+pub fn robust_range(values: &[f32]) -> Option<(f32, f32)> {
+    let stride = values.len().div_ceil(FLOW_QUANTILE_SAMPLES).max(1);
+    let mut v: Vec<f32> = values
+        .iter()
+        .step_by(stride)
+        .copied()
+        .filter(|x| x.is_finite())
+        .collect();
+    if v.is_empty() {
+        return None;
+    }
+    let last = v.len() - 1;
+    let lo_k = (last as f64 * ROBUST_TAIL).round() as usize;
+    let hi_k = (last as f64 * (1.0 - ROBUST_TAIL)).round() as usize;
+    let (_, &mut lo, _) = v.select_nth_unstable_by(lo_k, f32::total_cmp);
+    let (_, &mut hi, _) = v.select_nth_unstable_by(hi_k, f32::total_cmp);
+    Some((lo, hi))
+}
+
 /// A grey frame (contrast stretched to its range) as a texture.
 #[must_use]
 pub fn grey(img: &Image) -> ColorImage {
@@ -88,19 +113,43 @@ pub fn heat(img: &Image, range: Option<(f32, f32)>) -> Rendered {
     rendered(&viz::heat_map(img, Some((lo, hi)), HEAT_MAP), lo, hi)
 }
 
+/// Residual magnitudes above this quantile saturate the flow colours (a few wild pixels would
+/// otherwise wash the rest out).
+pub const FLOW_SATURATION_QUANTILE: f64 = 0.98;
+/// Most magnitudes sampled to find that quantile.
+const FLOW_QUANTILE_SAMPLES: usize = 65_536;
+
 /// Flow as colour (Middlebury wheel) after subtracting `subtract_u_px` from u, so the residual
-/// that depth causes shows; `hi` is the largest residual magnitude (full saturation).
+/// that depth causes shows. Residuals longer than the [`FLOW_SATURATION_QUANTILE`] of all are
+/// shortened to it first; `hi` is that length (full saturation).
 #[must_use]
 pub fn flow_colour(flow: &FlowField, subtract_u_px: f32) -> Rendered {
-    let hi = flow
-        .u
-        .data
-        .iter()
-        .zip(&flow.v.data)
-        .map(|(u, v)| (u - subtract_u_px).hypot(*v))
+    let n = flow.u.data.len().min(flow.v.data.len());
+    let stride = n.div_ceil(FLOW_QUANTILE_SAMPLES).max(1);
+    let mut mags: Vec<f32> = (0..n)
+        .step_by(stride)
+        .map(|i| (flow.u.data[i] - subtract_u_px).hypot(flow.v.data[i]))
         .filter(|m| m.is_finite())
-        .fold(0.0_f32, f32::max);
-    rendered(&viz::flow_image(flow, subtract_u_px), 0.0, hi)
+        .collect();
+    if mags.is_empty() {
+        return rendered(&viz::flow_image(flow, subtract_u_px), 0.0, 0.0);
+    }
+    let k = ((mags.len() - 1) as f64 * FLOW_SATURATION_QUANTILE).round() as usize;
+    let (_, &mut hi, _) = mags.select_nth_unstable_by(k, f32::total_cmp);
+    if hi <= 0.0 {
+        return rendered(&viz::flow_image(flow, subtract_u_px), 0.0, hi);
+    }
+    let mut limited = flow.clone();
+    for (u, v) in limited.u.data.iter_mut().zip(limited.v.data.iter_mut()) {
+        let du = *u - subtract_u_px;
+        let m = du.hypot(*v);
+        if m > hi {
+            let s = hi / m;
+            *u = subtract_u_px + du * s;
+            *v *= s;
+        }
+    }
+    rendered(&viz::flow_image(&limited, subtract_u_px), 0.0, hi)
 }
 
 /// The Hough accumulator as a log-scaled heat map: width = θ bins, height = ρ bins (the
@@ -121,6 +170,18 @@ pub fn stripes(frame: &Image, stripes: &Stripes) -> Rendered {
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
+
+    #[test]
+    fn robust_range_ignores_a_few_outliers() {
+        let mut v: Vec<f32> = (0..1000).map(|i| 4000.0 + (i % 50) as f32).collect();
+        v[3] = 1e6;
+        v[9] = -1e6;
+        v[11] = f32::NAN;
+        let (lo, hi) = robust_range(&v).unwrap();
+        assert!((4000.0..=4001.0).contains(&lo), "{lo}");
+        assert!((4048.0..=4049.0).contains(&hi), "{hi}");
+        assert!(robust_range(&[f32::NAN]).is_none());
+    }
 
     #[test]
     fn heat_spans_the_range_and_clears_nan() {
@@ -146,6 +207,23 @@ mod tests {
         assert!((r.hi - 0.5).abs() < 1e-6);
         assert_eq!(r.image.size, [2, 1]);
         assert_ne!(r.image.pixels[0], r.image.pixels[1]);
+        // One wild pixel among 99 small ones does not set the scale.
+        let mut u = vec![0.1_f32; 100];
+        u[7] = 50.0;
+        let wild = FlowField {
+            u: Image::from_vec(100, 1, u).unwrap(),
+            v: Image::zeros(100, 1),
+            confidence: Image::filled(100, 1, 1.0),
+            iterations: 1,
+            converged: true,
+            frame_index: 0,
+        };
+        let r = flow_colour(&wild, 0.0);
+        assert!((r.hi - 0.1).abs() < 1e-6, "{}", r.hi);
+        assert_eq!(
+            r.image.pixels[7], r.image.pixels[0],
+            "the wild pixel saturates"
+        );
     }
 
     #[test]

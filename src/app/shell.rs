@@ -405,7 +405,7 @@ impl Workbench {
                         &self.textures,
                         &mut v.hough,
                         &mut draft,
-                        height - 60.0,
+                        height - 130.0,
                     );
                     if draft != self.params.hough {
                         let mut p = self.params.clone();
@@ -611,6 +611,19 @@ impl eframe::App for Workbench {
         self.screenshot_step(&ctx);
         if busy {
             self.max_busy_frame = self.max_busy_frame.max(started.elapsed());
+        }
+    }
+
+    /// In screenshot mode the pointer is hidden from the app (no hover crosshair in pictures).
+    fn raw_input_hook(&mut self, _ctx: &egui::Context, raw_input: &mut egui::RawInput) {
+        if self.screenshot.is_some() {
+            raw_input.events.retain(|e| {
+                !matches!(
+                    e,
+                    egui::Event::PointerMoved(_) | egui::Event::PointerButton { .. }
+                )
+            });
+            raw_input.events.push(egui::Event::PointerGone);
         }
     }
 

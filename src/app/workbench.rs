@@ -879,8 +879,8 @@ impl Workbench {
             b: reference,
         });
         self.info(format!(
-            "clip ready: {:.2} s from {} groups",
-            clip.recon.audio.duration_secs(),
+            "clip ready: {:.1} ms from {} groups",
+            clip.recon.audio.duration_secs() * 1000.0,
             clip.groups.len()
         ));
         self.views.wave.selection = None;

@@ -171,7 +171,8 @@ pub fn render_stage(
         }
         Stage::Depth => {
             if let Some(d) = &cache.depth {
-                out.push((ViewImage::Depth, Arc::new(render::heat(&d.map.z_um, None))));
+                let range = render::robust_range(&d.map.z_um.data);
+                out.push((ViewImage::Depth, Arc::new(render::heat(&d.map.z_um, range))));
             }
         }
         Stage::Stripes => {

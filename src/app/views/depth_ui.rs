@@ -4,7 +4,9 @@ use egui::{Color32, Rect, Sense, Stroke, Ui, vec2};
 use egui_plot::{Line, LineStyle, Plot, PlotPoints, VLine};
 
 use super::frame_ui::StageData;
-use super::{empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines};
+use super::{
+    AXIS_WIDTH_PT, empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines,
+};
 use crate::app::render::heat_colour;
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
@@ -133,6 +135,7 @@ pub fn depth_ui(
         .map(f64::from)
         .collect();
     Plot::new("depth_section")
+        .y_axis_min_width(AXIS_WIDTH_PT)
         .height((height - img_h - 60.0).max(80.0))
         .x_axis_label(format!("y (px) at column {column}"))
         .y_axis_label("Z (µm)")

@@ -140,6 +140,9 @@ impl StageStatus {
     }
 }
 
+/// Room for the value labels of plot y axes (points): enough for "4030.5" or "-120".
+pub const AXIS_WIDTH_PT: f32 = 48.0;
+
 /// Tint of stale images.
 pub const STALE_TINT: Color32 = Color32::from_gray(110);
 

@@ -4,7 +4,9 @@ use egui::{Color32, Ui};
 use egui_plot::{Legend, Line, Plot, PlotPoints};
 
 use super::frame_ui::StageData;
-use super::{empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines};
+use super::{
+    AXIS_WIDTH_PT, empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines,
+};
 use crate::app::render::region_colour;
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
@@ -60,6 +62,7 @@ pub fn orientation_ui(
     ));
     let plot_h = height * 0.4;
     Plot::new("orientation_plot")
+        .y_axis_min_width(AXIS_WIDTH_PT)
         .height(plot_h)
         .legend(Legend::default())
         .x_axis_label("x (px)")
@@ -81,7 +84,7 @@ pub fn orientation_ui(
         empty_note(ui, "weight map not rendered yet");
         return;
     };
-    ui.weak("robust-fit weight per pixel (dark = outlier, grey = not used); lines: walls");
+    ui.weak("robust-fit weight per pixel (dark = outlier, bright = trusted, clear = not in any fit); lines: walls");
     let handle = tex.handle.clone();
     let dim = status.dim();
     let lines = data

@@ -6,7 +6,7 @@ use std::sync::Arc;
 use egui::{Color32, Ui};
 use egui_plot::{Legend, Line, LineStyle, Plot, PlotPoints, Span, VLine};
 
-use super::empty_note;
+use super::{AXIS_WIDTH_PT, empty_note};
 use crate::app::recon::{Clip, ReconRun};
 use crate::io::wav::WavBits;
 use crate::pipeline::audio_signal::GroupSignal;
@@ -148,8 +148,18 @@ pub fn partial_points(signals: &[Arc<GroupSignal>]) -> Vec<Vec<[f64; 2]>> {
         .collect()
 }
 
-fn envelope_lines(env: &[f32], block: usize, rate: f64) -> (Vec<[f64; 2]>, Vec<[f64; 2]>) {
-    let t = |i: usize| (i as f64 + 0.5) * block as f64 / rate;
+/// Envelope points at the middle of each block (the last block may be short).
+fn envelope_lines(
+    env: &[f32],
+    block: usize,
+    len: usize,
+    rate: f64,
+) -> (Vec<[f64; 2]>, Vec<[f64; 2]>) {
+    let t = |i: usize| {
+        let start = i * block;
+        let n = block.min(len.saturating_sub(start));
+        (start as f64 + n as f64 / 2.0) / rate
+    };
     let up = env
         .iter()
         .enumerate()
@@ -367,6 +377,7 @@ pub fn waveform_ui(
     let playhead = player.position_secs();
     let playing = player.is_playing();
     let resp = Plot::new("waveform")
+        .y_axis_min_width(AXIS_WIDTH_PT)
         .height(wave_h)
         .legend(Legend::default())
         .allow_drag(false)
@@ -406,7 +417,12 @@ pub fn waveform_ui(
                     .color(RECOVERED_COLOUR),
                 );
                 if state.show_envelopes {
-                    let (up, down) = envelope_lines(&c.recovered_envelope, c.envelope_block, rate);
+                    let (up, down) = envelope_lines(
+                        &c.recovered_envelope,
+                        c.envelope_block,
+                        c.recovered.len(),
+                        rate,
+                    );
                     for (k, l) in [up, down].into_iter().enumerate() {
                         plot_ui.line(
                             Line::new("recovered envelope", PlotPoints::from(l))
@@ -416,7 +432,8 @@ pub fn waveform_ui(
                         );
                     }
                     if let (true, Some(e)) = (state.show_reference, &c.reference_envelope) {
-                        let (up, down) = envelope_lines(e, c.envelope_block, rate);
+                        let (up, down) =
+                            envelope_lines(e, c.envelope_block, c.recovered.len(), rate);
                         for (k, l) in [up, down].into_iter().enumerate() {
                             plot_ui.line(
                                 Line::new("reference envelope", PlotPoints::from(l))
@@ -469,6 +486,7 @@ pub fn waveform_ui(
     if let Some(c) = clip {
         ui.weak("drag: select (loops while playing)  ·  click: seek  ·  scroll: pan  ·  ctrl+scroll: zoom  ·  double-click: reset");
         Plot::new("spectrum")
+            .y_axis_min_width(AXIS_WIDTH_PT)
             .height((height - wave_h - 90.0).max(80.0))
             .legend(Legend::default())
             .x_axis_label("frequency (Hz)")
