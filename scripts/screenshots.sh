@@ -12,7 +12,7 @@ cd "$(dirname "$0")/.."
 scan="${1:-assets/demo}"
 dual="${2:-assets/demo_dual}"
 [ -f "$dual/scan.toml" ] || dual="$scan"
-bin="${GROOVESCOPE_BIN:-target/debug/groovescope}"
+bin="${GROOVESCOPE_BIN:-${CARGO_TARGET_DIR:-target}/debug/groovescope}"
 if [ ! -x "$bin" ]; then
     cargo build --locked
 fi
