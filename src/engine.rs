@@ -162,6 +162,9 @@ pub fn reconstruct(
     let entries: Vec<_> = scan.groups[range.clone()].to_vec();
     let loader_cancel = AtomicBool::new(false);
     let outcome: Result<(), EngineError> = std::thread::scope(|s| {
+        // Own the receiver here so that an early return (or a panic) drops it, which unblocks a
+        // loader waiting in `send` instead of deadlocking the scope's join.
+        let rx = rx;
         let loader = std::thread::Builder::new()
             .name("groovescope-loader".into())
             .spawn_scoped(s, || {
