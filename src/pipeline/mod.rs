@@ -247,29 +247,7 @@ impl PipelineParams {
             1e12,
         )?;
         check_range("walls.min_slope", f64::from(self.walls.min_slope), 0.0, 1e6)?;
-        let o = &self.orientation;
-        check_range("orientation.sigma_start_um", o.sigma_start_um, 1e-12, 1e9)?;
-        check_range("orientation.sigma_decay", o.sigma_decay, 1e-6, 1.0)?;
-        check_range("orientation.sigma_min_um", o.sigma_min_um, 1e-12, 1e9)?;
-        check_range(
-            "orientation.residual_tolerance_um",
-            o.residual_tolerance_um,
-            0.0,
-            1e9,
-        )?;
-        check_range(
-            "orientation.divergence_factor",
-            o.divergence_factor,
-            1.0,
-            1e12,
-        )?;
-        check_range("orientation.outlier_sigmas", o.outlier_sigmas, 0.0, 1e6)?;
-        if o.neighbourhood_px < 3 {
-            return Err(StageError::InvalidParam {
-                name: "orientation.neighbourhood_px".into(),
-                problem: format!("{} is below the 3-pixel minimum", o.neighbourhood_px),
-            });
-        }
+        orientation::validate(&self.orientation)?;
         let s = &self.sound;
         if !matches!(s.output_rate_hz, 8_000..=192_000) {
             return Err(StageError::InvalidParam {
@@ -289,39 +267,7 @@ impl PipelineParams {
         )?;
         check_range("sound.full_scale_mm_s", s.full_scale_mm_s, 1e-9, 1e9)?;
         check_range("dsp.lowpass_hz", self.dsp.lowpass_hz, 1.0, 1e6)?;
-        let h = &self.hough;
-        check_range(
-            "hough.gradient_threshold",
-            f64::from(h.gradient_threshold),
-            0.0,
-            1e6,
-        )?;
-        check_range(
-            "hough.theta_min_deg",
-            f64::from(h.theta_min_deg),
-            -90.0,
-            90.0,
-        )?;
-        check_range(
-            "hough.theta_max_deg",
-            f64::from(h.theta_max_deg),
-            -90.0,
-            90.0,
-        )?;
-        check_range(
-            "hough.theta_step_deg",
-            f64::from(h.theta_step_deg),
-            1e-3,
-            90.0,
-        )?;
-        check_range("hough.rho_step_px", f64::from(h.rho_step_px), 1e-3, 1e4)?;
-        check_range(
-            "hough.window_theta_deg",
-            f64::from(h.window_theta_deg),
-            0.0,
-            180.0,
-        )?;
-        check_range("hough.window_rho_px", f64::from(h.window_rho_px), 0.0, 1e5)?;
+        hough::validate_params(&self.hough)?;
         Ok(())
     }
 }

@@ -101,7 +101,11 @@ const LANES: usize = 4;
 const N_SUMS: usize = 11;
 
 /// Checks the orientation params (same ranges as `PipelineParams::validate`).
-fn validate(p: &OrientationParams) -> Result<(), StageError> {
+/// Checks every orientation knob (shared by the stage and [`super::PipelineParams::validate`]).
+///
+/// # Errors
+/// [`StageError::InvalidParam`] naming the first bad key.
+pub fn validate(p: &OrientationParams) -> Result<(), StageError> {
     check_range("orientation.sigma_start_um", p.sigma_start_um, 1e-12, 1e9)?;
     check_range("orientation.sigma_decay", p.sigma_decay, 1e-6, 1.0)?;
     check_range("orientation.sigma_min_um", p.sigma_min_um, 1e-12, 1e9)?;
