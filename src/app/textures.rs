@@ -122,6 +122,25 @@ impl Textures {
         self.frame.as_ref().map(|(_, h)| h)
     }
 
+    /// Uploads a frame texture rendered elsewhere (the worker renders the one on screen).
+    pub fn set_frame(
+        &mut self,
+        ctx: &egui::Context,
+        group: usize,
+        index: usize,
+        frames: &Arc<Vec<Image>>,
+        image: Arc<egui::ColorImage>,
+    ) {
+        let id = (group, index, Arc::as_ptr(frames) as usize);
+        match &mut self.frame {
+            Some((k, h)) => {
+                h.set(image, options());
+                *k = id;
+            }
+            None => self.frame = Some((id, ctx.load_texture("frame", image, options()))),
+        }
+    }
+
     /// Forgets every texture (a new scan).
     pub fn clear(&mut self) {
         self.views.clear();

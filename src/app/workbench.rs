@@ -402,6 +402,7 @@ impl Workbench {
             input: JobInput::Load {
                 entry,
                 meta: Arc::new(scan.meta.clone()),
+                frame: None, // the middle one, where a new scan starts
             },
             cache: StageCache::default(),
         };
@@ -667,6 +668,7 @@ impl Workbench {
             None => JobInput::Load {
                 entry,
                 meta: meta.clone(),
+                frame: Some(self.frame),
             },
         };
         let current = matches!(input, JobInput::Ready(_)).then_some(from);
@@ -750,7 +752,8 @@ impl Workbench {
                     generation,
                     group,
                     frames,
-                } => self.on_loaded(generation, group, frames),
+                    texture,
+                } => self.on_loaded(generation, group, frames, texture),
                 WorkerEvent::StageDone(d) => self.on_stage_done(*d),
                 WorkerEvent::Finished {
                     generation,
@@ -788,7 +791,13 @@ impl Workbench {
         generation: u64,
         group: usize,
         frames: Result<Arc<Vec<Image>>, String>,
+        texture: Option<(usize, Arc<egui::ColorImage>)>,
     ) {
+        let upload = |wb: &mut Self, f: &Arc<Vec<Image>>| {
+            if let Some((i, img)) = texture.clone() {
+                wb.textures.set_frame(&wb.ctx, group, i, f, img);
+            }
+        };
         if self
             .pending_open
             .as_ref()
@@ -800,7 +809,8 @@ impl Workbench {
             match frames {
                 Ok(frames) => {
                     let job_params = self.params.clone();
-                    self.install_scan(pending.scan, frames);
+                    self.install_scan(pending.scan, frames.clone());
+                    upload(self, &frames);
                     if self.params != job_params {
                         self.schedule();
                     }
@@ -828,6 +838,7 @@ impl Workbench {
                 // Frames of the current group are good whichever job loaded them.
                 if self.frames().is_none() {
                     self.frame = self.frame.min(f.len().saturating_sub(1));
+                    upload(self, &f);
                     self.frames = Some((group, f));
                     self.load_error = None;
                 }

@@ -28,6 +28,9 @@ pub enum JobInput {
         entry: GroupEntry,
         /// The scan's metadata.
         meta: Arc<ScanMeta>,
+        /// Frame to render a texture of along with the frames (the one on screen; None: the
+        /// middle one).
+        frame: Option<usize>,
     },
 }
 
@@ -120,6 +123,8 @@ pub enum WorkerEvent {
         group: usize,
         /// The frames or the error text.
         frames: Result<Arc<Vec<Image>>, String>,
+        /// Texture of the frame on screen (index, pixels), rendered off the UI thread.
+        texture: Option<(usize, Arc<egui::ColorImage>)>,
     },
     /// A stage finished.
     StageDone(Box<StageDone>),
@@ -239,12 +244,17 @@ pub fn run_job(
     }
     let input = match job.input {
         JobInput::Ready(input) => input,
-        JobInput::Load { entry, meta } => {
+        JobInput::Load { entry, meta, frame } => {
             let loaded = load_group(&entry).map(Arc::new).map_err(|e| e.to_string());
+            let texture = loaded.as_ref().ok().and_then(|f| {
+                let i = frame.unwrap_or(f.len() / 2).min(f.len().saturating_sub(1));
+                f.get(i).map(|img| (i, Arc::new(render::grey(img))))
+            });
             let _ = tx.send(WorkerEvent::Loaded {
                 generation,
                 group: entry.index,
                 frames: loaded.clone(),
+                texture,
             });
             repaint();
             match loaded {
@@ -469,6 +479,7 @@ mod tests {
             input: JobInput::Load {
                 entry: scan.groups[0].clone(),
                 meta: Arc::new(scan.meta.clone()),
+                frame: Some(3),
             },
             cache: StageCache::default(),
         }))
@@ -505,6 +516,7 @@ mod tests {
                 input: JobInput::Load {
                     entry: scan.groups[0].clone(),
                     meta: Arc::new(scan.meta.clone()),
+                    frame: None,
                 },
                 cache: StageCache::default(),
             })
