@@ -482,3 +482,40 @@ fn snapshots_of_the_dual_focus_views() {
         snapshot(&mut h, name);
     }
 }
+
+#[test]
+fn exports_a_view_as_png_and_round_trips_a_preset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(tmp.path(), Some(test_scan()), DeviceChoice::Off));
+    settle(&mut h);
+    // A view as PNG: a capture of the view's area.
+    let png = tmp.path().join("flow.png");
+    wb_mut(&mut h).capture_view(png.clone(), View::Flow, false);
+    let t0 = Instant::now();
+    while !png.exists() && t0.elapsed() < TIMEOUT {
+        h.step();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let img = image::open(&png).unwrap().to_rgba8();
+    assert!(
+        img.width() > 200 && img.height() > 200,
+        "{:?}",
+        img.dimensions()
+    );
+    assert!(img.width() < SIZE[0] as u32, "cropped to the view");
+    // Presets: save, change, load back (an undoable change), never overwrite silently.
+    let preset = tmp.path().join("disc.toml");
+    wb_mut(&mut h).save_preset_to(&preset, false).unwrap();
+    assert!(wb_mut(&mut h).save_preset_to(&preset, false).is_err());
+    let saved = wb(&h).params().clone();
+    let mut p = saved.clone();
+    p.flow.lambda *= 3.0;
+    p.hough.window_rho_px += 2.0;
+    wb_mut(&mut h).set_params(p.clone());
+    settle(&mut h);
+    wb_mut(&mut h).load_preset_from(&preset).unwrap();
+    assert_eq!(wb(&h).params(), &saved);
+    wb_mut(&mut h).undo();
+    assert_eq!(wb(&h).params(), &p);
+    settle(&mut h);
+}
