@@ -6,20 +6,21 @@
 #   SCAN             scan for overview, flow, depth and waveform (default assets/demo)
 #   DUAL_FOCUS_SCAN  scan with a [dual_focus] table for hough and stripes (default assets/demo_dual,
 #                    else SCAN)
-# env: GROOVESCOPE_BIN (default target/debug/groovescope, built when missing), VIEWS (names).
+# env: SCREENSHOT_DIR (default screenshots), GROOVESCOPE_BIN (default target/debug/groovescope, built when missing), VIEWS (names).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scan="${1:-assets/demo}"
 dual="${2:-assets/demo_dual}"
 [ -f "$dual/scan.toml" ] || dual="$scan"
-bin="${GROOVESCOPE_BIN:-target/debug/groovescope}"
+bin="${GROOVESCOPE_BIN:-${CARGO_TARGET_DIR:-target}/debug/groovescope}"
 if [ ! -x "$bin" ]; then
     cargo build --locked
 fi
 for tool in Xvfb; do
     command -v "$tool" >/dev/null || { echo "missing $tool (apt-get install xvfb)" >&2; exit 1; }
 done
-mkdir -p screenshots
+outdir="${SCREENSHOT_DIR:-screenshots}"
+mkdir -p "$outdir"
 XDG_RUNTIME_DIR="$(mktemp -d)"
 chmod 700 "$XDG_RUNTIME_DIR"
 export XDG_RUNTIME_DIR
@@ -38,7 +39,7 @@ for view in ${VIEWS:-overview flow hough stripes depth waveform}; do
         hough|stripes) s="$dual" ;;
         *) s="$scan" ;;
     esac
-    out="screenshots/$view.png"
+    out="$outdir/$view.png"
     echo "== $view ($s) -> $out"
     # The overview and the waveform show the reconstructed clip.
     case "$view" in overview|waveform) recon=1 ;; *) recon=0 ;; esac

@@ -13,3 +13,8 @@ cargo fmt --all -- --check
 cargo clippy --locked --all-targets -- -D warnings
 cargo test --locked
 RUSTDOCFLAGS="-D warnings" cargo doc --locked --no-deps
+# The workbench for real: a window under Xvfb, one screenshot taken and checked.
+shot_dir="$(mktemp -d)"
+SCREENSHOT_DIR="$shot_dir" VIEWS=overview bash scripts/screenshots.sh
+test -s "$shot_dir/overview.png"
+echo "workbench screenshot under Xvfb: $(wc -c <"$shot_dir/overview.png") bytes"

@@ -74,7 +74,7 @@ pub enum Command {
         /// Parameters TOML.
         #[arg(long)]
         params: Option<PathBuf>,
-        /// Force a path instead of choosing by the [dual_focus] table.
+        /// Force a path instead of choosing by the `[dual_focus]` table.
         #[arg(long, value_parser = ["auto", "depth", "dual-focus"], default_value = "auto")]
         path: String,
         /// Replace existing files.
@@ -102,7 +102,7 @@ pub struct ReconstructArgs {
     /// JSON report (timings, per-group outliers, scores against reference.wav).
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// Force a path instead of choosing by the [dual_focus] table.
+    /// Force a path instead of choosing by the `[dual_focus]` table.
     #[arg(long, value_parser = ["auto", "depth", "dual-focus"], default_value = "auto")]
     pub path: String,
     /// WAV sample format: 16, 24 or 32f.
@@ -536,7 +536,7 @@ fn run_flow(args: &FlowArgs) -> Result<()> {
             args.out.display()
         );
     }
-    if !args.land_flow_px.is_finite() || !(args.focal_px.is_finite() && args.focal_px > 0.0) {
+    if !(args.land_flow_px.is_finite() && args.focal_px.is_finite() && args.focal_px > 0.0) {
         bail!("--land-flow-px and --focal-px must be finite (focal length positive)");
     }
     let mut params = load_params(args.params.as_deref())?;

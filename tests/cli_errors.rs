@@ -1,4 +1,5 @@
 //! Bad input through the CLI: one clear line naming the file and the problem, a failing exit code, no partial output.
+#![allow(clippy::unwrap_used)] // tests may panic
 
 mod common;
 

@@ -1,4 +1,5 @@
 //! Repository hygiene: every source file starts with a `//!` line, and the pipeline never touches the GUI or audio crates.
+#![allow(clippy::unwrap_used)] // tests may panic
 
 use std::path::Path;
 

@@ -397,7 +397,7 @@ group_step_um = 460.2
         let g = m.geometry();
         assert!((g.focal_px - 10_256.41).abs() < 0.01);
         assert!((g.land_flow_px() + 2.0).abs() < 1e-9);
-        assert!((m.groove_speed_mm_s(0) - 939.35).abs() < 0.01);
+        assert!((m.groove_speed_mm_s(0) - 939.336).abs() < 0.01);
         assert!(m.dual_focus.is_none());
     }
 

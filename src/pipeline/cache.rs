@@ -139,12 +139,12 @@ fn wall_depth_um(depth: &DepthMap, walls: &[WallLine]) -> Option<f64> {
     let mut zs = Vec::new();
     for line in walls {
         for (x, &row) in line.rows.iter().enumerate() {
-            if row.is_finite() && row >= 0.0 {
-                if let Some(z) = depth.z_um.get(x, row.round() as usize) {
-                    if z.is_finite() {
-                        zs.push(f64::from(z));
-                    }
-                }
+            if row.is_finite()
+                && row >= 0.0
+                && let Some(z) = depth.z_um.get(x, row.round() as usize)
+                && z.is_finite()
+            {
+                zs.push(f64::from(z));
             }
         }
     }

@@ -108,11 +108,11 @@ const MIN_PLANE_SCALE: f64 = 0.5;
 const MAX_MEDIAN_PX: usize = 15;
 /// Largest accepted `neighbourhood_px`.
 const MAX_NEIGHBOURHOOD_PX: usize = 255;
-/// Planes of the per-pixel state: α̃, β̃, ι̃, then the covariance P00 P01 P02 P11 P12 P22.
+/// Values of the per-pixel state: α̃, β̃, ι̃, then the covariance P00 P01 P02 P11 P12 P22.
 const PLANES: usize = 9;
-/// Plane index of ι̃.
+/// Index of ι̃ in the state.
 const IOTA: usize = 2;
-/// Plane index of Var ι̃ (P22).
+/// Index of Var ι̃ (P22) in the state.
 const VAR_IOTA: usize = 8;
 
 /// Checks the params and the geometry the stage needs.
@@ -203,6 +203,7 @@ fn check_flows(flows: &[FlowField]) -> Result<(usize, usize), StageError> {
 }
 
 /// One frame's measurements: weight w and weight × normalised flow w·m per pixel.
+#[derive(Default)]
 struct Measurements {
     w: Vec<f32>,
     wm: Vec<f32>,
@@ -212,78 +213,64 @@ struct Measurements {
     bad_flow: usize,
 }
 
-/// Weights (confidence / mean confidence, 0 below `min_confidence`) and w·u/u_land.
-fn measurements(flow: &FlowField, u_land: f64, min_confidence: f32) -> Measurements {
-    let usable = |u: f32, c: f32| c.is_finite() && c >= min_confidence && u.is_finite();
-    let (sum, valid, bad_flow) = flow
-        .u
-        .data
-        .par_iter()
-        .zip(&flow.confidence.data)
-        .map(|(&u, &c)| {
-            if usable(u, c) {
-                (f64::from(c), 1_usize, 0_usize)
-            } else if c.is_finite() && c >= min_confidence {
-                (0.0, 0, 1)
-            } else {
-                (0.0, 0, 0)
-            }
-        })
-        .reduce(|| (0.0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
-    // Weights are relative to the mean confidence; all-zero confidences weigh 1 each.
-    let scale = if sum > 0.0 { valid as f64 / sum } else { 1.0 };
-    let (w, wm): (Vec<f32>, Vec<f32>) = flow
-        .u
-        .data
-        .par_iter()
-        .zip(&flow.confidence.data)
-        .map(|(&u, &c)| {
-            if usable(u, c) {
-                let w = if sum > 0.0 { f64::from(c) * scale } else { 1.0 };
-                (w as f32, (w * f64::from(u) / u_land) as f32)
-            } else {
-                (0.0, 0.0)
-            }
-        })
-        .unzip();
-    Measurements {
-        w,
-        wm,
-        valid,
-        bad_flow,
+/// Pixels per parallel work item of the per-pixel passes.
+const CHUNK_PX: usize = 1 << 14;
+
+impl Measurements {
+    /// Fills the weights (confidence / mean confidence, 0 below `min_confidence`) and
+    /// w·u/u_land of one flow field, reusing the buffers.
+    fn fill(&mut self, flow: &FlowField, u_land: f64, min_confidence: f32) {
+        let usable = |u: f32, c: f32| c.is_finite() && c >= min_confidence && u.is_finite();
+        let (sum, valid, bad_flow) = flow
+            .u
+            .data
+            .par_chunks(CHUNK_PX)
+            .zip(flow.confidence.data.par_chunks(CHUNK_PX))
+            .map(|(us, cs)| {
+                let (mut sum, mut valid, mut bad) = (0.0_f64, 0_usize, 0_usize);
+                for (&u, &c) in us.iter().zip(cs) {
+                    if usable(u, c) {
+                        sum += f64::from(c);
+                        valid += 1;
+                    } else if c.is_finite() && c >= min_confidence {
+                        bad += 1;
+                    }
+                }
+                (sum, valid, bad)
+            })
+            .reduce(|| (0.0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+        // Weights are relative to the mean confidence; all-zero confidences weigh 1 each.
+        let scale = if sum > 0.0 {
+            (valid as f64 / sum) as f32
+        } else {
+            0.0
+        };
+        let inv_u_land = (1.0 / u_land) as f32;
+        let n = flow.u.data.len();
+        self.w.resize(n, 0.0);
+        self.wm.resize(n, 0.0);
+        self.w
+            .par_chunks_mut(CHUNK_PX)
+            .zip(self.wm.par_chunks_mut(CHUNK_PX))
+            .zip(flow.u.data.par_chunks(CHUNK_PX))
+            .zip(flow.confidence.data.par_chunks(CHUNK_PX))
+            .for_each(|(((ws, wms), us), cs)| {
+                for (((w, wm), &u), &c) in ws.iter_mut().zip(wms.iter_mut()).zip(us).zip(cs) {
+                    (*w, *wm) = if usable(u, c) {
+                        let wv = if scale > 0.0 { c * scale } else { 1.0 };
+                        (wv, wv * u * inv_u_land)
+                    } else {
+                        (0.0, 0.0)
+                    };
+                }
+            });
+        self.valid = valid;
+        self.bad_flow = bad_flow;
     }
 }
 
-/// Inverse of a symmetric 3×3 matrix packed as [m00, m01, m02, m11, m12, m22]; None when it is
-/// not positive definite enough to invert.
-fn inv_sym3(m: [f64; 6]) -> Option<[f64; 6]> {
-    let [a, b, c, d, e, f] = m;
-    let c00 = d * f - e * e;
-    let c01 = c * e - b * f;
-    let c02 = b * e - c * d;
-    let det = a * c00 + b * c01 + c * c02;
-    if !(det > 0.0 && det.is_finite()) {
-        return None;
-    }
-    let inv = 1.0 / det;
-    Some([
-        c00 * inv,
-        c01 * inv,
-        c02 * inv,
-        (a * f - c * c) * inv,
-        (b * c - a * e) * inv,
-        (a * d - b * b) * inv,
-    ])
-}
-
-/// Packed symmetric 3×3 times a vector.
-fn mul_sym3(m: &[f64; 6], v: [f64; 3]) -> [f64; 3] {
-    [
-        m[0] * v[0] + m[1] * v[1] + m[2] * v[2],
-        m[1] * v[0] + m[3] * v[1] + m[4] * v[2],
-        m[2] * v[0] + m[4] * v[1] + m[5] * v[2],
-    ]
-}
+/// One pixel's state: α̃, β̃, ι̃, then the covariance P00 P01 P02 P11 P12 P22.
+type Cell = [f32; PLANES];
 
 /// Fixed quantities of one filter run.
 struct Filter {
@@ -301,238 +288,539 @@ struct Filter {
     p0: [f64; 3],
 }
 
-/// Per-thread buffers of one row update.
-struct RowScratch {
-    old: Vec<f32>,
-    /// Vertical window sums per column: Σw, Σw·dy, Σw·dy², Σwm, Σwm·dy.
-    col: Vec<[f64; 5]>,
-}
+/// Rows per parallel work item of the filter (the vertical window sums slide down a band).
+const BAND_ROWS: usize = 32;
 
-/// What a row update counted.
-#[derive(Clone, Copy, Default)]
-struct RowStats {
-    diverged: usize,
-}
-
-impl std::ops::Add for RowStats {
-    type Output = Self;
-    fn add(self, o: Self) -> Self {
-        Self {
-            diverged: self.diverged + o.diverged,
-        }
-    }
-}
+/// Vertical window sums of one column over absolute rows Y: Σw, Σw·Y, Σw·Y², Σwm, Σwm·Y.
+type ColumnSums = [f64; 5];
 
 impl Filter {
-    /// Writes the prior state into every pixel of a state row.
-    fn reset_row(&self, row: &mut [f32]) {
-        let w = self.width;
-        let init = [
-            0.0, 0.0, 1.0, self.p0[0], 0.0, 0.0, self.p0[1], 0.0, self.p0[2],
-        ];
-        for (plane, v) in row.chunks_exact_mut(w).zip(init) {
-            plane.fill(v as f32);
-        }
-    }
-
     /// The prior state of one pixel.
-    fn prior(&self) -> ([f64; 3], [f64; 6]) {
-        (
-            [0.0, 0.0, 1.0],
-            [self.p0[0], 0.0, 0.0, self.p0[1], 0.0, self.p0[2]],
-        )
+    fn prior(&self) -> Cell {
+        let p0 = self.p0.map(|v| v as f32);
+        [0.0, 0.0, 1.0, p0[0], 0.0, 0.0, p0[1], 0.0, p0[2]]
     }
 
-    /// Reads pixel x of a state row.
-    fn read(&self, row: &[f32], x: usize) -> ([f64; 3], [f64; 6]) {
+    /// Adds (`sign` = 1) or removes (−1) row `yy` of the weights to the column sums.
+    fn slide(&self, vs: &mut [ColumnSums], meas: &Measurements, yy: usize, sign: f64) {
         let w = self.width;
-        let at = |p: usize| f64::from(row.get(p * w + x).copied().unwrap_or(f32::NAN));
-        (
-            [at(0), at(1), at(2)],
-            [at(3), at(4), at(5), at(6), at(7), at(8)],
-        )
-    }
-
-    /// Writes pixel x of a state row.
-    fn write(&self, row: &mut [f32], x: usize, mu: [f64; 3], p: [f64; 6]) {
-        let w = self.width;
-        for (k, v) in mu.into_iter().chain(p).enumerate() {
-            if let Some(o) = row.get_mut(k * w + x) {
-                *o = v as f32;
-            }
+        let (Some(wr), Some(mr)) = (
+            meas.w.get(yy * w..(yy + 1) * w),
+            meas.wm.get(yy * w..(yy + 1) * w),
+        ) else {
+            return;
+        };
+        let yf = yy as f64;
+        for ((c, &wv), &mv) in vs.iter_mut().zip(wr).zip(mr) {
+            let (wv, mv) = (sign * f64::from(wv), sign * f64::from(mv));
+            c[0] += wv;
+            c[1] += wv * yf;
+            c[2] += wv * yf * yf;
+            c[3] += mv;
+            c[4] += mv * yf;
         }
     }
 
-    /// Prediction of one state row over `steps` frames: re-index by the known motion, apply the
-    /// plane transform and add process noise. `old` holds the row before the step.
-    fn predict_row(&self, row: &mut [f32], old: &[f32], steps: f64) -> RowStats {
-        let mut stats = RowStats::default();
-        let w = self.width;
-        let k = self.land_shift_px * steps;
-        let plane = |p: usize, i: usize| f64::from(old.get(p * w + i).copied().unwrap_or(f32::NAN));
-        for x in 0..w {
-            let iota = plane(IOTA, x);
-            let xs = x as f64 + k * iota;
-            let i0 = xs.floor();
-            if !(i0 >= 0.0 && i0 + 1.0 < w as f64) {
-                // New content entering the view (or a non-finite state): start from the prior.
-                let (mu, p) = self.prior();
-                self.write(row, x, mu, p);
-                continue;
+    /// One row of one frame: prediction from the previous frame (when `steps` is Some) fused
+    /// with the measurement update from the column sums `vs` of the window about row `y`.
+    /// Returns the number of diverged predictions.
+    ///
+    /// Phase A: prefix sums along the row of the column moments give each pixel's information
+    /// J and b by differences, and the old state gives its source position x + f·U·ι·steps. Phase B then
+    /// predicts and updates [`LANES`] pixels at a time in f32 lanes; it overwrites cells in
+    /// place, which is safe because content moves toward −x: a pixel's source cells lie at or
+    /// right of it and are read before its block is written.
+    fn sweep_row(
+        &self,
+        y: usize,
+        row: &mut [Cell],
+        vs: &[ColumnSums],
+        steps: Option<f64>,
+        measured: bool,
+        sc: &mut SweepScratch,
+    ) -> usize {
+        let (w, r) = (self.width, self.r);
+        let yf = y as f64;
+        let inv_r = 1.0 / self.noise_var;
+        let k = self.land_shift_px * steps.unwrap_or(0.0);
+        // Phase A.
+        sc.info.clear();
+        sc.info.resize(w, [0.0; 9]);
+        if measured {
+            // Prefix sums along the row of the column sums taken relative to row y
+            // (Σw, Σw·dy, Σw·dy², Σwm, Σwm·dy), weighted by the absolute column X and X²:
+            // pre[X] = Σ_{X′<X} [c0, c0·X′, c0·X′², c1, c1·X′, c2, c3, c3·X′, c4].
+            sc.prefix.clear();
+            sc.prefix.reserve(w + 1);
+            let mut acc = [0.0_f64; 9];
+            sc.prefix.push(acc);
+            for (xc, c) in vs.iter().enumerate() {
+                let xf = xc as f64;
+                let c1 = c[1] - yf * c[0];
+                let c2 = c[2] - 2.0 * yf * c[1] + yf * yf * c[0];
+                let c4 = c[4] - yf * c[3];
+                let terms = [
+                    c[0],
+                    c[0] * xf,
+                    c[0] * xf * xf,
+                    c1,
+                    c1 * xf,
+                    c2,
+                    c[3],
+                    c[3] * xf,
+                    c4,
+                ];
+                for (a, v) in acc.iter_mut().zip(terms) {
+                    *a += v;
+                }
+                sc.prefix.push(acc);
             }
-            let t = xs - i0;
-            let i = i0 as usize;
-            let v: [f64; PLANES] =
-                std::array::from_fn(|p| plane(p, i) * (1.0 - t) + plane(p, i + 1) * t);
-            let [al, be, io, p00, p01, p02, p11, p12, p22] = v;
-            let den = 1.0 - k * al;
-            if den.is_nan() || den < MIN_PLANE_SCALE {
-                stats.diverged += 1;
-                let (mu, p) = self.prior();
-                self.write(row, x, mu, p);
-                continue;
-            }
-            let s = 1.0 / den;
-            let s2 = s * s;
-            let c = be * k * s2;
-            let q = self.q;
-            let p_new = [
-                s2 * s2 * p00 + q[0] * steps,
-                s2 * (c * p00 + s * p01),
-                s2 * p02,
-                c * c * p00 + 2.0 * c * s * p01 + s2 * p11 + q[1] * steps,
-                c * p02 + s * p12,
-                p22 + q[2] * steps,
-            ];
-            self.write(row, x, [s * al, s * be, io], p_new);
-        }
-        stats
-    }
-
-    /// Measurement update of state row `y` from one frame's weights.
-    fn update_row(&self, y: usize, row: &mut [f32], meas: &Measurements, col: &mut [[f64; 5]]) {
-        let (w, h, r) = (self.width, self.height, self.r);
-        // Vertical sums over rows y − r ..= y + r (dy relative to y).
-        col.fill([0.0; 5]);
-        for yy in y.saturating_sub(r)..=(y + r).min(h - 1) {
-            let dy = yy as f64 - y as f64;
-            let (Some(wr), Some(mr)) = (
-                meas.w.get(yy * w..(yy + 1) * w),
-                meas.wm.get(yy * w..(yy + 1) * w),
-            ) else {
-                continue;
-            };
-            for ((c, &wv), &mv) in col.iter_mut().zip(wr).zip(mr) {
-                if wv > 0.0 {
-                    let (wv, mv) = (f64::from(wv), f64::from(mv));
-                    c[0] += wv;
-                    c[1] += wv * dy;
-                    c[2] += wv * dy * dy;
-                    c[3] += mv;
-                    c[4] += mv * dy;
+            // Window sums over x − r ..= x + r, moved to dx = X − x:
+            // Σc·dx = T1 − x·T0, Σc·dx² = T2 − 2x·T1 + x²·T0. Then
+            // J = Σ w·h·hᵀ/R packed (αα, αβ, αι, ββ, βι, ιι) and b = Σ w·m·h/R.
+            for (x, info) in sc.info.iter_mut().enumerate() {
+                let (Some(hi), Some(lo)) = (
+                    sc.prefix.get((x + r + 1).min(w)),
+                    sc.prefix.get(x.saturating_sub(r)),
+                ) else {
+                    continue;
+                };
+                let t: [f64; 9] = std::array::from_fn(|i| hi[i] - lo[i]);
+                if t[0] > 0.0 {
+                    let xf = x as f64;
+                    let v = [
+                        t[2] - 2.0 * xf * t[1] + xf * xf * t[0],
+                        t[4] - xf * t[3],
+                        t[1] - xf * t[0],
+                        t[5],
+                        t[3],
+                        t[0],
+                        t[7] - xf * t[6],
+                        t[8],
+                        t[6],
+                    ];
+                    for (d, e) in info.iter_mut().zip(v) {
+                        *d = (e * inv_r) as f32;
+                    }
                 }
             }
         }
-        // Horizontal running sums over columns x − r ..= x + r of c·X^p (absolute column X),
-        // moved to dx = X − x: Σc·dx = T1 − x·T0, Σc·dx² = T2 − 2x·T1 + x²·T0.
-        // t = [Σc0, Σc0·X, Σc0·X², Σc1, Σc1·X, Σc2, Σc3, Σc3·X, Σc4].
-        let mut t = [0.0_f64; 9];
-        let add = |t: &mut [f64; 9], xc: usize, sign: f64| {
-            let Some(c) = col.get(xc) else { return };
-            let xf = xc as f64;
-            let terms = [
-                c[0],
-                c[0] * xf,
-                c[0] * xf * xf,
-                c[1],
-                c[1] * xf,
-                c[2],
-                c[3],
-                c[3] * xf,
-                c[4],
-            ];
-            for (acc, v) in t.iter_mut().zip(terms) {
-                *acc += sign * v;
+        sc.src.clear();
+        if steps.is_some() {
+            for x in 0..w {
+                let iota = row.get(x).map_or(f64::NAN, |c| f64::from(c[IOTA]));
+                let xs = x as f64 + k * iota;
+                let i0 = xs.floor();
+                // The source lies at or right of x; anything else (new content entering at the
+                // right edge, a broken state) restarts from the prior.
+                let ok = i0 >= x as f64 && i0 + 1.0 < w as f64;
+                sc.src.push(if ok {
+                    (i0 as u32, (xs - i0) as f32)
+                } else {
+                    (u32::MAX, 0.0)
+                });
             }
-        };
-        for xc in 0..r.min(w) {
-            add(&mut t, xc, 1.0);
         }
-        let inv_r = 1.0 / self.noise_var;
-        for x in 0..w {
-            if x + r < w {
-                add(&mut t, x + r, 1.0);
+        // Phase B.
+        let prior = self.prior();
+        let mut diverged = 0;
+        let mut x0 = 0;
+        while x0 < w {
+            let n = LANES.min(w - x0);
+            let mut st = [[0.0_f32; LANES]; PLANES];
+            let mut info = [[0.0_f32; LANES]; 9];
+            let mut fresh = [true; LANES];
+            for l in 0..LANES {
+                let x = x0 + l;
+                let cell = if l >= n {
+                    prior
+                } else if steps.is_some() {
+                    match sc.src.get(x) {
+                        Some(&(i, tt)) if i != u32::MAX => {
+                            let i = i as usize;
+                            match (row.get(i), row.get(i + 1)) {
+                                (Some(a), Some(b)) => {
+                                    fresh[l] = false;
+                                    std::array::from_fn(|p| a[p] + (b[p] - a[p]) * tt)
+                                }
+                                _ => prior,
+                            }
+                        }
+                        _ => prior,
+                    }
+                } else {
+                    fresh[l] = false;
+                    row.get(x).copied().unwrap_or(prior)
+                };
+                for (p, s) in st.iter_mut().enumerate() {
+                    s[l] = cell[p];
+                }
+                if let Some(src) = sc.info.get(x).filter(|_| l < n) {
+                    for (p, d) in info.iter_mut().enumerate() {
+                        d[l] = src[p];
+                    }
+                }
             }
-            if x > r {
-                add(&mut t, x - r - 1, -1.0);
+            if let Some(steps) = steps {
+                diverged += predict_lanes(
+                    &mut st,
+                    &fresh,
+                    k as f32,
+                    self.q.map(|q| (q * steps) as f32),
+                    &prior,
+                );
             }
-            let s0 = t[0];
-            if s0.is_nan() || s0 <= 0.0 {
-                continue;
+            if measured {
+                update_lanes(&mut st, &info);
             }
-            let xf = x as f64;
-            let sx = t[1] - xf * t[0];
-            let sxx = t[2] - 2.0 * xf * t[1] + xf * xf * t[0];
-            let sy = t[3];
-            let sxy = t[4] - xf * t[3];
-            let syy = t[5];
-            let sm = t[6];
-            let smx = t[7] - xf * t[6];
-            let smy = t[8];
-            let jm = [
-                sxx * inv_r,
-                sxy * inv_r,
-                sx * inv_r,
-                syy * inv_r,
-                sy * inv_r,
-                s0 * inv_r,
-            ];
-            let b = [smx * inv_r, smy * inv_r, sm * inv_r];
-            let (mu, p) = self.read(row, x);
-            let (lam, lmu) = match inv_sym3(p) {
-                Some(l) if mu.iter().all(|v| v.is_finite()) => (l, mul_sym3(&l, mu)),
-                // A broken prior carries no information.
-                _ => ([0.0; 6], [0.0; 3]),
-            };
-            let post_info: [f64; 6] = std::array::from_fn(|k| lam[k] + jm[k]);
-            let Some(p_post) = inv_sym3(post_info) else {
-                continue;
-            };
-            let rhs = [lmu[0] + b[0], lmu[1] + b[1], lmu[2] + b[2]];
-            self.write(row, x, mul_sym3(&p_post, rhs), p_post);
+            if let Some(cells) = row.get_mut(x0..x0 + n) {
+                for (l, cell) in cells.iter_mut().enumerate() {
+                    *cell = std::array::from_fn(|p| st[p][l]);
+                }
+            }
+            x0 += LANES;
+        }
+        diverged
+    }
+
+    /// One frame over a band of rows starting at `y0`: slides the vertical window sums down the
+    /// band and sweeps each row. Returns the number of diverged predictions.
+    fn frame_band(
+        &self,
+        y0: usize,
+        band: &mut [Cell],
+        meas: &Measurements,
+        steps: Option<f64>,
+        sc: &mut SweepScratch,
+    ) -> usize {
+        let (w, h, r) = (self.width, self.height, self.r);
+        let measured = meas.valid > 0;
+        let mut vs = std::mem::take(&mut sc.vs);
+        vs.clear();
+        vs.resize(w, [0.0; 5]);
+        if measured {
+            for yy in y0.saturating_sub(r)..(y0 + r).min(h) {
+                self.slide(&mut vs, meas, yy, 1.0);
+            }
+        }
+        let mut diverged = 0;
+        for (i, row) in band.chunks_mut(w).enumerate() {
+            let y = y0 + i;
+            if measured {
+                if y + r < h {
+                    self.slide(&mut vs, meas, y + r, 1.0);
+                }
+                if i > 0 && y > r {
+                    self.slide(&mut vs, meas, y - r - 1, -1.0);
+                }
+            }
+            diverged += self.sweep_row(y, row, &vs, steps, measured, sc);
+        }
+        sc.vs = vs;
+        diverged
+    }
+}
+
+/// Pixels predicted and updated together (f32 lanes the compiler maps onto SIMD registers).
+const LANES: usize = 8;
+/// One value for each pixel of a block.
+type Lane = [f32; LANES];
+
+/// Per-thread buffers of the row sweeps.
+#[derive(Default)]
+struct SweepScratch {
+    /// Vertical window sums per column.
+    vs: Vec<ColumnSums>,
+    /// Per pixel: J (αα, αβ, αι, ββ, βι, ιι) and b (α, β, ι) of this frame.
+    info: Vec<[f32; 9]>,
+    /// Per pixel: source cell and interpolation weight of the prediction (u32::MAX: prior).
+    src: Vec<(u32, f32)>,
+    /// Prefix sums along the row of the window moments.
+    prefix: Vec<[f64; 9]>,
+}
+
+/// A lane-wise map: `f` applied to every lane index (written so the compiler emits SIMD).
+fn lanes(f: impl Fn(usize) -> f32) -> Lane {
+    std::array::from_fn(f)
+}
+
+/// The plane transform and process noise on a block of interpolated states (module docs):
+/// α′ = s·α, β′ = s·β, ι′ = ι with s = 1/(1 − k·α), P′ = F·P·Fᵀ + Q. Lanes marked `fresh` hold
+/// the prior and are left alone; diverged lanes (1 − k·α < `MIN_PLANE_SCALE`) are reset to the
+/// prior. Returns the number of diverged lanes.
+fn predict_lanes(
+    st: &mut [Lane; PLANES],
+    fresh: &[bool; LANES],
+    k: f32,
+    q: [f32; 3],
+    prior: &Cell,
+) -> usize {
+    let [al, be, io, p00, p01, p02, p11, p12, p22] = *st;
+    let den = lanes(|l| 1.0 - k * al[l]);
+    let s = lanes(|l| 1.0 / den[l]);
+    let s2 = lanes(|l| s[l] * s[l]);
+    let c = lanes(|l| be[l] * k * s2[l]);
+    let new: [Lane; PLANES] = [
+        lanes(|l| s[l] * al[l]),
+        lanes(|l| s[l] * be[l]),
+        io,
+        lanes(|l| s2[l] * s2[l] * p00[l] + q[0]),
+        lanes(|l| s2[l] * (c[l] * p00[l] + s[l] * p01[l])),
+        lanes(|l| s2[l] * p02[l]),
+        lanes(|l| c[l] * c[l] * p00[l] + 2.0 * c[l] * s[l] * p01[l] + s2[l] * p11[l] + q[1]),
+        lanes(|l| c[l] * p02[l] + s[l] * p12[l]),
+        lanes(|l| p22[l] + q[2]),
+    ];
+    let ok: [bool; LANES] = std::array::from_fn(|l| den[l] >= MIN_PLANE_SCALE as f32);
+    for ((dst, nw), &pr) in st.iter_mut().zip(&new).zip(prior) {
+        *dst = lanes(|l| {
+            if fresh[l] {
+                dst[l]
+            } else if ok[l] {
+                nw[l]
+            } else {
+                pr
+            }
+        });
+    }
+    (0..LANES).filter(|&l| !ok[l] && !fresh[l]).count()
+}
+
+/// Inverse of packed symmetric 3×3 matrices, lane-wise, scaled by the trace so that f32 copes
+/// with any magnitude; zero (and a false flag) where the matrix is not invertible.
+fn inv_sym3_lanes(m: &[Lane; 6]) -> ([Lane; 6], [bool; LANES]) {
+    let sc = lanes(|l| 1.0 / (m[0][l] + m[3][l] + m[5][l]));
+    let a = lanes(|l| m[0][l] * sc[l]);
+    let b = lanes(|l| m[1][l] * sc[l]);
+    let c = lanes(|l| m[2][l] * sc[l]);
+    let d = lanes(|l| m[3][l] * sc[l]);
+    let e = lanes(|l| m[4][l] * sc[l]);
+    let f = lanes(|l| m[5][l] * sc[l]);
+    let c00 = lanes(|l| d[l] * f[l] - e[l] * e[l]);
+    let c01 = lanes(|l| c[l] * e[l] - b[l] * f[l]);
+    let c02 = lanes(|l| b[l] * e[l] - c[l] * d[l]);
+    let det = lanes(|l| a[l] * c00[l] + b[l] * c01[l] + c[l] * c02[l]);
+    let ok: [bool; LANES] = std::array::from_fn(|l| det[l] > 0.0 && det[l] < f32::INFINITY);
+    let g = lanes(|l| if ok[l] { sc[l] / det[l] } else { 0.0 });
+    let inv = [
+        lanes(|l| c00[l] * g[l]),
+        lanes(|l| c01[l] * g[l]),
+        lanes(|l| c02[l] * g[l]),
+        lanes(|l| (a[l] * f[l] - c[l] * c[l]) * g[l]),
+        lanes(|l| (b[l] * c[l] - a[l] * e[l]) * g[l]),
+        lanes(|l| (a[l] * d[l] - b[l] * b[l]) * g[l]),
+    ];
+    (inv, ok)
+}
+
+/// Packed symmetric 3×3 times a vector, lane-wise.
+fn mul_sym3_lanes(m: &[Lane; 6], v: &[Lane; 3]) -> [Lane; 3] {
+    let [x, y, z] = v;
+    [
+        lanes(|l| m[0][l] * x[l] + m[1][l] * y[l] + m[2][l] * z[l]),
+        lanes(|l| m[1][l] * x[l] + m[3][l] * y[l] + m[4][l] * z[l]),
+        lanes(|l| m[2][l] * x[l] + m[4][l] * y[l] + m[5][l] * z[l]),
+    ]
+}
+
+/// The information-form measurement update on a block: Λ⁺ = P⁻¹ + J,
+/// µ⁺ = (Λ⁺)⁻¹·(P⁻¹·µ + b). Lanes without a measurement (J_ιι = 0) or with a singular
+/// posterior keep their prior; a non-finite prior carries no information.
+fn update_lanes(st: &mut [Lane; PLANES], info: &[Lane; 9]) {
+    let [a0, a1, a2, p0, p1, p2, p3, p4, p5] = *st;
+    let fin = lanes(|l| {
+        if a0[l].is_finite() && a1[l].is_finite() && a2[l].is_finite() {
+            1.0
+        } else {
+            0.0
+        }
+    });
+    let mu = [
+        lanes(|l| if fin[l] > 0.0 { a0[l] } else { 0.0 }),
+        lanes(|l| if fin[l] > 0.0 { a1[l] } else { 0.0 }),
+        lanes(|l| if fin[l] > 0.0 { a2[l] } else { 0.0 }),
+    ];
+    // A non-finite prior carries no information (its Λ is zeroed).
+    let (lam, _) = inv_sym3_lanes(&[p0, p1, p2, p3, p4, p5]);
+    let mut post = lam;
+    for (pr, jr) in post.iter_mut().zip(info) {
+        *pr = lanes(|l| pr[l] * fin[l] + jr[l]);
+    }
+    let mut lmu = mul_sym3_lanes(&lam, &mu);
+    for (lr, br) in lmu.iter_mut().zip(&info[6..]) {
+        *lr = lanes(|l| lr[l] * fin[l] + br[l]);
+    }
+    let (p_post, ok) = inv_sym3_lanes(&post);
+    let mu_post = mul_sym3_lanes(&p_post, &lmu);
+    let take: [bool; LANES] = std::array::from_fn(|l| ok[l] && info[5][l] > 0.0);
+    for (dst, nw) in st.iter_mut().zip(mu_post.iter().chain(&p_post)) {
+        *dst = lanes(|l| if take[l] { nw[l] } else { dst[l] });
+    }
+}
+
+/// Pixels filtered together by the median network (one SIMD-friendly block).
+const MEDIAN_LANES: usize = 8;
+/// Largest window (m²) handled by the network; larger ones use selection per pixel.
+const MAX_NETWORK_INPUTS: usize = 49;
+
+/// A selection network that leaves the median of `n` inputs at `target` once the inputs are
+/// padded to `size` with −∞ (the first `lo_pad`) and +∞: Batcher's odd–even merge sort pruned
+/// to the comparators the median depends on.
+struct MedianNetwork {
+    size: usize,
+    lo_pad: usize,
+    target: usize,
+    pairs: Vec<(usize, usize)>,
+}
+
+impl MedianNetwork {
+    fn new(n: usize) -> Self {
+        let size = n.next_power_of_two();
+        let lo_pad = (size - n) / 2;
+        let target = lo_pad + n / 2;
+        let mut pairs = Vec::new();
+        let mut p = 1;
+        while p < size {
+            let mut k = p;
+            while k >= 1 {
+                let mut j = k % p;
+                while j + k < size {
+                    for i in 0..k.min(size - j - k) {
+                        if (i + j) / (2 * p) == (i + j + k) / (2 * p) {
+                            pairs.push((i + j, i + j + k));
+                        }
+                    }
+                    j += 2 * k;
+                }
+                k /= 2;
+            }
+            p *= 2;
+        }
+        let mut needed = vec![false; size];
+        if let Some(t) = needed.get_mut(target) {
+            *t = true;
+        }
+        let mut kept: Vec<(usize, usize)> = Vec::new();
+        for &(a, b) in pairs.iter().rev() {
+            let hit =
+                needed.get(a).copied().unwrap_or(false) || needed.get(b).copied().unwrap_or(false);
+            if hit {
+                for i in [a, b] {
+                    if let Some(nd) = needed.get_mut(i) {
+                        *nd = true;
+                    }
+                }
+                kept.push((a, b));
+            }
+        }
+        kept.reverse();
+        Self {
+            size,
+            lo_pad,
+            target,
+            pairs: kept,
         }
     }
+
+    /// Medians of `MEDIAN_LANES` pixels whose windows were loaded into `v[lo_pad..lo_pad + n]`.
+    fn run(&self, v: &mut [[f32; MEDIAN_LANES]]) -> Option<[f32; MEDIAN_LANES]> {
+        for &(a, b) in &self.pairs {
+            let (Some(&va), Some(&vb)) = (v.get(a), v.get(b)) else {
+                return None;
+            };
+            // Finite inputs only, so the plain comparisons are exact min/max.
+            let lo: [f32; MEDIAN_LANES] =
+                std::array::from_fn(|l| if va[l] < vb[l] { va[l] } else { vb[l] });
+            let hi: [f32; MEDIAN_LANES] =
+                std::array::from_fn(|l| if va[l] < vb[l] { vb[l] } else { va[l] });
+            if let Some(s) = v.get_mut(a) {
+                *s = lo;
+            }
+            if let Some(s) = v.get_mut(b) {
+                *s = hi;
+            }
+        }
+        v.get(self.target).copied()
+    }
+}
+
+/// Median of the finite values in the window of half-sides (rx, ry) about (x, y), by selection.
+fn median_select(
+    v: &[f32],
+    width: usize,
+    x: usize,
+    y: usize,
+    rx: usize,
+    ry: usize,
+    buf: &mut Vec<f32>,
+) -> f32 {
+    buf.clear();
+    for yy in y - ry..=y + ry {
+        let base = yy * width + x;
+        if let Some(s) = v.get(base - rx..=base + rx) {
+            buf.extend(s.iter().copied().filter(|e| e.is_finite()));
+        }
+    }
+    if buf.is_empty() {
+        return f32::NAN;
+    }
+    let mid = buf.len() / 2;
+    let (_, med, _) = buf.select_nth_unstable_by(mid, f32::total_cmp);
+    *med
 }
 
 /// Median filter (side `m`, NaN-aware) of `v` → `out`; NaN where the window holds no finite
 /// value. Near the borders the window shrinks symmetrically about the pixel, so a linear ramp
-/// is left unbiased.
+/// is left unbiased. Interior blocks of finite values go through a sorting network, eight
+/// pixels at a time; the rest use selection.
 fn median_filter(v: &[f32], width: usize, height: usize, m: usize, out: &mut [f32]) {
     let r = m / 2;
     if r == 0 {
         out.copy_from_slice(v);
         return;
     }
+    let n = m * m;
+    let net = (n <= MAX_NETWORK_INPUTS).then(|| MedianNetwork::new(n));
     out.par_chunks_mut(width).enumerate().for_each_init(
-        Vec::new,
-        |buf: &mut Vec<f32>, (y, row)| {
+        || (Vec::new(), Vec::new()),
+        |(buf, lanes): &mut (Vec<f32>, Vec<[f32; MEDIAN_LANES]>), (y, row)| {
             let ry = r.min(y).min(height - 1 - y);
-            for (x, o) in row.iter_mut().enumerate() {
-                let rx = r.min(x).min(width - 1 - x);
-                buf.clear();
-                for yy in y - ry..=y + ry {
-                    let base = yy * width + x;
-                    if let Some(s) = v.get(base - rx..=base + rx) {
-                        buf.extend(s.iter().copied().filter(|e| e.is_finite()));
+            let mut x = 0;
+            while x < width {
+                let block_ok = ry == r && x >= r && x + MEDIAN_LANES + r <= width;
+                if let (true, Some(net)) = (block_ok, net.as_ref()) {
+                    lanes.clear();
+                    lanes.resize(net.size, [f32::INFINITY; MEDIAN_LANES]);
+                    let mut finite = true;
+                    for (k, lane) in lanes.iter_mut().enumerate() {
+                        if k < net.lo_pad {
+                            *lane = [f32::NEG_INFINITY; MEDIAN_LANES];
+                        } else if k < net.lo_pad + n {
+                            let (dy, dx) = ((k - net.lo_pad) / m, (k - net.lo_pad) % m);
+                            let base = (y + dy - r) * width + x + dx - r;
+                            if let Some(src) = v.get(base..base + MEDIAN_LANES) {
+                                for (d, &s) in lane.iter_mut().zip(src) {
+                                    *d = s;
+                                    finite &= s.is_finite();
+                                }
+                            } else {
+                                finite = false;
+                            }
+                        }
+                    }
+                    if finite && let Some(med) = net.run(lanes) {
+                        if let Some(o) = row.get_mut(x..x + MEDIAN_LANES) {
+                            o.copy_from_slice(&med);
+                        }
+                        x += MEDIAN_LANES;
+                        continue;
                     }
                 }
-                *o = if buf.is_empty() {
-                    f32::NAN
-                } else {
-                    let mid = buf.len() / 2;
-                    let (_, med, _) = buf.select_nth_unstable_by(mid, f32::total_cmp);
-                    *med
-                };
+                let rx = r.min(x).min(width - 1 - x);
+                if let Some(o) = row.get_mut(x) {
+                    *o = median_select(v, width, x, y, rx, ry, buf);
+                }
+                x += 1;
             }
         },
     );
@@ -547,39 +835,24 @@ fn kalman(
     warnings: &mut Vec<String>,
 ) -> (Vec<f32>, Vec<f32>) {
     let (w, h) = (filter.width, filter.height);
-    let mut state = vec![0.0_f32; PLANES * w * h];
-    state
-        .par_chunks_mut(PLANES * w)
-        .for_each(|row| filter.reset_row(row));
+    let mut state: Vec<Cell> = Vec::new();
+    state.par_extend(rayon::iter::repeat_n(filter.prior(), w * h));
+    let mut meas = Measurements::default();
     let mut prev_index: Option<usize> = None;
     let mut diverged = 0;
     for (k, flow) in flows.iter().enumerate() {
-        let meas = measurements(flow, u_land, min_confidence);
+        meas.fill(flow, u_land, min_confidence);
         note_frame(k, flow, &meas, prev_index, warnings);
         let steps = prev_index.map(|p| flow.frame_index.saturating_sub(p) as f64);
         prev_index = Some(flow.frame_index);
-        let stats = state
-            .par_chunks_mut(PLANES * w)
+        let meas = &meas;
+        diverged += state
+            .par_chunks_mut(BAND_ROWS * w)
             .enumerate()
-            .map_init(
-                || RowScratch {
-                    old: vec![0.0; PLANES * w],
-                    col: vec![[0.0; 5]; w],
-                },
-                |sc, (y, row)| {
-                    let mut st = RowStats::default();
-                    if let Some(steps) = steps {
-                        sc.old.copy_from_slice(row);
-                        st = filter.predict_row(row, &sc.old, steps);
-                    }
-                    if meas.valid > 0 {
-                        filter.update_row(y, row, &meas, &mut sc.col);
-                    }
-                    st
-                },
-            )
-            .reduce(RowStats::default, |a, b| a + b);
-        diverged += stats.diverged;
+            .map_init(SweepScratch::default, |sc, (band, rows)| {
+                filter.frame_band(band * BAND_ROWS, rows, meas, steps, sc)
+            })
+            .sum::<usize>();
     }
     if diverged > 0 {
         warnings.push(format!(
@@ -587,26 +860,17 @@ fn kalman(
         ));
     }
     let limit = (UNMEASURED_SHARE * INITIAL_VARIANCE) as f32;
-    let mut iota = vec![f32::NAN; w * h];
-    let mut var = vec![f32::NAN; w * h];
-    iota.par_chunks_mut(w)
-        .zip(var.par_chunks_mut(w))
-        .zip(state.par_chunks(PLANES * w))
-        .for_each(|((io, va), st)| {
-            let (Some(iv), Some(vv)) = (
-                st.get(IOTA * w..(IOTA + 1) * w),
-                st.get(VAR_IOTA * w..(VAR_IOTA + 1) * w),
-            ) else {
-                return;
-            };
-            for (((o, ov), &i), &v) in io.iter_mut().zip(va.iter_mut()).zip(iv).zip(vv) {
-                if v.is_finite() && v < limit && i.is_finite() {
-                    *o = i;
-                    *ov = v;
-                }
+    state
+        .par_iter()
+        .map(|c| {
+            let (i, v) = (c[IOTA], c[VAR_IOTA]);
+            if v.is_finite() && v < limit && i.is_finite() {
+                (i, v)
+            } else {
+                (f32::NAN, f32::NAN)
             }
-        });
-    (iota, var)
+        })
+        .unzip()
 }
 
 /// Adds the warnings about one flow field (dropped, non-finite flow, frame gap).
@@ -659,7 +923,8 @@ fn average(
     let noise = f64::from(params.measurement_noise_px2);
     let mut prev_index = None;
     for (k, flow) in flows.iter().enumerate() {
-        let meas = measurements(flow, -fu / z_ref, params.min_confidence);
+        let mut meas = Measurements::default();
+        meas.fill(flow, -fu / z_ref, params.min_confidence);
         note_frame(k, flow, &meas, prev_index, warnings);
         prev_index = Some(flow.frame_index);
         if meas.valid == 0 {
@@ -1061,6 +1326,33 @@ mod tests {
             estimate_depth(&flows, &no_step, &p),
             Err(StageError::InvalidParam { .. })
         ));
+    }
+
+    #[test]
+    fn median_network_matches_selection() {
+        let mut rng = Rng::new(4);
+        let (w, h) = (45, 23);
+        let mut v: Vec<f32> = (0..w * h).map(|_| rng.gauss() as f32).collect();
+        for i in (0..w * h).step_by(97) {
+            v[i] = f32::NAN;
+        }
+        let mut buf = Vec::new();
+        for m in [3, 5, 7] {
+            let r = m / 2;
+            let mut out = vec![0.0; w * h];
+            median_filter(&v, w, h, m, &mut out);
+            for y in 0..h {
+                for x in 0..w {
+                    let (rx, ry) = (r.min(x).min(w - 1 - x), r.min(y).min(h - 1 - y));
+                    let want = median_select(&v, w, x, y, rx, ry, &mut buf);
+                    assert_eq!(
+                        out[y * w + x].to_bits(),
+                        want.to_bits(),
+                        "m {m} at ({x}, {y})"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

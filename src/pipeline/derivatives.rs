@@ -250,6 +250,7 @@ impl RowShift {
     }
 
     /// Resamples `src` into `dst` (same length).
+    #[inline(always)]
     fn apply(&self, src: &[f32], dst: &mut [f32]) {
         let w = src.len().min(dst.len());
         if w == 0 {
@@ -307,6 +308,7 @@ impl RowShift {
 }
 
 /// `dst[x] = Σ_j taps[j]·src[clamp(x + j − 2)]` (a 5-tap correlation with clamped borders).
+#[inline(always)]
 fn correlate_row5(src: &[f32], taps: &[f32; 5], dst: &mut [f32]) {
     let w = src.len().min(dst.len());
     if w == 0 {
@@ -345,6 +347,7 @@ fn correlate_row5(src: &[f32], taps: &[f32; 5], dst: &mut [f32]) {
 }
 
 /// `dst = Σ_j taps[j]·rows[j]` over five rows of equal length.
+#[inline(always)]
 fn combine_rows5(rows: [&[f32]; 5], taps: &[f32; 5], dst: &mut [f32]) {
     let len = dst.len();
     let [a, b, c, d, e] = rows.map(|r| &r[..len.min(r.len())]);
@@ -368,6 +371,7 @@ fn row_of(buf: &[f32], y: usize, width: usize) -> &[f32] {
 }
 
 /// `acc = t·src` when `first`, else `acc += t·src`.
+#[inline(always)]
 fn axpy(acc: &mut [f32], t: f32, src: &[f32], first: bool) {
     let len = acc.len().min(src.len());
     let (acc, src) = (&mut acc[..len], &src[..len]);
@@ -437,6 +441,72 @@ impl BandScratch {
     }
 }
 
+/// What every band of one Simoncelli window shares.
+struct BandCtx<'a> {
+    window: &'a [Image],
+    shifts: &'a [RowShift],
+    p7: &'a [f32; SIMONCELLI_WINDOW_FRAMES],
+    d7: &'a [f32; SIMONCELLI_WINDOW_FRAMES],
+    /// Left/right columns without data (see [`prewarp_margin`]).
+    margin: usize,
+}
+
+/// [`simoncelli_band`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn simoncelli_band_avx2(ctx: &BandCtx, s: &mut BandScratch, y0: usize, outs: [&mut [f32]; 4]) {
+    simoncelli_band(ctx, s, y0, outs);
+}
+
+/// Rows `y0..` of one window: temporal 7-tap filters (with pre-warp) into `s.p`/`s.d`, then
+/// the vertical and horizontal 5-tap passes into `outs = [ix, iy, it, image]` (whole rows).
+#[inline(always)]
+fn simoncelli_band(ctx: &BandCtx, s: &mut BandScratch, y0: usize, outs: [&mut [f32]; 4]) {
+    let [ix_b, iy_b, it_b, im_b] = outs;
+    let (width, height) = (ctx.window[0].width, ctx.window[0].height);
+    let rows = ix_b.len() / width;
+    // Temporal filtering of rows y0 − 2 ..= y0 + rows + 1 (clamped).
+    for r in 0..rows + 2 * RADIUS {
+        let y = (y0 as isize + r as isize - RADIUS as isize).clamp(0, height as isize - 1) as usize;
+        let p_row = &mut s.p[r * width..(r + 1) * width];
+        let d_row = &mut s.d[r * width..(r + 1) * width];
+        let mut first_d = true;
+        for (k, frame) in ctx.window.iter().enumerate() {
+            let src = frame.row(y);
+            let row: &[f32] = if ctx.shifts[k].is_identity() {
+                src
+            } else {
+                ctx.shifts[k].apply(src, &mut s.shifted);
+                &s.shifted
+            };
+            axpy(p_row, ctx.p7[k], row, k == 0);
+            if ctx.d7[k] != 0.0 {
+                axpy(d_row, ctx.d7[k], row, first_d);
+                first_d = false;
+            }
+        }
+    }
+    for r in 0..rows {
+        combine_rows5(five_rows(&s.p, r, width), &P5, &mut s.yp);
+        combine_rows5(five_rows(&s.p, r, width), &D5, &mut s.yd);
+        combine_rows5(five_rows(&s.d, r, width), &P5, &mut s.ypd);
+        let out = r * width..(r + 1) * width;
+        correlate_row5(&s.yp, &D5, &mut ix_b[out.clone()]);
+        correlate_row5(&s.yp, &P5, &mut im_b[out.clone()]);
+        correlate_row5(&s.yd, &P5, &mut iy_b[out.clone()]);
+        correlate_row5(&s.ypd, &P5, &mut it_b[out.clone()]);
+        let y = y0 + r;
+        let m = if y < RADIUS || y + RADIUS >= height {
+            width
+        } else {
+            ctx.margin
+        };
+        blank_margins(&mut ix_b[out.clone()], m);
+        blank_margins(&mut iy_b[out.clone()], m);
+        blank_margins(&mut it_b[out], m);
+    }
+}
+
 /// One Simoncelli derivative set from a 7-frame window centred on group frame `centre`.
 fn simoncelli_window(window: &[Image], centre: usize, base_flow_px: f64) -> Derivatives {
     let (width, height) = (window[0].width, window[0].height);
@@ -447,6 +517,8 @@ fn simoncelli_window(window: &[Image], centre: usize, base_flow_px: f64) -> Deri
         .collect();
 
     let margin = prewarp_margin(&shifts, RADIUS);
+    #[cfg(target_arch = "x86_64")]
+    let avx2 = std::arch::is_x86_feature_detected!("avx2");
     let n = width * height;
     let (mut ix, mut iy, mut it, mut image) =
         (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
@@ -459,49 +531,21 @@ fn simoncelli_window(window: &[Image], centre: usize, base_flow_px: f64) -> Deri
         .for_each_init(
             || BandScratch::new(width),
             |s, (band, (((ix_b, iy_b), it_b), im_b))| {
-                let y0 = band * BAND_ROWS;
-                let rows = ix_b.len() / width;
-                // Temporal filtering of rows y0 − 2 ..= y0 + rows + 1 (clamped).
-                for r in 0..rows + 2 * RADIUS {
-                    let y = (y0 as isize + r as isize - RADIUS as isize)
-                        .clamp(0, height as isize - 1) as usize;
-                    let p_row = &mut s.p[r * width..(r + 1) * width];
-                    let d_row = &mut s.d[r * width..(r + 1) * width];
-                    let mut first_d = true;
-                    for (k, frame) in window.iter().enumerate() {
-                        let src = frame.row(y);
-                        let row: &[f32] = if shifts[k].is_identity() {
-                            src
-                        } else {
-                            shifts[k].apply(src, &mut s.shifted);
-                            &s.shifted
-                        };
-                        axpy(p_row, p7[k], row, k == 0);
-                        if d7[k] != 0.0 {
-                            axpy(d_row, d7[k], row, first_d);
-                            first_d = false;
-                        }
-                    }
+                let ctx = BandCtx {
+                    window,
+                    shifts: &shifts,
+                    p7: &p7,
+                    d7: &d7,
+                    margin,
+                };
+                let outs = [ix_b, iy_b, it_b, im_b];
+                #[cfg(target_arch = "x86_64")]
+                if avx2 {
+                    // SAFETY: `avx2` is true only when the CPU reported AVX2.
+                    unsafe { simoncelli_band_avx2(&ctx, s, band * BAND_ROWS, outs) };
+                    return;
                 }
-                for r in 0..rows {
-                    combine_rows5(five_rows(&s.p, r, width), &P5, &mut s.yp);
-                    combine_rows5(five_rows(&s.p, r, width), &D5, &mut s.yd);
-                    combine_rows5(five_rows(&s.d, r, width), &P5, &mut s.ypd);
-                    let out = r * width..(r + 1) * width;
-                    correlate_row5(&s.yp, &D5, &mut ix_b[out.clone()]);
-                    correlate_row5(&s.yp, &P5, &mut im_b[out.clone()]);
-                    correlate_row5(&s.yd, &P5, &mut iy_b[out.clone()]);
-                    correlate_row5(&s.ypd, &P5, &mut it_b[out.clone()]);
-                    let y = y0 + r;
-                    let m = if y < RADIUS || y + RADIUS >= height {
-                        width
-                    } else {
-                        margin
-                    };
-                    blank_margins(&mut ix_b[out.clone()], m);
-                    blank_margins(&mut iy_b[out.clone()], m);
-                    blank_margins(&mut it_b[out], m);
-                }
+                simoncelli_band(&ctx, s, band * BAND_ROWS, outs);
             },
         );
     let wrap = |data| Image {

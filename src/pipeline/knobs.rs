@@ -146,6 +146,47 @@ pub const KNOB_DOCS: &[(&str, &str)] = &[
     ("dsp.lowpass", "apply the 2nd-order Butterworth low-pass"),
     ("dsp.lowpass_hz", "its −3 dB cutoff, Hz"),
     ("dsp.eq", "playback EQ: flat, riaa, turnover500"),
+    (
+        "flow.groove_weight",
+        "weight γ of the groove-orientation penalty, as a multiple of λ",
+    ),
+    (
+        "flow.sor_omega",
+        "over-relaxation ω of Gauss–Seidel (1 = plain; 1 < ω < 2 converges faster); Jacobi ignores it",
+    ),
+    (
+        "depth.neighbourhood_px",
+        "side of the neighbourhood whose flows measure each pixel's plane (odd, px)",
+    ),
+    (
+        "walls.smooth_px",
+        "half-side of the box smoothing the depth map before differencing, px",
+    ),
+    (
+        "walls.column_window_px",
+        "columns over which the median wall band is taken (odd, px)",
+    ),
+    (
+        "hough.min_votes_per_column",
+        "a peak needs this many votes per image column",
+    ),
+    (
+        "hough.min_peak_ratio",
+        "a peak needs this fraction of the strongest peak's votes",
+    ),
+    (
+        "hough.peak_rho_band_px",
+        "find peaks on votes summed over ±this many ρ px (0 = plain Hough), for wiggling stripes",
+    ),
+    (
+        "hough.max_vote_points",
+        "at most this many in-focus pixels vote (0 = all); beyond it every k-th votes",
+    ),
+    (
+        "dsp.dc_block",
+        "apply a first-order DC-blocking high-pass first (per-group tilt bias becomes DC)",
+    ),
+    ("dsp.dc_block_hz", "its −3 dB corner, Hz"),
 ];
 
 /// The documentation line of `key` (`table.key`), if any.

@@ -208,7 +208,7 @@ pub const WALL_SLOPE_MIN_RATIO: f64 = 0.5;
 /// ... and at most this multiple of it (steeper changes are borders or noise, not walls).
 pub const WALL_SLOPE_MAX_RATIO: f64 = 2.0;
 /// Bytes of rows the temporal blocking tries to keep cache-resident per thread.
-const BLOCK_CACHE_BYTES: usize = 640 * 1024;
+const BLOCK_CACHE_BYTES: usize = 896 * 1024;
 /// Longest block of iterations between convergence checks.
 const MAX_BLOCK_ITERATIONS: usize = 16;
 
@@ -254,9 +254,11 @@ pub fn compute_flow(
             d.base_flow_px
         )));
     }
-    if params.method == FlowMethod::LucasKanade {
-        return Ok(lucas_kanade(d, params));
-    }
+    let groove = match params.method {
+        FlowMethod::LucasKanade => return Ok(lucas_kanade(d, params)),
+        FlowMethod::HornSchunck => false,
+        FlowMethod::GrooveHornSchunck => true,
+    };
     if width < 2 || height < 2 {
         return Err(bad_input(format!(
             "Horn–Schunck needs at least 2x2 pixels, got {width}x{height}"
@@ -265,55 +267,51 @@ pub fn compute_flow(
     let lay = Layout::new(width, height);
     let simd = Simd::detect();
     let plain = || Problem::plain(&lay, d, params.lambda);
-    let (state, iterations, converged) = match params.method {
-        FlowMethod::HornSchunck => {
-            let mut st = SplitState::zeros(&lay);
-            let (it, conv) = plain().solve(&mut st, params, simd);
-            (st, it, conv)
+    let (state, iterations, converged) = if groove {
+        if !(focal_px.is_finite() && focal_px > 0.0) {
+            return Err(StageError::InvalidParam {
+                name: "focal_px".to_string(),
+                problem: format!("{focal_px} is not a positive finite focal length"),
+            });
         }
-        FlowMethod::GrooveHornSchunck => {
-            if !(focal_px.is_finite() && focal_px > 0.0) {
-                return Err(StageError::InvalidParam {
-                    name: "focal_px".to_string(),
-                    problem: format!("{focal_px} is not a positive finite focal length"),
-                });
+        let mut st = SplitState::zeros(&lay);
+        let mut first_iterations = 0;
+        let estimated;
+        let walls = match walls {
+            Some(w) => {
+                if w.width != width || w.height != height || w.sign.len() != n {
+                    return Err(bad_input(format!(
+                        "wall map is {}x{} ({} values), derivatives are {width}x{height}",
+                        w.width,
+                        w.height,
+                        w.sign.len()
+                    )));
+                }
+                w
             }
-            let mut st = SplitState::zeros(&lay);
-            let mut first_iterations = 0;
-            let estimated;
-            let walls = match walls {
-                Some(w) => {
-                    if w.width != width || w.height != height || w.sign.len() != n {
-                        return Err(bad_input(format!(
-                            "wall map is {}x{} ({} values), derivatives are {width}x{height}",
-                            w.width,
-                            w.height,
-                            w.sign.len()
-                        )));
-                    }
-                    w
-                }
-                None => {
-                    let (it, _) = plain().solve(&mut st, params, simd);
-                    first_iterations = it;
-                    let (u, v) = st.to_images(&lay, d.base_flow_px);
-                    let interim = FlowField {
-                        u,
-                        v,
-                        confidence: Image::zeros(width, height),
-                        iterations: it,
-                        converged: false,
-                        frame_index: d.frame_index,
-                    };
-                    estimated = estimate_wall_sides(&interim, focal_px)?;
-                    &estimated
-                }
-            };
-            let problem = Problem::groove(&lay, d, walls, focal_px, params);
-            let (it, conv) = problem.solve(&mut st, params, simd);
-            (st, first_iterations.saturating_add(it), conv)
-        }
-        FlowMethod::LucasKanade => unreachable_lk(),
+            None => {
+                let (it, _) = plain().solve(&mut st, params, simd);
+                first_iterations = it;
+                let (u, v) = st.to_images(&lay, d.base_flow_px);
+                let interim = FlowField {
+                    u,
+                    v,
+                    confidence: Image::zeros(width, height),
+                    iterations: it,
+                    converged: false,
+                    frame_index: d.frame_index,
+                };
+                estimated = estimate_wall_sides(&interim, focal_px)?;
+                &estimated
+            }
+        };
+        let problem = Problem::groove(&lay, d, walls, focal_px, params);
+        let (it, conv) = problem.solve(&mut st, params, simd);
+        (st, first_iterations.saturating_add(it), conv)
+    } else {
+        let mut st = SplitState::zeros(&lay);
+        let (it, conv) = plain().solve(&mut st, params, simd);
+        (st, it, conv)
     };
     let (u, v) = state.to_images(&lay, d.base_flow_px);
     Ok(FlowField {
@@ -324,11 +322,6 @@ pub fn compute_flow(
         converged,
         frame_index: d.frame_index,
     })
-}
-
-/// Lucas–Kanade returns before the Horn–Schunck match; this arm only satisfies exhaustiveness.
-fn unreachable_lk() -> (SplitState, u32, bool) {
-    (SplitState::default(), 0, false)
 }
 
 fn bad_input(problem: String) -> StageError {
@@ -1197,7 +1190,8 @@ fn groove_px(
 // Horn–Schunck: the row kernels
 // ---------------------------------------------------------------------------------------------
 
-/// The widest vector instruction set the row kernels may use (detected once per call).
+/// The vector instruction set the row kernels may use (detected once per call). AVX-512
+/// measured no faster than AVX2 here: the sweeps are bound by cache bandwidth.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Simd {
     /// Whatever the build target allows.
@@ -1205,18 +1199,12 @@ enum Simd {
     /// 256-bit AVX2.
     #[cfg(target_arch = "x86_64")]
     Avx2,
-    /// 512-bit AVX-512F.
-    #[cfg(target_arch = "x86_64")]
-    Avx512,
 }
 
 impl Simd {
     fn detect() -> Self {
         #[cfg(target_arch = "x86_64")]
         {
-            if std::arch::is_x86_feature_detected!("avx512f") {
-                return Simd::Avx512;
-            }
             if std::arch::is_x86_feature_detected!("avx2") {
                 return Simd::Avx2;
             }
@@ -1238,30 +1226,12 @@ impl Simd {
     ) {
         match self {
             Simd::Baseline => row_impl::<GROOVE, RELAX>(k, odd, lr, up, dn, coef, dst),
-            // SAFETY: `Simd::Avx512` and `Simd::Avx2` are only created by `detect` after the
-            // CPU reported the feature, which is all these functions require.
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => unsafe { row_avx512::<GROOVE, RELAX>(k, odd, lr, up, dn, coef, dst) },
+            // SAFETY: `Simd::Avx2` is only created by `detect` after the CPU reported AVX2,
+            // which is all `row_avx2` requires.
             #[cfg(target_arch = "x86_64")]
             Simd::Avx2 => unsafe { row_avx2::<GROOVE, RELAX>(k, odd, lr, up, dn, coef, dst) },
         }
     }
-}
-
-/// [`row_impl`] compiled for AVX-512F.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-#[allow(clippy::too_many_arguments)]
-fn row_avx512<const GROOVE: bool, const RELAX: bool>(
-    k: Consts,
-    odd: bool,
-    lr: &[f32],
-    up: &[f32],
-    dn: &[f32],
-    coef: &[f32],
-    dst: &mut [f32],
-) {
-    row_impl::<GROOVE, RELAX>(k, odd, lr, up, dn, coef, dst);
 }
 
 /// [`row_impl`] compiled for AVX2.

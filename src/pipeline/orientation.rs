@@ -229,7 +229,9 @@ fn irls_pass(
 ) -> [f64; N_SUMS] {
     let [a, b, c] = plane;
     let mut acc = [[0.0_f64; LANES]; N_SUMS];
-    let add = |acc: &mut [[f64; LANES]; N_SUMS], l: usize, x: f64, y: f64, z: f64, wo: f64| {
+    // One point into lane `l` of the accumulators; returns its new weight.
+    let point = |acc: &mut [[f64; LANES]; N_SUMS], l: usize, p: [f64; 4]| -> f64 {
+        let [x, y, z, wo] = p;
         let r = z - a * x - b * y - c;
         let w = 1.0 / (1.0 + r * r * k);
         let terms = [
@@ -246,32 +248,58 @@ fn irls_pass(
             wo,
         ];
         for (s, t) in acc.iter_mut().zip(terms) {
-            s[l] += t;
+            if let Some(s) = s.get_mut(l) {
+                *s += t;
+            }
         }
         w
     };
-    let xs = set.x.chunks_exact(LANES);
-    let ys = set.y.chunks_exact(LANES);
-    let zs = set.z.chunks_exact(LANES);
-    let wos = w_old.chunks_exact(LANES);
-    let tail = xs.remainder().len();
-    let n = set.len();
-    let mut wns = w_new.chunks_exact_mut(LANES);
-    for ((((xc, yc), zc), woc), wnc) in xs.zip(ys).zip(zs).zip(wos).zip(&mut wns) {
+    let n = set.len().min(w_old.len()).min(w_new.len());
+    let full = n - n % LANES;
+    let chunks = set.x[..full]
+        .chunks_exact(LANES)
+        .zip(set.y[..full].chunks_exact(LANES))
+        .zip(set.z[..full].chunks_exact(LANES))
+        .zip(w_old[..full].chunks_exact(LANES))
+        .zip(w_new[..full].chunks_exact_mut(LANES));
+    for ((((xc, yc), zc), woc), wnc) in chunks {
+        let (Ok(xc), Ok(yc), Ok(zc), Ok(woc), Ok(wnc)) = (
+            <&[f64; LANES]>::try_from(xc),
+            <&[f64; LANES]>::try_from(yc),
+            <&[f64; LANES]>::try_from(zc),
+            <&[f64; LANES]>::try_from(woc),
+            <&mut [f64; LANES]>::try_from(wnc),
+        ) else {
+            continue;
+        };
+        // Lane-wise arithmetic on fixed-size arrays (the compiler maps it onto SIMD registers).
+        let r: [f64; LANES] = std::array::from_fn(|l| zc[l] - a * xc[l] - b * yc[l] - c);
+        let w: [f64; LANES] = std::array::from_fn(|l| 1.0 / (1.0 + r[l] * r[l] * k));
+        *wnc = w;
         for l in 0..LANES {
-            if let (Some(&x), Some(&y), Some(&z), Some(&wo), Some(wn)) =
-                (xc.get(l), yc.get(l), zc.get(l), woc.get(l), wnc.get_mut(l))
-            {
-                *wn = add(&mut acc, l, x, y, z, wo);
-            }
+            let (x, y, z, wo, wl) = (xc[l], yc[l], zc[l], woc[l], w[l]);
+            let (wx, wy) = (wl * x, wl * y);
+            acc[0][l] += wl;
+            acc[1][l] += wx;
+            acc[2][l] += wy;
+            acc[3][l] += wl * z;
+            acc[4][l] += wx * x;
+            acc[5][l] += wx * y;
+            acc[6][l] += wy * y;
+            acc[7][l] += wx * z;
+            acc[8][l] += wy * z;
+            acc[9][l] += wo * r[l].abs();
+            acc[10][l] += wo;
         }
     }
-    for (j, wn) in wns.into_remainder().iter_mut().enumerate() {
-        let i = n - tail + j;
+    for i in full..n {
         if let (Some(&x), Some(&y), Some(&z), Some(&wo)) =
             (set.x.get(i), set.y.get(i), set.z.get(i), w_old.get(i))
         {
-            *wn = add(&mut acc, 0, x, y, z, wo);
+            let w = point(&mut acc, 0, [x, y, z, wo]);
+            if let Some(wn) = w_new.get_mut(i) {
+                *wn = w;
+            }
         }
     }
     acc.map(|lanes| lanes.iter().sum())
@@ -1160,5 +1188,72 @@ mod tests {
             orient_from_lines(&same, w, h, &[100.0], &geom, &params()),
             Err(StageError::NotFound { .. })
         ));
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // Tests fail loudly on purpose.
+mod end_to_end {
+    use super::*;
+    use crate::pipeline::depth::{DepthParams, estimate_depth};
+    use crate::pipeline::optical_flow::FlowField;
+    use crate::pipeline::walls::test_support::{Groove, Rng, paper_geometry};
+    use crate::pipeline::walls::{WallParams, find_walls};
+
+    /// Flows of a laterally sliding groove (with flow noise) → Kalman depth → walls → fits.
+    fn run(noise_px: f64, seed: u64) -> Vec<(WallSide, f64)> {
+        let geom = paper_geometry();
+        let s = 0.05;
+        let g = Groove::new(geom, move |x_um| s * x_um);
+        let (w, h) = (300, 560);
+        let mut rng = Rng::new(seed);
+        let fu = geom.focal_px * geom.frame_step_um;
+        let flows: Vec<FlowField> = (0..6)
+            .map(|k| {
+                let cam = f64::from(k) * geom.frame_step_um;
+                let u = Image::from_fn(w, h, |x, y| {
+                    let z = g.z_px_from(x as f64, y as f64, w, h, cam);
+                    (-fu / z + noise_px * rng.gauss()) as f32
+                });
+                FlowField {
+                    u,
+                    v: Image::zeros(w, h),
+                    confidence: Image::filled(w, h, 1.0),
+                    iterations: 1,
+                    converged: true,
+                    frame_index: k as usize,
+                }
+            })
+            .collect();
+        let depth = estimate_depth(&flows, &geom, &DepthParams::default()).unwrap();
+        let walls = find_walls(&depth, &geom, &WallParams::default()).unwrap();
+        let out = orient_from_depth(
+            &depth,
+            &walls,
+            &[75.0, 150.0, 225.0],
+            &geom,
+            &OrientationParams::default(),
+        )
+        .unwrap();
+        out.walls
+            .iter()
+            .flat_map(|wo| wo.samples.iter().map(move |smp| (wo.side, smp.tan_theta)))
+            .collect()
+    }
+
+    #[test]
+    fn sliding_groove_gives_its_slope_from_flow_to_tan_theta() {
+        let want = 0.05 / 2f64.sqrt();
+        for (noise, tol) in [(0.0, 1e-5), (0.002, 5e-3)] {
+            let got = run(noise, 5);
+            eprintln!("noise {noise}: {got:?} want {want}");
+            assert_eq!(got.len(), 6);
+            for (side, t) in got {
+                assert!(
+                    (t - want).abs() < tol,
+                    "noise {noise} {side:?}: {t} vs {want}"
+                );
+            }
+        }
     }
 }

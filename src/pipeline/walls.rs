@@ -501,6 +501,18 @@ pub(crate) mod test_support {
 
         /// Z seen at pixel (x, y): the fixed point of Z = z_at((x − cx)·Z/f, (y − cy)·Z/f).
         pub(crate) fn z_px(&self, x: f64, y: f64, width: usize, height: usize) -> f64 {
+            self.z_px_from(x, y, width, height, 0.0)
+        }
+
+        /// Z seen at pixel (x, y) with the camera moved to X = `cam_um`.
+        pub(crate) fn z_px_from(
+            &self,
+            x: f64,
+            y: f64,
+            width: usize,
+            height: usize,
+            cam_um: f64,
+        ) -> f64 {
             let f = self.geom.focal_px;
             let (px, py) = (
                 (x - (width as f64 - 1.0) / 2.0) / f,
@@ -508,7 +520,7 @@ pub(crate) mod test_support {
             );
             let mut z = self.land_um;
             for _ in 0..40 {
-                z = self.z_at(px * z, py * z);
+                z = self.z_at(px * z + cam_um, py * z);
             }
             z
         }

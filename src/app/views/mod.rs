@@ -258,7 +258,7 @@ pub fn stage_banner(ui: &mut Ui, stage: Stage, status: &StageStatus) {
     });
 }
 
-/// A placeholder message inside a view that has nothing to draw yet.
+/// A centred notice inside a view that has nothing to draw yet.
 pub fn empty_note(ui: &mut Ui, text: &str) {
     ui.add_space(20.0);
     ui.vertical_centered(|ui| ui.weak(text));
