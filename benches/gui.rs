@@ -132,6 +132,22 @@ fn ui_frame_times(scan: PathBuf) {
             std::thread::sleep(Duration::from_millis(5));
         }
     }
+    // Scrubbing through the frames (the worker rendered them with the group).
+    let mut worst_scrub = Duration::ZERO;
+    for i in 0..12 {
+        let Some(wb) = h.state_mut().0.as_mut() else {
+            return;
+        };
+        wb.set_view(View::Frame);
+        wb.set_frame(i);
+        let s = Instant::now();
+        h.step();
+        worst_scrub = worst_scrub.max(s.elapsed());
+    }
+    println!(
+        "UI frames while scrubbing 12 frames: worst step {:.1} ms",
+        worst_scrub.as_secs_f64() * 1e3
+    );
     let in_app = h
         .state()
         .0

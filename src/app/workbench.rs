@@ -402,7 +402,6 @@ impl Workbench {
             input: JobInput::Load {
                 entry,
                 meta: Arc::new(scan.meta.clone()),
-                frame: None, // the middle one, where a new scan starts
             },
             cache: StageCache::default(),
         };
@@ -668,7 +667,6 @@ impl Workbench {
             None => JobInput::Load {
                 entry,
                 meta: meta.clone(),
-                frame: Some(self.frame),
             },
         };
         let current = matches!(input, JobInput::Ready(_)).then_some(from);
@@ -752,8 +750,8 @@ impl Workbench {
                     generation,
                     group,
                     frames,
-                    texture,
-                } => self.on_loaded(generation, group, frames, texture),
+                    textures,
+                } => self.on_loaded(generation, group, frames, textures),
                 WorkerEvent::StageDone(d) => self.on_stage_done(*d),
                 WorkerEvent::Finished {
                     generation,
@@ -791,12 +789,10 @@ impl Workbench {
         generation: u64,
         group: usize,
         frames: Result<Arc<Vec<Image>>, String>,
-        texture: Option<(usize, Arc<egui::ColorImage>)>,
+        textures: Vec<Arc<egui::ColorImage>>,
     ) {
         let upload = |wb: &mut Self, f: &Arc<Vec<Image>>| {
-            if let Some((i, img)) = texture.clone() {
-                wb.textures.set_frame(&wb.ctx, group, i, f, img);
-            }
+            wb.textures.set_frames(group, f, textures.clone());
         };
         if self
             .pending_open

@@ -8,6 +8,8 @@ use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use rayon::prelude::*;
+
 use super::render::{self, Rendered};
 
 use crate::image::Image;
@@ -28,9 +30,6 @@ pub enum JobInput {
         entry: GroupEntry,
         /// The scan's metadata.
         meta: Arc<ScanMeta>,
-        /// Frame to render a texture of along with the frames (the one on screen; None: the
-        /// middle one).
-        frame: Option<usize>,
     },
 }
 
@@ -123,8 +122,9 @@ pub enum WorkerEvent {
         group: usize,
         /// The frames or the error text.
         frames: Result<Arc<Vec<Image>>, String>,
-        /// Texture of the frame on screen (index, pixels), rendered off the UI thread.
-        texture: Option<(usize, Arc<egui::ColorImage>)>,
+        /// Textures of every frame, rendered off the UI thread (scrubbing and the movie only
+        /// upload them).
+        textures: Vec<Arc<egui::ColorImage>>,
     },
     /// A stage finished.
     StageDone(Box<StageDone>),
@@ -244,17 +244,21 @@ pub fn run_job(
     }
     let input = match job.input {
         JobInput::Ready(input) => input,
-        JobInput::Load { entry, meta, frame } => {
+        JobInput::Load { entry, meta } => {
             let loaded = load_group(&entry).map(Arc::new).map_err(|e| e.to_string());
-            let texture = loaded.as_ref().ok().and_then(|f| {
-                let i = frame.unwrap_or(f.len() / 2).min(f.len().saturating_sub(1));
-                f.get(i).map(|img| (i, Arc::new(render::grey(img))))
-            });
+            let textures = loaded.as_ref().map_or_else(
+                |_| Vec::new(),
+                |f| {
+                    f.par_iter()
+                        .map(|img| Arc::new(render::grey(img)))
+                        .collect()
+                },
+            );
             let _ = tx.send(WorkerEvent::Loaded {
                 generation,
                 group: entry.index,
                 frames: loaded.clone(),
-                texture,
+                textures,
             });
             repaint();
             match loaded {
@@ -479,7 +483,6 @@ mod tests {
             input: JobInput::Load {
                 entry: scan.groups[0].clone(),
                 meta: Arc::new(scan.meta.clone()),
-                frame: Some(3),
             },
             cache: StageCache::default(),
         }))
@@ -516,7 +519,6 @@ mod tests {
                 input: JobInput::Load {
                     entry: scan.groups[0].clone(),
                     meta: Arc::new(scan.meta.clone()),
-                    frame: None,
                 },
                 cache: StageCache::default(),
             })
