@@ -522,3 +522,50 @@ fn exports_a_view_as_png_and_round_trips_a_preset() {
     assert_eq!(wb(&h).params(), &p);
     settle(&mut h);
 }
+
+#[test]
+fn per_disc_preset_loads_on_open_and_metadata_saves_back() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = rendered_scan(
+        "own",
+        SynthConfig {
+            frames_per_group: 7,
+            max_groups: Some(2),
+            ..SynthConfig::quick_test()
+        },
+    );
+    let mut preset = groovescope::pipeline::PipelineParams::default();
+    preset.flow.lambda = 0.125;
+    std::fs::write(scan.join("preset.toml"), preset.to_toml_string().unwrap()).unwrap();
+    let mut h = harness(options(tmp.path(), Some(scan.clone()), DeviceChoice::Off));
+    settle(&mut h);
+    assert_eq!(
+        wb(&h).params().flow.lambda,
+        0.125,
+        "the scan's preset.toml was loaded"
+    );
+    // The metadata form's save path: validated, written atomically, the group reruns with it.
+    let runs = wb(&h).stage_runs(Stage::Derivatives);
+    let mut meta = wb(&h).scan().unwrap().meta.clone();
+    meta.record.rpm = 45.0;
+    wb_mut(&mut h).save_meta(meta.clone()).unwrap();
+    settle(&mut h);
+    let back = groovescope::io::Scan::open(&scan).unwrap();
+    assert_eq!(back.meta.record.rpm, 45.0);
+    assert!(
+        back.meta.extra.contains_key("synth"),
+        "unknown tables are kept"
+    );
+    assert_eq!(wb(&h).stage_runs(Stage::Derivatives), runs + 1);
+    let mut bad = meta;
+    bad.camera.pixel_pitch_um = -1.0;
+    assert!(wb_mut(&mut h).save_meta(bad).is_err());
+    assert_eq!(
+        groovescope::io::Scan::open(&scan)
+            .unwrap()
+            .meta
+            .camera
+            .pixel_pitch_um,
+        back.meta.camera.pixel_pitch_um
+    );
+}
