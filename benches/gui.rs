@@ -42,13 +42,29 @@ fn input(dir: &Path) -> GroupInput {
     }
 }
 
-/// Runs every stage once; returns the filled cache and the error that stopped it, if any.
-fn full_cache(input: &GroupInput, params: &PipelineParams) -> (StageCache, Option<String>) {
+/// Runs every stage once (printing each stage's time); returns the filled cache and the error
+/// that stopped it, if any.
+fn full_cache(
+    name: &str,
+    input: &GroupInput,
+    params: &PipelineParams,
+) -> (StageCache, Option<String>) {
     let mut cache = StageCache::default();
+    let mut t0 = Instant::now();
+    let mut times = Vec::new();
     let err = cache
-        .run_from(Stage::Derivatives, input, params, &mut |_, _| true)
+        .run_from(Stage::Derivatives, input, params, &mut |stage, _| {
+            times.push(format!(
+                "{} {:.0} ms",
+                stage.name(),
+                t0.elapsed().as_secs_f64() * 1e3
+            ));
+            t0 = Instant::now();
+            true
+        })
         .err()
         .map(|e| e.to_string());
+    println!("{name}: one full run: {}", times.join(", "));
     (cache, err)
 }
 
@@ -116,6 +132,22 @@ fn ui_frame_times(scan: PathBuf) {
             std::thread::sleep(Duration::from_millis(5));
         }
     }
+    // Scrubbing through the frames (the worker rendered them with the group).
+    let mut worst_scrub = Duration::ZERO;
+    for i in 0..12 {
+        let Some(wb) = h.state_mut().0.as_mut() else {
+            return;
+        };
+        wb.set_view(View::Frame);
+        wb.set_frame(i);
+        let s = Instant::now();
+        h.step();
+        worst_scrub = worst_scrub.max(s.elapsed());
+    }
+    println!(
+        "UI frames while scrubbing 12 frames: worst step {:.1} ms",
+        worst_scrub.as_secs_f64() * 1e3
+    );
     let in_app = h
         .state()
         .0
@@ -134,7 +166,7 @@ fn main() {
 
     let depth_dir = render(&tmp.path().join("depth"), SynthConfig::default());
     let depth_input = input(&depth_dir);
-    let (cache, err) = full_cache(&depth_input, &params);
+    let (cache, err) = full_cache("depth path", &depth_input, &params);
     if let Some(e) = &err {
         println!("note: the depth-path group stops at: {e}");
     }
@@ -155,7 +187,7 @@ fn main() {
 
     let dual_dir = render(&tmp.path().join("dual"), SynthConfig::dual_focus_demo());
     let dual_input = input(&dual_dir);
-    let (dual_cache, err) = full_cache(&dual_input, &params);
+    let (dual_cache, err) = full_cache("dual focus", &dual_input, &params);
     if let Some(e) = &err {
         println!("note: the dual-focus group stops at: {e}");
     }

@@ -2,16 +2,16 @@
 # Runs the workbench for real in an X window under Xvfb and saves a screenshot of each view
 # into screenshots/ (the app captures itself: GROOVESCOPE_SCREENSHOT, then closes).
 #
-# usage: scripts/screenshots.sh [SCAN] [DUAL_FOCUS_SCAN]
-#   SCAN             scan for overview, flow, depth and waveform (default assets/demo)
-#   DUAL_FOCUS_SCAN  scan with a [dual_focus] table for hough and stripes (default assets/demo_dual,
-#                    else SCAN)
+# usage: scripts/screenshots.sh [SCAN] [DEPTH_SCAN]
+#   SCAN        scan for overview, flow, hough, stripes and waveform (default assets/demo, a
+#               dual-focus scan)
+#   DEPTH_SCAN  scan on the depth path (no [dual_focus]) for the depth view; default: one rendered
+#               now with `groovescope synth --preset demo` (6 groups of a 440 Hz tone)
 # env: SCREENSHOT_DIR (default screenshots), GROOVESCOPE_BIN (default target/debug/groovescope, built when missing), VIEWS (names).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scan="${1:-assets/demo}"
-dual="${2:-assets/demo_dual}"
-[ -f "$dual/scan.toml" ] || dual="$scan"
+depth="${2:-}"
 bin="${GROOVESCOPE_BIN:-${CARGO_TARGET_DIR:-target}/debug/groovescope}"
 if [ ! -x "$bin" ]; then
     cargo build --locked
@@ -35,10 +35,14 @@ export DISPLAY="$display"
 sleep 1
 status=0
 for view in ${VIEWS:-overview flow hough stripes depth waveform}; do
-    case "$view" in
-        hough|stripes) s="$dual" ;;
-        *) s="$scan" ;;
-    esac
+    s="$scan"
+    if [ "$view" = depth ]; then
+        if [ -z "$depth" ]; then
+            depth="$GROOVESCOPE_CONFIG_DIR/depth-scan"
+            "$bin" synth --preset demo --tone 440 --duration 0.05 --max-groups 6 --quiet --out "$depth"
+        fi
+        s="$depth"
+    fi
     out="$outdir/$view.png"
     echo "== $view ($s) -> $out"
     # The overview and the waveform show the reconstructed clip.

@@ -81,15 +81,11 @@ fn rendered_scan(name: &str, cfg: SynthConfig) -> PathBuf {
     dir
 }
 
-/// The scan most tests run on: the bundled demo when present, else a small synthetic lateral
-/// scan (3 groups of 8 frames of 256×320 px, 440 Hz tone, with `reference.wav`).
-fn test_scan() -> PathBuf {
+/// A small synthetic lateral scan on the depth path: 3 groups of 8 frames of 256×320 px of a
+/// 440 Hz tone, with `reference.wav`.
+fn lateral_scan() -> PathBuf {
     static SCAN: OnceLock<PathBuf> = OnceLock::new();
     SCAN.get_or_init(|| {
-        let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
-        if demo.join("scan.toml").is_file() {
-            return demo;
-        }
         rendered_scan(
             "lateral",
             SynthConfig {
@@ -102,10 +98,15 @@ fn test_scan() -> PathBuf {
     .clone()
 }
 
-/// A small dual-focus scan (cover glass, three in-focus stripes): 2 groups of 8 frames of 320×700 px.
-fn dual_scan() -> PathBuf {
+/// The bundled demo scan (dual focus, with `reference.wav`); when it is missing, a small
+/// synthetic dual-focus scan (2 groups of 8 frames of 320×700 px) stands in.
+fn demo_scan() -> PathBuf {
     static SCAN: OnceLock<PathBuf> = OnceLock::new();
     SCAN.get_or_init(|| {
+        let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
+        if demo.join("scan.toml").is_file() {
+            return demo;
+        }
         rendered_scan(
             "dual",
             SynthConfig {
@@ -194,9 +195,9 @@ fn last_message(h: &H) -> String {
 }
 
 #[test]
-fn opens_a_scan_and_steps_through_groups() {
+fn opens_the_demo_scan_and_steps_through_groups() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan();
+    let scan = demo_scan();
     let mut h = harness(options(tmp.path(), Some(scan.clone()), DeviceChoice::Off));
     settle(&mut h);
     let groups = wb(&h).scan().unwrap().groups.len();
@@ -222,7 +223,7 @@ fn opens_a_scan_and_steps_through_groups() {
 #[test]
 fn bad_input_gives_a_message_and_keeps_the_scan() {
     let tmp = tempfile::tempdir().unwrap();
-    let good = test_scan();
+    let good = lateral_scan();
     let mut h = harness(options(tmp.path(), Some(good.clone()), DeviceChoice::Off));
     settle(&mut h);
     // Not a scan.
@@ -262,7 +263,7 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
 #[test]
 fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan();
+    let scan = lateral_scan();
     let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
     settle(&mut h);
     wb_mut(&mut h).set_view(View::Flow);
@@ -304,7 +305,7 @@ fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
 #[test]
 fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = dual_scan();
+    let scan = demo_scan();
     let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
     settle(&mut h);
     let runs = Stage::ALL.map(|s| wb(&h).stage_runs(s));
@@ -334,7 +335,7 @@ fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
 #[test]
 fn reconstructs_exports_a_wav_and_reads_it_back() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan();
+    let scan = demo_scan();
     let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
     settle(&mut h);
     wb_mut(&mut h).set_view(View::Waveform);
@@ -343,8 +344,10 @@ fn reconstructs_exports_a_wav_and_reads_it_back() {
     h.step();
     assert!(wb(&h).is_reconstructing());
     settle(&mut h);
-    let clip_len = wb(&h).clip().expect("a clip").recon.audio.len();
+    let clip = wb(&h).clip().expect("a clip");
+    let clip_len = clip.recon.audio.len();
     assert!(clip_len > 0);
+    assert!(clip.reference.is_some(), "the scan has reference.wav");
     let wav = tmp.path().join("out.wav");
     wb_mut(&mut h).set_export_bits(WavBits::Int16);
     wb_mut(&mut h).request_export_wav(wav.clone(), false);
@@ -384,7 +387,7 @@ fn reconstructs_exports_a_wav_and_reads_it_back() {
 #[test]
 fn without_an_audio_device_the_play_controls_say_so() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan();
+    let scan = lateral_scan();
     let mut h = harness(options(
         tmp.path(),
         Some(scan),
@@ -410,7 +413,7 @@ fn without_an_audio_device_the_play_controls_say_so() {
 #[test]
 fn plays_through_the_null_sink() {
     let tmp = tempfile::tempdir().unwrap();
-    let scan = test_scan();
+    let scan = lateral_scan();
     let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Default));
     settle(&mut h);
     if let AudioStatus::Unavailable(why) = wb(&h).player().status() {
@@ -452,7 +455,7 @@ fn snapshot(h: &mut H, name: &str) {
 #[test]
 fn snapshots_of_the_depth_path_views() {
     let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(test_scan()), DeviceChoice::Off));
+    let mut h = harness(options(tmp.path(), Some(lateral_scan()), DeviceChoice::Off));
     settle(&mut h);
     wb_mut(&mut h).reconstruct(None);
     settle(&mut h);
@@ -466,11 +469,11 @@ fn snapshots_of_the_depth_path_views() {
     }
 }
 
-/// Snapshots of the Hough and stripes views (and the overview) on the dual-focus scan.
+/// Snapshots of the Hough and stripes views (and the overview) on the dual-focus demo scan.
 #[test]
 fn snapshots_of_the_dual_focus_views() {
     let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(dual_scan()), DeviceChoice::Off));
+    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
     settle(&mut h);
     for (v, name) in [
         (View::Hough, "hough"),
@@ -481,4 +484,88 @@ fn snapshots_of_the_dual_focus_views() {
         h.run_ok();
         snapshot(&mut h, name);
     }
+}
+
+#[test]
+fn exports_a_view_as_png_and_round_trips_a_preset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(tmp.path(), Some(lateral_scan()), DeviceChoice::Off));
+    settle(&mut h);
+    // A view as PNG: a capture of the view's area.
+    let png = tmp.path().join("flow.png");
+    wb_mut(&mut h).capture_view(png.clone(), View::Flow, false);
+    let t0 = Instant::now();
+    while !png.exists() && t0.elapsed() < TIMEOUT {
+        h.step();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let img = image::open(&png).unwrap().to_rgba8();
+    assert!(
+        img.width() > 200 && img.height() > 200,
+        "{:?}",
+        img.dimensions()
+    );
+    assert!(img.width() < SIZE[0] as u32, "cropped to the view");
+    // Presets: save, change, load back (an undoable change), never overwrite silently.
+    let preset = tmp.path().join("disc.toml");
+    wb_mut(&mut h).save_preset_to(&preset, false).unwrap();
+    assert!(wb_mut(&mut h).save_preset_to(&preset, false).is_err());
+    let saved = wb(&h).params().clone();
+    let mut p = saved.clone();
+    p.flow.lambda *= 3.0;
+    p.hough.window_rho_px += 2.0;
+    wb_mut(&mut h).set_params(p.clone());
+    settle(&mut h);
+    wb_mut(&mut h).load_preset_from(&preset).unwrap();
+    assert_eq!(wb(&h).params(), &saved);
+    wb_mut(&mut h).undo();
+    assert_eq!(wb(&h).params(), &p);
+    settle(&mut h);
+}
+
+#[test]
+fn per_disc_preset_loads_on_open_and_metadata_saves_back() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = rendered_scan(
+        "own",
+        SynthConfig {
+            frames_per_group: 7,
+            max_groups: Some(2),
+            ..SynthConfig::quick_test()
+        },
+    );
+    let mut preset = groovescope::pipeline::PipelineParams::default();
+    preset.flow.lambda = 0.125;
+    std::fs::write(scan.join("preset.toml"), preset.to_toml_string().unwrap()).unwrap();
+    let mut h = harness(options(tmp.path(), Some(scan.clone()), DeviceChoice::Off));
+    settle(&mut h);
+    assert_eq!(
+        wb(&h).params().flow.lambda,
+        0.125,
+        "the scan's preset.toml was loaded"
+    );
+    // The metadata form's save path: validated, written atomically, the group reruns with it.
+    let runs = wb(&h).stage_runs(Stage::Derivatives);
+    let mut meta = wb(&h).scan().unwrap().meta.clone();
+    meta.record.rpm = 45.0;
+    wb_mut(&mut h).save_meta(meta.clone()).unwrap();
+    settle(&mut h);
+    let back = groovescope::io::Scan::open(&scan).unwrap();
+    assert_eq!(back.meta.record.rpm, 45.0);
+    assert!(
+        back.meta.extra.contains_key("synth"),
+        "unknown tables are kept"
+    );
+    assert_eq!(wb(&h).stage_runs(Stage::Derivatives), runs + 1);
+    let mut bad = meta;
+    bad.camera.pixel_pitch_um = -1.0;
+    assert!(wb_mut(&mut h).save_meta(bad).is_err());
+    assert_eq!(
+        groovescope::io::Scan::open(&scan)
+            .unwrap()
+            .meta
+            .camera
+            .pixel_pitch_um,
+        back.meta.camera.pixel_pitch_um
+    );
 }

@@ -26,6 +26,8 @@ pub struct ViewTexture {
 pub struct Textures {
     views: HashMap<ViewImage, ViewTexture>,
     frame: Option<((usize, usize, usize), TextureHandle)>,
+    /// Pre-rendered frames of one group: (group, frames address, images).
+    frame_images: Option<(usize, usize, Vec<Arc<egui::ColorImage>>)>,
 }
 
 impl std::fmt::Debug for Textures {
@@ -109,8 +111,15 @@ impl Textures {
     ) -> Option<&TextureHandle> {
         let id = (group, index, Arc::as_ptr(frames) as usize);
         if self.frame.as_ref().is_none_or(|(k, _)| *k != id) {
-            let img = frames.get(index)?;
-            let colour = render::grey(img);
+            let ready = self
+                .frame_images
+                .as_ref()
+                .filter(|(g, p, _)| *g == group && *p == id.2)
+                .and_then(|(_, _, v)| v.get(index).cloned());
+            let colour = match ready {
+                Some(c) => c,
+                None => Arc::new(render::grey(frames.get(index)?)),
+            };
             match &mut self.frame {
                 Some((k, h)) => {
                     h.set(colour, options());
@@ -122,9 +131,23 @@ impl Textures {
         self.frame.as_ref().map(|(_, h)| h)
     }
 
+    /// Keeps a group's frames rendered elsewhere (the worker renders them when it loads a group),
+    /// so showing one only uploads it.
+    pub fn set_frames(
+        &mut self,
+        group: usize,
+        frames: &Arc<Vec<Image>>,
+        images: Vec<Arc<egui::ColorImage>>,
+    ) {
+        if images.len() == frames.len() {
+            self.frame_images = Some((group, Arc::as_ptr(frames) as usize, images));
+        }
+    }
+
     /// Forgets every texture (a new scan).
     pub fn clear(&mut self) {
         self.views.clear();
         self.frame = None;
+        self.frame_images = None;
     }
 }

@@ -750,7 +750,8 @@ impl Workbench {
                     generation,
                     group,
                     frames,
-                } => self.on_loaded(generation, group, frames),
+                    textures,
+                } => self.on_loaded(generation, group, frames, textures),
                 WorkerEvent::StageDone(d) => self.on_stage_done(*d),
                 WorkerEvent::Finished {
                     generation,
@@ -788,7 +789,11 @@ impl Workbench {
         generation: u64,
         group: usize,
         frames: Result<Arc<Vec<Image>>, String>,
+        textures: Vec<Arc<egui::ColorImage>>,
     ) {
+        let upload = |wb: &mut Self, f: &Arc<Vec<Image>>| {
+            wb.textures.set_frames(group, f, textures.clone());
+        };
         if self
             .pending_open
             .as_ref()
@@ -800,7 +805,8 @@ impl Workbench {
             match frames {
                 Ok(frames) => {
                     let job_params = self.params.clone();
-                    self.install_scan(pending.scan, frames);
+                    self.install_scan(pending.scan, frames.clone());
+                    upload(self, &frames);
                     if self.params != job_params {
                         self.schedule();
                     }
@@ -828,6 +834,7 @@ impl Workbench {
                 // Frames of the current group are good whichever job loaded them.
                 if self.frames().is_none() {
                     self.frame = self.frame.min(f.len().saturating_sub(1));
+                    upload(self, &f);
                     self.frames = Some((group, f));
                     self.load_error = None;
                 }

@@ -8,6 +8,8 @@ use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use rayon::prelude::*;
+
 use super::render::{self, Rendered};
 
 use crate::image::Image;
@@ -120,6 +122,9 @@ pub enum WorkerEvent {
         group: usize,
         /// The frames or the error text.
         frames: Result<Arc<Vec<Image>>, String>,
+        /// Textures of every frame, rendered off the UI thread (scrubbing and the movie only
+        /// upload them).
+        textures: Vec<Arc<egui::ColorImage>>,
     },
     /// A stage finished.
     StageDone(Box<StageDone>),
@@ -241,10 +246,19 @@ pub fn run_job(
         JobInput::Ready(input) => input,
         JobInput::Load { entry, meta } => {
             let loaded = load_group(&entry).map(Arc::new).map_err(|e| e.to_string());
+            let textures = loaded.as_ref().map_or_else(
+                |_| Vec::new(),
+                |f| {
+                    f.par_iter()
+                        .map(|img| Arc::new(render::grey(img)))
+                        .collect()
+                },
+            );
             let _ = tx.send(WorkerEvent::Loaded {
                 generation,
                 group: entry.index,
                 frames: loaded.clone(),
+                textures,
             });
             repaint();
             match loaded {
