@@ -4,7 +4,9 @@ use std::sync::Arc;
 
 use super::audio_signal::{GroupSignal, SoundParams, group_signal};
 use super::depth::{DepthMap, estimate_depth};
-use super::derivatives::{Derivatives, compute_derivatives};
+use super::derivatives::{
+    DerivativeMode, Derivatives, SIMONCELLI_WINDOW_FRAMES, compute_derivatives,
+};
 use super::hough::{Stripes, segment_stripes};
 use super::optical_flow::{FlowField, compute_flow};
 use super::orientation::{Orientation, orient_from_depth, orient_from_lines};
@@ -210,19 +212,32 @@ impl StageCache {
             self.produced_with[stage.index()] = None;
             match stage {
                 Stage::Derivatives => {
-                    let d = compute_derivatives(
-                        &input.frames,
-                        geom.land_flow_px(),
-                        &params.derivatives,
-                    )?;
+                    // The dual-focus path reads only the middle window: derive just its frames.
+                    let (first, frames) = if dual {
+                        middle_window_frames(&input.frames, params.derivatives.mode)
+                    } else {
+                        (0, &input.frames[..])
+                    };
+                    let mut d =
+                        compute_derivatives(frames, geom.land_flow_px(), &params.derivatives)?;
+                    for set in &mut d {
+                        set.frame_index += first;
+                    }
                     self.derivatives = Some(Arc::new(d));
                 }
                 Stage::Flow => {
                     let derivs = self.derivatives.clone().ok_or_else(|| missing(stage))?;
-                    let flows = derivs
-                        .iter()
-                        .map(|d| compute_flow(d, geom.focal_px, None, &params.flow))
-                        .collect::<Result<Vec<_>, _>>()?;
+                    let flows = if dual {
+                        // The dual-focus path reads one flow field, the middle window's (its
+                        // in-focus map): the other windows would be computed for nothing.
+                        let d = derivs.get(derivs.len() / 2).ok_or_else(|| missing(stage))?;
+                        vec![compute_flow(d, geom.focal_px, None, &params.flow)?]
+                    } else {
+                        derivs
+                            .iter()
+                            .map(|d| compute_flow(d, geom.focal_px, None, &params.flow))
+                            .collect::<Result<Vec<_>, _>>()?
+                    };
                     self.flows = Some(Arc::new(flows));
                 }
                 Stage::Depth => {
@@ -239,8 +254,7 @@ impl StageCache {
                     if let (true, Some(df)) = (dual, meta.dual_focus.as_ref()) {
                         let derivs = self.derivatives.clone().ok_or_else(|| missing(stage))?;
                         let flows = self.flows.clone().ok_or_else(|| missing(stage))?;
-                        let mid = derivs.len() / 2;
-                        let (Some(d), Some(f)) = (derivs.get(mid), flows.get(mid)) else {
+                        let Some((d, f)) = middle_window(&derivs, &flows) else {
                             return Err(missing(stage));
                         };
                         self.stripes = Some(Arc::new(segment_stripes(d, f, df, &params.hough)?));
@@ -330,5 +344,75 @@ impl StageCache {
             }
         }
         Ok(())
+    }
+}
+
+/// The frames of the middle derivative window of a group (the window the full group's
+/// `derivs[len / 2]` would be) and the index of its first frame. Too few frames: all of them,
+/// so the derivative stage reports the shortage.
+fn middle_window_frames(frames: &[Image], mode: DerivativeMode) -> (usize, &[Image]) {
+    let span = match mode {
+        DerivativeMode::Simoncelli => SIMONCELLI_WINDOW_FRAMES,
+        DerivativeMode::TwoFrame => 2,
+    };
+    let Some(windows) = (frames.len() + 1).checked_sub(span).filter(|&n| n > 0) else {
+        return (0, frames);
+    };
+    let start = windows / 2;
+    (start, &frames[start..start + span])
+}
+
+/// The middle derivative window and its flow field (the pair the dual-focus path reads).
+fn middle_window<'a>(
+    derivs: &'a [Derivatives],
+    flows: &'a [FlowField],
+) -> Option<(&'a Derivatives, &'a FlowField)> {
+    let d = derivs.get(derivs.len() / 2)?;
+    let f = flows.iter().find(|f| f.frame_index == d.frame_index)?;
+    Some((d, f))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests fail loudly on purpose
+mod tests {
+    use super::*;
+    use crate::pipeline::derivatives::DerivativeParams;
+
+    fn frames(n: usize) -> Vec<Image> {
+        (0..n)
+            .map(|k| {
+                Image::from_fn(40, 24, |x, y| {
+                    let t = x as f32 + 1.7 * k as f32;
+                    (0.3 * t).sin() * (0.2 * y as f32).cos() + 0.01 * (k * k) as f32
+                })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn middle_window_frames_give_the_full_groups_middle_derivatives() {
+        for (n, mode) in [
+            (12, DerivativeMode::Simoncelli),
+            (7, DerivativeMode::Simoncelli),
+            (9, DerivativeMode::TwoFrame),
+        ] {
+            let fr = frames(n);
+            let params = DerivativeParams {
+                mode,
+                ..DerivativeParams::default()
+            };
+            let full = compute_derivatives(&fr, -2.0, &params).unwrap();
+            let (start, sub) = middle_window_frames(&fr, mode);
+            let mut one = compute_derivatives(sub, -2.0, &params).unwrap();
+            assert_eq!(one.len(), 1, "{n} frames {mode:?}");
+            one[0].frame_index += start;
+            assert_eq!(one[0], full[full.len() / 2], "{n} frames {mode:?}");
+        }
+        // Too few frames: all of them go through, so the stage reports the shortage.
+        let fr = frames(5);
+        assert_eq!(
+            middle_window_frames(&fr, DerivativeMode::Simoncelli),
+            (0, &fr[..])
+        );
     }
 }

@@ -75,7 +75,8 @@ use walls::WallParams;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Stage {
-    /// Ix, Iy, It of every 7-frame window.
+    /// Ix, Iy, It of every 7-frame window (dual-focus path: the middle window only, the one
+    /// its stripes are read from).
     Derivatives,
     /// Optical flow of every derivative set.
     Flow,
