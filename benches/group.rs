@@ -1,0 +1,66 @@
+//! One whole 12-frame 1280×1024 group through every stage (issue 2's ≤ 0.5 s target), on the depth path and on the dual-focus path, plus decoding the group's PNG frames.
+//!
+//! `cargo bench --no-default-features --bench group` (add `-- --quick` for a short run). The
+//! groups are rendered by the synth generator (the paper's camera) into a temporary folder.
+
+use std::hint::black_box;
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use groovescope::io::{Scan, load_group};
+use groovescope::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
+use groovescope::synth::{SynthConfig, render_scan, tone};
+
+/// Renders one group of `cfg` into `dir` and loads it.
+fn group(dir: &Path, cfg: SynthConfig) -> (Scan, GroupInput) {
+    let cfg = SynthConfig {
+        max_groups: Some(1),
+        ..cfg
+    };
+    render_scan(
+        &tone(1000.0, 0.05, 44_100),
+        &cfg,
+        dir,
+        &|_, _| {},
+        &AtomicBool::new(false),
+    )
+    .expect("synthetic scan");
+    let scan = Scan::open(dir).expect("scan");
+    let frames = load_group(&scan.groups[0]).expect("frames");
+    let input = GroupInput {
+        group: 0,
+        frames: Arc::new(frames),
+        meta: Arc::new(scan.meta.clone()),
+    };
+    (scan, input)
+}
+
+fn bench(c: &mut Criterion) {
+    let tmp = tempfile::tempdir().expect("tempdir");
+    let params = PipelineParams::default();
+    let mut g = c.benchmark_group("group_12x1280x1024");
+    g.sample_size(10);
+    for (name, cfg) in [
+        ("depth_path", SynthConfig::default()),
+        ("dual_focus", SynthConfig::dual_focus_demo()),
+    ] {
+        let (scan, input) = group(&tmp.path().join(name), cfg);
+        assert_eq!(input.frames.len(), 12, "{name}: frames per group");
+        g.bench_function(format!("{name}: every stage"), |b| {
+            b.iter(|| {
+                let mut cache = StageCache::default();
+                let r = cache.run_from(Stage::Derivatives, &input, &params, &mut |_, _| true);
+                black_box((r.is_ok(), cache))
+            });
+        });
+        g.bench_function(format!("{name}: decode 12 PNG frames"), |b| {
+            b.iter(|| black_box(load_group(&scan.groups[0]).map(|f| f.len())));
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
