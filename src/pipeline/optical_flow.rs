@@ -232,6 +232,24 @@ pub fn compute_flow(
     walls: Option<&WallSideMap>,
     params: &FlowParams,
 ) -> Result<FlowField, StageError> {
+    compute_flow_from(d, focal_px, walls, None, params)
+}
+
+/// [`compute_flow`] with the Horn–Schunck iteration started from `init` (a flow field in this
+/// window's pixel grid, total flow as in [`FlowField::u`], e.g. the previous window's result
+/// moved with the content) instead of from zero. The fixed point is the same; a good start
+/// reaches the tolerance in far fewer sweeps. With `walls` given and an `init`, the groove
+/// solve runs alone (no plain pre-solve). Lucas–Kanade ignores `init`.
+///
+/// # Errors
+/// As [`compute_flow`], and when `init` is not the derivatives' size.
+pub fn compute_flow_from(
+    d: &Derivatives,
+    focal_px: f64,
+    walls: Option<&WallSideMap>,
+    init: Option<&FlowField>,
+    params: &FlowParams,
+) -> Result<FlowField, StageError> {
     validate(params)?;
     let (width, height) = (d.ix.width, d.ix.height);
     let n = width * height;
@@ -266,6 +284,20 @@ pub fn compute_flow(
     }
     let lay = Layout::new(width, height);
     let simd = Simd::detect();
+    if let Some(f) = init {
+        for (name, im) in [("u", &f.u), ("v", &f.v)] {
+            if im.width != width || im.height != height || im.data.len() != n {
+                return Err(bad_input(format!(
+                    "initial flow {name} is {}x{}, derivatives are {width}x{height}",
+                    im.width, im.height
+                )));
+            }
+        }
+    }
+    let start = || match init {
+        Some(f) => SplitState::from_images(&lay, &f.u, &f.v, d.base_flow_px),
+        None => SplitState::zeros(&lay),
+    };
     let plain = || Problem::plain(&lay, d, params.lambda);
     let (state, iterations, converged) = if groove {
         if !(focal_px.is_finite() && focal_px > 0.0) {
@@ -274,7 +306,7 @@ pub fn compute_flow(
                 problem: format!("{focal_px} is not a positive finite focal length"),
             });
         }
-        let mut st = SplitState::zeros(&lay);
+        let mut st = start();
         let mut first_iterations = 0;
         let estimated;
         let walls = match walls {
@@ -309,7 +341,7 @@ pub fn compute_flow(
         let (it, conv) = problem.solve(&mut st, params, simd);
         (st, first_iterations.saturating_add(it), conv)
     } else {
-        let mut st = SplitState::zeros(&lay);
+        let mut st = start();
         let (it, conv) = plain().solve(&mut st, params, simd);
         (st, it, conv)
     };
@@ -616,6 +648,33 @@ impl SplitState {
             e: vec![0.0; 2 * lay.ne * lay.height],
             o: vec![0.0; 2 * lay.no * lay.height],
         }
+    }
+
+    /// From images (the inverse of [`SplitState::to_images`]); `base` is subtracted from u and
+    /// non-finite values start at 0.
+    fn from_images(lay: &Layout, u: &Image, v: &Image, base: f32) -> Self {
+        let mut st = Self::zeros(lay);
+        let w = lay.width;
+        let clean = |x: f32| if x.is_finite() { x } else { 0.0 };
+        st.e.par_chunks_mut(2 * lay.ne)
+            .zip(st.o.par_chunks_mut(2 * lay.no.max(1)))
+            .zip(u.data.par_chunks(w))
+            .zip(v.data.par_chunks(w))
+            .for_each(|(((er, or), ur), vr)| {
+                let (eu, ev) = er.split_at_mut(lay.ne);
+                for (i, (a, b)) in eu.iter_mut().zip(ev.iter_mut()).enumerate() {
+                    *a = ur.get(2 * i).map_or(0.0, |&x| clean(x - base));
+                    *b = vr.get(2 * i).map_or(0.0, |&x| clean(x));
+                }
+                if lay.no > 0 {
+                    let (ou, ov) = or.split_at_mut(lay.no);
+                    for (i, (a, b)) in ou.iter_mut().zip(ov.iter_mut()).enumerate() {
+                        *a = ur.get(2 * i + 1).map_or(0.0, |&x| clean(x - base));
+                        *b = vr.get(2 * i + 1).map_or(0.0, |&x| clean(x));
+                    }
+                }
+            });
+        st
     }
 
     /// Back to images; `base` is added to u.
