@@ -268,9 +268,7 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
         }
         return action;
     }
-    let Some(form) = state.form.as_mut() else {
-        return None;
-    };
+    let form = state.form.as_mut()?;
     ui.horizontal(|ui| {
         if ui.button("Choose clip…").clicked() {
             action = Some(ImportAction::PickClip);

@@ -8,27 +8,28 @@
 //!
 //! The scan is written into a hidden temporary sibling folder and renamed into place at the end,
 //! so a failed or cancelled import leaves nothing behind; the target must not exist or be empty.
-//! `scan.toml` is built from [`ClipMeta`] with [`ScanMeta`] and checked by [`ScanMeta::validate`]
+//! `scan.toml` is built from [`ClipMeta`] with [`super::ScanMeta`], checked by [`super::ScanMeta::validate`]
 //! (the check [`super::Scan::open`] applies); an extra `[video_import]` table records the source
 //! clip and the grouping (the format keeps such tables and ignores them).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use ffmpeg::format::Pixel;
 use ffmpeg::media::Type;
-use ffmpeg::software::scaling;
 use ffmpeg::util::frame::video::Video as VideoFrame;
 use ffmpeg_next as ffmpeg;
 use serde::Serialize;
 
 use super::LoadError;
 use super::atomic::{dir_is_missing_or_empty, write_atomic};
-use super::frames::save_grey_png;
-use super::scan::{
-    CameraMeta, Cut, FORMAT_VERSION, MIN_FRAMES_PER_GROUP, MotionMeta, RecordMeta, ScanMeta,
-};
-use crate::image::Image;
+use grey::{GreyConverter, Splitter, component_depth_bits, estimated_frames};
+
+mod encode;
+mod grey;
+mod layout;
+
+pub use encode::encode_grey_clip;
+pub use layout::{ClipMeta, GroupLayout};
 
 /// Frames per group when the caller does not say (the paper's choice for real records).
 pub const DEFAULT_FRAMES_PER_GROUP: usize = 12;
@@ -112,129 +113,6 @@ pub enum VideoError {
     Cancelled,
 }
 
-/// How a clip's frames are cut into groups.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct GroupLayout {
-    /// Frames in each group (at least [`MIN_FRAMES_PER_GROUP`]).
-    pub frames_per_group: usize,
-    /// Frames between the first frames of consecutive groups; `None` = `frames_per_group`
-    /// (no shared frames). Smaller values repeat frames; larger values skip frames.
-    pub group_stride_frames: Option<usize>,
-    /// Clip frames skipped before the first group.
-    pub first_frame: usize,
-    /// Write at most this many groups (decoding stops once they are full).
-    pub max_groups: Option<usize>,
-}
-
-impl Default for GroupLayout {
-    fn default() -> Self {
-        Self {
-            frames_per_group: DEFAULT_FRAMES_PER_GROUP,
-            group_stride_frames: None,
-            first_frame: 0,
-            max_groups: None,
-        }
-    }
-}
-
-impl GroupLayout {
-    /// Frames between the first frames of consecutive groups.
-    #[must_use]
-    pub fn stride(&self) -> usize {
-        self.group_stride_frames.unwrap_or(self.frames_per_group)
-    }
-
-    /// Checks the grouping; returns the first problem.
-    ///
-    /// # Errors
-    /// A sentence naming the setting.
-    pub fn validate(&self) -> Result<(), String> {
-        if self.frames_per_group < MIN_FRAMES_PER_GROUP {
-            return Err(format!(
-                "frames_per_group must be at least {MIN_FRAMES_PER_GROUP} (the derivative filters need {MIN_FRAMES_PER_GROUP}), got {}",
-                self.frames_per_group
-            ));
-        }
-        if self.stride() == 0 {
-            return Err("group_stride_frames must be at least 1, got 0".into());
-        }
-        if self.max_groups == Some(0) {
-            return Err("max_groups must be at least 1, got 0".into());
-        }
-        Ok(())
-    }
-
-    /// Full groups in `frames` frames counted from the first frame used (before `max_groups`).
-    #[must_use]
-    pub fn full_groups(&self, frames: usize) -> usize {
-        if frames < self.frames_per_group {
-            0
-        } else {
-            (frames - self.frames_per_group) / self.stride() + 1
-        }
-    }
-
-    /// Groups written from `frames` frames (from the first frame used), `max_groups` applied.
-    #[must_use]
-    pub fn groups_written(&self, frames: usize) -> usize {
-        let n = self.full_groups(frames);
-        self.max_groups.map_or(n, |m| n.min(m))
-    }
-
-    /// Frames (from the first frame used) needed to fill `max_groups`, if set.
-    fn frames_needed(&self) -> Option<usize> {
-        self.max_groups
-            .map(|m| (m - 1) * self.stride() + self.frames_per_group)
-    }
-
-    /// The groups frame `j` (from the first frame used) belongs to, with its index in each.
-    fn placements(&self, j: usize) -> impl Iterator<Item = (usize, usize)> + '_ {
-        let stride = self.stride();
-        let lo = (j + 1)
-            .saturating_sub(self.frames_per_group)
-            .div_ceil(stride);
-        let hi = j / stride;
-        let cap = self.max_groups.unwrap_or(usize::MAX);
-        (lo..=hi)
-            .filter(move |&g| g < cap && j - g * stride < self.frames_per_group)
-            .map(move |g| (g, j - g * stride))
-    }
-}
-
-/// The metadata a clip does not carry: the caller supplies it and it becomes `scan.toml`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ClipMeta {
-    /// Turntable speed the disc was cut at.
-    pub rpm: f64,
-    /// Groove radius at the first group.
-    pub radius_mm: f64,
-    /// Cut type.
-    pub cut: Cut,
-    /// Size of one pixel on the land plane.
-    pub pixel_pitch_um: f64,
-    /// Optical centre to the land plane.
-    pub working_distance_mm: f64,
-    /// Record travel between consecutive frames.
-    pub frame_step_um: f64,
-    /// Travel between the first frames of consecutive groups; `None` = stride × `frame_step_um`.
-    pub group_step_um: Option<f64>,
-}
-
-impl Default for ClipMeta {
-    /// The example values of docs/FORMAT.md (a 78 rpm disc under the paper's microscope).
-    fn default() -> Self {
-        Self {
-            rpm: 78.0,
-            radius_mm: 115.0,
-            cut: Cut::Lateral,
-            pixel_pitch_um: 0.39,
-            working_distance_mm: 4.0,
-            frame_step_um: 0.78,
-            group_step_um: None,
-        }
-    }
-}
-
 /// The `[video_import]` table: where the scan came from.
 #[derive(Serialize)]
 struct ImportInfo<'a> {
@@ -243,40 +121,6 @@ struct ImportInfo<'a> {
     first_frame: usize,
     frames_per_group: usize,
     group_stride_frames: usize,
-}
-
-impl ClipMeta {
-    /// The scan metadata for `layout` (no extra tables), validated as [`super::Scan::open`] does.
-    ///
-    /// # Errors
-    /// [`VideoError::Settings`] naming the first invalid key.
-    pub fn scan_meta(&self, layout: &GroupLayout) -> Result<ScanMeta, VideoError> {
-        let group_step_um = self
-            .group_step_um
-            .unwrap_or(layout.stride() as f64 * self.frame_step_um);
-        let meta = ScanMeta {
-            format: FORMAT_VERSION,
-            record: RecordMeta {
-                rpm: self.rpm,
-                radius_mm: self.radius_mm,
-                cut: self.cut,
-                group_radius_mm: None,
-            },
-            camera: CameraMeta {
-                pixel_pitch_um: self.pixel_pitch_um,
-                working_distance_mm: self.working_distance_mm,
-            },
-            motion: MotionMeta {
-                frame_step_um: self.frame_step_um,
-                group_step_um,
-            },
-            dual_focus: None,
-            extra: toml::Table::new(),
-        };
-        meta.validate()
-            .map_err(|problem| VideoError::Settings { problem })?;
-        Ok(meta)
-    }
 }
 
 /// What [`import_video`] wrote.
@@ -300,16 +144,6 @@ pub struct ImportSummary {
     pub bit_depth: u8,
     /// The clip's codec name.
     pub codec: String,
-}
-
-/// Bits of the first component of `format` (8 when FFmpeg does not know the format).
-fn component_depth_bits(format: Pixel) -> i32 {
-    let Some(desc) = format.descriptor() else {
-        return 8;
-    };
-    // SAFETY: `descriptor()` only returns `Some` for FFmpeg's static, non-null table entry of
-    // this format; every entry has `comp[0]` filled in.
-    unsafe { (*desc.as_ptr()).comp[0].depth }
 }
 
 /// Removes the temporary folder unless the import finished.
@@ -359,157 +193,6 @@ fn check_out_dir(out_dir: &Path) -> Result<(), VideoError> {
             path: out_dir.to_path_buf(),
         })
     }
-}
-
-/// Converts decoded frames to grey images, through swscale when the format is not grey already.
-struct GreyConverter {
-    target: Pixel,
-    scaler: Option<(scaling::Context, Pixel, u32, u32)>,
-    converted: VideoFrame,
-}
-
-impl GreyConverter {
-    fn new(sixteen_bit: bool) -> Self {
-        Self {
-            target: if sixteen_bit {
-                Pixel::GRAY16LE
-            } else {
-                Pixel::GRAY8
-            },
-            scaler: None,
-            converted: VideoFrame::empty(),
-        }
-    }
-
-    fn convert(&mut self, frame: &VideoFrame) -> Result<Image, ffmpeg::Error> {
-        let (fmt, w, h) = (frame.format(), frame.width(), frame.height());
-        let grey = if fmt == self.target {
-            frame
-        } else {
-            let stale = self
-                .scaler
-                .as_ref()
-                .is_none_or(|(_, f, sw, sh)| (*f, *sw, *sh) != (fmt, w, h));
-            if stale {
-                let ctx = scaling::Context::get(
-                    fmt,
-                    w,
-                    h,
-                    self.target,
-                    w,
-                    h,
-                    scaling::Flags::POINT | scaling::Flags::ACCURATE_RND,
-                )?;
-                self.scaler = Some((ctx, fmt, w, h));
-            }
-            if let Some((ctx, ..)) = self.scaler.as_mut() {
-                ctx.run(frame, &mut self.converted)?;
-            }
-            &self.converted
-        };
-        let (wu, hu) = (w as usize, h as usize);
-        let stride = grey.stride(0);
-        let bytes = grey.data(0);
-        let mut data = Vec::with_capacity(wu * hu);
-        for y in 0..hu {
-            let row = bytes.get(y * stride..).ok_or(ffmpeg::Error::InvalidData)?;
-            if self.target == Pixel::GRAY16LE {
-                let row = row.get(..wu * 2).ok_or(ffmpeg::Error::InvalidData)?;
-                data.extend(
-                    row.chunks_exact(2)
-                        .map(|b| f32::from(u16::from_le_bytes([b[0], b[1]])) / 65535.0),
-                );
-            } else {
-                let row = row.get(..wu).ok_or(ffmpeg::Error::InvalidData)?;
-                data.extend(row.iter().map(|&v| f32::from(v) / 255.0));
-            }
-        }
-        Ok(Image {
-            width: wu,
-            height: hu,
-            data,
-        })
-    }
-}
-
-/// Streams decoded frames into group folders.
-struct Splitter<'a> {
-    layout: &'a GroupLayout,
-    dir: &'a Path,
-    sixteen_bit: bool,
-    group_digits: usize,
-    frame_digits: usize,
-    /// Frames taken so far, counted from the first frame used.
-    taken: usize,
-}
-
-impl Splitter<'_> {
-    fn group_dir(&self, g: usize) -> PathBuf {
-        let gw = self.group_digits;
-        self.dir.join(format!("g{g:0gw$}"))
-    }
-
-    /// Writes frame `self.taken` into every group holding it.
-    fn push(&mut self, img: &Image) -> Result<(), VideoError> {
-        let j = self.taken;
-        for (g, k) in self.layout.placements(j) {
-            let gdir = self.group_dir(g);
-            if k == 0 {
-                std::fs::create_dir(&gdir)
-                    .map_err(|e| io_err(format!("cannot create group folder: {e}"), &gdir))?;
-            }
-            let fw = self.frame_digits;
-            save_grey_png(
-                img,
-                &gdir.join(format!("f{k:0fw$}.png")),
-                self.sixteen_bit,
-                false,
-            )?;
-        }
-        self.taken += 1;
-        Ok(())
-    }
-
-    /// Whether `max_groups` groups are full.
-    fn done(&self) -> bool {
-        self.layout.frames_needed().is_some_and(|n| self.taken >= n)
-    }
-
-    /// Removes the folders of trailing groups the clip did not fill; returns the full groups.
-    fn finish(&self) -> Result<usize, VideoError> {
-        let full = self.layout.groups_written(self.taken);
-        let mut g = full;
-        loop {
-            let gdir = self.group_dir(g);
-            if !gdir.is_dir() {
-                break;
-            }
-            std::fs::remove_dir_all(&gdir)
-                .map_err(|e| io_err(format!("cannot remove partial group: {e}"), &gdir))?;
-            g += 1;
-        }
-        Ok(full)
-    }
-}
-
-/// Frames in the clip's stream as the container states or its duration implies; 0 = unknown.
-fn estimated_frames(stream: &ffmpeg::format::stream::Stream<'_>) -> usize {
-    if let Ok(n) = usize::try_from(stream.frames())
-        && n > 0
-    {
-        return n;
-    }
-    let (rate, tb) = (stream.avg_frame_rate(), stream.time_base());
-    if stream.duration() > 0 && rate.denominator() != 0 && tb.denominator() != 0 {
-        let secs =
-            stream.duration() as f64 * f64::from(tb.numerator()) / f64::from(tb.denominator());
-        let fps = f64::from(rate.numerator()) / f64::from(rate.denominator());
-        let n = (secs * fps).round();
-        if n.is_finite() && n > 0.0 {
-            return n as usize;
-        }
-    }
-    0
 }
 
 /// Imports `clip` as a scan in `out_dir` (missing or empty; created).
@@ -661,7 +344,6 @@ pub fn import_video(
         // End of stream: the decoder may still hold delayed frames.
         feed(&mut decoder, None)?;
     }
-    drop(feed);
     // The container's frame count is only an estimate; end the bar at what was decoded.
     progress(decoded, decoded);
 
@@ -741,108 +423,6 @@ fn finish_into(mut tmp: TempDir, out_dir: &Path) -> Result<(), VideoError> {
     Ok(())
 }
 
-/// Encodes grey frames losslessly (FFV1, 8- or 16-bit grey) into a clip at `path`; the container
-/// follows the extension (`.avi`, `.mkv`). For tests and fixtures: an exact source to import.
-///
-/// # Errors
-/// [`VideoError::Settings`] for no frames or mixed sizes, [`VideoError::Load`] naming `path`
-/// when FFmpeg cannot write it.
-pub fn encode_grey_clip(
-    path: &Path,
-    frames: &[Image],
-    sixteen_bit: bool,
-    frames_per_sec: i32,
-) -> Result<(), VideoError> {
-    let Some(first) = frames.first() else {
-        return Err(VideoError::Settings {
-            problem: "a clip needs at least one frame".into(),
-        });
-    };
-    if frames.iter().any(|f| !f.same_size(first)) {
-        return Err(VideoError::Settings {
-            problem: "every frame of a clip must have the same size".into(),
-        });
-    }
-    let fail = |e: ffmpeg::Error| io_err(format!("cannot encode video: {e}"), path);
-    ffmpeg::init().map_err(fail)?;
-    ffmpeg::util::log::set_level(ffmpeg::util::log::Level::Fatal);
-    let (w, h) = (
-        u32::try_from(first.width).map_err(|_| fail(ffmpeg::Error::InvalidData))?,
-        u32::try_from(first.height).map_err(|_| fail(ffmpeg::Error::InvalidData))?,
-    );
-    let pixel = if sixteen_bit {
-        Pixel::GRAY16LE
-    } else {
-        Pixel::GRAY8
-    };
-    let time_base = ffmpeg::Rational::new(1, frames_per_sec);
-    let mut octx = ffmpeg::format::output(path).map_err(fail)?;
-    let global_header = octx
-        .format()
-        .flags()
-        .contains(ffmpeg::format::Flags::GLOBAL_HEADER);
-    let codec = ffmpeg::encoder::find(ffmpeg::codec::Id::FFV1)
-        .ok_or(ffmpeg::Error::EncoderNotFound)
-        .map_err(fail)?;
-    let mut ost = octx.add_stream(codec).map_err(fail)?;
-    let mut enc = ffmpeg::codec::context::Context::new_with_codec(codec)
-        .encoder()
-        .video()
-        .map_err(fail)?;
-    enc.set_width(w);
-    enc.set_height(h);
-    enc.set_format(pixel);
-    enc.set_time_base(time_base);
-    enc.set_frame_rate(Some(ffmpeg::Rational::new(frames_per_sec, 1)));
-    if global_header {
-        enc.set_flags(ffmpeg::codec::Flags::GLOBAL_HEADER);
-    }
-    let mut enc = enc.open_as(codec).map_err(fail)?;
-    ost.set_parameters(&enc);
-    ost.set_time_base(time_base);
-    octx.write_header().map_err(fail)?;
-    let stream_tb = octx
-        .stream(0)
-        .map(|s| s.time_base())
-        .ok_or(ffmpeg::Error::StreamNotFound)
-        .map_err(fail)?;
-    let mut packet = ffmpeg::Packet::empty();
-    let mut write_ready = |enc: &mut ffmpeg::encoder::Video,
-                           octx: &mut ffmpeg::format::context::Output| {
-        while enc.receive_packet(&mut packet).is_ok() {
-            packet.set_stream(0);
-            packet.rescale_ts(time_base, stream_tb);
-            packet.write_interleaved(octx)?;
-        }
-        Ok::<(), ffmpeg::Error>(())
-    };
-    for (i, img) in frames.iter().enumerate() {
-        let mut vf = VideoFrame::new(pixel, w, h);
-        let stride = vf.stride(0);
-        let plane = vf.data_mut(0);
-        for (y, row) in img.data.chunks_exact(img.width.max(1)).enumerate() {
-            let dst = &mut plane[y * stride..];
-            for (x, v) in row.iter().enumerate() {
-                let v = v.clamp(0.0, 1.0);
-                if sixteen_bit {
-                    let q = (v * 65535.0).round() as u16;
-                    dst[2 * x..2 * x + 2].copy_from_slice(&q.to_le_bytes());
-                } else {
-                    dst[x] = (v * 255.0).round() as u8;
-                }
-            }
-        }
-        vf.set_pts(i64::try_from(i).ok());
-        enc.send_frame(&vf).map_err(fail)?;
-        write_ready(&mut enc, &mut octx).map_err(fail)?;
-    }
-    enc.send_eof().map_err(fail)?;
-    write_ready(&mut enc, &mut octx).map_err(fail)?;
-    octx.write_trailer().map_err(fail)?;
-    Ok(())
-}
-
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // tests may panic
-#[path = "video_tests.rs"]
 mod tests;

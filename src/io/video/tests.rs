@@ -3,6 +3,7 @@
 use std::sync::atomic::AtomicBool;
 
 use super::*;
+use crate::image::Image;
 use crate::io::{Scan, load_group};
 
 const W: usize = 48;
