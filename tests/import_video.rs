@@ -141,3 +141,75 @@ fn import_video_without_the_feature_says_so() {
     assert!(err.contains("built without video support"), "{err}");
     assert!(!out.exists());
 }
+
+/// The workbench's File > Import video… end to end, headless (egui_kittest).
+#[cfg(all(feature = "video", feature = "gui"))]
+#[test]
+fn workbench_imports_a_clip_and_opens_the_scan() {
+    use egui_kittest::Harness;
+    use egui_kittest::kittest::Queryable;
+    use groovescope::app::{Workbench, WorkbenchOptions};
+    use groovescope::playback::DeviceChoice;
+
+    struct App {
+        wb: Option<Workbench>,
+        frame: eframe::Frame,
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(
+            |ui, app: &mut App| {
+                if let Some(wb) = &mut app.wb {
+                    eframe::App::logic(wb, ui.ctx(), &mut app.frame);
+                    eframe::App::ui(wb, ui, &mut app.frame);
+                }
+            },
+            App {
+                wb: None,
+                frame: eframe::Frame::_new_kittest(),
+            },
+        );
+    let ctx = h.ctx.clone();
+    let opts = WorkbenchOptions {
+        scan: None,
+        config_dir: Some(dir.path().join("config")),
+        audio: DeviceChoice::Off,
+        ..WorkbenchOptions::default()
+    };
+    h.state_mut().wb = Some(Workbench::new(&ctx, opts).unwrap());
+    h.run_steps(3);
+    h.get_by_label("File").click();
+    h.run_steps(2);
+    h.get_by_label("Import video…").click();
+    h.run_steps(3);
+    h.get_by_label_contains("choose a video clip");
+
+    let clip = clip(dir.path(), 14);
+    let out = dir.path().join("imported");
+    {
+        let wb = h.state_mut().wb.as_mut().unwrap();
+        let form = wb.import_video_form_mut().unwrap();
+        form.clip = Some(clip);
+        form.out = out.display().to_string();
+        form.frames_per_group = 7;
+        form.group_stride_frames = 7;
+    }
+    h.run_steps(2);
+    h.get_by_label("Import").click();
+    let t0 = std::time::Instant::now();
+    loop {
+        h.step();
+        let wb = h.state().wb.as_ref().unwrap();
+        if wb.scan().is_some_and(|s| s.dir == out) {
+            break;
+        }
+        assert!(
+            t0.elapsed().as_secs() < 120,
+            "the imported scan did not open"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let wb = h.state().wb.as_ref().unwrap();
+    assert_eq!(wb.scan().unwrap().groups.len(), 2);
+}

@@ -356,7 +356,12 @@ impl Workbench {
         }
     }
 
-    /// Whether the import window is open or an import runs.
+    /// The open import form, for tests and scripting.
+    pub fn import_video_form_mut(&mut self) -> Option<&mut ImportForm> {
+        self.video_import.form.as_mut()
+    }
+
+    /// Whether an import runs.
     #[must_use]
     pub fn is_importing_video(&self) -> bool {
         self.video_import.run.is_some()
@@ -441,5 +446,72 @@ impl Workbench {
         if self.video_import.run.is_some() {
             ctx.request_repaint_after(std::time::Duration::from_millis(100));
         }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use crate::io::video::encode_grey_clip;
+
+    fn clip(dir: &Path, frames: usize) -> PathBuf {
+        let imgs: Vec<Image> = (0..frames)
+            .map(|k| Image::from_fn(24, 16, |x, y| ((x + k + y) % 9) as f32 / 8.0))
+            .collect();
+        let p = dir.join("clip.avi");
+        encode_grey_clip(&p, &imgs, false, 25).unwrap();
+        p
+    }
+
+    #[test]
+    fn form_names_what_is_missing_or_invalid() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut f = ImportForm::default();
+        assert_eq!(f.request().unwrap_err(), "choose a video clip");
+        f.clip = Some(clip(dir.path(), 8));
+        assert_eq!(f.request().unwrap_err(), "choose an output folder");
+        f.set_out_from_pick(dir.path());
+        assert!(f.out.ends_with("clip-scan"), "{}", f.out);
+        f.frames_per_group = 6;
+        assert!(f.request().unwrap_err().contains("frames_per_group"));
+        f.frames_per_group = 7;
+        f.meta.pixel_pitch_um = -1.0;
+        assert!(f.request().unwrap_err().contains("camera.pixel_pitch_um"));
+        f.meta.pixel_pitch_um = 0.39;
+        let req = f.request().unwrap();
+        assert_eq!(req.layout.stride(), 12);
+        assert_eq!(req.meta.group_step_um, None);
+        f.out = dir.path().display().to_string();
+        assert!(f.request().unwrap_err().contains("new or empty"));
+    }
+
+    #[test]
+    fn run_imports_on_its_thread_and_reports_progress() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut f = ImportForm {
+            clip: Some(clip(dir.path(), 16)),
+            out: dir.path().join("scan").display().to_string(),
+            frames_per_group: 8,
+            group_stride_frames: 8,
+            ..ImportForm::default()
+        };
+        f.own_group_step = true;
+        f.group_step_um = 50.0;
+        let mut run = ImportRun::start(f.request().unwrap(), Box::new(|| {})).unwrap();
+        let started = std::time::Instant::now();
+        let outcome = loop {
+            if let Some(o) = run.poll() {
+                break o;
+            }
+            assert!(started.elapsed().as_secs() < 60, "import hung");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        };
+        let s = outcome.unwrap();
+        assert_eq!(s.groups, 2);
+        assert_eq!(run.progress(), (16, 16));
+        let scan = crate::io::Scan::open(&s.out_dir).unwrap();
+        assert!((scan.meta.motion.group_step_um - 50.0).abs() < 1e-12);
     }
 }
