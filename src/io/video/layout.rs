@@ -129,7 +129,7 @@ impl Default for ClipMeta {
 }
 
 impl ClipMeta {
-    /// The scan metadata for `layout` (no extra tables), validated as [`super::Scan::open`] does.
+    /// The scan metadata for `layout` (no extra tables), validated as [`crate::io::Scan::open`] does.
     ///
     /// # Errors
     /// [`VideoError::Settings`] naming the first invalid key.
