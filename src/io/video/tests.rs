@@ -380,3 +380,36 @@ fn demo_frames_survive_a_clip_and_the_imported_scan_reconstructs() {
         rec.err()
     );
 }
+
+/// Speed of a camera-sized import (run with `--ignored --nocapture`): 48 frames of 1280×1024.
+#[test]
+#[ignore = "timing, not a check: 48 full-size frames"]
+fn import_speed_full_size_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let imgs: Vec<Image> = (0..48)
+        .map(|k| {
+            Image::from_fn(1280, 1024, |x, y| {
+                (((x + 2 * k) * 7 + y * 13) % 251) as f32 / 250.0
+            })
+        })
+        .collect();
+    let path = dir.path().join("big.avi");
+    let t = std::time::Instant::now();
+    encode_grey_clip(&path, &imgs, false, 25).unwrap();
+    eprintln!("encode 48 frames 1280x1024 (FFV1): {:?}", t.elapsed());
+    let t = std::time::Instant::now();
+    let s = import_video(
+        &path,
+        &dir.path().join("scan"),
+        &layout(12, None),
+        &ClipMeta::default(),
+        &no_progress,
+        &AtomicBool::new(false),
+    )
+    .unwrap();
+    eprintln!(
+        "import 48 frames 1280x1024 into {} groups: {:?}",
+        s.groups,
+        t.elapsed()
+    );
+}
