@@ -254,7 +254,9 @@ pub fn import_video(
     let mut decoder = ffmpeg::codec::context::Context::from_parameters(params)
         .and_then(|c| c.decoder().video())
         .map_err(unsupported)?;
-    let sixteen_bit = component_depth_bits(decoder.format()) > 8;
+    // The depth is known from the codec parameters for most clips, else from the first frame.
+    let mut sixteen_bit: Option<bool> = (decoder.format() != ffmpeg::format::Pixel::None)
+        .then(|| component_depth_bits(decoder.format()) > 8);
     let mut total = estimated_frames(&stream);
     if let Some(needed) = layout.frames_needed() {
         let needed = needed + layout.first_frame;
@@ -273,12 +275,12 @@ pub fn import_video(
     let mut splitter = Splitter {
         layout,
         dir: &tmp.path,
-        sixteen_bit,
+        sixteen_bit: false,
         group_digits: crate::synth::digits(est_groups, 5),
         frame_digits: crate::synth::digits(layout.frames_per_group, 3),
         taken: 0,
     };
-    let mut converter = GreyConverter::new(sixteen_bit);
+    let mut converter: Option<GreyConverter> = None;
     let mut size: Option<(usize, usize)> = None;
     let mut decoded = 0usize;
     let mut frame = VideoFrame::empty();
@@ -304,7 +306,11 @@ pub fn import_video(
                 return Err(VideoError::Cancelled);
             }
             if decoded >= layout.first_frame {
+                let deep =
+                    *sixteen_bit.get_or_insert_with(|| component_depth_bits(frame.format()) > 8);
+                splitter.sixteen_bit = deep;
                 let img = converter
+                    .get_or_insert_with(|| GreyConverter::new(deep))
                     .convert(&frame)
                     .map_err(|e| decode_err(decoded, format!("grey conversion failed: {e}")))?;
                 let this = (img.width, img.height);
@@ -386,6 +392,7 @@ pub fn import_video(
     if cancel.load(Ordering::Relaxed) {
         return Err(VideoError::Cancelled);
     }
+    let bit_depth = if splitter.sixteen_bit { 16 } else { 8 };
     finish_into(tmp, out_dir)?;
     let (width, height) = size.unwrap_or((0, 0));
     Ok(ImportSummary {
@@ -396,7 +403,7 @@ pub fn import_video(
         frames_decoded: decoded,
         width,
         height,
-        bit_depth: if sixteen_bit { 16 } else { 8 },
+        bit_depth,
         codec,
     })
 }
