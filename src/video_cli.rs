@@ -29,25 +29,25 @@ pub struct ImportVideoArgs {
     #[arg(long)]
     pub max_groups: Option<usize>,
     /// Turntable speed the disc was cut at.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub rpm: f64,
     /// Groove radius at the first group, mm.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub radius_mm: f64,
     /// Cut type.
     #[arg(long, value_parser = ["lateral", "stereo", "vertical"], default_value = "lateral")]
     pub cut: String,
     /// Size of one pixel on the land plane, µm.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub pixel_pitch_um: f64,
     /// Optical centre to the land plane, mm.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub working_distance_mm: f64,
     /// Record travel between consecutive frames, µm.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub frame_step_um: f64,
     /// Travel between the first frames of consecutive groups, µm (default: stride × frame step).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub group_step_um: Option<f64>,
     /// No progress bar.
     #[arg(long)]
