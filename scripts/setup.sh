@@ -5,7 +5,10 @@ set -euo pipefail
 PKGS=(pkg-config libasound2-dev
       mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri
       libx11-6 libxcursor1 libxi6 libxrandr2 libxkbcommon-x11-0 libfontconfig1
-      xvfb xauth imagemagick)
+      xvfb xauth imagemagick
+      # FFmpeg and libclang (bindgen) for the `video` feature (import-video, Import video…).
+      libavcodec-dev libavformat-dev libavutil-dev libswscale-dev libswresample-dev
+      libavfilter-dev libavdevice-dev libclang-dev)
 missing=()
 for p in "${PKGS[@]}"; do
     dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

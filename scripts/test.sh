@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The test command: formatting, lints, the whole test suite (GUI tests render headless), docs.
+# The test command: formatting, lints, the whole test suite (GUI tests render headless), the
+# video-import tests with the `video` feature on, docs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -12,7 +13,12 @@ export ALSA_CONFIG_PATH="$alsa_conf"
 cargo fmt --all -- --check
 cargo clippy --locked --all-targets -- -D warnings
 cargo test --locked
+# The `video` feature (FFmpeg): lints, then only its own tests to keep CI time down.
+cargo clippy --locked --all-targets --features video -- -D warnings
+cargo test --locked --features video --lib -- io::video app::import_video
+cargo test --locked --features video --test import_video
 RUSTDOCFLAGS="-D warnings" cargo doc --locked --no-deps
+RUSTDOCFLAGS="-D warnings" cargo doc --locked --no-deps --features video
 # The workbench for real: a window under Xvfb, one screenshot taken and checked.
 shot_dir="$(mktemp -d)"
 SCREENSHOT_DIR="$shot_dir" VIEWS=overview bash scripts/screenshots.sh

@@ -81,6 +81,8 @@ pub enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// Import a microscope video clip (AVI/MP4) as a scan folder (needs the `video` feature).
+    ImportVideo(crate::video_cli::ImportVideoArgs),
     /// Open the workbench (optionally on a scan).
     Gui {
         /// Scan folder to open.
@@ -614,6 +616,7 @@ pub fn run(command: Command) -> Result<()> {
             p.path = path_choice(&path, p.path);
             crate::inspect::run_inspect(&scan, group, &out, &p, force)
         }
+        Command::ImportVideo(args) => crate::video_cli::run_import_video(&args),
         Command::Gui { scan } => run_gui(scan),
     }
 }

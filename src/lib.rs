@@ -14,4 +14,5 @@ pub mod pipeline;
 #[cfg(feature = "gui")]
 pub mod playback;
 pub mod synth;
+pub mod video_cli;
 pub mod viz;

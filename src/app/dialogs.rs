@@ -18,6 +18,12 @@ pub enum DialogKind {
     SavePreset,
     /// Choose where to save a view as PNG.
     ExportPng(View),
+    /// Pick a video clip to import.
+    #[cfg(feature = "video")]
+    VideoClip,
+    /// Pick the folder an imported scan goes to.
+    #[cfg(feature = "video")]
+    VideoOut,
 }
 
 /// Runs one dialog at a time and hands back its answer.
@@ -89,6 +95,15 @@ impl Dialogs {
                         .set_title("Export view as PNG")
                         .add_filter("PNG", &["png"])
                         .save_file(),
+                    #[cfg(feature = "video")]
+                    DialogKind::VideoClip => d
+                        .set_title("Import video clip")
+                        .add_filter("Video", &["avi", "mp4", "mkv", "mov", "m4v"])
+                        .pick_file(),
+                    #[cfg(feature = "video")]
+                    DialogKind::VideoOut => d
+                        .set_title("Folder for the imported scan (new or empty)")
+                        .pick_folder(),
                 };
                 let _ = tx.send((kind, picked));
                 repaint();

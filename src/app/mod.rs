@@ -4,11 +4,14 @@
 //!
 //! Threads: the UI thread only reads results and draws; `groovescope-stages` runs
 //! [`worker::Job`]s; `groovescope-reconstruct` runs the engine over all groups;
-//! `groovescope-dialog` shows file dialogs; the cpal callback reads a prepared buffer.
+//! `groovescope-dialog` shows file dialogs; `groovescope-import` imports a video clip (feature
+//! `video`); the cpal callback reads a prepared buffer.
 
 pub mod dialogs;
 pub mod export;
 pub mod history;
+#[cfg(feature = "video")]
+pub mod import_video;
 pub mod recent;
 pub mod recon;
 pub mod render;

@@ -57,7 +57,7 @@ impl Workbench {
         self.scan.as_ref().map(|s| s.dir.clone())
     }
 
-    fn show_dialog(&mut self, kind: DialogKind, file_name: Option<String>) {
+    pub(super) fn show_dialog(&mut self, kind: DialogKind, file_name: Option<String>) {
         let ctx = self.ctx.clone();
         let start = self.start_dir();
         if let Err(e) = self.dialogs.show(
@@ -97,6 +97,8 @@ impl Workbench {
                     self.capture_view(path, view, false);
                 }
             }
+            #[cfg(feature = "video")]
+            DialogKind::VideoClip | DialogKind::VideoOut => self.video_dialog_answer(&kind, path),
         }
     }
 
@@ -202,6 +204,10 @@ impl Workbench {
             ui.menu_button("File", |ui| {
                 if ui.button("Open scan…").clicked() {
                     self.show_dialog(DialogKind::OpenScan, None);
+                }
+                #[cfg(feature = "video")]
+                if ui.button("Import video…").clicked() {
+                    self.open_import_video();
                 }
                 ui.menu_button("Recent scans", |ui| {
                     let recent = self.recent.scans.clone();
@@ -598,6 +604,8 @@ impl eframe::App for Workbench {
             .show(ui, |ui| self.side_panel(ui, &statuses));
         egui::CentralPanel::default().show(ui, |ui| self.central(ui, &statuses));
         self.confirm_modal(&ctx);
+        #[cfg(feature = "video")]
+        self.import_video_step(&ctx);
         if ctx.input(|i| !i.raw.hovered_files.is_empty()) {
             egui::Area::new(egui::Id::unique("drop_hint"))
                 .fixed_pos(egui::pos2(40.0, 40.0))

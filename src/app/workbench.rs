@@ -148,6 +148,9 @@ pub struct Workbench {
     pub(super) view_rect: egui::Rect,
     pub(super) reconstruct_on_open: bool,
     pub(super) max_busy_frame: Duration,
+    /// The "Import video" window and its running import.
+    #[cfg(feature = "video")]
+    pub(super) video_import: super::import_video::VideoImport,
 }
 
 impl std::fmt::Debug for Workbench {
@@ -212,6 +215,8 @@ impl Workbench {
             view_rect: egui::Rect::NOTHING,
             reconstruct_on_open: opts.reconstruct_on_open,
             max_busy_frame: Duration::ZERO,
+            #[cfg(feature = "video")]
+            video_import: super::import_video::VideoImport::default(),
         };
         if let Some(dir) = opts.scan {
             let _ = wb.open_scan(&dir);

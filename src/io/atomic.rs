@@ -62,6 +62,25 @@ pub fn write_atomic(target: &Path, bytes: &[u8], overwrite: bool) -> Result<(), 
     write_atomic_with(target, overwrite, |w| w.write_all(bytes))
 }
 
+/// Whether `dir` may receive a new scan: it does not exist, or it is an empty folder.
+/// Shared by the generator and the video import, which never write into a non-empty folder.
+///
+/// # Errors
+/// [`LoadError::Io`] naming the folder when it cannot be listed.
+pub(crate) fn dir_is_missing_or_empty(dir: &Path) -> Result<bool, LoadError> {
+    if !dir.exists() {
+        return Ok(true);
+    }
+    if !dir.is_dir() {
+        return Ok(false);
+    }
+    let mut entries = std::fs::read_dir(dir).map_err(|e| LoadError::Io {
+        problem: format!("cannot list output folder: {e}"),
+        path: dir.to_path_buf(),
+    })?;
+    Ok(entries.next().is_none())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,9 +1,11 @@
-//! Disk input and output: scans and frames, WAV files, `.flo` flow fields, atomic writes.
+//! Disk input and output: scans and frames, WAV files, `.flo` flow fields, atomic writes, video import (feature `video`).
 
 pub mod atomic;
 pub mod flo;
 pub mod frames;
 pub mod scan;
+#[cfg(feature = "video")]
+pub mod video;
 pub mod wav;
 
 use std::path::PathBuf;

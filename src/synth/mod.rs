@@ -144,19 +144,12 @@ fn io_err(problem: String, path: &Path) -> SynthError {
 
 /// Creates `dir` or accepts it when empty; anything else is an error and nothing is touched.
 pub(crate) fn prepare_out_dir(dir: &Path) -> Result<(), SynthError> {
+    if !crate::io::atomic::dir_is_missing_or_empty(dir)? {
+        return Err(SynthError::OutputExists {
+            path: dir.to_path_buf(),
+        });
+    }
     if dir.exists() {
-        if !dir.is_dir() {
-            return Err(SynthError::OutputExists {
-                path: dir.to_path_buf(),
-            });
-        }
-        let mut entries = std::fs::read_dir(dir)
-            .map_err(|e| io_err(format!("cannot list output folder: {e}"), dir))?;
-        if entries.next().is_some() {
-            return Err(SynthError::OutputExists {
-                path: dir.to_path_buf(),
-            });
-        }
         Ok(())
     } else {
         std::fs::create_dir_all(dir)

@@ -1,0 +1,517 @@
+//! "Import video…" (features `gui` + `video`): a form for the clip, its grouping and metadata, an
+//! import on a named worker thread with progress and cancel, then the new scan opens.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::mpsc::{self, Receiver};
+use std::thread::JoinHandle;
+
+use egui::{Color32, Grid, Ui};
+
+use super::dialogs::DialogKind;
+use super::workbench::Workbench;
+use crate::io::Cut;
+use crate::io::video::{ClipMeta, GroupLayout, ImportSummary, import_video};
+
+/// The form's draft: everything [`import_video`] needs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImportForm {
+    /// The clip.
+    pub clip: Option<PathBuf>,
+    /// The output scan folder, as typed or picked.
+    pub out: String,
+    /// Frames per group.
+    pub frames_per_group: usize,
+    /// Frames between the first frames of consecutive groups.
+    pub group_stride_frames: usize,
+    /// Most groups written; 0 = all the clip holds.
+    pub max_groups: usize,
+    /// Metadata; `group_step_um` is used only when `own_group_step` is on.
+    pub meta: ClipMeta,
+    /// Whether the operator gives the group step rather than stride × frame step.
+    pub own_group_step: bool,
+    /// The group step when `own_group_step` is on.
+    pub group_step_um: f64,
+}
+
+impl Default for ImportForm {
+    fn default() -> Self {
+        let layout = GroupLayout::default();
+        let meta = ClipMeta::default();
+        Self {
+            clip: None,
+            out: String::new(),
+            frames_per_group: layout.frames_per_group,
+            group_stride_frames: layout.stride(),
+            max_groups: 0,
+            group_step_um: layout.stride() as f64 * meta.frame_step_um,
+            meta,
+            own_group_step: false,
+        }
+    }
+}
+
+/// A validated request.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImportRequest {
+    /// The clip.
+    pub clip: PathBuf,
+    /// The output folder.
+    pub out: PathBuf,
+    /// Grouping.
+    pub layout: GroupLayout,
+    /// Metadata.
+    pub meta: ClipMeta,
+}
+
+impl ImportForm {
+    /// The request the form describes, or the first problem (checked as the import checks).
+    ///
+    /// # Errors
+    /// A sentence for the form.
+    pub fn request(&self) -> Result<ImportRequest, String> {
+        let Some(clip) = self.clip.clone() else {
+            return Err("choose a video clip".into());
+        };
+        if !clip.is_file() {
+            return Err(format!("no such video file: {}", clip.display()));
+        }
+        if self.out.trim().is_empty() {
+            return Err("choose an output folder".into());
+        }
+        let out = PathBuf::from(self.out.trim());
+        if out.exists() && std::fs::read_dir(&out).map_or(true, |mut d| d.next().is_some()) {
+            return Err(format!(
+                "the output folder must be new or empty: {}",
+                out.display()
+            ));
+        }
+        let layout = GroupLayout {
+            frames_per_group: self.frames_per_group,
+            group_stride_frames: Some(self.group_stride_frames),
+            first_frame: 0,
+            max_groups: (self.max_groups > 0).then_some(self.max_groups),
+        };
+        layout.validate()?;
+        let meta = ClipMeta {
+            group_step_um: self.own_group_step.then_some(self.group_step_um),
+            ..self.meta.clone()
+        };
+        meta.scan_meta(&layout).map_err(|e| e.to_string())?;
+        Ok(ImportRequest {
+            clip,
+            out,
+            layout,
+            meta,
+        })
+    }
+
+    /// Sets the output from a picked folder: itself when empty, else `<folder>/<clip stem>`.
+    pub fn set_out_from_pick(&mut self, folder: &Path) {
+        let empty = std::fs::read_dir(folder).is_ok_and(|mut d| d.next().is_none());
+        let out = if empty {
+            folder.to_path_buf()
+        } else {
+            let stem = self
+                .clip
+                .as_ref()
+                .and_then(|c| c.file_stem())
+                .map_or_else(|| "imported".into(), |s| s.to_string_lossy().into_owned());
+            folder.join(format!("{stem}-scan"))
+        };
+        self.out = out.display().to_string();
+    }
+}
+
+/// An import running on the `groovescope-import` thread.
+#[derive(Debug)]
+pub struct ImportRun {
+    cancel: Arc<AtomicBool>,
+    done: Arc<AtomicUsize>,
+    total: Arc<AtomicUsize>,
+    rx: Receiver<Result<ImportSummary, String>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl ImportRun {
+    /// Starts importing; `repaint` wakes the UI on progress and at the end.
+    ///
+    /// # Errors
+    /// When the thread cannot be started.
+    pub fn start(
+        req: ImportRequest,
+        repaint: Box<dyn Fn() + Send + Sync>,
+    ) -> std::io::Result<Self> {
+        let cancel = Arc::new(AtomicBool::new(false));
+        let done = Arc::new(AtomicUsize::new(0));
+        let total = Arc::new(AtomicUsize::new(0));
+        let (tx, rx) = mpsc::channel();
+        let (flag, d, t) = (cancel.clone(), done.clone(), total.clone());
+        let thread = std::thread::Builder::new()
+            .name("groovescope-import".into())
+            .spawn(move || {
+                let progress = |n: usize, of: usize| {
+                    d.store(n, Ordering::Relaxed);
+                    t.store(of, Ordering::Relaxed);
+                    repaint();
+                };
+                let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    import_video(
+                        &req.clip,
+                        &req.out,
+                        &req.layout,
+                        &req.meta,
+                        &progress,
+                        &flag,
+                    )
+                }));
+                let outcome = match result {
+                    Ok(r) => r.map_err(|e| e.to_string()),
+                    Err(_) => Err("the import crashed (a bug); nothing was written".into()),
+                };
+                let _ = tx.send(outcome);
+                repaint();
+            })?;
+        Ok(Self {
+            cancel,
+            done,
+            total,
+            rx,
+            thread: Some(thread),
+        })
+    }
+
+    /// Frames decoded and expected (0 = unknown).
+    #[must_use]
+    pub fn progress(&self) -> (usize, usize) {
+        (
+            self.done.load(Ordering::Relaxed),
+            self.total.load(Ordering::Relaxed),
+        )
+    }
+
+    /// Asks the thread to stop; it removes what it wrote.
+    pub fn cancel(&self) {
+        self.cancel.store(true, Ordering::Relaxed);
+    }
+
+    /// The outcome once the thread finished.
+    pub fn poll(&mut self) -> Option<Result<ImportSummary, String>> {
+        let got = self.rx.try_recv().ok()?;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        Some(got)
+    }
+}
+
+impl Drop for ImportRun {
+    fn drop(&mut self) {
+        self.cancel();
+    }
+}
+
+/// The window's state on the workbench.
+#[derive(Debug, Default)]
+pub struct VideoImport {
+    /// The form, while the window is open.
+    pub form: Option<ImportForm>,
+    /// The running import.
+    pub run: Option<ImportRun>,
+    /// The last failure, shown in the window.
+    pub problem: Option<String>,
+}
+
+/// What the window asks for.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ImportAction {
+    /// Pick the clip.
+    PickClip,
+    /// Pick the output folder.
+    PickOut,
+    /// Start importing.
+    Start(ImportRequest),
+    /// Stop the running import.
+    Cancel,
+    /// Close the window.
+    Close,
+}
+
+fn num(ui: &mut Ui, text: &str, value: &mut f64, speed: f64) {
+    let l = ui.label(text);
+    ui.add(egui::DragValue::new(value).speed(speed).max_decimals(6))
+        .labelled_by(l.id);
+    ui.end_row();
+}
+
+fn count(ui: &mut Ui, text: &str, value: &mut usize, min: usize) {
+    let l = ui.label(text);
+    ui.add(egui::DragValue::new(value).range(min..=100_000))
+        .labelled_by(l.id);
+    ui.end_row();
+}
+
+/// Draws the form (or the running import's progress) and returns what was asked for.
+pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAction> {
+    let mut action = None;
+    if let Some(run) = &state.run {
+        let (done, total) = run.progress();
+        let frac = if total > 0 {
+            done as f32 / total as f32
+        } else {
+            0.0
+        };
+        ui.add(egui::ProgressBar::new(frac).text(format!("decoded {done}/{total} frames")));
+        if ui.button("Cancel import").clicked() {
+            action = Some(ImportAction::Cancel);
+        }
+        return action;
+    }
+    let form = state.form.as_mut()?;
+    ui.horizontal(|ui| {
+        if ui.button("Choose clip…").clicked() {
+            action = Some(ImportAction::PickClip);
+        }
+        match &form.clip {
+            Some(c) => ui.label(c.display().to_string()),
+            None => ui.weak("no clip chosen"),
+        };
+    });
+    ui.horizontal(|ui| {
+        if ui.button("Output folder…").clicked() {
+            action = Some(ImportAction::PickOut);
+        }
+        ui.add(egui::TextEdit::singleline(&mut form.out).hint_text("new or empty folder"));
+    });
+    Grid::new("import_video_form")
+        .num_columns(2)
+        .show(ui, |ui| {
+            count(ui, "frames per group", &mut form.frames_per_group, 7);
+            count(
+                ui,
+                "group stride (frames)",
+                &mut form.group_stride_frames,
+                1,
+            );
+            count(ui, "max groups (0 = all)", &mut form.max_groups, 0);
+            num(ui, "rpm", &mut form.meta.rpm, 0.1);
+            num(ui, "radius (mm)", &mut form.meta.radius_mm, 0.1);
+            let l = ui.label("cut");
+            egui::ComboBox::from_id_salt("import_cut")
+                .selected_text(format!("{:?}", form.meta.cut).to_lowercase())
+                .show_ui(ui, |ui| {
+                    for c in [Cut::Lateral, Cut::Stereo, Cut::Vertical] {
+                        ui.selectable_value(&mut form.meta.cut, c, format!("{c:?}").to_lowercase());
+                    }
+                })
+                .response
+                .labelled_by(l.id);
+            ui.end_row();
+            num(ui, "pixel pitch (µm)", &mut form.meta.pixel_pitch_um, 0.01);
+            num(
+                ui,
+                "working distance (mm)",
+                &mut form.meta.working_distance_mm,
+                0.01,
+            );
+            num(ui, "frame step (µm)", &mut form.meta.frame_step_um, 0.01);
+            ui.checkbox(&mut form.own_group_step, "group step (µm)");
+            if form.own_group_step {
+                ui.add(egui::DragValue::new(&mut form.group_step_um).speed(0.1));
+            } else {
+                ui.weak(format!(
+                    "{:.4} (stride × frame step)",
+                    form.group_stride_frames as f64 * form.meta.frame_step_um
+                ));
+            }
+            ui.end_row();
+        });
+    let request = form.request();
+    if let Err(problem) = &request {
+        ui.colored_label(Color32::from_rgb(235, 90, 80), problem);
+    } else if let Some(p) = &state.problem {
+        ui.colored_label(Color32::from_rgb(235, 90, 80), p);
+    }
+    ui.horizontal(|ui| {
+        if ui
+            .add_enabled(request.is_ok(), egui::Button::new("Import"))
+            .clicked()
+            && let Ok(req) = request
+        {
+            action = Some(ImportAction::Start(req));
+        }
+        if ui.button("Close").clicked() {
+            action = Some(ImportAction::Close);
+        }
+    });
+    action
+}
+
+impl Workbench {
+    /// Opens the "Import video" window.
+    pub fn open_import_video(&mut self) {
+        if self.video_import.form.is_none() {
+            self.video_import.form = Some(ImportForm::default());
+        }
+    }
+
+    /// The open import form, for tests and scripting.
+    pub fn import_video_form_mut(&mut self) -> Option<&mut ImportForm> {
+        self.video_import.form.as_mut()
+    }
+
+    /// Whether an import runs.
+    #[must_use]
+    pub fn is_importing_video(&self) -> bool {
+        self.video_import.run.is_some()
+    }
+
+    /// Handles a picked clip or output folder.
+    pub(super) fn video_dialog_answer(&mut self, kind: &DialogKind, path: PathBuf) {
+        let Some(form) = self.video_import.form.as_mut() else {
+            return;
+        };
+        match kind {
+            DialogKind::VideoClip => form.clip = Some(path),
+            DialogKind::VideoOut => form.set_out_from_pick(&path),
+            _ => {}
+        }
+    }
+
+    /// Draws the window, polls the running import and opens its scan when it finishes.
+    pub(super) fn import_video_step(&mut self, ctx: &egui::Context) {
+        if let Some(run) = self.video_import.run.as_mut()
+            && let Some(outcome) = run.poll()
+        {
+            self.video_import.run = None;
+            match outcome {
+                Ok(s) => {
+                    self.info(format!(
+                        "imported {} groups of {} frames into {}",
+                        s.groups,
+                        s.frames_per_group,
+                        s.out_dir.display()
+                    ));
+                    self.video_import.form = None;
+                    self.video_import.problem = None;
+                    let _ = self.open_scan(&s.out_dir);
+                }
+                Err(e) => {
+                    self.error(format!("video import failed: {e}"));
+                    self.video_import.problem = Some(e);
+                }
+            }
+        }
+        if self.video_import.form.is_none() && self.video_import.run.is_none() {
+            return;
+        }
+        let mut open = true;
+        let mut action = None;
+        egui::Window::new("Import video")
+            .open(&mut open)
+            .collapsible(false)
+            .resizable(false)
+            .show(ctx, |ui| {
+                action = import_video_ui(ui, &mut self.video_import)
+            });
+        if !open {
+            action = Some(ImportAction::Close);
+        }
+        match action {
+            Some(ImportAction::PickClip) => self.show_dialog(DialogKind::VideoClip, None),
+            Some(ImportAction::PickOut) => self.show_dialog(DialogKind::VideoOut, None),
+            Some(ImportAction::Start(req)) => {
+                self.video_import.problem = None;
+                let ctx = self.ctx.clone();
+                match ImportRun::start(req, Box::new(move || ctx.request_repaint())) {
+                    Ok(run) => self.video_import.run = Some(run),
+                    Err(e) => self.error(format!("cannot start the import: {e}")),
+                }
+            }
+            Some(ImportAction::Cancel) => {
+                if let Some(run) = &self.video_import.run {
+                    run.cancel();
+                }
+            }
+            Some(ImportAction::Close) => {
+                if let Some(run) = &self.video_import.run {
+                    run.cancel();
+                } else {
+                    self.video_import.form = None;
+                }
+            }
+            None => {}
+        }
+        if self.video_import.run.is_some() {
+            ctx.request_repaint_after(std::time::Duration::from_millis(100));
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use crate::io::video::encode_grey_clip;
+
+    fn clip(dir: &Path, frames: usize) -> PathBuf {
+        let imgs: Vec<Image> = (0..frames)
+            .map(|k| Image::from_fn(24, 16, |x, y| ((x + k + y) % 9) as f32 / 8.0))
+            .collect();
+        let p = dir.join("clip.avi");
+        encode_grey_clip(&p, &imgs, false, 25).unwrap();
+        p
+    }
+
+    #[test]
+    fn form_names_what_is_missing_or_invalid() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut f = ImportForm::default();
+        assert_eq!(f.request().unwrap_err(), "choose a video clip");
+        f.clip = Some(clip(dir.path(), 8));
+        assert_eq!(f.request().unwrap_err(), "choose an output folder");
+        f.set_out_from_pick(dir.path());
+        assert!(f.out.ends_with("clip-scan"), "{}", f.out);
+        f.frames_per_group = 6;
+        assert!(f.request().unwrap_err().contains("frames_per_group"));
+        f.frames_per_group = 7;
+        f.meta.pixel_pitch_um = -1.0;
+        assert!(f.request().unwrap_err().contains("camera.pixel_pitch_um"));
+        f.meta.pixel_pitch_um = 0.39;
+        let req = f.request().unwrap();
+        assert_eq!(req.layout.stride(), 12);
+        assert_eq!(req.meta.group_step_um, None);
+        f.out = dir.path().display().to_string();
+        assert!(f.request().unwrap_err().contains("new or empty"));
+    }
+
+    #[test]
+    fn run_imports_on_its_thread_and_reports_progress() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut f = ImportForm {
+            clip: Some(clip(dir.path(), 16)),
+            out: dir.path().join("scan").display().to_string(),
+            frames_per_group: 8,
+            group_stride_frames: 8,
+            ..ImportForm::default()
+        };
+        f.own_group_step = true;
+        f.group_step_um = 50.0;
+        let mut run = ImportRun::start(f.request().unwrap(), Box::new(|| {})).unwrap();
+        let started = std::time::Instant::now();
+        let outcome = loop {
+            if let Some(o) = run.poll() {
+                break o;
+            }
+            assert!(started.elapsed().as_secs() < 60, "import hung");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        };
+        let s = outcome.unwrap();
+        assert_eq!(s.groups, 2);
+        assert_eq!(run.progress(), (16, 16));
+        let scan = crate::io::Scan::open(&s.out_dir).unwrap();
+        assert!((scan.meta.motion.group_step_um - 50.0).abs() < 1e-12);
+    }
+}

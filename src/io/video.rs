@@ -1,0 +1,435 @@
+//! Video import (feature `video`): decodes an AVI/MP4/MKV clip to grey frames and writes them as a scan folder.
+//!
+//! Every frame is decoded in order (FFmpeg through `ffmpeg-next`), converted to grey — 16-bit
+//! when the source format holds more than 8 bits per component, else 8-bit — and streamed into
+//! groups of `frames_per_group` frames whose first frames lie `group_stride_frames` apart
+//! (a stride below the group size repeats frames in consecutive groups; above it, frames between
+//! groups are skipped). A trailing group the clip cannot fill is dropped.
+//!
+//! The scan is written into a hidden temporary sibling folder and renamed into place at the end,
+//! so a failed or cancelled import leaves nothing behind; the target must not exist or be empty.
+//! `scan.toml` is built from [`ClipMeta`] with [`super::ScanMeta`], checked by [`super::ScanMeta::validate`]
+//! (the check [`super::Scan::open`] applies); an extra `[video_import]` table records the source
+//! clip and the grouping (the format keeps such tables and ignores them).
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use ffmpeg::media::Type;
+use ffmpeg::util::frame::video::Video as VideoFrame;
+use ffmpeg_next as ffmpeg;
+use serde::Serialize;
+
+use super::LoadError;
+use super::atomic::{dir_is_missing_or_empty, write_atomic};
+use grey::{GreyConverter, Splitter, component_depth_bits, estimated_frames};
+
+mod encode;
+mod grey;
+mod layout;
+
+pub use encode::encode_grey_clip;
+pub use layout::{ClipMeta, GroupLayout};
+
+/// Frames per group when the caller does not say (the paper's choice for real records).
+pub const DEFAULT_FRAMES_PER_GROUP: usize = 12;
+
+/// Why a clip could not be imported. Messages about the clip end with its path.
+#[derive(Debug, thiserror::Error)]
+pub enum VideoError {
+    /// The clip file does not exist.
+    #[error("no such video file: {}", path.display())]
+    Missing {
+        /// The clip.
+        path: PathBuf,
+    },
+    /// FFmpeg cannot read the file as a container.
+    #[error("not a video file ({problem}): {}", path.display())]
+    NotAVideo {
+        /// FFmpeg's message.
+        problem: String,
+        /// The clip.
+        path: PathBuf,
+    },
+    /// The container holds no video stream (an audio file, for example).
+    #[error("the file holds no video stream: {}", path.display())]
+    NoVideoStream {
+        /// The clip.
+        path: PathBuf,
+    },
+    /// This FFmpeg has no decoder for the clip's codec.
+    #[error("unsupported video codec {codec} ({problem}): {}", path.display())]
+    UnsupportedCodec {
+        /// Codec name.
+        codec: String,
+        /// FFmpeg's message.
+        problem: String,
+        /// The clip.
+        path: PathBuf,
+    },
+    /// A packet or frame failed to decode or convert.
+    #[error("cannot decode frame {frame} ({problem}): {}", path.display())]
+    Decode {
+        /// Index of the frame (from 0) being decoded.
+        frame: usize,
+        /// What went wrong.
+        problem: String,
+        /// The clip.
+        path: PathBuf,
+    },
+    /// The clip decoded to no frames at all.
+    #[error("the clip holds no frames: {}", path.display())]
+    NoFrames {
+        /// The clip.
+        path: PathBuf,
+    },
+    /// The clip (from the first frame used) is shorter than one group.
+    #[error("the clip has {found} frames from the first frame used, one group needs {needed}: {}", path.display())]
+    TooFewFrames {
+        /// Frames available.
+        found: usize,
+        /// Frames one group needs.
+        needed: usize,
+        /// The clip.
+        path: PathBuf,
+    },
+    /// A grouping or metadata setting is invalid.
+    #[error("invalid import setting: {problem}")]
+    Settings {
+        /// The key and the problem.
+        problem: String,
+    },
+    /// The output folder exists and is not empty; nothing was written.
+    #[error("refusing to write into a folder that is not empty: {}", path.display())]
+    OutputExists {
+        /// The folder.
+        path: PathBuf,
+    },
+    /// A file could not be written (the message names it).
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    /// The cancel flag was raised; nothing was left behind.
+    #[error("cancelled")]
+    Cancelled,
+}
+
+/// The `[video_import]` table: where the scan came from.
+#[derive(Serialize)]
+struct ImportInfo<'a> {
+    source: &'a str,
+    codec: &'a str,
+    first_frame: usize,
+    frames_per_group: usize,
+    group_stride_frames: usize,
+}
+
+/// What [`import_video`] wrote.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImportSummary {
+    /// The scan folder.
+    pub out_dir: PathBuf,
+    /// Groups written.
+    pub groups: usize,
+    /// Frames in each group.
+    pub frames_per_group: usize,
+    /// Frames between the first frames of consecutive groups.
+    pub group_stride_frames: usize,
+    /// Frames decoded from the clip (including skipped ones).
+    pub frames_decoded: usize,
+    /// Frame width in pixels.
+    pub width: usize,
+    /// Frame height in pixels.
+    pub height: usize,
+    /// Bits per pixel of the written PNGs (8 or 16).
+    pub bit_depth: u8,
+    /// The clip's codec name.
+    pub codec: String,
+}
+
+/// Removes the temporary folder unless the import finished.
+struct TempDir {
+    path: PathBuf,
+    keep: bool,
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        if !self.keep {
+            let _ = std::fs::remove_dir_all(&self.path);
+        }
+    }
+}
+
+fn io_err(problem: String, path: &Path) -> VideoError {
+    VideoError::Load(LoadError::Io {
+        problem,
+        path: path.to_path_buf(),
+    })
+}
+
+/// Creates the hidden sibling folder the scan is written into.
+fn make_temp_dir(out_dir: &Path) -> Result<TempDir, VideoError> {
+    let name = out_dir
+        .file_name()
+        .map_or_else(|| "scan".into(), |n| n.to_string_lossy().into_owned());
+    let parent = match out_dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent)
+        .map_err(|e| io_err(format!("cannot create output folder: {e}"), &parent))?;
+    let path = parent.join(format!(".{name}.import-{}.tmp", std::process::id()));
+    std::fs::create_dir(&path)
+        .map_err(|e| io_err(format!("cannot create temporary folder: {e}"), &path))?;
+    Ok(TempDir { path, keep: false })
+}
+
+/// Fails unless `out_dir` is missing or an empty folder.
+fn check_out_dir(out_dir: &Path) -> Result<(), VideoError> {
+    if dir_is_missing_or_empty(out_dir)? {
+        Ok(())
+    } else {
+        Err(VideoError::OutputExists {
+            path: out_dir.to_path_buf(),
+        })
+    }
+}
+
+/// Imports `clip` as a scan in `out_dir` (missing or empty; created).
+///
+/// `progress(decoded, total)` is called with 0 first and after every decoded frame; `total` is
+/// the number of frames expected to be decoded (0 when the container does not say). Raising
+/// `cancel` stops before the next frame with [`VideoError::Cancelled`]; nothing is left behind
+/// then, nor after any other error.
+///
+/// # Errors
+/// [`VideoError`] naming the clip (missing, not a video, no video stream, unsupported codec,
+/// no frames, too few frames for one group), the output folder, or the file that failed.
+pub fn import_video(
+    clip: &Path,
+    out_dir: &Path,
+    layout: &GroupLayout,
+    meta: &ClipMeta,
+    progress: &(dyn Fn(usize, usize) + Sync),
+    cancel: &AtomicBool,
+) -> Result<ImportSummary, VideoError> {
+    layout
+        .validate()
+        .map_err(|problem| VideoError::Settings { problem })?;
+    let mut scan_meta = meta.scan_meta(layout)?;
+    if !clip.is_file() {
+        return Err(VideoError::Missing {
+            path: clip.to_path_buf(),
+        });
+    }
+    check_out_dir(out_dir)?;
+
+    ffmpeg::init().map_err(|e| VideoError::NotAVideo {
+        problem: format!("FFmpeg failed to start: {e}"),
+        path: clip.to_path_buf(),
+    })?;
+    // Our errors name the file; FFmpeg's own log lines would only repeat them on stderr.
+    ffmpeg::util::log::set_level(ffmpeg::util::log::Level::Fatal);
+    let mut input = ffmpeg::format::input(clip).map_err(|e| VideoError::NotAVideo {
+        problem: e.to_string(),
+        path: clip.to_path_buf(),
+    })?;
+    let Some(stream) = input.streams().best(Type::Video) else {
+        return Err(VideoError::NoVideoStream {
+            path: clip.to_path_buf(),
+        });
+    };
+    let stream_index = stream.index();
+    let params = stream.parameters();
+    let codec_id = params.id();
+    let codec = format!("{codec_id:?}").to_lowercase();
+    let unsupported = |e: ffmpeg::Error| VideoError::UnsupportedCodec {
+        codec: codec.clone(),
+        problem: e.to_string(),
+        path: clip.to_path_buf(),
+    };
+    if ffmpeg::decoder::find(codec_id).is_none() {
+        return Err(unsupported(ffmpeg::Error::DecoderNotFound));
+    }
+    let mut decoder = ffmpeg::codec::context::Context::from_parameters(params)
+        .and_then(|c| c.decoder().video())
+        .map_err(unsupported)?;
+    // The depth is known from the codec parameters for most clips, else from the first frame.
+    let mut sixteen_bit: Option<bool> = (decoder.format() != ffmpeg::format::Pixel::None)
+        .then(|| component_depth_bits(decoder.format()) > 8);
+    let mut total = estimated_frames(&stream);
+    if let Some(needed) = layout.frames_needed() {
+        let needed = needed + layout.first_frame;
+        total = if total == 0 {
+            needed
+        } else {
+            total.min(needed)
+        };
+    }
+    let est_groups = layout
+        .max_groups
+        .unwrap_or(0)
+        .max(layout.full_groups(total.saturating_sub(layout.first_frame)));
+
+    let tmp = make_temp_dir(out_dir)?;
+    let mut splitter = Splitter {
+        layout,
+        dir: &tmp.path,
+        sixteen_bit: false,
+        group_digits: crate::synth::digits(est_groups, 5),
+        frame_digits: crate::synth::digits(layout.frames_per_group, 3),
+        taken: 0,
+    };
+    let mut converter: Option<GreyConverter> = None;
+    let mut size: Option<(usize, usize)> = None;
+    let mut decoded = 0usize;
+    let mut frame = VideoFrame::empty();
+    progress(0, total);
+
+    // Sends a packet (or, with `None`, the end of stream) and takes every frame the decoder has
+    // ready; returns false once enough groups are full.
+    let mut feed = |decoder: &mut ffmpeg::decoder::Video,
+                    packet: Option<&ffmpeg::Packet>|
+     -> Result<bool, VideoError> {
+        let decode_err = |frame: usize, problem: String| VideoError::Decode {
+            frame,
+            problem,
+            path: clip.to_path_buf(),
+        };
+        let sent = match packet {
+            Some(p) => decoder.send_packet(p),
+            None => decoder.send_eof(),
+        };
+        sent.map_err(|e| decode_err(decoded, e.to_string()))?;
+        while decoder.receive_frame(&mut frame).is_ok() {
+            if cancel.load(Ordering::Relaxed) {
+                return Err(VideoError::Cancelled);
+            }
+            if decoded >= layout.first_frame {
+                let deep =
+                    *sixteen_bit.get_or_insert_with(|| component_depth_bits(frame.format()) > 8);
+                splitter.sixteen_bit = deep;
+                let img = converter
+                    .get_or_insert_with(|| GreyConverter::new(deep))
+                    .convert(&frame)
+                    .map_err(|e| decode_err(decoded, format!("grey conversion failed: {e}")))?;
+                let this = (img.width, img.height);
+                let first = *size.get_or_insert(this);
+                if this != first {
+                    return Err(decode_err(
+                        decoded,
+                        format!(
+                            "frame is {}x{} but the clip's first frame is {}x{}",
+                            this.0, this.1, first.0, first.1
+                        ),
+                    ));
+                }
+                splitter.push(&img)?;
+            }
+            decoded += 1;
+            progress(decoded, total.max(decoded));
+            if splitter.done() {
+                return Ok(false);
+            }
+        }
+        Ok(true)
+    };
+    let mut more = true;
+    for (stream, packet) in input.packets() {
+        if cancel.load(Ordering::Relaxed) {
+            return Err(VideoError::Cancelled);
+        }
+        if stream.index() == stream_index {
+            more = feed(&mut decoder, Some(&packet))?;
+            if !more {
+                break;
+            }
+        }
+    }
+    if more {
+        // End of stream: the decoder may still hold delayed frames.
+        feed(&mut decoder, None)?;
+    }
+    // The container's frame count is only an estimate; end the bar at what was decoded.
+    progress(decoded, decoded);
+
+    if decoded == 0 {
+        return Err(VideoError::NoFrames {
+            path: clip.to_path_buf(),
+        });
+    }
+    let groups = splitter.finish()?;
+    if groups == 0 {
+        return Err(VideoError::TooFewFrames {
+            found: splitter.taken,
+            needed: layout.frames_per_group,
+            path: clip.to_path_buf(),
+        });
+    }
+    let source = clip
+        .file_name()
+        .map_or_else(|| clip.to_string_lossy(), |n| n.to_string_lossy())
+        .into_owned();
+    let info = ImportInfo {
+        source: &source,
+        codec: &codec,
+        first_frame: layout.first_frame,
+        frames_per_group: layout.frames_per_group,
+        group_stride_frames: layout.stride(),
+    };
+    let info = toml::Table::try_from(&info).map_err(|e| VideoError::Settings {
+        problem: format!("cannot write [video_import]: {e}"),
+    })?;
+    scan_meta
+        .extra
+        .insert("video_import".into(), toml::Value::Table(info));
+    let meta_text = scan_meta
+        .to_toml_string()
+        .map_err(|e| VideoError::Settings {
+            problem: format!("cannot write scan.toml: {e}"),
+        })?;
+    write_atomic(&tmp.path.join("scan.toml"), meta_text.as_bytes(), false)?;
+    if cancel.load(Ordering::Relaxed) {
+        return Err(VideoError::Cancelled);
+    }
+    let bit_depth = if splitter.sixteen_bit { 16 } else { 8 };
+    finish_into(tmp, out_dir)?;
+    let (width, height) = size.unwrap_or((0, 0));
+    Ok(ImportSummary {
+        out_dir: out_dir.to_path_buf(),
+        groups,
+        frames_per_group: layout.frames_per_group,
+        group_stride_frames: layout.stride(),
+        frames_decoded: decoded,
+        width,
+        height,
+        bit_depth,
+        codec,
+    })
+}
+
+/// Renames the finished temporary folder to `out_dir` (replacing it only when it is empty).
+fn finish_into(mut tmp: TempDir, out_dir: &Path) -> Result<(), VideoError> {
+    check_out_dir(out_dir)?;
+    if out_dir.exists() {
+        // An empty folder: `remove_dir` refuses anything else, so nothing can be lost.
+        std::fs::remove_dir(out_dir).map_err(|e| {
+            io_err(
+                format!("cannot replace the empty output folder: {e}"),
+                out_dir,
+            )
+        })?;
+    }
+    std::fs::rename(&tmp.path, out_dir).map_err(|e| {
+        io_err(
+            format!("cannot move the imported scan into place: {e}"),
+            out_dir,
+        )
+    })?;
+    tmp.keep = true;
+    Ok(())
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests;

@@ -1,0 +1,141 @@
+//! The `import-video` subcommand: its arguments and handler (progress bar, one summary line).
+//!
+//! The subcommand is always listed; a binary built without the `video` feature answers it with one
+//! line saying so and exits with failure.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+
+/// Arguments of `import-video`.
+#[derive(Debug, clap::Args)]
+pub struct ImportVideoArgs {
+    /// The clip (AVI, MP4, MKV, … anything this FFmpeg decodes).
+    pub clip: PathBuf,
+    /// Output scan folder (must not exist or be empty).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Frames in each group (at least 7).
+    #[arg(long, default_value_t = 12)]
+    pub frames_per_group: usize,
+    /// Frames between the first frames of consecutive groups (default: --frames-per-group, no
+    /// shared frames; smaller repeats frames, larger skips them).
+    #[arg(long)]
+    pub group_stride: Option<usize>,
+    /// Clip frames to skip before the first group.
+    #[arg(long, default_value_t = 0)]
+    pub first_frame: usize,
+    /// Write at most this many groups.
+    #[arg(long)]
+    pub max_groups: Option<usize>,
+    /// Turntable speed the disc was cut at.
+    #[arg(long, allow_hyphen_values = true)]
+    pub rpm: f64,
+    /// Groove radius at the first group, mm.
+    #[arg(long, allow_hyphen_values = true)]
+    pub radius_mm: f64,
+    /// Cut type.
+    #[arg(long, value_parser = ["lateral", "stereo", "vertical"], default_value = "lateral")]
+    pub cut: String,
+    /// Size of one pixel on the land plane, µm.
+    #[arg(long, allow_hyphen_values = true)]
+    pub pixel_pitch_um: f64,
+    /// Optical centre to the land plane, mm.
+    #[arg(long, allow_hyphen_values = true)]
+    pub working_distance_mm: f64,
+    /// Record travel between consecutive frames, µm.
+    #[arg(long, allow_hyphen_values = true)]
+    pub frame_step_um: f64,
+    /// Travel between the first frames of consecutive groups, µm (default: stride × frame step).
+    #[arg(long, allow_hyphen_values = true)]
+    pub group_step_um: Option<f64>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Runs `import-video`.
+///
+/// # Errors
+/// One line naming the clip or folder and the problem; without the `video` feature, always.
+#[cfg(feature = "video")]
+pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
+    use std::sync::atomic::AtomicBool;
+
+    use indicatif::{ProgressBar, ProgressStyle};
+
+    use crate::io::Cut;
+    use crate::io::video::{ClipMeta, GroupLayout, import_video};
+
+    let cut = match args.cut.as_str() {
+        "stereo" => Cut::Stereo,
+        "vertical" => Cut::Vertical,
+        _ => Cut::Lateral,
+    };
+    let layout = GroupLayout {
+        frames_per_group: args.frames_per_group,
+        group_stride_frames: args.group_stride,
+        first_frame: args.first_frame,
+        max_groups: args.max_groups,
+    };
+    let meta = ClipMeta {
+        rpm: args.rpm,
+        radius_mm: args.radius_mm,
+        cut,
+        pixel_pitch_um: args.pixel_pitch_um,
+        working_distance_mm: args.working_distance_mm,
+        frame_step_um: args.frame_step_um,
+        group_step_um: args.group_step_um,
+    };
+    let pb = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        let pb = ProgressBar::new(0);
+        if let Ok(style) = ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} frames ({per_sec}, ETA {eta})",
+        ) {
+            pb.set_style(style);
+        }
+        pb
+    };
+    let progress = |done: usize, total: usize| {
+        pb.set_length(total as u64);
+        pb.set_position(done as u64);
+    };
+    let summary = import_video(
+        &args.clip,
+        &args.out,
+        &layout,
+        &meta,
+        &progress,
+        &AtomicBool::new(false),
+    )?;
+    pb.finish_and_clear();
+    if !args.quiet {
+        println!(
+            "wrote {} ({} groups of {} frames, stride {}, {}x{} {}-bit grey, {} frames decoded, {})",
+            summary.out_dir.display(),
+            summary.groups,
+            summary.frames_per_group,
+            summary.group_stride_frames,
+            summary.width,
+            summary.height,
+            summary.bit_depth,
+            summary.frames_decoded,
+            summary.codec
+        );
+    }
+    Ok(())
+}
+
+/// Runs `import-video`: this build has no video support, so it says so.
+///
+/// # Errors
+/// Always.
+#[cfg(not(feature = "video"))]
+pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
+    let _ = args;
+    anyhow::bail!(
+        "this groovescope was built without video support; rebuild with `cargo build --features video` (needs the FFmpeg dev packages)"
+    )
+}
