@@ -563,6 +563,9 @@ mod tests {
                     / cold.u.data.len() as f64
             })
             .collect();
-        assert!(diffs.iter().all(|&x| x < 1e-4), "mean |Δu| per window {diffs:?}");
+        assert!(
+            diffs.iter().all(|&x| x < 1e-4),
+            "mean |Δu| per window {diffs:?}"
+        );
     }
 }
