@@ -7,7 +7,7 @@ use super::frame_ui::StageData;
 use super::{
     AXIS_WIDTH_PT, empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines,
 };
-use crate::app::render::heat_colour;
+use crate::app::render::{heat_colour, robust_range};
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
 use crate::pipeline::Stage;
@@ -134,8 +134,14 @@ pub fn depth_ui(
         .filter(|r| r.is_finite())
         .map(f64::from)
         .collect();
-    Plot::new("depth_section")
-        .y_axis_min_width(AXIS_WIDTH_PT)
+    // Y range from the map's robust range (as the colour bar), so a stray border value does
+    // not squash the section into a flat line; double-click still fits everything.
+    let mut plot = Plot::new("depth_section");
+    if let Some((lo, hi)) = robust_range(&z.data).filter(|(lo, hi)| lo < hi) {
+        let pad = 0.1 * f64::from(hi - lo);
+        plot = plot.default_y_bounds(f64::from(lo) - pad, f64::from(hi) + pad);
+    }
+    plot.y_axis_min_width(AXIS_WIDTH_PT)
         .height((height - img_h - 60.0).max(80.0))
         .x_axis_label(format!("y (px) at column {column}"))
         .y_axis_label("Z (µm)")
