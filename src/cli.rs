@@ -81,6 +81,25 @@ pub enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// Run the accuracy suite against ground truth (tones, speech, melody, Fig. 20, Table 2
+    /// depth scenes) and write a markdown report.
+    Accuracy {
+        /// The report file (markdown).
+        #[arg(long)]
+        out: PathBuf,
+        /// Fewer, shorter cases (about a minute).
+        #[arg(long)]
+        quick: bool,
+        /// Keep the rendered scans in this folder (must not exist or be empty).
+        #[arg(long)]
+        keep: Option<PathBuf>,
+        /// Replace an existing report.
+        #[arg(long)]
+        force: bool,
+        /// No per-case lines on stderr.
+        #[arg(long)]
+        quiet: bool,
+    },
     /// Import a microscope video clip (AVI/MP4) as a scan folder (needs the `video` feature).
     ImportVideo(crate::video_cli::ImportVideoArgs),
     /// Open the workbench (optionally on a scan).
@@ -615,6 +634,24 @@ pub fn run(command: Command) -> Result<()> {
             let mut p = load_params(params.as_deref())?;
             p.path = path_choice(&path, p.path);
             crate::inspect::run_inspect(&scan, group, &out, &p, force)
+        }
+        Command::Accuracy {
+            out,
+            quick,
+            keep,
+            force,
+            quiet,
+        } => {
+            let opts = crate::accuracy::AccuracyOptions { quick, keep };
+            crate::accuracy::write_report(&out, force, &opts, &mut |line| {
+                if !quiet {
+                    eprintln!("{line}");
+                }
+            })?;
+            if !quiet {
+                println!("wrote {}", out.display());
+            }
+            Ok(())
         }
         Command::ImportVideo(args) => crate::video_cli::run_import_video(&args),
         Command::Gui { scan } => run_gui(scan),

@@ -3,6 +3,7 @@
 //! The [`pipeline`] holds the pure stages; [`io`] reads scans and writes sound; [`synth`] renders
 //! ground-truth scans.
 
+pub mod accuracy;
 #[cfg(feature = "gui")]
 pub mod app;
 pub mod cli;

@@ -1,0 +1,98 @@
+//! Fast versions of the accuracy suite: each asserts a bar against the generator's ground truth.
+#![allow(clippy::unwrap_used)] // tests may panic
+
+mod common;
+
+use common::{groovescope, stderr};
+use groovescope::accuracy::{
+    render, scene_depth_table, score_scan, small_dual_focus, sound_params, two_sample_window_px,
+};
+use groovescope::pipeline::PipelineParams;
+use groovescope::synth::{SceneConfig, SceneKind, SynthConfig, tone};
+
+#[test]
+fn sphere_depth_error_beats_the_papers_kalman() {
+    // Paper Table 2: mean relative error ≈ 7–9% at frame 27; the goal is ≤ 3%.
+    let rows = scene_depth_table(
+        SceneKind::Sphere,
+        &SceneConfig::default(),
+        &[27],
+        &PipelineParams::default(),
+        true,
+    )
+    .unwrap();
+    let r = rows[0];
+    eprintln!(
+        "sphere frame 27: mean {:.2}% ± {:.2}, < 5%: {:.1}%, {} px",
+        r.mean, r.sigma, r.below_5, r.pixels
+    );
+    assert!(r.pixels > 5000, "{} pixels", r.pixels);
+    assert!(r.mean < 4.0, "mean error {:.2}%", r.mean);
+    assert!(r.below_5 > 70.0, "{:.1}% below 5%", r.below_5);
+}
+
+#[test]
+fn dual_focus_tone_reaches_its_snr_bar() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = small_dual_focus(8);
+    let secs = 8.0 * cfg.group_span_um() / cfg.groove_speed_um_s() + 0.01;
+    let scan = dir.path().join("tone");
+    render("1.5 kHz", &tone(1500.0, secs, 48_000), &cfg, &scan).unwrap();
+    let (s, _) = score_scan(
+        "1.5 kHz",
+        &scan,
+        &sound_params(two_sample_window_px(&cfg), true),
+    )
+    .unwrap();
+    eprintln!(
+        "1.5 kHz dual-focus tone: r {:.3}, SNR {:.1} dB",
+        s.r, s.snr_db
+    );
+    assert!(s.r > 0.88, "r = {:.3}", s.r);
+    assert!(s.snr_db > 4.0, "SNR = {:.1} dB", s.snr_db);
+}
+
+#[test]
+fn robust_fit_beats_least_squares_on_a_missing_wall() {
+    // Paper Fig. 20: the upper 45% of one wall missing from 300 to 1300 µm.
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = SynthConfig {
+        max_groups: Some(4),
+        ..SynthConfig::dual_focus_fig20()
+    };
+    let secs = 4.0 * cfg.group_span_um() / cfg.groove_speed_um_s() + 0.002;
+    let scan = dir.path().join("fig20");
+    render("Fig. 20", &tone(1000.0, secs, 48_000), &cfg, &scan).unwrap();
+    let robust = score_scan("Fig. 20", &scan, &sound_params(100, true))
+        .unwrap()
+        .0;
+    let ls = score_scan("Fig. 20", &scan, &sound_params(100, false))
+        .unwrap()
+        .0;
+    eprintln!(
+        "Fig. 20: robust r {:.3}, least squares r {:.3}",
+        robust.r, ls.r
+    );
+    assert!(robust.r > 0.6, "robust r = {:.3}", robust.r);
+    assert!(
+        robust.r > ls.r + 0.1,
+        "robust {:.3} vs LS {:.3}",
+        robust.r,
+        ls.r
+    );
+}
+
+#[test]
+fn accuracy_refuses_to_overwrite_a_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("report.md");
+    std::fs::write(&out, "mine").unwrap();
+    let o = groovescope(&["accuracy", "--quick", "--out", out.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("report.md") && err.contains("--force"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "mine");
+}
