@@ -659,7 +659,9 @@ fn vote(
 /// Finds up to `params.peak_count` global maxima with at least `min_votes` votes (and at least
 /// `params.min_peak_ratio` of the first peak's votes), suppressing
 /// each peak's window (±window_theta_deg, ±window_rho_px) before looking for the next, and
-/// returns them sorted top to bottom (by row at the centre column).
+/// returns them sorted top to bottom (by row at the centre column). A maximum whose line crosses
+/// a chosen peak's line inside the frame, or comes within a window half-width of it, is another
+/// tangent of the same (curved) stripe and is skipped.
 #[must_use]
 pub fn find_peaks(acc: &Accumulator, params: &HoughParams, min_votes: u32) -> Vec<Peak> {
     let nr = acc.rho_bins;
@@ -675,8 +677,8 @@ pub fn find_peaks(acc: &Accumulator, params: &HoughParams, min_votes: u32) -> Ve
     } else {
         band_sums(acc, band)
     };
-    let mut peaks = Vec::with_capacity(params.peak_count);
-    for _ in 0..params.peak_count {
+    let mut peaks: Vec<Peak> = Vec::with_capacity(params.peak_count);
+    'next_peak: while peaks.len() < params.peak_count {
         let Some((best, &votes)) = work
             .iter()
             .enumerate()
@@ -700,7 +702,7 @@ pub fn find_peaks(acc: &Accumulator, params: &HoughParams, min_votes: u32) -> Ve
             }
         }
         let theta_rad = acc.thetas_rad.get(t).copied().unwrap_or(0.0);
-        peaks.push(Peak {
+        let peak = Peak {
             theta_rad,
             rho_px: if band == 0 {
                 refine_rho(acc, t, r, wr)
@@ -711,11 +713,29 @@ pub fn find_peaks(acc: &Accumulator, params: &HoughParams, min_votes: u32) -> Ve
             x_origin_px: acc.x_origin_px,
             window_theta_rad: params.window_theta_deg.to_radians(),
             window_rho_px: params.window_rho_px,
-        });
+        };
+        // Distinct stripes never cross: a maximum whose line crosses, or comes within a window
+        // half-width of, a chosen line inside the frame is another part of that stripe (a curved
+        // stripe votes for several tangents), not a new one.
+        if peaks.iter().any(|p| same_stripe(p, &peak)) {
+            continue 'next_peak;
+        }
+        peaks.push(peak);
     }
     let x0 = acc.x_origin_px;
     peaks.sort_by(|a, b| a.row_at_px(x0).total_cmp(&b.row_at_px(x0)));
     peaks
+}
+
+/// True when the lines of `a` and `b` cross inside the frame (columns 0..=2·x₀) or come closer
+/// than `a`'s window half-width in ρ there.
+fn same_stripe(a: &Peak, b: &Peak) -> bool {
+    let right = 2.0 * a.x_origin_px;
+    let d0 = a.row_at_px(0.0) - b.row_at_px(0.0);
+    let d1 = a.row_at_px(right) - b.row_at_px(right);
+    !(d0.is_finite() && d1.is_finite())
+        || d0.signum() != d1.signum()
+        || d0.abs().min(d1.abs()) < a.window_rho_px
 }
 
 /// Each θ row's votes summed over ±`band` ρ bins (clipped at the ends).
@@ -1169,6 +1189,30 @@ mod tests {
         }
         // Sub-bin: the stripe rows on a pure θ bin give ρ within a fraction of a bin.
         assert!((s.peaks[2].rho_px - 150.0).abs() < 0.5);
+    }
+
+    #[test]
+    fn a_bent_stripe_gives_one_peak_not_two() {
+        // A stripe bent at the centre column (±8°, as a strongly modulated groove curves within
+        // a frame) votes for two tangents, both stronger than the short straight stripes below
+        // it; the tangents cross inside the frame, so only one may become a
+        // peak.
+        let (w, h) = (400, 200);
+        let x0 = (w as f32 - 1.0) * 0.5;
+        let bent = |x: usize| 40.0 + (x as f32 - x0).abs() * 8f32.to_radians().tan();
+        let (mut d, f) = scene(w, h, &[], 1.0, 0.0, 0..0);
+        d.iy = Image::from_fn(w, h, |x, y| {
+            let y = y as f32;
+            let short = (150..250).contains(&x);
+            let on = (y - bent(x)).abs() <= 1.0 || (short && (y == 110.0 || y == 160.0));
+            if on { 1.0 } else { 0.0 }
+        });
+        let s = segment_stripes(&d, &f, &dual(GlassSide::Top), &HoughParams::default()).unwrap();
+        let rows: Vec<f32> = s.peaks.iter().map(|p| p.row_at_px(x0)).collect();
+        assert_eq!(rows.len(), 3, "{rows:?}");
+        assert!((rows[0] - 40.0).abs() < 3.0, "{rows:?}");
+        assert!((rows[1] - 110.0).abs() < 1.0, "{rows:?}");
+        assert!((rows[2] - 160.0).abs() < 1.0, "{rows:?}");
     }
 
     #[test]
