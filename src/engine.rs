@@ -72,6 +72,8 @@ pub struct GroupReport {
     pub group: usize,
     /// Mean outlier fraction of the robust fits (None when the group failed).
     pub outlier_fraction: Option<f64>,
+    /// Fits rejected for an implausible wall slope (they became gaps).
+    pub rejected_fits: usize,
     /// Samples produced.
     pub samples: usize,
     /// Failure or warning text.
@@ -204,6 +206,7 @@ pub fn reconstruct(
                     reports.push(GroupReport {
                         group,
                         outlier_fraction: None,
+                        rejected_fits: 0,
                         samples: 0,
                         warning: Some(w),
                     });
@@ -234,11 +237,16 @@ pub fn reconstruct(
                         .orientation
                         .as_ref()
                         .map(|o| o.orientation.outlier_fraction);
+                    let rejected_fits = cache
+                        .orientation
+                        .as_ref()
+                        .map_or(0, |o| o.orientation.rejected_fits);
                     match cache.signal {
                         Some(sig) => {
                             reports.push(GroupReport {
                                 group,
                                 outlier_fraction: outlier,
+                                rejected_fits,
                                 samples: sig.positions_um.len(),
                                 warning: None,
                             });
@@ -257,6 +265,7 @@ pub fn reconstruct(
                     reports.push(GroupReport {
                         group,
                         outlier_fraction: None,
+                        rejected_fits: 0,
                         samples: 0,
                         warning: Some(w),
                     });
@@ -294,6 +303,12 @@ pub fn reconstruct(
     let t_finish = Instant::now();
     let spacing = native_spacing_um(&scan.meta, &params.sound);
     let mut stitched = stitch(&signals, spacing)?;
+    let rejected: usize = reports.iter().map(|r| r.rejected_fits).sum();
+    if rejected > 0 {
+        warnings.push(format!(
+            "{rejected} orientation fits rejected for an implausible wall slope (left as gaps)"
+        ));
+    }
     let bridged = bridge_short_gaps(&mut stitched);
     if bridged > 0 {
         warnings.push(format!(

@@ -707,6 +707,7 @@ mod tests {
             walls,
             weight_map: Image::zeros(1, 1),
             outlier_fraction: 0.0,
+            rejected_fits: 0,
         }
     }
 

@@ -128,6 +128,10 @@ pub const KNOB_DOCS: &[(&str, &str)] = &[
         "residuals beyond this many σ count as outliers in the report",
     ),
     (
+        "orientation.max_wall_slope_change",
+        "reject a fit whose cross-groove wall slope strays from the group's median by more than this fraction (0 = off)",
+    ),
+    (
         "sound.output_rate_hz",
         "output sample rate, Hz (44100 or 48000)",
     ),

@@ -31,6 +31,11 @@ pub struct OrientationParams {
     pub max_iterations: u32,
     /// Residuals beyond this many σ count as outliers in the reported fraction.
     pub outlier_sigmas: f64,
+    /// A fit whose cross-groove wall slope |b| differs from the median |b| of its wall in the
+    /// group by more than this fraction is a failed fit and becomes a gap: a cut wall keeps its
+    /// angle across the groove (modulation changes it by about 1 − cos θ, 2% at tan θ = 0.2),
+    /// so a wall that seems to turn steeper or flatter is a fit locked onto damage. 0 = off.
+    pub max_wall_slope_change: f64,
 }
 
 impl Default for OrientationParams {
@@ -45,6 +50,7 @@ impl Default for OrientationParams {
             divergence_factor: 2.0,
             max_iterations: 30,
             outlier_sigmas: 3.0,
+            max_wall_slope_change: 0.25,
         }
     }
 }
@@ -122,6 +128,12 @@ pub fn validate(p: &OrientationParams) -> Result<(), StageError> {
         1e12,
     )?;
     check_range("orientation.outlier_sigmas", p.outlier_sigmas, 0.0, 1e6)?;
+    check_range(
+        "orientation.max_wall_slope_change",
+        p.max_wall_slope_change,
+        0.0,
+        1e6,
+    )?;
     if p.neighbourhood_px < 3 {
         return Err(StageError::InvalidParam {
             name: "orientation.neighbourhood_px".into(),
@@ -540,6 +552,8 @@ pub struct Orientation {
     pub weight_map: Image,
     /// Mean outlier fraction over all fits.
     pub outlier_fraction: f64,
+    /// Fits turned into gaps for an implausible wall slope.
+    pub rejected_fits: usize,
 }
 
 /// tan θ of a fitted wall plane: the wall's velocity along its normal over Vt, −a·sign(b)/√(1+b²).
@@ -629,13 +643,44 @@ impl Workspace {
     }
 }
 
-/// Assembles the per-wall sample lists, the weight map and the mean outlier share.
+/// Turns the fits of `samples` whose |b| strays from the median |b| by more than
+/// `max_change`·median into gaps; returns how many it rejected.
+fn reject_implausible_slopes(samples: &mut [OrientationSample], max_change: f64) -> usize {
+    if max_change <= 0.0 {
+        return 0;
+    }
+    let mut slopes: Vec<f64> = samples
+        .iter()
+        .filter_map(|s| s.fit.as_ref().map(|f| f.b.abs()))
+        .filter(|b| b.is_finite())
+        .collect();
+    if slopes.len() < 3 {
+        return 0;
+    }
+    let mid = slopes.len() / 2;
+    let (_, &mut median, _) = slopes.select_nth_unstable_by(mid, f64::total_cmp);
+    let mut rejected = 0;
+    for s in samples.iter_mut() {
+        let Some(b) = s.fit.as_ref().map(|f| f.b.abs()) else {
+            continue;
+        };
+        if !b.is_finite() || (b - median).abs() > max_change * median {
+            *s = gap(s.x_px);
+            rejected += 1;
+        }
+    }
+    rejected
+}
+
+/// Assembles the per-wall sample lists, the weight map and the mean outlier share; rejects
+/// fits with implausible wall slopes ([`OrientationParams::max_wall_slope_change`]).
 fn assemble(
     sides: &[WallSide],
     n_samples: usize,
     results: Vec<SampleResult>,
     width: usize,
     height: usize,
+    params: &OrientationParams,
 ) -> Orientation {
     let mut weight_map = Image::filled(width, height, f32::NAN);
     let mut walls: Vec<WallOrientation> = sides
@@ -660,7 +705,12 @@ fn assemble(
             w.samples.push(r.sample);
         }
     }
+    let rejected_fits = walls
+        .iter_mut()
+        .map(|w| reject_implausible_slopes(&mut w.samples, params.max_wall_slope_change))
+        .sum();
     Orientation {
+        rejected_fits,
         walls,
         weight_map,
         outlier_fraction: if fits > 0 {
@@ -752,6 +802,7 @@ pub fn orient_from_depth(
         results,
         width,
         height,
+        params,
     ))
 }
 
@@ -893,6 +944,7 @@ pub fn orient_from_lines(
         results,
         width,
         height,
+        params,
     ))
 }
 
@@ -900,6 +952,52 @@ pub fn orient_from_lines(
 #[allow(clippy::unwrap_used)] // Tests fail loudly on purpose.
 mod tests {
     use super::*;
+
+    #[test]
+    fn fits_with_a_wall_slope_far_from_the_median_become_gaps() {
+        let sample = |x: f32, a: f64, b: f64| OrientationSample {
+            x_px: x,
+            tan_theta: tan_theta(&PlaneFit {
+                a,
+                b,
+                c: 0.0,
+                iterations: 1,
+                outlier_fraction: 0.0,
+                residual_um: 0.0,
+                stop: StopReason::Converged,
+            }),
+            fit: Some(PlaneFit {
+                a,
+                b,
+                c: 0.0,
+                iterations: 1,
+                outlier_fraction: 0.0,
+                residual_um: 0.0,
+                stop: StopReason::Converged,
+            }),
+        };
+        // Modulation moves b by a few per cent; a fit locked onto damage turns the wall steep.
+        let mut s = vec![
+            sample(0.0, 0.01, -0.38),
+            sample(3.0, 0.05, -0.39),
+            sample(6.0, 0.8, -1.2),
+            sample(9.0, -0.04, -0.37),
+            sample(12.0, 0.0, -0.38),
+            gap(15.0),
+        ];
+        assert_eq!(reject_implausible_slopes(&mut s, 0.25), 1);
+        assert!(s[2].fit.is_none() && s[2].tan_theta.is_nan());
+        assert_eq!(s[2].x_px, 6.0);
+        assert!(s.iter().filter(|x| x.fit.is_some()).count() == 4);
+        // 0 turns the check off.
+        let mut t = vec![
+            sample(0.0, 0.0, -0.38),
+            sample(1.0, 0.0, -0.38),
+            sample(2.0, 0.8, -1.2),
+        ];
+        assert_eq!(reject_implausible_slopes(&mut t, 0.0), 0);
+        assert!(t[2].fit.is_some());
+    }
     use crate::pipeline::walls::test_support::{Groove, Rng, paper_geometry};
 
     fn params() -> OrientationParams {

@@ -441,6 +441,14 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; 6])
             0.05,
             0.1..=20.0,
         );
+        num(
+            ui,
+            "max wall-slope change",
+            "orientation.max_wall_slope_change",
+            &mut o.max_wall_slope_change,
+            0.01,
+            0.0..=10.0,
+        );
     });
     section(ui, "sound", st(Stage::Sound), false, |ui| {
         let s = &mut p.sound;
