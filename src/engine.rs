@@ -14,6 +14,7 @@ use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample, stitc
 use crate::pipeline::cache::native_spacing_um;
 use crate::pipeline::dsp::apply_dsp;
 use crate::pipeline::eval::{Scores, evaluate};
+use crate::pipeline::orientation::Orientation;
 use crate::pipeline::{GroupInput, PipelineParams, Stage, StageCache, StageError};
 
 /// Longest lag searched when scoring against the reference (seconds).
@@ -112,6 +113,83 @@ pub struct Reconstruction {
     pub warnings: Vec<String>,
 }
 
+/// The clip's wall slopes so far: per wall side, the median |b| of each group's fits.
+///
+/// The orientation stage rejects fits whose cross-groove slope strays from their group's
+/// median; a group whose fits are mostly wrong (a flaked chunk longer than half a group) passes
+/// that check. Groups run in order, so the engine also checks each group against the median of
+/// the groups before it and reruns the sound stage when that rejects fits.
+#[derive(Default)]
+struct SlopeReference {
+    medians: Vec<(crate::pipeline::walls::WallSide, Vec<f64>)>,
+}
+
+/// Groups needed before their median is trusted as a reference.
+const SLOPE_REFERENCE_MIN_GROUPS: usize = 3;
+
+impl SlopeReference {
+    fn check(
+        &mut self,
+        cache: &mut StageCache,
+        input: &GroupInput,
+        params: &PipelineParams,
+    ) -> Result<(), StageError> {
+        let max_change = params.orientation.max_wall_slope_change;
+        let Some(out) = cache.orientation.as_ref() else {
+            return Ok(());
+        };
+        if max_change <= 0.0 {
+            return Ok(());
+        }
+        let mut out = (**out).clone();
+        let rejected = self.apply(&mut out.orientation, max_change);
+        if rejected > 0 {
+            out.orientation.rejected_fits += rejected;
+            cache.orientation = Some(Arc::new(out));
+            cache.run_from(Stage::Sound, input, params, &mut |_, _| true)?;
+        }
+        Ok(())
+    }
+
+    /// Checks one group's walls against the medians of the groups before (once there are
+    /// [`SLOPE_REFERENCE_MIN_GROUPS`]), turning strays into gaps, and adds the group's own
+    /// median to the history when it is plausible. Returns the fits rejected.
+    fn apply(&mut self, orientation: &mut Orientation, max_change: f64) -> usize {
+        use crate::pipeline::orientation::{median_wall_slope, reject_slopes_against};
+        let mut rejected = 0;
+        for wall in &mut orientation.walls {
+            let own = median_wall_slope(&wall.samples);
+            let idx = match self.medians.iter().position(|(s, _)| *s == wall.side) {
+                Some(i) => i,
+                None => {
+                    self.medians.push((wall.side, Vec::new()));
+                    self.medians.len() - 1
+                }
+            };
+            let Some((_, history)) = self.medians.get_mut(idx) else {
+                continue;
+            };
+            let reference = if history.len() >= SLOPE_REFERENCE_MIN_GROUPS {
+                let mut h = history.clone();
+                let mid = h.len() / 2;
+                let (_, &mut m, _) = h.select_nth_unstable_by(mid, f64::total_cmp);
+                Some(m)
+            } else {
+                None
+            };
+            if let Some(m) = own
+                && reference.is_none_or(|r| (m - r).abs() <= max_change * r)
+            {
+                history.push(m);
+            }
+            if let Some(r) = reference {
+                rejected += reject_slopes_against(&mut wall.samples, r, max_change);
+            }
+        }
+        rejected
+    }
+}
+
 /// Runs one group through every stage (used by the engine and by benchmarks).
 ///
 /// # Errors
@@ -156,6 +234,7 @@ pub fn reconstruct(
     let mut timings = StageTimings::default();
     let mut stage_secs = vec![0.0; Stage::ALL.len()];
     let mut signals: Vec<GroupSignal> = Vec::with_capacity(total);
+    let mut slope_refs = SlopeReference::default();
     let mut reports = Vec::with_capacity(total);
     let mut warnings = Vec::new();
 
@@ -228,7 +307,10 @@ pub fn reconstruct(
                 frames: Arc::new(frames),
                 meta: meta.clone(),
             };
-            let signal = match run_group(&input, params) {
+            let signal = match run_group(&input, params).and_then(|(mut cache, times)| {
+                slope_refs.check(&mut cache, &input, params)?;
+                Ok((cache, times))
+            }) {
                 Ok((cache, times)) => {
                     for (acc, t) in stage_secs.iter_mut().zip(&times) {
                         *acc += t.as_secs_f64();
@@ -452,5 +534,59 @@ fn score_against_reference(
             warnings.push(format!("reference not scored: {e}"));
             None
         }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use crate::pipeline::orientation::{OrientationSample, PlaneFit, StopReason, WallOrientation};
+    use crate::pipeline::walls::WallSide;
+
+    fn group(b: f64) -> Orientation {
+        let fit = PlaneFit {
+            a: 0.01,
+            b,
+            c: 0.0,
+            iterations: 1,
+            outlier_fraction: 0.0,
+            residual_um: 0.0,
+            stop: StopReason::Converged,
+        };
+        let samples = (0..10)
+            .map(|i| OrientationSample {
+                x_px: i as f32,
+                tan_theta: 0.01,
+                fit: Some(fit),
+            })
+            .collect();
+        Orientation {
+            walls: vec![WallOrientation {
+                side: WallSide::Right,
+                samples,
+            }],
+            weight_map: Image::zeros(1, 1),
+            outlier_fraction: 0.0,
+            rejected_fits: 0,
+        }
+    }
+
+    #[test]
+    fn a_group_whose_wall_slope_strays_from_the_clip_becomes_gaps() {
+        let mut r = SlopeReference::default();
+        // The first groups set the reference; nothing is rejected before there are three.
+        for b in [-0.38, -0.37, -0.39] {
+            assert_eq!(r.apply(&mut group(b), 0.25), 0);
+        }
+        // A group locked onto a flaked chunk: its own median agrees with its fits, the clip's
+        // does not.
+        let mut bad = group(-1.0);
+        assert_eq!(r.apply(&mut bad, 0.25), 10);
+        assert!(bad.walls[0].samples.iter().all(|s| s.fit.is_none()));
+        // The stray group did not shift the reference; good groups still pass.
+        assert_eq!(r.apply(&mut group(-0.4), 0.25), 0);
+        assert_eq!(r.apply(&mut group(-1.0), 0.25), 10);
     }
 }

@@ -643,33 +643,53 @@ impl Workspace {
     }
 }
 
-/// Turns the fits of `samples` whose |b| strays from the median |b| by more than
-/// `max_change`·median into gaps; returns how many it rejected.
-fn reject_implausible_slopes(samples: &mut [OrientationSample], max_change: f64) -> usize {
-    if max_change <= 0.0 {
-        return 0;
-    }
+/// Median |b| (cross-groove wall slope) of the fits in `samples`; None with fewer than 3 fits.
+#[must_use]
+pub fn median_wall_slope(samples: &[OrientationSample]) -> Option<f64> {
     let mut slopes: Vec<f64> = samples
         .iter()
         .filter_map(|s| s.fit.as_ref().map(|f| f.b.abs()))
         .filter(|b| b.is_finite())
         .collect();
     if slopes.len() < 3 {
-        return 0;
+        return None;
     }
     let mid = slopes.len() / 2;
     let (_, &mut median, _) = slopes.select_nth_unstable_by(mid, f64::total_cmp);
+    Some(median)
+}
+
+/// Turns the fits of `samples` whose |b| strays from `reference` by more than
+/// `max_change`·reference into gaps; returns how many it rejected. The stage uses the group's
+/// own median as the reference; the engine also applies the median of the groups before, which
+/// catches a group whose fits are mostly wrong (a long flaked chunk).
+pub fn reject_slopes_against(
+    samples: &mut [OrientationSample],
+    reference: f64,
+    max_change: f64,
+) -> usize {
+    if max_change <= 0.0 || !(reference.is_finite() && reference > 0.0) {
+        return 0;
+    }
     let mut rejected = 0;
     for s in samples.iter_mut() {
         let Some(b) = s.fit.as_ref().map(|f| f.b.abs()) else {
             continue;
         };
-        if !b.is_finite() || (b - median).abs() > max_change * median {
+        if !b.is_finite() || (b - reference).abs() > max_change * reference {
             *s = gap(s.x_px);
             rejected += 1;
         }
     }
     rejected
+}
+
+/// [`reject_slopes_against`] the median of `samples` themselves.
+fn reject_implausible_slopes(samples: &mut [OrientationSample], max_change: f64) -> usize {
+    if max_change <= 0.0 {
+        return 0;
+    }
+    median_wall_slope(samples).map_or(0, |m| reject_slopes_against(samples, m, max_change))
 }
 
 /// Assembles the per-wall sample lists, the weight map and the mean outlier share; rejects
