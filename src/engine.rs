@@ -113,19 +113,28 @@ pub struct Reconstruction {
     pub warnings: Vec<String>,
 }
 
-/// The clip's wall slopes so far: per wall side, the median |b| of each group's fits.
+/// The clip's recent wall slopes: per wall side, the median |b| of the last groups' fits.
 ///
 /// The orientation stage rejects fits whose cross-groove slope strays from their group's
 /// median; a group whose fits are mostly wrong (a flaked chunk longer than half a group) passes
 /// that check. Groups run in order, so the engine also checks each group against the median of
-/// the groups before it and reruns the sound stage when that rejects fits.
+/// the [`SLOPE_HISTORY`] groups before it, once there are [`SLOPE_REFERENCE_MIN_GROUPS`] and
+/// most of them agree with that median (a clip that starts on damage sets no reference), and
+/// reruns the sound stage when that rejects fits.
 #[derive(Default)]
 struct SlopeReference {
-    medians: Vec<(crate::pipeline::walls::WallSide, Vec<f64>)>,
+    medians: Vec<(
+        crate::pipeline::walls::WallSide,
+        std::collections::VecDeque<f64>,
+    )>,
 }
 
-/// Groups needed before their median is trusted as a reference.
-const SLOPE_REFERENCE_MIN_GROUPS: usize = 3;
+/// Groups needed before their median is used as a reference.
+const SLOPE_REFERENCE_MIN_GROUPS: usize = 8;
+/// Groups the reference looks back over.
+const SLOPE_HISTORY: usize = 64;
+/// Share of those groups that must agree with their median for it to be used.
+const SLOPE_AGREEMENT: f64 = 0.6;
 
 impl SlopeReference {
     fn check(
@@ -151,9 +160,8 @@ impl SlopeReference {
         Ok(())
     }
 
-    /// Checks one group's walls against the medians of the groups before (once there are
-    /// [`SLOPE_REFERENCE_MIN_GROUPS`]), turning strays into gaps, and adds the group's own
-    /// median to the history when it is plausible. Returns the fits rejected.
+    /// Checks one group's walls against the reference (when there is one), turning strays into
+    /// gaps, then adds the group's own median to the history. Returns the fits rejected.
     fn apply(&mut self, orientation: &mut Orientation, max_change: f64) -> usize {
         use crate::pipeline::orientation::{median_wall_slope, reject_slopes_against};
         let mut rejected = 0;
@@ -162,32 +170,40 @@ impl SlopeReference {
             let idx = match self.medians.iter().position(|(s, _)| *s == wall.side) {
                 Some(i) => i,
                 None => {
-                    self.medians.push((wall.side, Vec::new()));
+                    self.medians.push((wall.side, Default::default()));
                     self.medians.len() - 1
                 }
             };
             let Some((_, history)) = self.medians.get_mut(idx) else {
                 continue;
             };
-            let reference = if history.len() >= SLOPE_REFERENCE_MIN_GROUPS {
-                let mut h = history.clone();
-                let mid = h.len() / 2;
-                let (_, &mut m, _) = h.select_nth_unstable_by(mid, f64::total_cmp);
-                Some(m)
-            } else {
-                None
-            };
-            if let Some(m) = own
-                && reference.is_none_or(|r| (m - r).abs() <= max_change * r)
-            {
-                history.push(m);
-            }
-            if let Some(r) = reference {
+            if let Some(r) = agreed_median(history, max_change) {
                 rejected += reject_slopes_against(&mut wall.samples, r, max_change);
+            }
+            if let Some(m) = own {
+                if history.len() == SLOPE_HISTORY {
+                    history.pop_front();
+                }
+                history.push_back(m);
             }
         }
         rejected
     }
+}
+
+/// The median of `history` when it holds enough groups and most lie within `max_change` of it.
+fn agreed_median(history: &std::collections::VecDeque<f64>, max_change: f64) -> Option<f64> {
+    if history.len() < SLOPE_REFERENCE_MIN_GROUPS {
+        return None;
+    }
+    let mut h: Vec<f64> = history.iter().copied().collect();
+    let mid = h.len() / 2;
+    let (_, &mut m, _) = h.select_nth_unstable_by(mid, f64::total_cmp);
+    let agree = h
+        .iter()
+        .filter(|&&v| (v - m).abs() <= max_change * m)
+        .count();
+    (agree as f64 >= SLOPE_AGREEMENT * h.len() as f64).then_some(m)
 }
 
 /// Runs one group through every stage (used by the engine and by benchmarks).
@@ -576,8 +592,9 @@ mod tests {
     #[test]
     fn a_group_whose_wall_slope_strays_from_the_clip_becomes_gaps() {
         let mut r = SlopeReference::default();
-        // The first groups set the reference; nothing is rejected before there are three.
-        for b in [-0.38, -0.37, -0.39] {
+        // The first groups set the reference; nothing is rejected before there are eight.
+        for k in 0..SLOPE_REFERENCE_MIN_GROUPS {
+            let b = [-0.38, -0.37, -0.39][k % 3];
             assert_eq!(r.apply(&mut group(b), 0.25), 0);
         }
         // A group locked onto a flaked chunk: its own median agrees with its fits, the clip's
@@ -585,8 +602,19 @@ mod tests {
         let mut bad = group(-1.0);
         assert_eq!(r.apply(&mut bad, 0.25), 10);
         assert!(bad.walls[0].samples.iter().all(|s| s.fit.is_none()));
-        // The stray group did not shift the reference; good groups still pass.
+        // Good groups still pass.
         assert_eq!(r.apply(&mut group(-0.4), 0.25), 0);
-        assert_eq!(r.apply(&mut group(-1.0), 0.25), 10);
+    }
+
+    #[test]
+    fn a_clip_that_starts_on_damage_sets_no_reference() {
+        // Half the first groups are wrong in different ways: no median is agreed on, so no
+        // group is judged by it.
+        let mut r = SlopeReference::default();
+        for b in [-1.0, -0.38, -0.6, -0.37, -1.4, -0.39, -0.8, -0.38] {
+            assert_eq!(r.apply(&mut group(b), 0.25), 0);
+        }
+        assert_eq!(r.apply(&mut group(-0.38), 0.25), 0);
+        assert_eq!(r.apply(&mut group(-1.0), 0.25), 0);
     }
 }
