@@ -12,6 +12,24 @@ use crate::viz::{
     ColorMap, Rgba8Image, grey_image, heat_map, hough_image, save_png, stripes_overlay,
 };
 
+/// Writes the in-focus map and the Hough accumulator image.
+fn save_hough(
+    out_dir: &Path,
+    in_focus: &crate::image::Image,
+    hough: &Rgba8Image,
+    force: bool,
+    written: &mut Vec<String>,
+) -> Result<()> {
+    save(
+        out_dir,
+        "in_focus.png",
+        &grey_image(in_focus),
+        force,
+        written,
+    )?;
+    save(out_dir, "hough.png", hough, force, written)
+}
+
 fn save(
     dir: &Path,
     name: &str,
@@ -106,20 +124,8 @@ pub fn run_inspect(
             .and_then(|d| d.get(d.len() / 2))
             .map(|d| d.image.clone())
             .unwrap_or_default();
-        save(
-            out_dir,
-            "in_focus.png",
-            &grey_image(&st.in_focus),
-            force,
-            &mut written,
-        )?;
-        save(
-            out_dir,
-            "hough.png",
-            &hough_image(&st.accumulator, &st.peaks, Some(st.dropped)),
-            force,
-            &mut written,
-        )?;
+        let hough = hough_image(&st.accumulator, &st.peaks, Some(st.dropped));
+        save_hough(out_dir, &st.in_focus, &hough, force, &mut written)?;
         save(
             out_dir,
             "stripes.png",
@@ -127,6 +133,27 @@ pub fn run_inspect(
             force,
             &mut written,
         )?;
+    }
+    let stripes_failed = cache.stripes.is_none()
+        && outcome.is_err()
+        && cache.flows.is_some()
+        && match params.path {
+            crate::pipeline::PathChoice::Depth => false,
+            crate::pipeline::PathChoice::DualFocus => true,
+            crate::pipeline::PathChoice::Auto => input.meta.dual_focus.is_some(),
+        };
+    if stripes_failed {
+        // Segmentation failed: the in-focus map and the accumulator with its peaks show why.
+        let mid = |n: usize| n / 2;
+        if let (Some(d), Some(f)) = (
+            cache.derivatives.as_ref().and_then(|d| d.get(mid(d.len()))),
+            cache.flows.as_ref().and_then(|f| f.get(mid(f.len()))),
+        ) && let Ok((in_focus, acc, peaks)) =
+            crate::pipeline::hough::hough_diagnostics(d, f, &params.hough)
+        {
+            let hough = hough_image(&acc, &peaks, None);
+            save_hough(out_dir, &in_focus, &hough, force, &mut written)?;
+        }
     }
     if let Some(o) = &cache.orientation {
         save(

@@ -6,26 +6,8 @@ mod common;
 use std::sync::atomic::AtomicBool;
 
 use common::{groovescope, stderr};
-use groovescope::synth::{SynthConfig, render_scan, tone};
-
-/// The demo's camera scaled for speed: 0.78 µm pixels, 320×384 frames, 7 frames a group, a
-/// 16⅔ rpm transcription disc at 60 mm, and the dual-focus cover glass of paper §9.
-fn small_dual_focus() -> SynthConfig {
-    SynthConfig {
-        width_px: 320,
-        height_px: 384,
-        pixel_pitch_um: 0.78,
-        frame_step_um: 1.56,
-        frames_per_group: 7,
-        group_overlap_px: 24,
-        rpm: 16.667,
-        radius_mm: 60.0,
-        bit_depth: 8,
-        noise_sigma_8bit: 0.5,
-        max_groups: Some(8),
-        ..SynthConfig::dual_focus_demo()
-    }
-}
+use groovescope::accuracy::small_dual_focus;
+use groovescope::synth::{render_scan, tone};
 
 #[test]
 fn dual_focus_tone_scan_reconstructs_the_tone() {
@@ -34,7 +16,7 @@ fn dual_focus_tone_scan_reconstructs_the_tone() {
     let sound = tone(700.0, 0.03, 48_000);
     render_scan(
         &sound,
-        &small_dual_focus(),
+        &small_dual_focus(8),
         &scan,
         &|_, _| {},
         &AtomicBool::new(false),
@@ -63,4 +45,58 @@ fn dual_focus_tone_scan_reconstructs_the_tone() {
     eprintln!("dual-focus 700 Hz tone: r = {r:.3}, SNR = {snr:.1} dB");
     assert!(r > 0.8, "r = {r}");
     assert!(snr > 2.0, "SNR = {snr}");
+}
+
+#[test]
+fn inspect_dumps_every_stage_and_the_accumulator_when_segmentation_fails() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan");
+    render_scan(
+        &tone(700.0, 0.01, 48_000),
+        &small_dual_focus(1),
+        &scan,
+        &|_, _| {},
+        &AtomicBool::new(false),
+    )
+    .unwrap();
+    let ok = dir.path().join("ok");
+    let out = groovescope(&[
+        "inspect",
+        scan.to_str().unwrap(),
+        "--group",
+        "0",
+        "--out",
+        ok.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for f in [
+        "frame.png",
+        "flow.png",
+        "in_focus.png",
+        "hough.png",
+        "stripes.png",
+        "samples.csv",
+    ] {
+        assert!(ok.join(f).is_file(), "{f} missing");
+    }
+    // Windows so wide that the stripes cannot be told apart: the group fails, and the
+    // accumulator with its peaks is still written, so the operator can see why.
+    let params = dir.path().join("wide.toml");
+    std::fs::write(&params, "[hough]\nwindow_rho_px = 150.0\n").unwrap();
+    let bad = dir.path().join("bad");
+    let out = groovescope(&[
+        "inspect",
+        scan.to_str().unwrap(),
+        "--group",
+        "0",
+        "--out",
+        bad.to_str().unwrap(),
+        "--params",
+        params.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(err.contains("group 0") && err.contains("stripes"), "{err}");
+    assert!(bad.join("hough.png").is_file() && bad.join("in_focus.png").is_file());
+    assert!(!bad.join("samples.csv").exists());
 }

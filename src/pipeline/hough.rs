@@ -309,6 +309,73 @@ struct FocusPoint {
     index: u32,
 }
 
+/// The in-focus map, its points, the Hough accumulator and its peaks of one derivative set.
+struct Votes {
+    in_focus: Image,
+    points: Vec<FocusPoint>,
+    accumulator: Accumulator,
+    min_votes: u32,
+    peaks: Vec<Peak>,
+}
+
+/// Checks the inputs, finds the in-focus pixels, votes and finds the peaks (the first half of
+/// [`segment_stripes`]).
+fn votes_and_peaks(
+    derivs: &Derivatives,
+    flow: &FlowField,
+    params: &HoughParams,
+) -> Result<Votes, StageError> {
+    validate_params(params)?;
+    let (w, h) = (derivs.ix.width, derivs.ix.height);
+    if w == 0 || h == 0 {
+        return Err(bad_input("empty image".into()));
+    }
+    if !derivs.ix.same_size(&derivs.iy) || !derivs.ix.same_size(&flow.confidence) {
+        return Err(bad_input(format!(
+            "sizes differ: Ix {}×{}, Iy {}×{}, flow confidence {}×{}",
+            w, h, derivs.iy.width, derivs.iy.height, flow.confidence.width, flow.confidence.height
+        )));
+    }
+    if w > usize::from(u16::MAX) || h > usize::from(u16::MAX) {
+        return Err(bad_input(format!("image {w}×{h} is too large")));
+    }
+    let cells = theta_count(params).saturating_mul(rho_count(h, params));
+    if cells > MAX_ACCUMULATOR_CELLS {
+        return Err(invalid(
+            "hough.theta_step_deg",
+            format!(
+                "the accumulator would have {cells} cells (at most {MAX_ACCUMULATOR_CELLS}); use coarser θ or ρ steps"
+            ),
+        ));
+    }
+    let (in_focus, points) = in_focus_points(&derivs.ix, &derivs.iy, &flow.confidence, params);
+    let stride = vote_stride(points.len(), params.max_vote_points);
+    let accumulator = vote(&points, stride, w, h, params);
+    let min_votes = min_peak_votes(w, stride, params);
+    let peaks = find_peaks(&accumulator, params, min_votes);
+    Ok(Votes {
+        in_focus,
+        points,
+        accumulator,
+        min_votes,
+        peaks,
+    })
+}
+
+/// The in-focus map, Hough accumulator and peaks alone, for showing why segmentation failed
+/// (`inspect` writes them when [`segment_stripes`] returns an error).
+///
+/// # Errors
+/// As [`segment_stripes`] for invalid params or mismatched images.
+pub fn hough_diagnostics(
+    derivs: &Derivatives,
+    flow: &FlowField,
+    params: &HoughParams,
+) -> Result<(Image, Accumulator, Vec<Peak>), StageError> {
+    let v = votes_and_peaks(derivs, flow, params)?;
+    Ok((v.in_focus, v.accumulator, v.peaks))
+}
+
 /// Runs the dual-focus stripe stages on one derivative set and its flow.
 ///
 /// In-focus map -> Hough votes -> three peaks with non-maximum suppression -> segmentation by
@@ -324,36 +391,15 @@ pub fn segment_stripes(
     dual: &DualFocusMeta,
     params: &HoughParams,
 ) -> Result<Stripes, StageError> {
-    validate_params(params)?;
     validate_dual(dual)?;
+    let Votes {
+        in_focus,
+        points,
+        accumulator,
+        min_votes,
+        peaks,
+    } = votes_and_peaks(derivs, flow, params)?;
     let (w, h) = (derivs.ix.width, derivs.ix.height);
-    if w == 0 || h == 0 {
-        return Err(bad_input("empty image".into()));
-    }
-    if !derivs.ix.same_size(&derivs.iy) || !derivs.ix.same_size(&flow.confidence) {
-        return Err(bad_input(format!(
-            "sizes differ: Ix {}×{}, Iy {}×{}, flow confidence {}×{}",
-            w, h, derivs.iy.width, derivs.iy.height, flow.confidence.width, flow.confidence.height
-        )));
-    }
-    if w > usize::from(u16::MAX) || h > usize::from(u16::MAX) {
-        return Err(bad_input(format!("image {w}×{h} is too large")));
-    }
-
-    let cells = theta_count(params).saturating_mul(rho_count(h, params));
-    if cells > MAX_ACCUMULATOR_CELLS {
-        return Err(invalid(
-            "hough.theta_step_deg",
-            format!(
-                "the accumulator would have {cells} cells (at most {MAX_ACCUMULATOR_CELLS}); use coarser θ or ρ steps"
-            ),
-        ));
-    }
-    let (in_focus, points) = in_focus_points(&derivs.ix, &derivs.iy, &flow.confidence, params);
-    let stride = vote_stride(points.len(), params.max_vote_points);
-    let accumulator = vote(&points, stride, w, h, params);
-    let min_votes = min_peak_votes(w, stride, params);
-    let peaks = find_peaks(&accumulator, params, min_votes);
     if peaks.len() < STRIPE_COUNT {
         return Err(StageError::NotFound {
             stage: STAGE,
