@@ -12,21 +12,25 @@ use std::time::Instant;
 
 use crate::engine::{ReconstructOptions, reconstruct};
 use crate::image::Image;
-use crate::io::wav::read_wav;
-use crate::io::{Geometry, Scan, write_atomic};
+use crate::io::wav::{Audio, read_wav};
+use crate::io::{Scan, write_atomic};
+use crate::pipeline::audio_signal::SoundParams;
 use crate::pipeline::depth::estimate_depth;
 use crate::pipeline::derivatives::compute_derivatives;
 use crate::pipeline::eval::Scores;
 use crate::pipeline::optical_flow::{FlowMethod, compute_flow};
 use crate::pipeline::{PathChoice, PipelineParams};
 use crate::synth::{
-    DamageConfig, SceneConfig, SceneKind, SynthConfig, melody, render_scan, render_scan_wav, tone,
+    BUILTIN_RATE_HZ, DamageConfig, SceneConfig, SceneKind, SynthConfig, arpeggio, render_scan, tone,
 };
 
-/// Output rate the report's sound cases are scored at (the engine's default).
-const RATE_HZ: f64 = 44_100.0;
-/// Sample rate of the built-in sounds.
-const SOUND_RATE_HZ: u32 = 48_000;
+/// Sound rendered beyond the last group's span (s): the generator never runs short.
+const SOUND_MARGIN_SECS: f64 = 0.01;
+
+/// Output rate the report's sound cases are scored at (the engine's default), Hz.
+fn output_rate_hz() -> f64 {
+    f64::from(SoundParams::default().output_rate_hz)
+}
 /// The paper's Table 2 frames (1-based there; here the frame index from 0 of a 40-frame scene).
 pub const TABLE2_FRAMES: [usize; 4] = [7, 19, 27, 36];
 /// The phrase spoken by `espeak-ng` for the speech cases.
@@ -111,7 +115,7 @@ pub fn heavy_damage() -> DamageConfig {
 /// (odd, at least 5 px): the smallest window that does not low-pass the sound below Nyquist.
 #[must_use]
 pub fn two_sample_window_px(cfg: &SynthConfig) -> usize {
-    let spacing_px = cfg.groove_speed_um_s() / RATE_HZ / cfg.pixel_pitch_um;
+    let spacing_px = cfg.groove_speed_um_s() / output_rate_hz() / cfg.pixel_pitch_um;
     let n = (2.0 * spacing_px).round().max(5.0) as usize;
     n | 1
 }
@@ -141,13 +145,38 @@ pub fn snr_from_r_db(r: f64) -> f64 {
 /// The generator's error, named by `case`.
 pub fn render(
     case: &str,
-    sound: &crate::io::wav::Audio,
+    sound: &Audio,
     cfg: &SynthConfig,
     dir: &Path,
 ) -> Result<(), AccuracyError> {
     render_scan(sound, cfg, dir, &|_, _| {}, &AtomicBool::new(false))
         .map(|_| ())
         .map_err(|e| case_err(case, e))
+}
+
+/// Seconds of sound that `cfg.max_groups` groups cover (with a margin).
+#[must_use]
+pub fn scan_secs(cfg: &SynthConfig) -> f64 {
+    let groups = cfg.max_groups.unwrap_or(1) as f64;
+    groups * cfg.group_span_um() / cfg.groove_speed_um_s() + SOUND_MARGIN_SECS
+}
+
+/// Renders a scan of a `freq_hz` tone long enough for `cfg.max_groups` groups into `dir`.
+///
+/// # Errors
+/// As [`render`].
+pub fn render_tone(
+    case: &str,
+    freq_hz: f64,
+    cfg: &SynthConfig,
+    dir: &Path,
+) -> Result<(), AccuracyError> {
+    render(
+        case,
+        &tone(freq_hz, scan_secs(cfg), BUILTIN_RATE_HZ),
+        cfg,
+        dir,
+    )
 }
 
 /// Reconstructs the scan in `dir` with `params` and scores it against its `reference.wav`;
@@ -233,10 +262,18 @@ pub fn depth_errors(
     }
 }
 
-/// Table 2 on one scene: renders `frames` frames (in memory), runs derivatives, plain
-/// Horn–Schunck flow and the Kalman depth stage over the flows up to each frame of `at`, and
-/// measures the relative depth error at that frame, on the object (`object_only`) or on every
-/// pixel.
+/// One frame's Table 2 errors on a scene: on the object's pixels and on every pixel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneDepthRow {
+    /// Errors on the object (pixels nearer than the background plane).
+    pub object: DepthErrors,
+    /// Errors on every pixel, background included.
+    pub all: DepthErrors,
+}
+
+/// Table 2 on one scene: renders the frames (in memory), runs derivatives, plain Horn–Schunck
+/// flow and the Kalman depth stage over the flows up to each frame of `at`, and measures the
+/// relative depth error at that frame, on the object and on every pixel.
 ///
 /// # Errors
 /// A rendering or stage error, named by the scene.
@@ -245,30 +282,22 @@ pub fn scene_depth_table(
     cfg: &SceneConfig,
     at: &[usize],
     params: &PipelineParams,
-    object_only: bool,
-) -> Result<Vec<DepthErrors>, AccuracyError> {
+) -> Result<Vec<SceneDepthRow>, AccuracyError> {
+    use rayon::prelude::*;
     let case = format!("{kind:?} scene");
     let last = at.iter().copied().max().unwrap_or(0);
-    let frames_needed = (last + 4).max(cfg.frames);
     let cfg = SceneConfig {
-        frames: frames_needed,
+        frames: (last + 4).max(cfg.frames),
         ..cfg.clone()
     };
-    let geom = Geometry {
-        focal_px: cfg.focal_px,
-        pixel_pitch_um: cfg.plane_distance_um / cfg.focal_px,
-        working_distance_um: cfg.plane_distance_um,
-        frame_step_um: cfg.frame_step_um,
-    };
-    let rendered: Vec<(Image, Image)> = {
-        use rayon::prelude::*;
-        (0..cfg.frames)
-            .into_par_iter()
-            .map(|k| crate::synth::scene::render_scene_frame(kind, &cfg, k))
-            .collect::<Result<_, _>>()
-            .map_err(|e| case_err(&case, e))?
-    };
-    let frames: Vec<Image> = rendered.iter().map(|(img, _)| img.clone()).collect();
+    let geom = cfg.geometry();
+    let (frames, truths): (Vec<Image>, Vec<Image>) = (0..cfg.frames)
+        .into_par_iter()
+        .map(|k| crate::synth::scene::render_scene_frame(kind, &cfg, k))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| case_err(&case, e))?
+        .into_iter()
+        .unzip();
     let derivs = compute_derivatives(&frames, geom.land_flow_px(), &params.derivatives)
         .map_err(|e| case_err(&case, e))?;
     let mut flow_params = params.flow.clone();
@@ -276,32 +305,26 @@ pub fn scene_depth_table(
         // The groove constraint describes groove walls; a scene has none.
         flow_params.method = FlowMethod::HornSchunck;
     }
-    let flows = {
-        use rayon::prelude::*;
-        derivs
-            .par_iter()
-            .map(|d| compute_flow(d, geom.focal_px, None, &flow_params))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| case_err(&case, e))?
-    };
+    // In frame order (one flow per derivative window).
+    let flows = derivs
+        .par_iter()
+        .map(|d| compute_flow(d, geom.focal_px, None, &flow_params))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| case_err(&case, e))?;
     let plane = cfg.plane_distance_um as f32;
+    let border = 8;
     let mut rows = Vec::with_capacity(at.len());
     for &k in at {
-        let upto: Vec<_> = flows
-            .iter()
-            .filter(|f| f.frame_index <= k)
-            .cloned()
-            .collect();
-        if upto.last().map(|f| f.frame_index) != Some(k) {
+        let upto = flows.iter().take_while(|f| f.frame_index <= k).count();
+        if upto == 0 || flows[upto - 1].frame_index != k {
             return Err(case_err(&case, format!("no flow field at frame {k}")));
         }
-        let depth = estimate_depth(&upto, &geom, &params.depth).map_err(|e| case_err(&case, e))?;
-        let truth = &rendered[k].1;
-        let border = 8;
-        rows.push(if object_only {
-            depth_errors(k, &depth.z_um, truth, border, |t| t < plane - 0.5)
-        } else {
-            depth_errors(k, &depth.z_um, truth, border, |_| true)
+        let depth =
+            estimate_depth(&flows[..upto], &geom, &params.depth).map_err(|e| case_err(&case, e))?;
+        let truth = &truths[k];
+        rows.push(SceneDepthRow {
+            object: depth_errors(k, &depth.z_um, truth, border, |t| t < plane - 0.5),
+            all: depth_errors(k, &depth.z_um, truth, border, |_| true),
         });
     }
     Ok(rows)
@@ -322,11 +345,8 @@ pub fn speak(phrase: &str, dir: &Path) -> Option<PathBuf> {
     (ok && path.is_file()).then_some(path)
 }
 
-/// First time (s) the sound in `path` rises above 2% of its peak (skips leading silence).
-fn speech_onset_secs(path: &Path) -> f64 {
-    let Ok(audio) = read_wav(path) else {
-        return 0.0;
-    };
+/// First time (s) the sound rises above 2% of its peak (skips leading silence).
+fn onset_secs(audio: &Audio) -> f64 {
     let Some(ch) = audio.channels.first() else {
         return 0.0;
     };
@@ -438,7 +458,7 @@ pub fn run_suite(
          higher tones themselves; r ignores gain). Orientation window: the default 100 px, and \
          {} px (about two output samples).",
         small.groove_speed_um_s() / 1000.0,
-        small.groove_speed_um_s() / RATE_HZ / small.pixel_pitch_um,
+        small.groove_speed_um_s() / output_rate_hz() / small.pixel_pitch_um,
         tone_groups,
         tone_groups as f64 * small.group_step_um() / small.groove_speed_um_s() * 1000.0,
         w2
@@ -451,13 +471,7 @@ pub fn run_suite(
     for &f in freqs {
         let case = format!("{f} Hz tone (dual focus)");
         let dir = work.join(format!("tone_df_{f}"));
-        let secs = tone_groups as f64 * small.group_span_um() / small.groove_speed_um_s() + 0.01;
-        render(
-            &case,
-            &tone(f, secs, SOUND_RATE_HZ),
-            &small_dual_focus(tone_groups),
-            &dir,
-        )?;
+        render_tone(&case, f, &small_dual_focus(tone_groups), &dir)?;
         let (a, _) = score_scan(&case, &dir, &sound_params(100, true))?;
         let (b, _) = score_scan(&case, &dir, &sound_params(w2, true))?;
         let mut lp = sound_params(w2, true);
@@ -498,13 +512,7 @@ pub fn run_suite(
     for &f in depth_freqs {
         let case = format!("{f} Hz tone (depth path)");
         let dir = work.join(format!("tone_depth_{f}"));
-        let secs = depth_groups as f64 * lat.group_span_um() / lat.groove_speed_um_s() + 0.01;
-        render(
-            &case,
-            &tone(f, secs, SOUND_RATE_HZ),
-            &small_lateral(depth_groups),
-            &dir,
-        )?;
+        render_tone(&case, f, &small_lateral(depth_groups), &dir)?;
         let mut p = sound_params(wl, true);
         p.path = PathChoice::Depth;
         let (s, t) = score_scan(&case, &dir, &p)?;
@@ -517,13 +525,13 @@ pub fn run_suite(
     let speech_groups = if opts.quick { 45 } else { 228 };
     rep.line("## Speech (espeak-ng), clean and damaged");
     rep.line("");
-    match speak(PHRASE, &work) {
+    match speak(PHRASE, &work).and_then(|wav| read_wav(&wav).ok()) {
         None => {
             rep.line("Skipped: `espeak-ng` is not installed or failed.");
             log("speech: skipped (espeak-ng missing)");
         }
-        Some(wav) => {
-            let onset = speech_onset_secs(&wav);
+        Some(speech) => {
+            let onset = onset_secs(&speech);
             let clean = SynthConfig {
                 start_secs: onset,
                 ..small_dual_focus(speech_groups)
@@ -549,8 +557,7 @@ pub fn run_suite(
             for (name, cfg) in [("clean", &clean), ("damaged", &damaged)] {
                 let case = format!("speech ({name})");
                 let dir = work.join(format!("speech_{name}"));
-                render_scan_wav(&wav, cfg, &dir, &|_, _| {}, &AtomicBool::new(false))
-                    .map_err(|e| case_err(&case, e))?;
+                render(&case, &speech, cfg, &dir)?;
                 let fits: &[bool] = if name == "clean" {
                     &[true]
                 } else {
@@ -579,15 +586,7 @@ pub fn run_suite(
     if !opts.quick {
         let case = "melody";
         let note = 0.03;
-        let sound = melody(
-            &[
-                (523.25, note),
-                (659.25, note),
-                (783.99, note),
-                (1046.5, note),
-            ],
-            SOUND_RATE_HZ,
-        );
+        let sound = arpeggio(note, BUILTIN_RATE_HZ);
         let groups = (4.0 * note * small.groove_speed_um_s() / small.group_step_um()) as usize;
         let dir = work.join("melody");
         render(case, &sound, &small_dual_focus(groups.max(1)), &dir)?;
@@ -615,9 +614,8 @@ pub fn run_suite(
             max_groups: Some(groups),
             ..SynthConfig::dual_focus_fig20()
         };
-        let secs = groups as f64 * cfg.group_span_um() / cfg.groove_speed_um_s() + 0.002;
         let dir = work.join("fig20");
-        render(case, &tone(1000.0, secs, SOUND_RATE_HZ), &cfg, &dir)?;
+        render_tone(case, 1000.0, &cfg, &dir)?;
         let robust = score_scan(case, &dir, &sound_params(100, true))?.0;
         let ls = score_scan(case, &dir, &sound_params(100, false))?.0;
         rep.line("## Paper Fig. 20: nearly half of a wall missing");
@@ -673,16 +671,18 @@ pub fn run_suite(
         &[SceneKind::Cube, SceneKind::Cylinder, SceneKind::Sphere]
     };
     for &kind in kinds {
-        let obj = scene_depth_table(kind, &scene, &TABLE2_FRAMES, &params, true)?;
-        let all = scene_depth_table(kind, &scene, &TABLE2_FRAMES, &params, false)?;
-        for (o, a) in obj.iter().zip(&all) {
+        let rows = scene_depth_table(kind, &scene, &TABLE2_FRAMES, &params)?;
+        for SceneDepthRow { object: o, all: a } in &rows {
             rep.line(&format!(
                 "| {kind:?} | {} | {:.1} | {:.1} | {:.1} | {:.2} ± {:.2} | {:.2} |",
                 o.frame, o.below_5, o.from_5_to_15, o.above_15, o.mean, o.sigma, a.mean
             ));
         }
-        if let Some(o) = obj.iter().find(|o| o.frame == 27) {
-            log(&format!("{kind:?}: frame 27 mean error {:.2}%", o.mean));
+        if let Some(row) = rows.iter().find(|r| r.object.frame == 27) {
+            log(&format!(
+                "{kind:?}: frame 27 mean error {:.2}%",
+                row.object.mean
+            ));
         }
     }
     rep.line("");

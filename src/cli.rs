@@ -209,11 +209,10 @@ pub struct SynthArgs {
     pub quiet: bool,
 }
 
-/// Sample rate of the built-in test sounds.
-const BUILTIN_RATE_HZ: u32 = 48_000;
-
 fn run_synth(args: &SynthArgs) -> Result<()> {
-    use crate::synth::{SynthConfig, melody, render_scan, render_scan_wav, sweep, tone};
+    use crate::synth::{
+        BUILTIN_RATE_HZ, SynthConfig, arpeggio, render_scan, render_scan_wav, sweep, tone,
+    };
     let base = match args.preset.as_str() {
         "quick" => SynthConfig::quick_test(),
         "demo" => SynthConfig::demo(),
@@ -277,16 +276,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         };
         Some(sweep(f0, f1, args.duration, BUILTIN_RATE_HZ))
     } else if args.melody {
-        let note = args.duration / 4.0;
-        Some(melody(
-            &[
-                (523.25, note),
-                (659.25, note),
-                (783.99, note),
-                (1046.5, note),
-            ],
-            BUILTIN_RATE_HZ,
-        ))
+        Some(arpeggio(args.duration / 4.0, BUILTIN_RATE_HZ))
     } else {
         None
     };

@@ -144,17 +144,17 @@ impl SlopeReference {
         params: &PipelineParams,
     ) -> Result<(), StageError> {
         let max_change = params.orientation.max_wall_slope_change;
-        let Some(out) = cache.orientation.as_ref() else {
+        let Some(out) = cache.orientation.as_mut() else {
             return Ok(());
         };
         if max_change <= 0.0 {
             return Ok(());
         }
-        let mut out = (**out).clone();
-        let rejected = self.apply(&mut out.orientation, max_change);
+        // The engine's cache holds the only reference, so this does not copy the output.
+        let orientation = &mut Arc::make_mut(out).orientation;
+        let rejected = self.apply(orientation, max_change);
         if rejected > 0 {
-            out.orientation.rejected_fits += rejected;
-            cache.orientation = Some(Arc::new(out));
+            orientation.rejected_fits += rejected;
             cache.run_from(Stage::Sound, input, params, &mut |_, _| true)?;
         }
         Ok(())
@@ -196,14 +196,12 @@ fn agreed_median(history: &std::collections::VecDeque<f64>, max_change: f64) -> 
     if history.len() < SLOPE_REFERENCE_MIN_GROUPS {
         return None;
     }
-    let mut h: Vec<f64> = history.iter().copied().collect();
-    let mid = h.len() / 2;
-    let (_, &mut m, _) = h.select_nth_unstable_by(mid, f64::total_cmp);
-    let agree = h
+    let m = crate::pipeline::median(history.iter().copied().collect())?;
+    let agree = history
         .iter()
         .filter(|&&v| (v - m).abs() <= max_change * m)
         .count();
-    (agree as f64 >= SLOPE_AGREEMENT * h.len() as f64).then_some(m)
+    (agree as f64 >= SLOPE_AGREEMENT * history.len() as f64).then_some(m)
 }
 
 /// Runs one group through every stage (used by the engine and by benchmarks).
@@ -558,19 +556,11 @@ fn score_against_reference(
 mod tests {
     use super::*;
     use crate::image::Image;
-    use crate::pipeline::orientation::{OrientationSample, PlaneFit, StopReason, WallOrientation};
+    use crate::pipeline::orientation::{OrientationSample, WallOrientation, test_fit};
     use crate::pipeline::walls::WallSide;
 
     fn group(b: f64) -> Orientation {
-        let fit = PlaneFit {
-            a: 0.01,
-            b,
-            c: 0.0,
-            iterations: 1,
-            outlier_fraction: 0.0,
-            residual_um: 0.0,
-            stop: StopReason::Converged,
-        };
+        let fit = test_fit(0.01, b);
         let samples = (0..10)
             .map(|i| OrientationSample {
                 x_px: i as f32,

@@ -137,11 +137,7 @@ pub fn run_inspect(
     let stripes_failed = cache.stripes.is_none()
         && outcome.is_err()
         && cache.flows.is_some()
-        && match params.path {
-            crate::pipeline::PathChoice::Depth => false,
-            crate::pipeline::PathChoice::DualFocus => true,
-            crate::pipeline::PathChoice::Auto => input.meta.dual_focus.is_some(),
-        };
+        && params.uses_dual_focus(&input.meta);
     if stripes_failed {
         // Segmentation failed: the in-focus map and the accumulator with its peaks show why.
         let mid = |n: usize| n / 2;

@@ -5,10 +5,11 @@ mod common;
 
 use common::{groovescope, stderr};
 use groovescope::accuracy::{
-    render, scene_depth_table, score_scan, small_dual_focus, sound_params, two_sample_window_px,
+    render_tone, scene_depth_table, score_scan, small_dual_focus, sound_params,
+    two_sample_window_px,
 };
 use groovescope::pipeline::PipelineParams;
-use groovescope::synth::{SceneConfig, SceneKind, SynthConfig, tone};
+use groovescope::synth::{SceneConfig, SceneKind, SynthConfig};
 
 #[test]
 fn sphere_depth_error_beats_the_papers_kalman() {
@@ -18,10 +19,9 @@ fn sphere_depth_error_beats_the_papers_kalman() {
         &SceneConfig::default(),
         &[27],
         &PipelineParams::default(),
-        true,
     )
     .unwrap();
-    let r = rows[0];
+    let r = rows[0].object;
     eprintln!(
         "sphere frame 27: mean {:.2}% ± {:.2}, < 5%: {:.1}%, {} px",
         r.mean, r.sigma, r.below_5, r.pixels
@@ -35,9 +35,8 @@ fn sphere_depth_error_beats_the_papers_kalman() {
 fn dual_focus_tone_reaches_its_snr_bar() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = small_dual_focus(8);
-    let secs = 8.0 * cfg.group_span_um() / cfg.groove_speed_um_s() + 0.01;
     let scan = dir.path().join("tone");
-    render("1.5 kHz", &tone(1500.0, secs, 48_000), &cfg, &scan).unwrap();
+    render_tone("1.5 kHz", 1500.0, &cfg, &scan).unwrap();
     let (s, _) = score_scan(
         "1.5 kHz",
         &scan,
@@ -60,9 +59,8 @@ fn robust_fit_beats_least_squares_on_a_missing_wall() {
         max_groups: Some(4),
         ..SynthConfig::dual_focus_fig20()
     };
-    let secs = 4.0 * cfg.group_span_um() / cfg.groove_speed_um_s() + 0.002;
     let scan = dir.path().join("fig20");
-    render("Fig. 20", &tone(1000.0, secs, 48_000), &cfg, &scan).unwrap();
+    render_tone("Fig. 20", 1000.0, &cfg, &scan).unwrap();
     let robust = score_scan("Fig. 20", &scan, &sound_params(100, true))
         .unwrap()
         .0;

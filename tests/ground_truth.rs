@@ -7,13 +7,13 @@ use std::sync::atomic::AtomicBool;
 
 use common::{groovescope, stderr};
 use groovescope::accuracy::small_dual_focus;
-use groovescope::synth::{render_scan, tone};
+use groovescope::synth::{BUILTIN_RATE_HZ, render_scan, tone};
 
 #[test]
 fn dual_focus_tone_scan_reconstructs_the_tone() {
     let dir = tempfile::tempdir().unwrap();
     let scan = dir.path().join("scan");
-    let sound = tone(700.0, 0.03, 48_000);
+    let sound = tone(700.0, 0.03, BUILTIN_RATE_HZ);
     render_scan(
         &sound,
         &small_dual_focus(8),
@@ -52,22 +52,27 @@ fn inspect_dumps_every_stage_and_the_accumulator_when_segmentation_fails() {
     let dir = tempfile::tempdir().unwrap();
     let scan = dir.path().join("scan");
     render_scan(
-        &tone(700.0, 0.01, 48_000),
+        &tone(700.0, 0.01, BUILTIN_RATE_HZ),
         &small_dual_focus(1),
         &scan,
         &|_, _| {},
         &AtomicBool::new(false),
     )
     .unwrap();
+    let inspect = |out: &std::path::Path, extra: &[&str]| {
+        let mut args = vec![
+            "inspect",
+            scan.to_str().unwrap(),
+            "--group",
+            "0",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        groovescope(&args)
+    };
     let ok = dir.path().join("ok");
-    let out = groovescope(&[
-        "inspect",
-        scan.to_str().unwrap(),
-        "--group",
-        "0",
-        "--out",
-        ok.to_str().unwrap(),
-    ]);
+    let out = inspect(&ok, &[]);
     assert!(out.status.success(), "{}", stderr(&out));
     for f in [
         "frame.png",
@@ -84,16 +89,7 @@ fn inspect_dumps_every_stage_and_the_accumulator_when_segmentation_fails() {
     let params = dir.path().join("wide.toml");
     std::fs::write(&params, "[hough]\nwindow_rho_px = 150.0\n").unwrap();
     let bad = dir.path().join("bad");
-    let out = groovescope(&[
-        "inspect",
-        scan.to_str().unwrap(),
-        "--group",
-        "0",
-        "--out",
-        bad.to_str().unwrap(),
-        "--params",
-        params.to_str().unwrap(),
-    ]);
+    let out = inspect(&bad, &["--params", params.to_str().unwrap()]);
     assert!(!out.status.success());
     let err = stderr(&out);
     assert!(err.contains("group 0") && err.contains("stripes"), "{err}");

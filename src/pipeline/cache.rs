@@ -13,7 +13,7 @@ use super::optical_flow::{
 };
 use super::orientation::{Orientation, orient_from_depth, orient_from_lines};
 use super::walls::{WallLine, find_walls};
-use super::{PipelineParams, Stage, StageError};
+use super::{PipelineParams, Stage, StageError, median};
 use crate::image::Image;
 use crate::io::ScanMeta;
 
@@ -127,15 +127,6 @@ pub fn sample_grid(
         um_per_px,
         columns,
     }
-}
-
-fn median(mut v: Vec<f64>) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    let mid = v.len() / 2;
-    v.select_nth_unstable_by(mid, f64::total_cmp);
-    Some(v[mid])
 }
 
 /// Median depth along the wall lines (µm); the scale of the sample grid for the depth path.

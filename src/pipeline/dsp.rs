@@ -334,6 +334,9 @@ pub fn apply_dsp(
     params: &DspParams,
 ) -> Result<(), StageError> {
     let chain = dsp_chain(sample_rate_hz, params)?;
+    if samples.is_empty() {
+        return Ok(());
+    }
     for v in samples.iter_mut() {
         if !v.is_finite() {
             *v = 0.0;
@@ -344,9 +347,10 @@ pub fn apply_dsp(
             // Start the DC block settled on the mean level of its first time constant, not
             // on the first sample (which carries signal): otherwise the difference decays
             // through the clip as a slow drift, which dominates the error of a short clip.
+            // (dsp_chain puts the DC block first when it is on.)
             let tau = (sample_rate_hz / (2.0 * PI * params.dc_block_hz)).ceil() as usize;
-            let head = &samples[..tau.clamp(1, samples.len().max(1)).min(samples.len())];
-            let level = head.iter().map(|&v| f64::from(v)).sum::<f64>() / head.len().max(1) as f64;
+            let head = &samples[..tau.clamp(1, samples.len())];
+            let level = head.iter().map(|&v| f64::from(v)).sum::<f64>() / head.len() as f64;
             section.run_settled(samples, level);
         } else {
             section.run(samples);

@@ -274,3 +274,13 @@ impl PipelineParams {
 }
 
 pub use cache::{GroupInput, StageCache};
+
+/// The median of `v` (the upper one of an even count); None when empty. NaN sorts last.
+pub(crate) fn median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    let mid = v.len() / 2;
+    let (_, &mut m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    Some(m)
+}

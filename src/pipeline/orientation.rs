@@ -646,7 +646,7 @@ impl Workspace {
 /// Median |b| (cross-groove wall slope) of the fits in `samples`; None with fewer than 3 fits.
 #[must_use]
 pub fn median_wall_slope(samples: &[OrientationSample]) -> Option<f64> {
-    let mut slopes: Vec<f64> = samples
+    let slopes: Vec<f64> = samples
         .iter()
         .filter_map(|s| s.fit.as_ref().map(|f| f.b.abs()))
         .filter(|b| b.is_finite())
@@ -654,9 +654,7 @@ pub fn median_wall_slope(samples: &[OrientationSample]) -> Option<f64> {
     if slopes.len() < 3 {
         return None;
     }
-    let mid = slopes.len() / 2;
-    let (_, &mut median, _) = slopes.select_nth_unstable_by(mid, f64::total_cmp);
-    Some(median)
+    super::median(slopes)
 }
 
 /// Turns the fits of `samples` whose |b| strays from `reference` by more than
@@ -686,10 +684,21 @@ pub fn reject_slopes_against(
 
 /// [`reject_slopes_against`] the median of `samples` themselves.
 fn reject_implausible_slopes(samples: &mut [OrientationSample], max_change: f64) -> usize {
-    if max_change <= 0.0 {
-        return 0;
-    }
     median_wall_slope(samples).map_or(0, |m| reject_slopes_against(samples, m, max_change))
+}
+
+/// A converged fit with slopes `a`, `b` (tests of the slope checks here and in the engine).
+#[cfg(test)]
+pub(crate) fn test_fit(a: f64, b: f64) -> PlaneFit {
+    PlaneFit {
+        a,
+        b,
+        c: 0.0,
+        iterations: 1,
+        outlier_fraction: 0.0,
+        residual_um: 0.0,
+        stop: StopReason::Converged,
+    }
 }
 
 /// Assembles the per-wall sample lists, the weight map and the mean outlier share; rejects
@@ -977,24 +986,8 @@ mod tests {
     fn fits_with_a_wall_slope_far_from_the_median_become_gaps() {
         let sample = |x: f32, a: f64, b: f64| OrientationSample {
             x_px: x,
-            tan_theta: tan_theta(&PlaneFit {
-                a,
-                b,
-                c: 0.0,
-                iterations: 1,
-                outlier_fraction: 0.0,
-                residual_um: 0.0,
-                stop: StopReason::Converged,
-            }),
-            fit: Some(PlaneFit {
-                a,
-                b,
-                c: 0.0,
-                iterations: 1,
-                outlier_fraction: 0.0,
-                residual_um: 0.0,
-                stop: StopReason::Converged,
-            }),
+            tan_theta: tan_theta(&test_fit(a, b)),
+            fit: Some(test_fit(a, b)),
         };
         // Modulation moves b by a few per cent; a fit locked onto damage turns the wall steep.
         let mut s = vec![

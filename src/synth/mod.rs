@@ -51,7 +51,7 @@ pub use config::{DamageConfig, DualFocusConfig, SynthConfig, WallChunk};
 pub use groove::{Groove, GrooveTruth, Optics, groove_truth};
 pub use render::{RenderedFrame, render_frame};
 pub use scene::{SceneConfig, SceneKind, SceneMeta, load_true_depth, render_scene};
-pub use sounds::{chord, melody, stereo, sweep, tone};
+pub use sounds::{BUILTIN_RATE_HZ, arpeggio, chord, melody, stereo, sweep, tone};
 
 use crate::io::LoadError;
 use crate::io::frames::save_grey_png;

@@ -150,6 +150,18 @@ fn bad(key: &str, problem: String) -> SynthError {
 }
 
 impl SceneConfig {
+    /// Camera geometry for the depth stage: the background plane plays the land's part, so the
+    /// pixel pitch is its distance over the focal length.
+    #[must_use]
+    pub fn geometry(&self) -> Geometry {
+        Geometry {
+            focal_px: self.focal_px,
+            pixel_pitch_um: self.plane_distance_um / self.focal_px,
+            working_distance_um: self.plane_distance_um,
+            frame_step_um: self.frame_step_um,
+        }
+    }
+
     /// Checks the settings.
     ///
     /// # Errors
@@ -478,13 +490,14 @@ pub fn render_scene(
     out_dir: &Path,
 ) -> Result<SceneMeta, SynthError> {
     cfg.validate()?;
+    let geom = cfg.geometry();
     let meta = SceneMeta {
         kind,
         frames: cfg.frames,
-        focal_px: cfg.focal_px,
-        frame_step_um: cfg.frame_step_um,
-        pixel_pitch_um: cfg.plane_distance_um / cfg.focal_px,
-        working_distance_um: cfg.plane_distance_um,
+        focal_px: geom.focal_px,
+        frame_step_um: geom.frame_step_um,
+        pixel_pitch_um: geom.pixel_pitch_um,
+        working_distance_um: geom.working_distance_um,
         config: cfg.clone(),
     };
     let text = toml::to_string_pretty(&meta).map_err(|e| SynthError::Config {

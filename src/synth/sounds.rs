@@ -2,6 +2,8 @@
 
 use crate::io::wav::Audio;
 
+/// Sample rate of the built-in sounds (`synth --tone/--sweep/--melody`, the accuracy suite).
+pub const BUILTIN_RATE_HZ: u32 = 48_000;
 /// Peak level of the built-in sounds (leaves headroom in the WAV range).
 const LEVEL: f64 = 0.5;
 /// Fade-in/out of each melody note, seconds (avoids clicks).
@@ -90,6 +92,20 @@ pub fn melody(notes: &[(f64, f64)], rate_hz: u32) -> Audio {
         }
     }
     mono(rate_hz, data)
+}
+
+/// The built-in melody: C5 E5 G5 C6, `note_secs` each.
+#[must_use]
+pub fn arpeggio(note_secs: f64, rate_hz: u32) -> Audio {
+    melody(
+        &[
+            (523.25, note_secs),
+            (659.25, note_secs),
+            (783.99, note_secs),
+            (1046.5, note_secs),
+        ],
+        rate_hz,
+    )
 }
 
 /// A stereo sound from two mono ones (first channel of each; the shorter is padded with silence).
