@@ -96,7 +96,7 @@ use serde::{Deserialize, Serialize};
 
 use super::StageError;
 use super::derivatives::Derivatives;
-use crate::image::Image;
+use crate::image::{Image, zeros_par};
 
 /// Which flow algorithm runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -412,21 +412,23 @@ fn validate(p: &FlowParams) -> Result<(), StageError> {
     Ok(())
 }
 
-/// `sqrt(Ix² + Iy²)`, zeroed below `threshold`.
+/// `sqrt(Ix² + Iy²)`, zeroed below `threshold` (a row at a time, so the loop vectorises).
 fn gradient_confidence(d: &Derivatives, threshold: f32) -> Image {
-    let data =
-        d.ix.data
-            .par_iter()
-            .zip(d.iy.data.par_iter())
-            .map(|(&gx, &gy)| {
+    let w = d.ix.width.max(1);
+    let mut data = zeros_par(d.ix.data.len());
+    data.par_chunks_mut(w)
+        .zip(d.ix.data.par_chunks(w))
+        .zip(d.iy.data.par_chunks(w))
+        .for_each(|((out, ix), iy)| {
+            for ((o, &gx), &gy) in out.iter_mut().zip(ix).zip(iy) {
                 let g = (gx * gx + gy * gy).sqrt();
-                if g >= threshold && g.is_finite() {
+                *o = if g >= threshold && g.is_finite() {
                     g
                 } else {
                     0.0
-                }
-            })
-            .collect();
+                };
+            }
+        });
     Image {
         width: d.ix.width,
         height: d.ix.height,
@@ -645,8 +647,8 @@ struct SplitState {
 impl SplitState {
     fn zeros(lay: &Layout) -> Self {
         Self {
-            e: vec![0.0; 2 * lay.ne * lay.height],
-            o: vec![0.0; 2 * lay.no * lay.height],
+            e: zeros_par(2 * lay.ne * lay.height),
+            o: zeros_par(2 * lay.no * lay.height),
         }
     }
 
@@ -680,8 +682,8 @@ impl SplitState {
     /// Back to images; `base` is added to u.
     fn to_images(&self, lay: &Layout, base: f32) -> (Image, Image) {
         let (w, h) = (lay.width, lay.height);
-        let mut u = vec![0.0_f32; w * h];
-        let mut v = vec![0.0_f32; w * h];
+        let mut u = zeros_par(w * h);
+        let mut v = zeros_par(w * h);
         u.par_chunks_mut(w)
             .zip(v.par_chunks_mut(w))
             .zip(self.e.par_chunks(2 * lay.ne))
@@ -742,39 +744,47 @@ struct Problem {
 }
 
 impl Problem {
-    /// Fills the split coefficient arrays from `f(x, y) -> coefficients`.
-    fn build<const C: usize>(
+    /// Fills the split coefficient arrays a row at a time: `f(y, rows)` writes coefficient k
+    /// of every column of image row `y` into `rows[k]` (natural column order, so the caller's
+    /// loop can vectorise); the rows are then split into their even and odd halves.
+    fn build_rows<const C: usize>(
         lay: &Layout,
         kernel: Kernel,
-        f: impl Fn(usize, usize) -> [f32; C] + Sync,
+        f: impl Fn(usize, &mut [Vec<f32>; C]) + Sync,
     ) -> Self {
-        let mut coef_e = vec![0.0_f32; C * lay.ne * lay.height];
-        let mut coef_o = vec![0.0_f32; C * lay.no * lay.height];
-        let (ne, no) = (lay.ne, lay.no);
+        let (w, ne, no) = (lay.width, lay.ne, lay.no);
+        let mut coef_e = zeros_par(C * ne * lay.height);
+        let mut coef_o = zeros_par(C * no * lay.height);
+        // Width ≥ 2 (checked by the caller), so both halves have columns; `max(1)` only keeps
+        // the chunk size valid.
         coef_e
-            .par_chunks_mut(C * ne)
+            .par_chunks_mut((C * ne).max(1))
+            .zip(coef_o.par_chunks_mut((C * no).max(1)))
             .enumerate()
-            .for_each(|(y, row)| {
-                for i in 0..ne {
-                    let c = f(2 * i, y);
-                    for (k, &v) in c.iter().enumerate() {
-                        row[k * ne + i] = v;
-                    }
-                }
-            });
-        if no > 0 {
-            coef_o
-                .par_chunks_mut(C * no)
-                .enumerate()
-                .for_each(|(y, row)| {
-                    for i in 0..no {
-                        let c = f(2 * i + 1, y);
-                        for (k, &v) in c.iter().enumerate() {
-                            row[k * no + i] = v;
+            .for_each_init(
+                || std::array::from_fn(|_| vec![0.0_f32; w]),
+                |rows: &mut [Vec<f32>; C], (y, (re, ro))| {
+                    f(y, rows);
+                    for (k, full) in rows.iter().enumerate() {
+                        let (Some(e), Some(o)) = (
+                            re.get_mut(k * ne..(k + 1) * ne),
+                            ro.get_mut(k * no..(k + 1) * no),
+                        ) else {
+                            continue;
+                        };
+                        let pairs = full.chunks_exact(2);
+                        if let (Some(&last), Some(e_last)) =
+                            (pairs.remainder().first(), e.get_mut(no))
+                        {
+                            *e_last = last;
+                        }
+                        for ((pair, de), d_o) in pairs.zip(e.iter_mut()).zip(o.iter_mut()) {
+                            *de = pair[0];
+                            *d_o = pair[1];
                         }
                     }
-                });
-        }
+                },
+            );
         Self {
             lay: *lay,
             kernel,
@@ -785,16 +795,20 @@ impl Problem {
 
     fn plain(lay: &Layout, d: &Derivatives, lambda: f32) -> Self {
         let w = lay.width;
-        let lambda = f64::from(lambda);
-        Self::build::<PLAIN_COEFS>(lay, Kernel::Plain, |x, y| {
-            let i = y * w + x;
-            let (gx, gy, gt) = (
-                f64::from(d.ix.data[i]),
-                f64::from(d.iy.data[i]),
-                f64::from(d.it.data[i]),
-            );
-            let s = 1.0 / (lambda + gx * gx + gy * gy).sqrt();
-            [(gx * s) as f32, (gy * s) as f32, (gt * s) as f32]
+        Self::build_rows::<PLAIN_COEFS>(lay, Kernel::Plain, |y, [gx, gy, gt]| {
+            let span = y * w..(y + 1) * w;
+            let (Some(ix), Some(iy), Some(it)) = (
+                d.ix.data.get(span.clone()),
+                d.iy.data.get(span.clone()),
+                d.it.data.get(span),
+            ) else {
+                return;
+            };
+            let outs = gx.iter_mut().zip(gy.iter_mut()).zip(gt.iter_mut());
+            for (((a, b), c), ((&ix, &iy), &it)) in outs.zip(ix.iter().zip(iy).zip(it)) {
+                let s = 1.0 / (lambda + ix * ix + iy * iy).sqrt();
+                (*a, *b, *c) = (ix * s, iy * s, it * s);
+            }
         })
     }
 
@@ -810,39 +824,49 @@ impl Problem {
         let gamma = f64::from(params.groove_weight) * lambda;
         let base = f64::from(d.base_flow_px);
         let centre = (h as f64 - 1.0) * 0.5;
-        Self::build::<GROOVE_COEFS>(
+        // k = c/(f − c·ŷ) of a constrained edge at height y_mid, for c = −1 and c = +1.
+        let ks = |y_mid: f64| [-1.0_f64, 1.0].map(|c| c / (focal_px - c * (y_mid - centre)));
+        Self::build_rows::<GROOVE_COEFS>(
             lay,
             Kernel::Groove {
                 q: 0.25 * params.lambda,
             },
-            |x, y| {
-                let i = y * w + x;
-                let side = |yy: usize| walls.sign.get(yy * w + x).copied().unwrap_or(0);
-                let c = side(y);
-                // Edge to the row above (o) and below (d): constrained when both ends share c ≠ 0.
-                let edge = |other: Option<usize>, y_mid: f64| -> (f64, f64) {
-                    match other {
-                        Some(yy) if c != 0 && side(yy) == c => {
-                            let cf = f64::from(c);
-                            (1.0, cf / (focal_px - cf * (y_mid - centre)))
-                        }
-                        _ => (0.0, 0.0),
-                    }
+            |y, rows| {
+                let span = y * w..(y + 1) * w;
+                let (Some(ix), Some(iy), Some(it), Some(sides)) = (
+                    d.ix.data.get(span.clone()),
+                    d.iy.data.get(span.clone()),
+                    d.it.data.get(span.clone()),
+                    walls.sign.get(span),
+                ) else {
+                    return;
                 };
-                let (m_o, k_o) = edge(y.checked_sub(1), y as f64 - 0.5);
-                let (m_d, k_d) = edge((y + 1 < h).then_some(y + 1), y as f64 + 0.5);
-                groove_px(
-                    [
-                        f64::from(d.ix.data[i]),
-                        f64::from(d.iy.data[i]),
-                        f64::from(d.it.data[i]),
-                    ],
-                    lambda,
-                    gamma,
-                    base,
-                    (m_o, k_o),
-                    (m_d, k_d),
-                )
+                let above = y
+                    .checked_sub(1)
+                    .and_then(|yy| walls.sign.get(yy * w..(yy + 1) * w));
+                let below = walls.sign.get((y + 1) * w..(y + 2) * w);
+                let (k_above, k_below) = (ks(y as f64 - 0.5), ks(y as f64 + 0.5));
+                // Edge to the row above (o) and below (d): constrained when both ends share
+                // c ≠ 0.
+                let edge = |c: i8, other: Option<&[i8]>, x: usize, k: &[f64; 2]| match other {
+                    Some(row) if c != 0 && row.get(x) == Some(&c) => (1.0, k[usize::from(c > 0)]),
+                    _ => (0.0, 0.0),
+                };
+                for (x, &c) in sides.iter().enumerate() {
+                    let coefs = groove_px(
+                        [ix[x], iy[x], it[x]].map(f64::from),
+                        lambda,
+                        gamma,
+                        base,
+                        edge(c, above, x, &k_above),
+                        edge(c, below, x, &k_below),
+                    );
+                    for (row, v) in rows.iter_mut().zip(coefs) {
+                        if let Some(dst) = row.get_mut(x) {
+                            *dst = v;
+                        }
+                    }
+                }
             },
         )
     }
@@ -1234,10 +1258,10 @@ fn groove_px(
     let wu = m_o * (w * alpha_o * beta_o - q);
     let wd = m_d * (w * alpha_d * beta_d - q);
     let e = -w * (m_o * beta_o * k_o - m_d * alpha_d * k_d) * base;
-    let det = (a + ix * ix) * (lambda + iy * iy) - ix * ix * iy * iy;
-    let puu = (lambda + iy * iy) / det;
-    let puv = -ix * iy / det;
-    let pvv = (a + ix * ix) / det;
+    let inv_det = 1.0 / ((a + ix * ix) * (lambda + iy * iy) - ix * ix * iy * iy);
+    let puu = (lambda + iy * iy) * inv_det;
+    let puv = -ix * iy * inv_det;
+    let pvv = (a + ix * ix) * inv_det;
     let ru = e - ix * it;
     let rv = -iy * it;
     let pu0 = puu * ru + puv * rv;
