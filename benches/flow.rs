@@ -68,6 +68,8 @@ fn middle(frames: &[Image]) -> Derivatives {
 }
 
 fn benches(c: &mut Criterion) {
+    // As the `groovescope` binary does at start-up.
+    groovescope::alloc::keep_freed_buffers();
     let frames = group();
     let mut g = c.benchmark_group("flow_1280x1024");
     g.sample_size(10);

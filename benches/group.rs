@@ -38,6 +38,8 @@ fn group(dir: &Path, cfg: SynthConfig) -> (Scan, GroupInput) {
 }
 
 fn bench(c: &mut Criterion) {
+    // As the `groovescope` binary does at start-up.
+    groovescope::alloc::keep_freed_buffers();
     let tmp = tempfile::tempdir().expect("tempdir");
     let params = PipelineParams::default();
     let mut g = c.benchmark_group("group_12x1280x1024");

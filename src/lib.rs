@@ -4,6 +4,7 @@
 //! ground-truth scans.
 
 pub mod accuracy;
+pub mod alloc;
 #[cfg(feature = "gui")]
 pub mod app;
 pub mod cli;

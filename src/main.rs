@@ -65,6 +65,7 @@ fn default_action() -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
+    groovescope::alloc::keep_freed_buffers();
     let cli = Cli::parse();
     let result = match cli.command {
         Some(cmd) => run(cmd),
