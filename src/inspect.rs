@@ -9,7 +9,8 @@ use anyhow::{Context, Result, bail};
 use crate::io::{Scan, load_group, write_atomic};
 use crate::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
 use crate::viz::{
-    ColorMap, Rgba8Image, grey_image, heat_map, hough_image, save_png, stripes_overlay,
+    ColorMap, Rgba8Image, grey_image, heat_map, hough_image, robust_range, save_png,
+    stripes_overlay,
 };
 
 /// Writes the in-focus map and the Hough accumulator image.
@@ -96,7 +97,7 @@ pub fn run_inspect(
         save(
             out_dir,
             "flow_u.png",
-            &heat_map(&f.u, None, ColorMap::Viridis),
+            &heat_map(&f.u, robust_range(&f.u.data), ColorMap::Viridis),
             force,
             &mut written,
         )?;
@@ -112,7 +113,11 @@ pub fn run_inspect(
         save(
             out_dir,
             "depth.png",
-            &heat_map(&depth.map.z_um, None, ColorMap::Viridis),
+            &heat_map(
+                &depth.map.z_um,
+                robust_range(&depth.map.z_um.data),
+                ColorMap::Viridis,
+            ),
             force,
             &mut written,
         )?;

@@ -209,6 +209,34 @@ pub fn heat_map(img: &Image, range: Option<(f32, f32)>, map: ColorMap) -> Rgba8I
     }
 }
 
+/// Most values sampled by [`robust_range`].
+const RANGE_SAMPLES: usize = 65_536;
+
+/// Share of values left out at each end by [`robust_range`].
+pub const ROBUST_TAIL: f64 = 0.01;
+
+/// The range between the [`ROBUST_TAIL`] and 1 − [`ROBUST_TAIL`] quantiles of the finite values
+/// (sampled), so a few outliers do not flatten a heat map.
+#[must_use]
+pub fn robust_range(values: &[f32]) -> Option<(f32, f32)> {
+    let stride = values.len().div_ceil(RANGE_SAMPLES).max(1);
+    let mut v: Vec<f32> = values
+        .iter()
+        .step_by(stride)
+        .copied()
+        .filter(|x| x.is_finite())
+        .collect();
+    if v.is_empty() {
+        return None;
+    }
+    let last = v.len() - 1;
+    let lo_k = (last as f64 * ROBUST_TAIL).round() as usize;
+    let hi_k = (last as f64 * (1.0 - ROBUST_TAIL)).round() as usize;
+    let (_, &mut lo, _) = v.select_nth_unstable_by(lo_k, f32::total_cmp);
+    let (_, &mut hi, _) = v.select_nth_unstable_by(hi_k, f32::total_cmp);
+    Some((lo, hi))
+}
+
 /// The Middlebury colour wheel (55 hues: red, yellow, green, cyan, blue, magenta).
 fn color_wheel() -> Vec<[f32; 3]> {
     const SEGMENTS: [usize; 6] = [15, 6, 4, 11, 13, 6];
@@ -437,6 +465,18 @@ mod tests {
 
     fn close(a: [u8; 4], b: [u8; 4], tol: u8) -> bool {
         a.iter().zip(&b).all(|(x, y)| x.abs_diff(*y) <= tol)
+    }
+
+    #[test]
+    fn robust_range_ignores_a_few_outliers() {
+        let mut v: Vec<f32> = (0..1000).map(|i| 4000.0 + (i % 50) as f32).collect();
+        v[3] = 1e6;
+        v[9] = -1e6;
+        v[11] = f32::NAN;
+        let (lo, hi) = robust_range(&v).unwrap();
+        assert!((4000.0..=4001.0).contains(&lo), "{lo}");
+        assert!((4048.0..=4049.0).contains(&hi), "{hi}");
+        assert!(robust_range(&[f32::NAN]).is_none());
     }
 
     #[test]

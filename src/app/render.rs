@@ -73,30 +73,7 @@ pub fn finite_range(values: &[f32]) -> Option<(f32, f32)> {
     (lo <= hi).then_some((lo, hi))
 }
 
-/// Share of values left out at each end by [`robust_range`].
-pub const ROBUST_TAIL: f64 = 0.01;
-
-/// The range between the [`ROBUST_TAIL`] and 1 − [`ROBUST_TAIL`] quantiles of the finite values
-/// (sampled), so a few outliers do not flatten a heat map.
-#[must_use]
-pub fn robust_range(values: &[f32]) -> Option<(f32, f32)> {
-    let stride = values.len().div_ceil(FLOW_QUANTILE_SAMPLES).max(1);
-    let mut v: Vec<f32> = values
-        .iter()
-        .step_by(stride)
-        .copied()
-        .filter(|x| x.is_finite())
-        .collect();
-    if v.is_empty() {
-        return None;
-    }
-    let last = v.len() - 1;
-    let lo_k = (last as f64 * ROBUST_TAIL).round() as usize;
-    let hi_k = (last as f64 * (1.0 - ROBUST_TAIL)).round() as usize;
-    let (_, &mut lo, _) = v.select_nth_unstable_by(lo_k, f32::total_cmp);
-    let (_, &mut hi, _) = v.select_nth_unstable_by(hi_k, f32::total_cmp);
-    Some((lo, hi))
-}
+pub use crate::viz::{ROBUST_TAIL, robust_range};
 
 /// A grey frame (contrast stretched to its range) as a texture.
 #[must_use]
@@ -170,18 +147,6 @@ pub fn stripes(frame: &Image, stripes: &Stripes) -> Rendered {
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
-
-    #[test]
-    fn robust_range_ignores_a_few_outliers() {
-        let mut v: Vec<f32> = (0..1000).map(|i| 4000.0 + (i % 50) as f32).collect();
-        v[3] = 1e6;
-        v[9] = -1e6;
-        v[11] = f32::NAN;
-        let (lo, hi) = robust_range(&v).unwrap();
-        assert!((4000.0..=4001.0).contains(&lo), "{lo}");
-        assert!((4048.0..=4049.0).contains(&hi), "{hi}");
-        assert!(robust_range(&[f32::NAN]).is_none());
-    }
 
     #[test]
     fn heat_spans_the_range_and_clears_nan() {
