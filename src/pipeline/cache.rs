@@ -1,5 +1,6 @@
 //! The stage cache shared by the CLI and the workbench: one slot per [`Stage`], rerun from the first stale one.
 
+use rayon::prelude::*;
 use std::sync::Arc;
 
 use super::audio_signal::{GroupSignal, SoundParams, group_signal};
@@ -14,7 +15,7 @@ use super::optical_flow::{
 use super::orientation::{Orientation, orient_from_depth, orient_from_lines};
 use super::walls::{WallLine, find_walls};
 use super::{PipelineParams, Stage, StageError, median};
-use crate::image::Image;
+use crate::image::{Image, zeros_par};
 use crate::io::ScanMeta;
 
 /// Columns kept clear of each frame edge when placing samples (px): pre-warping clamps there.
@@ -383,19 +384,39 @@ fn depth_path_flows(
 /// A flow field whose content moved by `shift_px` toward −x: column x takes the (linearly
 /// interpolated) value at x + shift; beyond the right edge the last column repeats.
 fn shift_flow(flow: &FlowField, shift_px: f64) -> FlowField {
+    let s = if shift_px.is_finite() { shift_px } else { 0.0 };
+    // Column x reads x + s = x + whole + t: the same fraction t for every column.
+    let whole = s.floor();
+    let t = (s - whole) as f32;
     let shift = |im: &Image| {
-        let w = im.width;
-        let last = w.saturating_sub(1) as f64;
-        let s = if shift_px.is_finite() { shift_px } else { 0.0 };
-        Image::from_fn(w, im.height, |x, y| {
-            let xs = (x as f64 + s).clamp(0.0, last);
-            let i = xs.floor() as usize;
-            let t = (xs - i as f64) as f32;
-            let row = &im.data[y * w..(y + 1) * w];
-            let a = row.get(i).copied().unwrap_or(0.0);
-            let b = row.get(i + 1).copied().unwrap_or(a);
-            a + (b - a) * t
-        })
+        let w = im.width.max(1);
+        let mut out = zeros_par(im.data.len());
+        out.par_chunks_mut(w)
+            .zip(im.data.par_chunks(w))
+            .for_each(|(dst, row)| {
+                let last = row.len().saturating_sub(1);
+                let (Some(&first), Some(&end)) = (row.first(), row.last()) else {
+                    return;
+                };
+                for (x, d) in dst.iter_mut().enumerate() {
+                    let xs = x as f64 + whole;
+                    *d = if xs < 0.0 {
+                        first
+                    } else if xs >= last as f64 {
+                        end
+                    } else {
+                        // In range: 0 ≤ i < last.
+                        let i = xs as usize;
+                        let (a, b) = (row[i], row[i + 1]);
+                        a + (b - a) * t
+                    };
+                }
+            });
+        Image {
+            width: im.width,
+            height: im.height,
+            data: out,
+        }
     };
     FlowField {
         u: shift(&flow.u),
