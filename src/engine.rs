@@ -15,7 +15,7 @@ use crate::pipeline::cache::native_spacing_um;
 use crate::pipeline::dsp::apply_dsp;
 use crate::pipeline::eval::{Scores, evaluate};
 use crate::pipeline::orientation::Orientation;
-use crate::pipeline::{GroupInput, PipelineParams, Stage, StageCache, StageError};
+use crate::pipeline::{FlowDetail, GroupInput, PipelineParams, Stage, StageCache, StageError};
 
 /// Longest lag searched when scoring against the reference (seconds).
 pub const MAX_EVAL_LAG_SECS: f64 = 0.0003;
@@ -204,7 +204,9 @@ fn agreed_median(history: &std::collections::VecDeque<f64>, max_change: f64) -> 
     (agree as f64 >= SLOPE_AGREEMENT * history.len() as f64).then_some(m)
 }
 
-/// Runs one group through every stage (used by the engine and by benchmarks).
+/// Runs one group through every stage for its sound (used by the engine and by benchmarks):
+/// on the dual-focus path the flow stage gives only the in-focus map ([`FlowDetail::InFocusMap`]),
+/// which is all the stripes read.
 ///
 /// # Errors
 /// The first stage error.
@@ -212,7 +214,10 @@ pub fn run_group(
     input: &GroupInput,
     params: &PipelineParams,
 ) -> Result<(StageCache, Vec<Duration>), StageError> {
-    let mut cache = StageCache::default();
+    let mut cache = StageCache {
+        flow_detail: FlowDetail::InFocusMap,
+        ..StageCache::default()
+    };
     let mut times = vec![Duration::ZERO; Stage::ALL.len()];
     let mut t0 = Instant::now();
     cache.run_from(Stage::Derivatives, input, params, &mut |stage, _| {

@@ -11,6 +11,7 @@ use super::derivatives::{
 use super::hough::{Stripes, segment_stripes};
 use super::optical_flow::{
     FlowField, FlowMethod, WallSideMap, compute_flow, compute_flow_from, estimate_wall_sides,
+    flow_confidence_only,
 };
 use super::orientation::{Orientation, orient_from_depth, orient_from_lines};
 use super::walls::{WallLine, find_walls};
@@ -63,9 +64,24 @@ pub struct OrientationOutput {
     pub grid: SampleGrid,
 }
 
+/// How much the flow stage computes on the dual-focus path (the depth path always needs the
+/// whole field).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FlowDetail {
+    /// The flow field (u, v) as well as its confidence: what the workbench and `inspect` show.
+    #[default]
+    Field,
+    /// Only the confidence map, the pixels that carry flow, which is all the dual-focus stripes
+    /// read ([`flow_confidence_only`]): whole-scan reconstruction skips the Horn–Schunck solve.
+    /// Stripes, orientation and sound are the same as with [`FlowDetail::Field`].
+    InFocusMap,
+}
+
 /// One slot per stage. `Arc`s make clones cheap, so a worker can take a copy, run, and send it back.
 #[derive(Clone, Debug, Default)]
 pub struct StageCache {
+    /// How much the flow stage computes on the dual-focus path (set by the cache's owner).
+    pub flow_detail: FlowDetail,
     /// [`Stage::Derivatives`].
     pub derivatives: Option<Arc<Vec<Derivatives>>>,
     /// [`Stage::Flow`].
@@ -225,7 +241,12 @@ impl StageCache {
                         // The dual-focus path reads one flow field, the middle window's (its
                         // in-focus map): the other windows would be computed for nothing.
                         let d = derivs.get(derivs.len() / 2).ok_or_else(|| missing(stage))?;
-                        vec![compute_flow(d, geom.focal_px, None, &params.flow)?]
+                        vec![match self.flow_detail {
+                            FlowDetail::Field => {
+                                compute_flow(d, geom.focal_px, None, &params.flow)?
+                            }
+                            FlowDetail::InFocusMap => flow_confidence_only(d, &params.flow)?,
+                        }]
                     } else {
                         depth_path_flows(&derivs, geom.focal_px, geom.land_flow_px(), params)?
                     };
@@ -492,6 +513,57 @@ mod tests {
                 })
             })
             .collect()
+    }
+
+    /// One group of the small dual-focus camera, rendered by the generator.
+    fn dual_focus_group() -> GroupInput {
+        use std::sync::atomic::AtomicBool;
+        let dir = tempfile::tempdir().unwrap();
+        let cfg = crate::accuracy::small_dual_focus(1);
+        let tone = crate::synth::tone(1000.0, 0.01, crate::synth::BUILTIN_RATE_HZ);
+        crate::synth::render_scan(&tone, &cfg, dir.path(), &|_, _| {}, &AtomicBool::new(false))
+            .unwrap();
+        let scan = crate::io::Scan::open(dir.path()).unwrap();
+        let frames = crate::io::load_group(&scan.groups[0]).unwrap();
+        GroupInput {
+            group: 0,
+            frames: Arc::new(frames),
+            meta: Arc::new(scan.meta.clone()),
+        }
+    }
+
+    #[test]
+    fn the_in_focus_map_alone_gives_the_same_dual_focus_sound() {
+        let input = dual_focus_group();
+        let params = PipelineParams::default();
+        assert!(params.uses_dual_focus(&input.meta));
+        let run = |flow_detail| {
+            let mut c = StageCache {
+                flow_detail,
+                ..StageCache::default()
+            };
+            c.run_from(Stage::Derivatives, &input, &params, &mut |_, _| true)
+                .unwrap();
+            c
+        };
+        let (full, lean) = (run(FlowDetail::Field), run(FlowDetail::InFocusMap));
+        let (ff, lf) = (
+            &full.flows.as_ref().unwrap()[0],
+            &lean.flows.as_ref().unwrap()[0],
+        );
+        assert!(ff.iterations > 0 && !ff.u.data.is_empty());
+        assert_eq!((lf.iterations, lf.u.data.len()), (0, 0));
+        assert_eq!(ff.confidence, lf.confidence);
+        assert_eq!(full.stripes, lean.stripes);
+        // Debug text, so NaN gaps (and NaN weights) compare equal to themselves.
+        let same =
+            |a: &dyn std::fmt::Debug, b: &dyn std::fmt::Debug| format!("{a:?}") == format!("{b:?}");
+        assert!(
+            same(&full.orientation, &lean.orientation),
+            "orientation differs"
+        );
+        assert!(same(&full.signal, &lean.signal), "sound differs");
+        assert!(lean.signal.as_ref().unwrap().positions_um.len() > 10);
     }
 
     #[test]

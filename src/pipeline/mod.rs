@@ -273,7 +273,7 @@ impl PipelineParams {
     }
 }
 
-pub use cache::{GroupInput, StageCache};
+pub use cache::{FlowDetail, GroupInput, StageCache};
 
 /// The median of `v` (the upper one of an even count); None when empty. NaN sorts last.
 pub(crate) fn median(mut v: Vec<f64>) -> Option<f64> {

@@ -356,6 +356,36 @@ pub fn compute_flow_from(
     })
 }
 
+/// The flow stage's confidence map alone: which pixels carry flow, as [`compute_flow`] would
+/// report them, without solving for u and v. For the Horn–Schunck methods that is the gradient
+/// magnitude at or above `gradient_threshold`, and u and v are left empty (0×0, no iterations);
+/// Lucas–Kanade's confidence is its smallest eigenvalue, so it runs in full (it has no
+/// iterations to skip). The dual-focus stripes read nothing else from the flow stage.
+///
+/// # Errors
+/// As [`compute_flow`].
+pub fn flow_confidence_only(d: &Derivatives, params: &FlowParams) -> Result<FlowField, StageError> {
+    validate(params)?;
+    if params.method == FlowMethod::LucasKanade {
+        return compute_flow(d, 1.0, None, params);
+    }
+    let n = d.ix.data.len();
+    if !d.ix.same_size(&d.iy) || d.ix.width * d.ix.height != n || n == 0 {
+        return Err(bad_input(format!(
+            "derivatives ix {}x{} and iy {}x{} do not match or are empty",
+            d.ix.width, d.ix.height, d.iy.width, d.iy.height
+        )));
+    }
+    Ok(FlowField {
+        u: Image::zeros(0, 0),
+        v: Image::zeros(0, 0),
+        confidence: gradient_confidence(d, params.gradient_threshold),
+        iterations: 0,
+        converged: false,
+        frame_index: d.frame_index,
+    })
+}
+
 fn bad_input(problem: String) -> StageError {
     StageError::BadInput {
         stage: "optical flow",
