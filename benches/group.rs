@@ -33,6 +33,7 @@ fn group(dir: &Path, cfg: SynthConfig) -> (Scan, GroupInput) {
     let input = GroupInput {
         group: 0,
         frames: Arc::new(frames),
+        first_frame: 0,
         meta: Arc::new(scan.meta.clone()),
     };
     (scan, input)

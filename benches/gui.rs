@@ -38,6 +38,7 @@ fn input(dir: &Path) -> GroupInput {
     GroupInput {
         group: 0,
         frames: Arc::new(frames),
+        first_frame: 0,
         meta: Arc::new(scan.meta),
     }
 }

@@ -9,9 +9,9 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use crate::io::wav::{Audio, read_wav};
-use crate::io::{LoadError, Scan, load_group};
+use crate::io::{LoadError, Scan, load_group_frames};
 use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample, stitch};
-use crate::pipeline::cache::native_spacing_um;
+use crate::pipeline::cache::{middle_window_range, native_spacing_um};
 use crate::pipeline::dsp::apply_dsp;
 use crate::pipeline::eval::{Scores, evaluate};
 use crate::pipeline::orientation::Orientation;
@@ -257,9 +257,17 @@ pub fn reconstruct(
     let mut reports = Vec::with_capacity(total);
     let mut warnings = Vec::new();
 
-    let (tx, rx) =
-        mpsc::sync_channel::<(usize, Result<Vec<crate::image::Image>, LoadError>, f64)>(1);
+    // A decoded group: its index, the first frame loaded, the frames, the seconds it took.
+    type Loaded = (
+        usize,
+        usize,
+        Result<Vec<crate::image::Image>, LoadError>,
+        f64,
+    );
+    let (tx, rx) = mpsc::sync_channel::<Loaded>(1);
     let entries: Vec<_> = scan.groups[range.clone()].to_vec();
+    // The dual-focus path reads only each group's middle derivative window: decode just that.
+    let dual = params.uses_dual_focus(&scan.meta);
     let loader_cancel = AtomicBool::new(false);
     let outcome: Result<(), EngineError> = std::thread::scope(|s| {
         // Own the receiver here so that an early return (or a panic) drops it, which unblocks a
@@ -273,9 +281,16 @@ pub fn reconstruct(
                         break;
                     }
                     let t = Instant::now();
-                    let frames = load_group(entry);
+                    let n = entry.frames.len();
+                    let window = if dual {
+                        middle_window_range(n, params.derivatives.mode)
+                    } else {
+                        0..n
+                    };
+                    let first = window.start;
+                    let frames = load_group_frames(entry, window);
                     if tx
-                        .send((entry.index, frames, t.elapsed().as_secs_f64()))
+                        .send((entry.index, first, frames, t.elapsed().as_secs_f64()))
                         .is_err()
                     {
                         break;
@@ -290,7 +305,7 @@ pub fn reconstruct(
             }));
         }
         let mut done = 0;
-        for (group, frames, load_secs) in rx.iter() {
+        for (group, first_frame, frames, load_secs) in rx.iter() {
             if cancel.load(Ordering::Relaxed) {
                 loader_cancel.store(true, Ordering::Relaxed);
                 return Err(EngineError::Cancelled);
@@ -324,6 +339,7 @@ pub fn reconstruct(
             let input = GroupInput {
                 group,
                 frames: Arc::new(frames),
+                first_frame,
                 meta: meta.clone(),
             };
             let signal = match run_group(&input, params).and_then(|(mut cache, times)| {

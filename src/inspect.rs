@@ -71,6 +71,7 @@ pub fn run_inspect(
     let input = GroupInput {
         group,
         frames: Arc::new(frames),
+        first_frame: 0,
         meta: Arc::new(scan.meta.clone()),
     };
     let mut cache = StageCache::default();

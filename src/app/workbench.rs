@@ -667,6 +667,7 @@ impl Workbench {
             Some(frames) => JobInput::Ready(GroupInput {
                 group: self.group,
                 frames,
+                first_frame: 0,
                 meta: meta.clone(),
             }),
             None => JobInput::Load {

@@ -265,6 +265,7 @@ pub fn run_job(
                 Ok(frames) => GroupInput {
                     group: entry.index,
                     frames,
+                    first_frame: 0,
                     meta,
                 },
                 Err(e) => return finish(Outcome::LoadFailed(e)),
@@ -457,6 +458,7 @@ mod tests {
             input: JobInput::Ready(GroupInput {
                 group: 0,
                 frames: Arc::new(Vec::new()),
+                first_frame: 0,
                 meta: Arc::new(
                     crate::io::ScanMeta::from_toml_str(
                         "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\n[camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n[motion]\nframe_step_um = 0.78\ngroup_step_um = 20.0\n",

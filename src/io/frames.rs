@@ -57,13 +57,29 @@ fn grey_from_dynamic(img: &DynamicImage) -> Image {
 /// # Errors
 /// The first unreadable frame, or the first frame whose size differs from the group's first.
 pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
-    let frames: Vec<Image> = group
+    load_group_frames(group, 0..group.frames.len())
+}
+
+/// Loads the frames `range` of a group (clamped to the group) in parallel and checks they
+/// share one size.
+///
+/// # Errors
+/// As [`load_group`].
+pub fn load_group_frames(
+    group: &GroupEntry,
+    range: std::ops::Range<usize>,
+) -> Result<Vec<Image>, LoadError> {
+    let n = group.frames.len();
+    let paths = group
         .frames
+        .get(range.start.min(n)..range.end.min(n))
+        .unwrap_or_default();
+    let frames: Vec<Image> = paths
         .par_iter()
         .map(|p| load_frame(p))
         .collect::<Result<_, _>>()?;
     if let Some(first) = frames.first() {
-        for (img, path) in frames.iter().zip(&group.frames) {
+        for (img, path) in frames.iter().zip(paths) {
             if !img.same_size(first) {
                 return Err(LoadError::MixedSizes {
                     found_w: img.width,

@@ -11,7 +11,7 @@ pub mod wav;
 use std::path::PathBuf;
 
 pub use atomic::{write_atomic, write_atomic_with};
-pub use frames::{load_frame, load_group, save_grey_png};
+pub use frames::{load_frame, load_group, load_group_frames, save_grey_png};
 pub use scan::{Cut, Geometry, GroupEntry, Scan, ScanMeta};
 
 /// Why a scan, frame or sound file could not be read or written.

@@ -27,8 +27,11 @@ pub const SAMPLE_MARGIN_PX: f64 = 8.0;
 pub struct GroupInput {
     /// Group index in the scan.
     pub group: usize,
-    /// Grey frames of the group, in order.
+    /// Grey frames of the group, in order: all of them, or a run of them that starts at
+    /// `first_frame` (reconstruction loads only the window the dual-focus path reads).
     pub frames: Arc<Vec<Image>>,
+    /// Index in the whole group of `frames[0]`.
+    pub first_frame: usize,
     /// The scan's metadata.
     pub meta: Arc<ScanMeta>,
 }
@@ -231,7 +234,7 @@ impl StageCache {
                     let mut d =
                         compute_derivatives(frames, geom.land_flow_px(), &params.derivatives)?;
                     for set in &mut d {
-                        set.frame_index += first;
+                        set.frame_index += input.first_frame + first;
                     }
                     self.derivatives = Some(Arc::new(d));
                 }
@@ -477,15 +480,22 @@ fn shift_walls(walls: &WallSideMap, shift_px: f64) -> WallSideMap {
 /// `derivs[len / 2]` would be) and the index of its first frame. Too few frames: all of them,
 /// so the derivative stage reports the shortage.
 fn middle_window_frames(frames: &[Image], mode: DerivativeMode) -> (usize, &[Image]) {
+    let range = middle_window_range(frames.len(), mode);
+    (range.start, frames.get(range).unwrap_or(frames))
+}
+
+/// The frames of a group of `n` the dual-focus path reads: its middle derivative window (all
+/// `n` when there are too few for one, so the derivative stage reports the shortage).
+#[must_use]
+pub fn middle_window_range(n: usize, mode: DerivativeMode) -> std::ops::Range<usize> {
     let span = match mode {
         DerivativeMode::Simoncelli => SIMONCELLI_WINDOW_FRAMES,
         DerivativeMode::TwoFrame => 2,
     };
-    let Some(windows) = (frames.len() + 1).checked_sub(span).filter(|&n| n > 0) else {
-        return (0, frames);
-    };
-    let start = windows / 2;
-    (start, &frames[start..start + span])
+    match (n + 1).checked_sub(span).filter(|&windows| windows > 0) {
+        Some(windows) => windows / 2..windows / 2 + span,
+        None => 0..n,
+    }
 }
 
 /// The middle derivative window and its flow field (the pair the dual-focus path reads).
@@ -515,11 +525,14 @@ mod tests {
             .collect()
     }
 
-    /// One group of the small dual-focus camera, rendered by the generator.
-    fn dual_focus_group() -> GroupInput {
+    /// One group of `frames` frames of the small dual-focus camera, rendered by the generator.
+    fn dual_focus_group(frames: usize) -> GroupInput {
         use std::sync::atomic::AtomicBool;
         let dir = tempfile::tempdir().unwrap();
-        let cfg = crate::accuracy::small_dual_focus(1);
+        let cfg = crate::synth::SynthConfig {
+            frames_per_group: frames,
+            ..crate::accuracy::small_dual_focus(1)
+        };
         let tone = crate::synth::tone(1000.0, 0.01, crate::synth::BUILTIN_RATE_HZ);
         crate::synth::render_scan(&tone, &cfg, dir.path(), &|_, _| {}, &AtomicBool::new(false))
             .unwrap();
@@ -528,13 +541,14 @@ mod tests {
         GroupInput {
             group: 0,
             frames: Arc::new(frames),
+            first_frame: 0,
             meta: Arc::new(scan.meta.clone()),
         }
     }
 
     #[test]
     fn the_in_focus_map_alone_gives_the_same_dual_focus_sound() {
-        let input = dual_focus_group();
+        let input = dual_focus_group(7);
         let params = PipelineParams::default();
         assert!(params.uses_dual_focus(&input.meta));
         let run = |flow_detail| {
@@ -564,6 +578,44 @@ mod tests {
         );
         assert!(same(&full.signal, &lean.signal), "sound differs");
         assert!(lean.signal.as_ref().unwrap().positions_um.len() > 10);
+    }
+
+    #[test]
+    fn loading_only_the_middle_window_gives_the_same_dual_focus_sound() {
+        let full = dual_focus_group(12);
+        let window = middle_window_range(12, DerivativeMode::Simoncelli);
+        assert_eq!(window, 3..10);
+        let part = GroupInput {
+            frames: Arc::new(full.frames[window.clone()].to_vec()),
+            first_frame: window.start,
+            ..full.clone()
+        };
+        let params = PipelineParams::default();
+        let run = |input: &GroupInput| {
+            let mut c = StageCache::default();
+            c.run_from(Stage::Derivatives, input, &params, &mut |_, _| true)
+                .unwrap();
+            c
+        };
+        let (a, b) = (run(&full), run(&part));
+        assert_eq!(a.derivatives.as_ref().unwrap()[0].frame_index, 6);
+        assert_eq!(a.derivatives, b.derivatives);
+        assert_eq!(a.stripes, b.stripes);
+        assert_eq!(
+            format!("{:?}", a.signal),
+            format!("{:?}", b.signal),
+            "sound differs"
+        );
+        // Without the offset the samples would land three frames early along the groove.
+        let shifted = GroupInput {
+            first_frame: 0,
+            ..part
+        };
+        let c = run(&shifted);
+        assert_ne!(
+            a.signal.as_ref().unwrap().positions_um,
+            c.signal.as_ref().unwrap().positions_um
+        );
     }
 
     #[test]
