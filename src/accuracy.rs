@@ -19,6 +19,7 @@ use crate::pipeline::depth::estimate_depth;
 use crate::pipeline::derivatives::compute_derivatives;
 use crate::pipeline::eval::Scores;
 use crate::pipeline::optical_flow::{FlowMethod, compute_flow};
+use crate::pipeline::walls::WallMethod;
 use crate::pipeline::{PathChoice, PipelineParams};
 use crate::synth::{
     BUILTIN_RATE_HZ, DamageConfig, SceneConfig, SceneKind, SynthConfig, arpeggio, render_scan, tone,
@@ -497,27 +498,55 @@ pub fn run_suite(
     let depth_freqs: &[f64] = if opts.quick {
         &[1000.0]
     } else {
-        &[200.0, 1000.0, 5000.0]
+        &[200.0, 500.0, 1000.0, 2000.0, 5000.0]
     };
     rep.line("## Sinusoids, depth path (no cover glass: flow → Kalman depth → orientation)");
     rep.line("");
     rep.line(&format!(
         "The same camera and disc (`accuracy::small_lateral`), everything in focus, 12 frames a \
-         group, a 180 µm wide 70 µm deep groove, {depth_groups} groups per tone, orientation \
-         window {wl} px, low-pass off."
+         group, a 180 µm wide 70 µm deep groove, {depth_groups} groups per tone. Walls found by \
+         depth levels (the default), with the orientation window at the default 100 px, at \
+         {wl} px, and at {wl} px with the 3 kHz low-pass; the last columns find the walls by \
+         slope runs (the method before 29 Nov 2026) at {wl} px, low-pass off."
     ));
     rep.line("");
-    rep.line("| tone | r | SNR dB | SNR(r) dB | seconds |");
-    rep.line("|---:|---:|---:|---:|---:|");
+    rep.line(&format!(
+        "| tone | r (100 px) | SNR dB | SNR(r) dB | r ({wl} px) | SNR dB | SNR(r) dB | r ({wl} px, 3 kHz LP) | SNR dB | SNR(r) dB | r (slope runs, {wl} px) | SNR dB | SNR(r) dB |"
+    ));
+    rep.line("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for &f in depth_freqs {
         let case = format!("{f} Hz tone (depth path)");
         let dir = work.join(format!("tone_depth_{f}"));
         render_tone(&case, f, &small_lateral(depth_groups), &dir)?;
-        let mut p = sound_params(wl, true);
-        p.path = PathChoice::Depth;
-        let (s, t) = score_scan(&case, &dir, &p)?;
-        rep.line(&format!("| {f} Hz | {} | {t:.1} |", tone_cells(&s)));
-        log(&format!("{case}: r {:.3}, SNR {:.1} dB", s.r, s.snr_db));
+        let depth_params = |window: usize, lowpass: bool, walls: WallMethod| {
+            let mut p = sound_params(window, true);
+            p.path = PathChoice::Depth;
+            p.dsp.lowpass = lowpass;
+            p.walls.method = walls;
+            p
+        };
+        let mut cells = Vec::new();
+        for (window, lowpass, walls) in [
+            (100, false, WallMethod::DepthLevels),
+            (wl, false, WallMethod::DepthLevels),
+            (wl, true, WallMethod::DepthLevels),
+            (wl, false, WallMethod::SlopeRuns),
+        ] {
+            let (s, _) = score_scan(&case, &dir, &depth_params(window, lowpass, walls))?;
+            cells.push(s);
+        }
+        rep.line(&format!(
+            "| {f} Hz | {} |",
+            cells.iter().map(tone_cells).collect::<Vec<_>>().join(" | ")
+        ));
+        log(&format!(
+            "{case}: r {}",
+            cells
+                .iter()
+                .map(|s| format!("{:.3}", s.r))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        ));
     }
     rep.line("");
 

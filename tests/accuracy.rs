@@ -5,10 +5,11 @@ mod common;
 
 use common::{groovescope, stderr};
 use groovescope::accuracy::{
-    render_tone, scene_depth_table, score_scan, small_dual_focus, sound_params,
+    render_tone, scene_depth_table, score_scan, small_dual_focus, small_lateral, sound_params,
     two_sample_window_px,
 };
-use groovescope::pipeline::PipelineParams;
+use groovescope::pipeline::walls::WallMethod;
+use groovescope::pipeline::{PathChoice, PipelineParams};
 use groovescope::synth::{SceneConfig, SceneKind, SynthConfig};
 
 #[test]
@@ -46,6 +47,28 @@ fn dual_focus_tone_reaches_its_snr_bar() {
     eprintln!(
         "1.5 kHz dual-focus tone: r {:.3}, SNR {:.1} dB",
         s.r, s.snr_db
+    );
+    assert!(s.r > 0.9, "r = {:.3}", s.r);
+    assert!(s.snr_db > 6.0, "SNR = {:.1} dB", s.snr_db);
+}
+
+#[test]
+fn depth_path_tone_reaches_its_bar() {
+    // No cover glass: flow → Kalman depth → walls → orientation, with the default params.
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("tone");
+    render_tone("1 kHz", 1000.0, &small_lateral(6), &scan).unwrap();
+    let params = PipelineParams {
+        path: PathChoice::Depth,
+        ..PipelineParams::default()
+    };
+    let (s, _) = score_scan("1 kHz", &scan, &params).unwrap();
+    let mut slope_runs = params.clone();
+    slope_runs.walls.method = WallMethod::SlopeRuns;
+    let (old, _) = score_scan("1 kHz", &scan, &slope_runs).unwrap();
+    eprintln!(
+        "1 kHz depth-path tone: r {:.3}, SNR {:.1} dB (walls by slope runs: r {:.3})",
+        s.r, s.snr_db, old.r
     );
     assert!(s.r > 0.9, "r = {:.3}", s.r);
     assert!(s.snr_db > 6.0, "SNR = {:.1} dB", s.snr_db);

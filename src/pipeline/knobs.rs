@@ -57,8 +57,12 @@ pub const KNOB_DOCS: &[(&str, &str)] = &[
         "flow values with lower confidence are ignored",
     ),
     (
+        "walls.method",
+        "depth_levels: bands between the land and bottom depth levels about each wall's mid-depth crossing; slope_runs: runs of rows steeper than min_slope",
+    ),
+    (
         "walls.min_slope",
-        "|∂Z/∂Y| above this marks a wall pixel (45° walls give 1)",
+        "|∂Z/∂Y| above this marks a wall pixel (45° walls give 1); depth_levels: least mean slope of a wall band",
     ),
     (
         "walls.trim_px",

@@ -7,6 +7,7 @@ use crate::pipeline::derivatives::DerivativeMode;
 use crate::pipeline::dsp::EqCurve;
 use crate::pipeline::knobs::knob_doc;
 use crate::pipeline::optical_flow::{FlowMethod, Solver};
+use crate::pipeline::walls::WallMethod;
 use crate::pipeline::{PathChoice, PipelineParams, Stage};
 
 /// Drag speed of decade-spanning values, as a share of the value per point dragged.
@@ -249,6 +250,16 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; 6])
             1..=63,
         );
         let w = &mut p.walls;
+        choice(
+            ui,
+            "wall finder",
+            "walls.method",
+            &mut w.method,
+            &[
+                (WallMethod::DepthLevels, "depth levels"),
+                (WallMethod::SlopeRuns, "slope runs"),
+            ],
+        );
         num(
             ui,
             "wall min slope",
