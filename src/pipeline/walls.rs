@@ -532,7 +532,9 @@ fn build_line(side: WallSide, bands: &[Option<(f32, f32)>], trim_px: usize) -> O
 /// The map is smoothed by a NaN-aware box of half-side `smooth_px`. With
 /// [`WallMethod::DepthLevels`] (the default) the land and bottom levels are the 5th and 98th
 /// percentiles of the smoothed depths (no walls when they are within 10× the map's noise of
-/// each other), and each column's bands come from [`column_bands_by_level`]. With [`WallMethod::SlopeRuns`] the map is differenced along y over
+/// each other); in each column the longest run of rows deeper than mid-depth is the groove's
+/// inside, each wall is centred on its mid-depth crossing, and its band reaches the land and
+/// bottom levels (measured on the shorter complete side, between 15% and 85% of the depth). With [`WallMethod::SlopeRuns`] the map is differenced along y over
 /// ±`smooth_px` rows and turned into the physical slope ∂Z/∂Y; in each column, rows with
 /// ∂Z/∂Y > `min_slope` (left wall) or < −`min_slope` (right wall) form runs, and the groove is
 /// the longest rising run followed directly by a falling one. A column's band is kept only when it
