@@ -1,6 +1,6 @@
 //! Frame loading: PNG or TIFF, 8 or 16 bit, grey or colour, converted to grey `f32` in `[0, 1]`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use image::{DynamicImage, ImageBuffer, Luma};
 use rayon::prelude::*;
@@ -61,7 +61,8 @@ pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
 }
 
 /// Loads the frames `range` of a group (clamped to the group) in parallel and checks they
-/// share one size.
+/// share one size. The other frames are not decoded, but their headers are read, so an
+/// unreadable frame or one of another size anywhere in the group is still reported.
 ///
 /// # Errors
 /// As [`load_group`].
@@ -90,6 +91,40 @@ pub fn load_group_frames(
                 });
             }
         }
+    }
+    if let Some(first) = frames.first() {
+        let (want_w, want_h) = (first.width, first.height);
+        let others: Vec<&PathBuf> = group
+            .frames
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| !(range.start..range.end).contains(k))
+            .map(|(_, p)| p)
+            .collect();
+        others.par_iter().try_for_each(|path| {
+            let bad = |e: &dyn std::fmt::Display| LoadError::BadFrame {
+                problem: e.to_string(),
+                path: path.to_path_buf(),
+            };
+            let (w, h) = image::ImageReader::open(path)
+                .map_err(|e| bad(&e))?
+                .with_guessed_format()
+                .map_err(|e| bad(&e))?
+                .into_dimensions()
+                .map_err(|e| bad(&e))?;
+            let (w, h) = (w as usize, h as usize);
+            if (w, h) == (want_w, want_h) {
+                Ok(())
+            } else {
+                Err(LoadError::MixedSizes {
+                    found_w: w,
+                    found_h: h,
+                    want_w,
+                    want_h,
+                    path: path.to_path_buf(),
+                })
+            }
+        })?;
     }
     Ok(frames)
 }
@@ -153,6 +188,38 @@ mod tests {
         for (a, b) in img.data.iter().zip(&back.data) {
             assert!((a - b).abs() < 1.0 / 65535.0);
         }
+    }
+
+    #[test]
+    fn frames_outside_a_loaded_window_are_still_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let frame = |k: usize, w: usize| {
+            let p = dir.path().join(format!("f{k:03}.png"));
+            save_grey_png(&Image::filled(w, 6, 0.5), &p, false, false).unwrap();
+            p
+        };
+        let mut frames: Vec<PathBuf> = (0..12).map(|k| frame(k, 8)).collect();
+        let group = |frames: &[PathBuf]| GroupEntry {
+            index: 0,
+            dir: dir.path().to_path_buf(),
+            frames: frames.to_vec(),
+        };
+        let window = load_group_frames(&group(&frames), 3..10).unwrap();
+        assert_eq!(window.len(), 7);
+        // Another size outside the window.
+        let first = std::mem::replace(&mut frames[0], frame(100, 9));
+        let err = load_group_frames(&group(&frames), 3..10).unwrap_err();
+        assert!(
+            matches!(err, LoadError::MixedSizes { found_w: 9, .. }),
+            "{err}"
+        );
+        assert!(err.to_string().contains("f100.png"), "{err}");
+        // A corrupt frame outside the window.
+        frames[0] = first;
+        std::fs::write(&frames[11], b"not a png").unwrap();
+        let err = load_group_frames(&group(&frames), 3..10).unwrap_err();
+        assert!(matches!(err, LoadError::BadFrame { .. }), "{err}");
+        assert!(err.to_string().contains("f011.png"), "{err}");
     }
 
     #[test]
