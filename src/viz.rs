@@ -219,22 +219,7 @@ pub const ROBUST_TAIL: f64 = 0.01;
 /// (sampled), so a few outliers do not flatten a heat map.
 #[must_use]
 pub fn robust_range(values: &[f32]) -> Option<(f32, f32)> {
-    let stride = values.len().div_ceil(RANGE_SAMPLES).max(1);
-    let mut v: Vec<f32> = values
-        .iter()
-        .step_by(stride)
-        .copied()
-        .filter(|x| x.is_finite())
-        .collect();
-    if v.is_empty() {
-        return None;
-    }
-    let last = v.len() - 1;
-    let lo_k = (last as f64 * ROBUST_TAIL).round() as usize;
-    let hi_k = (last as f64 * (1.0 - ROBUST_TAIL)).round() as usize;
-    let (_, &mut lo, _) = v.select_nth_unstable_by(lo_k, f32::total_cmp);
-    let (_, &mut hi, _) = v.select_nth_unstable_by(hi_k, f32::total_cmp);
-    Some((lo, hi))
+    crate::pipeline::sampled_quantiles(values, ROBUST_TAIL, 1.0 - ROBUST_TAIL, RANGE_SAMPLES)
 }
 
 /// The Middlebury colour wheel (55 hues: red, yellow, green, cyan, blue, magenta).

@@ -276,6 +276,24 @@ impl PipelineParams {
 pub use cache::{FlowDetail, GroupInput, StageCache};
 
 /// The median of `v` (the upper one of an even count); None when empty. NaN sorts last.
+/// The `lo` and `hi` quantiles (0–1) of the finite values, from at most about `samples` of them
+/// taken at an even stride; None when none is finite.
+#[must_use]
+pub fn sampled_quantiles(values: &[f32], lo: f64, hi: f64, samples: usize) -> Option<(f32, f32)> {
+    let stride = values.len().div_ceil(samples.max(1)).max(1);
+    let mut v: Vec<f32> = values
+        .iter()
+        .step_by(stride)
+        .copied()
+        .filter(|x| x.is_finite())
+        .collect();
+    let last = v.len().checked_sub(1)?;
+    let k = |q: f64| ((last as f64 * q.clamp(0.0, 1.0)).round() as usize).min(last);
+    let (_, &mut a, _) = v.select_nth_unstable_by(k(lo), f32::total_cmp);
+    let (_, &mut b, _) = v.select_nth_unstable_by(k(hi), f32::total_cmp);
+    Some((a, b))
+}
+
 pub(crate) fn median(mut v: Vec<f64>) -> Option<f64> {
     if v.is_empty() {
         return None;

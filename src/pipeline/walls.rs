@@ -4,7 +4,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::depth::DepthMap;
-use super::{StageError, check_range};
+use super::{StageError, check_range, sampled_quantiles};
 use crate::io::Geometry;
 
 /// Which wall of the groove.
@@ -278,18 +278,7 @@ fn column_bands(runs: &[Run]) -> [Option<(f32, f32)>; 2] {
 /// [`LAND_QUANTILE`] and [`BOTTOM_QUANTILE`] quantiles of its finite values (sampled).
 /// None when they are less than [`MIN_DEPTH_NOISE_RATIO`] × the map's noise apart (no groove).
 fn depth_levels(zs: &[f32], noise_um: f32) -> Option<(f32, f32)> {
-    let stride = zs.len().div_ceil(LEVEL_SAMPLES).max(1);
-    let mut v: Vec<f32> = zs
-        .iter()
-        .step_by(stride)
-        .copied()
-        .filter(|z| z.is_finite())
-        .collect();
-    let last = v.len().checked_sub(1)?;
-    let lo_k = (last as f64 * LAND_QUANTILE).round() as usize;
-    let hi_k = (last as f64 * BOTTOM_QUANTILE).round() as usize;
-    let (_, &mut lo, _) = v.select_nth_unstable_by(lo_k, f32::total_cmp);
-    let (_, &mut hi, _) = v.select_nth_unstable_by(hi_k, f32::total_cmp);
+    let (lo, hi) = sampled_quantiles(zs, LAND_QUANTILE, BOTTOM_QUANTILE, LEVEL_SAMPLES)?;
     (hi - lo > MIN_DEPTH_NOISE_RATIO * noise_um && hi > lo).then_some((lo, hi))
 }
 
