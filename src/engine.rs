@@ -11,7 +11,7 @@ use serde::Serialize;
 use crate::io::wav::{Audio, read_wav};
 use crate::io::{LoadError, Scan, load_group_frames};
 use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample, stitch};
-use crate::pipeline::cache::{middle_window_range, native_spacing_um};
+use crate::pipeline::cache::{frames_read, native_spacing_um};
 use crate::pipeline::dsp::apply_dsp;
 use crate::pipeline::eval::{Scores, evaluate};
 use crate::pipeline::orientation::Orientation;
@@ -266,8 +266,6 @@ pub fn reconstruct(
     );
     let (tx, rx) = mpsc::sync_channel::<Loaded>(1);
     let entries: Vec<_> = scan.groups[range.clone()].to_vec();
-    // The dual-focus path reads only each group's middle derivative window: decode just that.
-    let dual = params.uses_dual_focus(&scan.meta);
     let loader_cancel = AtomicBool::new(false);
     let outcome: Result<(), EngineError> = std::thread::scope(|s| {
         // Own the receiver here so that an early return (or a panic) drops it, which unblocks a
@@ -281,12 +279,7 @@ pub fn reconstruct(
                         break;
                     }
                     let t = Instant::now();
-                    let n = entry.frames.len();
-                    let window = if dual {
-                        middle_window_range(n, params.derivatives.mode)
-                    } else {
-                        0..n
-                    };
+                    let window = frames_read(entry.frames.len(), &scan.meta, params);
                     let first = window.start;
                     let frames = load_group_frames(entry, window);
                     if tx

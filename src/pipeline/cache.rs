@@ -226,11 +226,9 @@ impl StageCache {
             match stage {
                 Stage::Derivatives => {
                     // The dual-focus path reads only the middle window: derive just its frames.
-                    let (first, frames) = if dual {
-                        middle_window_frames(&input.frames, params.derivatives.mode)
-                    } else {
-                        (0, &input.frames[..])
-                    };
+                    let range = frames_read(input.frames.len(), meta, params);
+                    let first = range.start;
+                    let frames = input.frames.get(range).unwrap_or(&input.frames[..]);
                     let mut d =
                         compute_derivatives(frames, geom.land_flow_px(), &params.derivatives)?;
                     for set in &mut d {
@@ -476,12 +474,16 @@ fn shift_walls(walls: &WallSideMap, shift_px: f64) -> WallSideMap {
     }
 }
 
-/// The frames of the middle derivative window of a group (the window the full group's
-/// `derivs[len / 2]` would be) and the index of its first frame. Too few frames: all of them,
-/// so the derivative stage reports the shortage.
-fn middle_window_frames(frames: &[Image], mode: DerivativeMode) -> (usize, &[Image]) {
-    let range = middle_window_range(frames.len(), mode);
-    (range.start, frames.get(range).unwrap_or(frames))
+/// The frames of a group of `n` that its stages read: the middle derivative window on the
+/// dual-focus path (its stripes come from that window alone), all of them on the depth path.
+/// Reconstruction decodes only these.
+#[must_use]
+pub fn frames_read(n: usize, meta: &ScanMeta, params: &PipelineParams) -> std::ops::Range<usize> {
+    if params.uses_dual_focus(meta) {
+        middle_window_range(n, params.derivatives.mode)
+    } else {
+        0..n
+    }
 }
 
 /// The frames of a group of `n` the dual-focus path reads: its middle derivative window (all
@@ -616,6 +618,14 @@ mod tests {
             a.signal.as_ref().unwrap().positions_um,
             c.signal.as_ref().unwrap().positions_um
         );
+    }
+
+    /// The frames of the middle derivative window of a group (the window the full group's
+    /// `derivs[len / 2]` would be) and the index of its first frame. Too few frames: all of them,
+    /// so the derivative stage reports the shortage.
+    fn middle_window_frames(frames: &[Image], mode: DerivativeMode) -> (usize, &[Image]) {
+        let range = middle_window_range(frames.len(), mode);
+        (range.start, frames.get(range).unwrap_or(frames))
     }
 
     #[test]

@@ -251,21 +251,8 @@ pub fn compute_flow_from(
     params: &FlowParams,
 ) -> Result<FlowField, StageError> {
     validate(params)?;
-    let (width, height) = (d.ix.width, d.ix.height);
+    let (width, height) = check_derivatives(d)?;
     let n = width * height;
-    for (name, im) in [("ix", &d.ix), ("iy", &d.iy), ("it", &d.it)] {
-        if im.width != width || im.height != height || im.data.len() != n {
-            return Err(bad_input(format!(
-                "derivative {name} is {}x{} ({} values), ix is {width}x{height}",
-                im.width,
-                im.height,
-                im.data.len()
-            )));
-        }
-    }
-    if n == 0 {
-        return Err(bad_input("empty derivative images".to_string()));
-    }
     if !d.base_flow_px.is_finite() {
         return Err(bad_input(format!(
             "base flow {} is not finite",
@@ -369,13 +356,7 @@ pub fn flow_confidence_only(d: &Derivatives, params: &FlowParams) -> Result<Flow
     if params.method == FlowMethod::LucasKanade {
         return compute_flow(d, 1.0, None, params);
     }
-    let n = d.ix.data.len();
-    if !d.ix.same_size(&d.iy) || d.ix.width * d.ix.height != n || n == 0 {
-        return Err(bad_input(format!(
-            "derivatives ix {}x{} and iy {}x{} do not match or are empty",
-            d.ix.width, d.ix.height, d.iy.width, d.iy.height
-        )));
-    }
+    check_derivatives(d)?;
     Ok(FlowField {
         u: Image::zeros(0, 0),
         v: Image::zeros(0, 0),
@@ -384,6 +365,25 @@ pub fn flow_confidence_only(d: &Derivatives, params: &FlowParams) -> Result<Flow
         converged: false,
         frame_index: d.frame_index,
     })
+}
+
+/// The derivatives' size (width, height) when Ix, Iy and It share it and it is not empty.
+fn check_derivatives(d: &Derivatives) -> Result<(usize, usize), StageError> {
+    let (width, height) = (d.ix.width, d.ix.height);
+    for (name, im) in [("ix", &d.ix), ("iy", &d.iy), ("it", &d.it)] {
+        if im.width != width || im.height != height || im.data.len() != width * height {
+            return Err(bad_input(format!(
+                "derivative {name} is {}x{} ({} values), ix is {width}x{height}",
+                im.width,
+                im.height,
+                im.data.len()
+            )));
+        }
+    }
+    if width * height == 0 {
+        return Err(bad_input("empty derivative images".to_string()));
+    }
+    Ok((width, height))
 }
 
 fn bad_input(problem: String) -> StageError {
