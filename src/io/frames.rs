@@ -61,8 +61,10 @@ pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
 }
 
 /// Loads the frames `range` of a group (clamped to the group) in parallel and checks they
-/// share one size. The other frames are not decoded, but their headers are read, so an
-/// unreadable frame or one of another size anywhere in the group is still reported.
+/// share one size. The other frames are not decoded, but they are read and checked, so an
+/// unreadable frame or one of another size anywhere in the group is still reported: every
+/// frame's header, and for PNG every chunk's checksum, which catches truncated files and
+/// damaged image data (TIFF has no checksums; only its header is checked).
 ///
 /// # Errors
 /// As [`load_group`].
@@ -106,8 +108,11 @@ pub fn load_group_frames(
                 problem: e.to_string(),
                 path: path.to_path_buf(),
             };
-            let (w, h) = image::ImageReader::open(path)
-                .map_err(|e| bad(&e))?
+            let bytes = std::fs::read(path).map_err(|e| bad(&e))?;
+            if bytes.starts_with(&PNG_SIGNATURE) {
+                check_png_chunks(&bytes).map_err(|e| bad(&e))?;
+            }
+            let (w, h) = image::ImageReader::new(std::io::Cursor::new(&bytes))
                 .with_guessed_format()
                 .map_err(|e| bad(&e))?
                 .into_dimensions()
@@ -127,6 +132,48 @@ pub fn load_group_frames(
         })?;
     }
     Ok(frames)
+}
+
+/// The eight bytes every PNG file starts with.
+const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
+
+/// Walks the chunks of a PNG file without decompressing it: each chunk must lie inside the
+/// file and match its CRC-32, there must be image data, and the file must end with `IEND`.
+fn check_png_chunks(bytes: &[u8]) -> Result<(), String> {
+    let mut at = PNG_SIGNATURE.len();
+    let mut has_data = false;
+    loop {
+        let Some(head) = bytes.get(at..at + 8) else {
+            return Err(format!(
+                "PNG file is truncated: it ends at byte {} without an IEND chunk",
+                bytes.len()
+            ));
+        };
+        let len = u32::from_be_bytes([head[0], head[1], head[2], head[3]]) as usize;
+        let kind = String::from_utf8_lossy(&head[4..8]).into_owned();
+        let body = at + 4..at + 8 + len;
+        let Some(crc) = bytes.get(body.end..body.end + 4) else {
+            return Err(format!(
+                "PNG file is truncated inside its {kind} chunk at byte {at} (the file has {} bytes)",
+                bytes.len()
+            ));
+        };
+        let want = u32::from_be_bytes([crc[0], crc[1], crc[2], crc[3]]);
+        if crc32fast::hash(&bytes[body]) != want {
+            return Err(format!(
+                "PNG data is damaged: the {kind} chunk at byte {at} fails its CRC check"
+            ));
+        }
+        has_data |= kind == "IDAT";
+        if kind == "IEND" {
+            return if has_data {
+                Ok(())
+            } else {
+                Err("PNG file has no image data (no IDAT chunk)".into())
+            };
+        }
+        at += 12 + len;
+    }
 }
 
 /// Saves a grey image (values in `[0, 1]`, clamped) as an 8- or 16-bit PNG, atomically.
@@ -220,6 +267,42 @@ mod tests {
         let err = load_group_frames(&group(&frames), 3..10).unwrap_err();
         assert!(matches!(err, LoadError::BadFrame { .. }), "{err}");
         assert!(err.to_string().contains("f011.png"), "{err}");
+    }
+
+    #[test]
+    fn damaged_or_truncated_png_outside_the_window_is_reported() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<PathBuf> = (0..12)
+            .map(|k| {
+                let p = dir.path().join(format!("f{k:03}.png"));
+                let img = Image::from_fn(40, 30, |x, y| ((x * 7 + y * 13 + k) % 17) as f32 / 16.0);
+                save_grey_png(&img, &p, false, false).unwrap();
+                p
+            })
+            .collect();
+        let group = GroupEntry {
+            index: 0,
+            dir: dir.path().to_path_buf(),
+            frames: frames.clone(),
+        };
+        let good = std::fs::read(&frames[1]).unwrap();
+        // One flipped bit inside the image data: the header still reads.
+        let idat = good.windows(4).position(|w| w == b"IDAT").unwrap();
+        let mut flipped = good.clone();
+        flipped[idat + 10] ^= 0x10;
+        std::fs::write(&frames[1], &flipped).unwrap();
+        let err = load_group_frames(&group, 3..10).unwrap_err().to_string();
+        assert!(err.contains("f001.png") && err.contains("CRC"), "{err}");
+        // Cut short after the header.
+        std::fs::write(&frames[1], &good[..good.len() / 2]).unwrap();
+        let err = load_group_frames(&group, 3..10).unwrap_err().to_string();
+        assert!(
+            err.contains("f001.png") && err.contains("truncated"),
+            "{err}"
+        );
+        // Intact again: the group loads.
+        std::fs::write(&frames[1], &good).unwrap();
+        assert_eq!(load_group_frames(&group, 3..10).unwrap().len(), 7);
     }
 
     #[test]
