@@ -930,8 +930,10 @@ impl Problem {
         let max = params.max_iterations as usize;
         let pixels = (lay.width * lay.height) as f64;
         let mut done = 0;
+        let mut next = block_iterations;
+        let mut last: Option<(usize, f64)> = None;
         while done < max {
-            let k = block_iterations.min(max - done);
+            let k = next.min(max - done);
             let levels = k * per_iteration;
             let bands = threads.min(lay.height / (2 * levels + 2)).max(1);
             let delta = match other.as_mut() {
@@ -945,9 +947,18 @@ impl Problem {
                 }
             };
             done += k;
-            if delta / pixels < f64::from(params.tolerance_px) {
+            let per_px = delta / pixels;
+            let tolerance = f64::from(params.tolerance_px);
+            if per_px < tolerance {
                 return (u32::try_from(done).unwrap_or(u32::MAX), true);
             }
+            if block_override.is_none() {
+                next = last
+                    .and_then(|before| iterations_to_tolerance(before, (done, per_px), tolerance))
+                    .unwrap_or(block_iterations)
+                    .clamp(1, block_iterations);
+            }
+            last = Some((done, per_px));
         }
         (u32::try_from(done).unwrap_or(u32::MAX), false)
     }
@@ -1170,6 +1181,22 @@ impl Problem {
             Kernel::Groove { .. } => simd.row::<true, false>(k, odd, lr, up, dn, coef, dst),
         }
     }
+}
+
+/// Iterations still needed for the per-pixel change to fall below `tolerance`, if the
+/// changes `d0` after `k0` iterations and `d1` after `k1` fit a geometric decay; a block ends
+/// there instead of running its full length past the point of convergence.
+fn iterations_to_tolerance(
+    (k0, d0): (usize, f64),
+    (k1, d1): (usize, f64),
+    tolerance: f64,
+) -> Option<usize> {
+    if k1 <= k0 || !(d1 > 0.0 && d0 > d1 && tolerance > 0.0) {
+        return None;
+    }
+    let log_rate = (d1 / d0).ln() / (k1 - k0) as f64;
+    let n = ((tolerance / d1).ln() / log_rate).ceil();
+    (n.is_finite() && n >= 1.0).then(|| n.min(usize::MAX as f64) as usize)
 }
 
 /// Level count and the first measured level of one block.
@@ -2058,6 +2085,50 @@ mod tests {
                 .fold(0.0_f32, f32::max);
             assert!(diff < 1e-5, "{w}x{h}: {diff}");
         }
+    }
+
+    #[test]
+    fn geometric_decay_predicts_the_iterations_left() {
+        // 1e-2 after 16 iterations, 1e-3 after 32: a tenth per 16 iterations, so 1e-5 needs
+        // 32 more.
+        assert_eq!(
+            iterations_to_tolerance((16, 1e-2), (32, 1e-3), 1e-5),
+            Some(32)
+        );
+        assert_eq!(
+            iterations_to_tolerance((16, 1e-2), (32, 1e-3), 0.9e-3),
+            Some(1)
+        );
+        // Growing, flat or missing changes predict nothing.
+        assert_eq!(iterations_to_tolerance((16, 1e-3), (32, 1e-2), 1e-5), None);
+        assert_eq!(iterations_to_tolerance((16, 1e-3), (32, 1e-3), 1e-5), None);
+        assert_eq!(iterations_to_tolerance((16, 1e-3), (32, 0.0), 1e-5), None);
+        assert_eq!(iterations_to_tolerance((16, 1e-2), (32, 1e-3), 0.0), None);
+    }
+
+    #[test]
+    fn adaptive_blocks_stop_close_to_where_every_iteration_is_checked() {
+        let (w, h) = (64, 48);
+        let frames = translating(w, h, 7, 0.4, -0.2, 5);
+        let d = middle(&frames, 0.0, &no_prewarp());
+        let lay = Layout::new(w, h);
+        let p = FlowParams {
+            max_iterations: 1000,
+            tolerance_px: 1e-6,
+            sor_omega: 1.0,
+            ..params(FlowMethod::HornSchunck)
+        };
+        let problem = Problem::plain(&lay, &d, p.lambda);
+        let mut st = SplitState::zeros(&lay);
+        let (exact, ok) = problem.solve_with(&mut st, &p, Simd::detect(), 1, Some(1));
+        assert!(ok && exact > 2 * MAX_BLOCK_ITERATIONS as u32, "{exact}");
+        let mut st = SplitState::zeros(&lay);
+        let (adaptive, ok) = problem.solve(&mut st, &p, Simd::detect());
+        assert!(ok);
+        assert!(
+            adaptive >= exact && adaptive <= exact + 3,
+            "checked every iteration: {exact}, adaptive blocks: {adaptive}"
+        );
     }
 
     #[test]
