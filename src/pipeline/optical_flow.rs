@@ -88,8 +88,9 @@
 //! of rows in cache while they are updated `2K` times (trapezoids per thread, then the small
 //! inverted triangles at the band seams). Red–black Gauss–Seidel and Jacobi (ping-pong
 //! buffers) share this machinery. Convergence (`mean |Δu| + |Δv| < τ`) is measured on the
-//! last iteration of each block, so iteration counts are multiples of the block length
-//! unless the cap ends the run.
+//! last iteration of each block; after two blocks, the next one is cut to the iterations a
+//! geometric fit of the measured changes predicts are still needed, so a solve stops close
+//! to where τ is reached rather than up to a whole block past it.
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
