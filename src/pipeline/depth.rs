@@ -302,6 +302,7 @@ impl Filter {
     }
 
     /// Adds (`sign` = 1) or removes (−1) row `yy` of the weights to the column sums.
+    #[inline(always)]
     fn slide(&self, vs: &mut [ColumnSums], meas: &Measurements, yy: usize, sign: f64) {
         let w = self.width;
         let (Some(wr), Some(mr)) = (
@@ -330,6 +331,7 @@ impl Filter {
     /// predicts and updates [`LANES`] pixels at a time in f32 lanes; it overwrites cells in
     /// place, which is safe because content moves toward −x: a pixel's source cells lie at or
     /// right of it and are read before its block is written.
+    #[inline(always)]
     fn sweep_row(
         &self,
         y: usize,
@@ -484,8 +486,43 @@ impl Filter {
     }
 
     /// One frame over a band of rows starting at `y0`: slides the vertical window sums down the
-    /// band and sweeps each row. Returns the number of diverged predictions.
+    /// band and sweeps each row. Returns the number of diverged predictions. Runs the AVX2
+    /// build of the same code where the CPU has it (no FMA, so the results are identical).
     fn frame_band(
+        &self,
+        y0: usize,
+        band: &mut [Cell],
+        meas: &Measurements,
+        steps: Option<f64>,
+        sc: &mut SweepScratch,
+    ) -> usize {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU reported AVX2, all that `frame_band_avx2` requires.
+                return unsafe { self.frame_band_avx2(y0, band, meas, steps, sc) };
+            }
+        }
+        self.frame_band_impl(y0, band, meas, steps, sc)
+    }
+
+    /// [`Filter::frame_band_impl`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn frame_band_avx2(
+        &self,
+        y0: usize,
+        band: &mut [Cell],
+        meas: &Measurements,
+        steps: Option<f64>,
+        sc: &mut SweepScratch,
+    ) -> usize {
+        self.frame_band_impl(y0, band, meas, steps, sc)
+    }
+
+    /// See [`Filter::frame_band`].
+    #[inline(always)]
+    fn frame_band_impl(
         &self,
         y0: usize,
         band: &mut [Cell],
@@ -540,6 +577,7 @@ struct SweepScratch {
 }
 
 /// A lane-wise map: `f` applied to every lane index (written so the compiler emits SIMD).
+#[inline(always)]
 fn lanes(f: impl Fn(usize) -> f32) -> Lane {
     std::array::from_fn(f)
 }
@@ -548,6 +586,7 @@ fn lanes(f: impl Fn(usize) -> f32) -> Lane {
 /// α′ = s·α, β′ = s·β, ι′ = ι with s = 1/(1 − k·α), P′ = F·P·Fᵀ + Q. Lanes marked `fresh` hold
 /// the prior and are left alone; diverged lanes (1 − k·α < `MIN_PLANE_SCALE`) are reset to the
 /// prior. Returns the number of diverged lanes.
+#[inline(always)]
 fn predict_lanes(
     st: &mut [Lane; PLANES],
     fresh: &[bool; LANES],
@@ -588,6 +627,7 @@ fn predict_lanes(
 
 /// Inverse of packed symmetric 3×3 matrices, lane-wise, scaled by the trace so that f32 copes
 /// with any magnitude; zero (and a false flag) where the matrix is not invertible.
+#[inline(always)]
 fn inv_sym3_lanes(m: &[Lane; 6]) -> ([Lane; 6], [bool; LANES]) {
     let sc = lanes(|l| 1.0 / (m[0][l] + m[3][l] + m[5][l]));
     let a = lanes(|l| m[0][l] * sc[l]);
@@ -614,6 +654,7 @@ fn inv_sym3_lanes(m: &[Lane; 6]) -> ([Lane; 6], [bool; LANES]) {
 }
 
 /// Packed symmetric 3×3 times a vector, lane-wise.
+#[inline(always)]
 fn mul_sym3_lanes(m: &[Lane; 6], v: &[Lane; 3]) -> [Lane; 3] {
     let [x, y, z] = v;
     [
@@ -626,6 +667,7 @@ fn mul_sym3_lanes(m: &[Lane; 6], v: &[Lane; 3]) -> [Lane; 3] {
 /// The information-form measurement update on a block: Λ⁺ = P⁻¹ + J,
 /// µ⁺ = (Λ⁺)⁻¹·(P⁻¹·µ + b). Lanes without a measurement (J_ιι = 0) or with a singular
 /// posterior keep their prior; a non-finite prior carries no information.
+#[inline(always)]
 fn update_lanes(st: &mut [Lane; PLANES], info: &[Lane; 9]) {
     let [a0, a1, a2, p0, p1, p2, p3, p4, p5] = *st;
     let fin = lanes(|l| {
