@@ -125,6 +125,12 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
             summary.codec
         );
     }
+    for path in &summary.removed_stale {
+        eprintln!(
+            "removed an unfinished import left by an earlier, killed run: {}",
+            path.display()
+        );
+    }
     Ok(())
 }
 

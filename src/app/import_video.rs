@@ -387,8 +387,12 @@ impl Workbench {
             self.video_import.run = None;
             match outcome {
                 Ok(s) => {
+                    let stale = match s.removed_stale.len() {
+                        0 => String::new(),
+                        n => format!(" (removed {n} unfinished import(s) left by killed runs)"),
+                    };
                     self.info(format!(
-                        "imported {} groups of {} frames into {}",
+                        "imported {} groups of {} frames into {}{stale}",
                         s.groups,
                         s.frames_per_group,
                         s.out_dir.display()

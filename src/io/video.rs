@@ -8,6 +8,9 @@
 //!
 //! The scan is written into a hidden temporary sibling folder and renamed into place at the end,
 //! so a failed or cancelled import leaves nothing behind; the target must not exist or be empty.
+//! An import killed outright (power cut, `kill -9`) cannot clean up: the next import to the same
+//! target removes such a folder once the process that made it is gone (where the OS lets us see
+//! that, i.e. Linux's `/proc`), and says so in its summary.
 //! `scan.toml` is built from [`ClipMeta`] with [`super::ScanMeta`], checked by [`super::ScanMeta::validate`]
 //! (the check [`super::Scan::open`] applies); an extra `[video_import]` table records the source
 //! clip and the grouping (the format keeps such tables and ignores them).
@@ -144,6 +147,8 @@ pub struct ImportSummary {
     pub bit_depth: u8,
     /// The clip's codec name.
     pub codec: String,
+    /// Unfinished imports to the same target, left by killed runs, that were removed.
+    pub removed_stale: Vec<PathBuf>,
 }
 
 /// Removes the temporary folder unless the import finished.
@@ -167,8 +172,8 @@ fn io_err(problem: String, path: &Path) -> VideoError {
     })
 }
 
-/// Creates the hidden sibling folder the scan is written into.
-fn make_temp_dir(out_dir: &Path) -> Result<TempDir, VideoError> {
+/// The folder holding `out_dir` and the name the temporary folders are derived from.
+fn temp_parent_and_name(out_dir: &Path) -> (PathBuf, String) {
     let name = out_dir
         .file_name()
         .map_or_else(|| "scan".into(), |n| n.to_string_lossy().into_owned());
@@ -176,12 +181,52 @@ fn make_temp_dir(out_dir: &Path) -> Result<TempDir, VideoError> {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
+    (parent, name)
+}
+
+/// Creates the hidden sibling folder the scan is written into.
+fn make_temp_dir(out_dir: &Path) -> Result<TempDir, VideoError> {
+    let (parent, name) = temp_parent_and_name(out_dir);
     std::fs::create_dir_all(&parent)
         .map_err(|e| io_err(format!("cannot create output folder: {e}"), &parent))?;
     let path = parent.join(format!(".{name}.import-{}.tmp", std::process::id()));
     std::fs::create_dir(&path)
         .map_err(|e| io_err(format!("cannot create temporary folder: {e}"), &path))?;
     Ok(TempDir { path, keep: false })
+}
+
+/// Removes the temporary folders of earlier imports to `out_dir` whose process no longer runs
+/// (`.NAME.import-PID.tmp` beside it, PID not in `/proc`); returns them. Without `/proc`
+/// nothing is removed: a live import's folder must never go.
+fn remove_stale_imports(out_dir: &Path) -> Vec<PathBuf> {
+    let proc_fs = Path::new("/proc/self");
+    if !proc_fs.exists() {
+        return Vec::new();
+    }
+    let (parent, name) = temp_parent_and_name(out_dir);
+    let prefix = format!(".{name}.import-");
+    let Ok(entries) = std::fs::read_dir(&parent) else {
+        return Vec::new();
+    };
+    let mut removed = Vec::new();
+    for entry in entries.flatten() {
+        let file_name = entry.file_name();
+        let Some(pid) = file_name
+            .to_str()
+            .and_then(|n| n.strip_prefix(&prefix))
+            .and_then(|n| n.strip_suffix(".tmp"))
+            .and_then(|n| n.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let path = entry.path();
+        let alive = pid == std::process::id() || Path::new("/proc").join(pid.to_string()).exists();
+        if !alive && path.is_dir() && std::fs::remove_dir_all(&path).is_ok() {
+            removed.push(path);
+        }
+    }
+    removed.sort();
+    removed
 }
 
 /// Fails unless `out_dir` is missing or an empty folder.
@@ -271,6 +316,7 @@ pub fn import_video(
         .unwrap_or(0)
         .max(layout.full_groups(total.saturating_sub(layout.first_frame)));
 
+    let removed_stale = remove_stale_imports(out_dir);
     let tmp = make_temp_dir(out_dir)?;
     let mut splitter = Splitter {
         layout,
@@ -405,6 +451,7 @@ pub fn import_video(
         height,
         bit_depth,
         codec,
+        removed_stale,
     })
 }
 

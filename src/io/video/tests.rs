@@ -97,6 +97,51 @@ fn eight_bit_clip_imports_into_exact_overlapping_groups() {
 }
 
 #[test]
+fn unfinished_imports_of_killed_runs_are_removed_and_live_ones_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, _) = clip(dir.path(), "clip.avi", 10, false);
+    let out = dir.path().join("scan");
+    // A process id above the kernel's maximum is never running; pid 1 always is.
+    let pid_max: u32 = std::fs::read_to_string("/proc/sys/kernel/pid_max")
+        .ok()
+        .and_then(|t| t.trim().parse().ok())
+        .unwrap_or(4_194_304);
+    let dead = dir.path().join(format!(".scan.import-{}.tmp", pid_max + 1));
+    let live = dir.path().join(".scan.import-1.tmp");
+    let other = dir
+        .path()
+        .join(format!(".other.import-{}.tmp", pid_max + 1));
+    for d in [&dead, &live, &other] {
+        std::fs::create_dir(d).unwrap();
+        std::fs::write(d.join("f000.png"), b"partial").unwrap();
+    }
+    let s = import_video(
+        &path,
+        &out,
+        &layout(7, None),
+        &ClipMeta::default(),
+        &no_progress,
+        &AtomicBool::new(false),
+    )
+    .unwrap();
+    if Path::new("/proc/self").exists() {
+        assert_eq!(s.removed_stale, vec![dead.clone()]);
+        assert!(!dead.exists());
+    } else {
+        assert!(s.removed_stale.is_empty() && dead.exists());
+    }
+    assert!(
+        live.join("f000.png").exists(),
+        "a running import's folder stays"
+    );
+    assert!(
+        other.join("f000.png").exists(),
+        "another target's folder stays"
+    );
+    assert_eq!(s.groups, 1);
+}
+
+#[test]
 fn sixteen_bit_clip_keeps_sixteen_bits_and_groups_skip_frames() {
     let dir = tempfile::tempdir().unwrap();
     let (path, imgs) = clip(dir.path(), "deep.mkv", 20, true);
