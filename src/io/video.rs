@@ -10,7 +10,8 @@
 //! so a failed or cancelled import leaves nothing behind; the target must not exist or be empty.
 //! An import killed outright (power cut, `kill -9`) cannot clean up: the next import to the same
 //! target removes such a folder once the process that made it is gone (where the OS lets us see
-//! that, i.e. Linux's `/proc`), and says so in its summary.
+//! that, i.e. Linux's `/proc`) and nothing has written to it for an hour, and says so in its
+//! summary.
 //! `scan.toml` is built from [`ClipMeta`] with [`super::ScanMeta`], checked by [`super::ScanMeta::validate`]
 //! (the check [`super::Scan::open`] applies); an extra `[video_import]` table records the source
 //! clip and the grouping (the format keeps such tables and ignores them).
@@ -195,9 +196,29 @@ fn make_temp_dir(out_dir: &Path) -> Result<TempDir, VideoError> {
     Ok(TempDir { path, keep: false })
 }
 
+/// A temporary folder touched this recently is kept even when its process id is not running
+/// here: it may belong to an import on another machine writing to the same shared folder.
+const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(3600);
+
+/// Whether `dir` or any entry directly in it was modified within [`STALE_AFTER`] (or its
+/// times cannot be read).
+fn recently_touched(dir: &Path) -> bool {
+    let recent = |m: std::io::Result<std::fs::Metadata>| {
+        m.and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| t.elapsed().ok())
+            .is_none_or(|age| age < STALE_AFTER)
+    };
+    recent(std::fs::metadata(dir))
+        || std::fs::read_dir(dir).map_or(true, |entries| {
+            entries.flatten().any(|e| recent(e.metadata()))
+        })
+}
+
 /// Removes the temporary folders of earlier imports to `out_dir` whose process no longer runs
-/// (`.NAME.import-PID.tmp` beside it, PID not in `/proc`); returns them. Without `/proc`
-/// nothing is removed: a live import's folder must never go.
+/// (`.NAME.import-PID.tmp` beside it, PID not in `/proc`) and that nothing has touched for
+/// [`STALE_AFTER`]; returns them. Without `/proc` nothing is removed: a live import's folder
+/// must never go.
 fn remove_stale_imports(out_dir: &Path) -> Vec<PathBuf> {
     let proc_fs = Path::new("/proc/self");
     if !proc_fs.exists() {
@@ -221,7 +242,11 @@ fn remove_stale_imports(out_dir: &Path) -> Vec<PathBuf> {
         };
         let path = entry.path();
         let alive = pid == std::process::id() || Path::new("/proc").join(pid.to_string()).exists();
-        if !alive && path.is_dir() && std::fs::remove_dir_all(&path).is_ok() {
+        if !alive
+            && path.is_dir()
+            && !recently_touched(&path)
+            && std::fs::remove_dir_all(&path).is_ok()
+        {
             removed.push(path);
         }
     }

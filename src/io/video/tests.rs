@@ -111,9 +111,20 @@ fn unfinished_imports_of_killed_runs_are_removed_and_live_ones_kept() {
     let other = dir
         .path()
         .join(format!(".other.import-{}.tmp", pid_max + 1));
-    for d in [&dead, &live, &other] {
+    let recent = dir.path().join(format!(".scan.import-{}.tmp", pid_max + 2));
+    let two_hours_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(7200);
+    for d in [&dead, &live, &other, &recent] {
         std::fs::create_dir(d).unwrap();
-        std::fs::write(d.join("f000.png"), b"partial").unwrap();
+        let f = d.join("f000.png");
+        std::fs::write(&f, b"partial").unwrap();
+        if d != &recent {
+            for p in [&f, d] {
+                std::fs::File::open(p)
+                    .unwrap()
+                    .set_modified(two_hours_ago)
+                    .unwrap();
+            }
+        }
     }
     let s = import_video(
         &path,
@@ -137,6 +148,10 @@ fn unfinished_imports_of_killed_runs_are_removed_and_live_ones_kept() {
     assert!(
         other.join("f000.png").exists(),
         "another target's folder stays"
+    );
+    assert!(
+        recent.join("f000.png").exists(),
+        "a folder written to within the hour stays (another machine's import?)"
     );
     assert_eq!(s.groups, 1);
 }
