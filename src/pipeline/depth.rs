@@ -1254,6 +1254,46 @@ mod tests {
         assert!(max_first > 5e-4, "{max_first}");
     }
 
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_bands_give_the_same_bits() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let g = paper_geometry();
+        let (w, h) = (53, 40);
+        let flows = plane_flows(w, h, 3, &g, [4000.0, 0.3, -0.5], 0.05, 4);
+        let land = g.focal_px * g.frame_step_um / g.working_distance_um;
+        let filter = Filter {
+            width: w,
+            height: h,
+            r: 2,
+            land_shift_px: land,
+            noise_var: 1e-4 / (land * land),
+            q: [1e-6 / 4.0, 1e-6 / 4.0, 1e-6],
+            p0: [
+                INITIAL_VARIANCE / 4.0,
+                INITIAL_VARIANCE / 4.0,
+                INITIAL_VARIANCE,
+            ],
+        };
+        let mut plain = vec![filter.prior(); w * h];
+        let mut simd = plain.clone();
+        let mut meas = Measurements::default();
+        for (k, flow) in flows.iter().enumerate() {
+            meas.fill(flow, -land, 1e-3);
+            let steps = (k > 0).then_some(1.0);
+            let mut sc = SweepScratch::default();
+            let a = filter.frame_band_impl(0, &mut plain, &meas, steps, &mut sc);
+            // SAFETY: AVX2 was detected above.
+            let b = unsafe { filter.frame_band_avx2(0, &mut simd, &meas, steps, &mut sc) };
+            assert_eq!(a, b);
+        }
+        let bits = |s: &[Cell]| -> Vec<u32> { s.iter().flatten().map(|v| v.to_bits()).collect() };
+        assert!(plain.iter().flatten().any(|&v| v != 1.0 && v.is_finite()));
+        assert_eq!(bits(&plain), bits(&simd));
+    }
+
     #[test]
     fn kalman_over_six_noisy_frames_beats_one_frame() {
         let g = paper_geometry();
