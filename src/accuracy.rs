@@ -384,9 +384,9 @@ fn tone_cells(s: &Scores) -> String {
 
 fn score_cells(s: &Scores) -> String {
     format!(
-        "{:.3} | {:.3} | {:.1} | {:.1}",
+        "{:.3} | {} | {:.1} | {:.1}",
         s.r,
-        s.envelope_r,
+        s.envelope_r_text(3),
         s.snr_db,
         snr_from_r_db(s.r)
     )
@@ -601,8 +601,10 @@ pub fn run_suite(
                             score_cells(&s)
                         ));
                         log(&format!(
-                            "{case}, {fit}, {window} px: r {:.3}, env r {:.3}, SNR {:.1} dB",
-                            s.r, s.envelope_r, s.snr_db
+                            "{case}, {fit}, {window} px: r {:.3}, env r {}, SNR {:.1} dB",
+                            s.r,
+                            s.envelope_r_text(3),
+                            s.snr_db
                         ));
                     }
                 }

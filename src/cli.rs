@@ -494,8 +494,10 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         );
         if let Some(s) = rec.scores {
             println!(
-                "vs reference: r = {:.3}, envelope r = {:.3}, SNR = {:.1} dB",
-                s.r, s.envelope_r, s.snr_db
+                "vs reference: r = {:.3}, envelope r = {}, SNR = {:.1} dB",
+                s.r,
+                s.envelope_r_text(3),
+                s.snr_db
             );
         }
     }
@@ -530,7 +532,7 @@ fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64) -> 
         println!("{}", serde_json::to_string_pretty(&scores)?);
     } else {
         println!("r            {:.4}", scores.r);
-        println!("envelope r   {:.4}", scores.envelope_r);
+        println!("envelope r   {}", scores.envelope_r_text(4));
         println!("SNR          {:.2} dB", scores.snr_db);
         println!("lag          {} samples", scores.lag_samples);
         println!("samples      {}", scores.samples);

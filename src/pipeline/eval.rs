@@ -15,6 +15,9 @@ const MIN_OVERLAP_SAMPLES: usize = 16;
 const ENVELOPE_WINDOW_S: f64 = 0.005;
 /// Blocks on each side averaged when smoothing the block peaks (1 → a 3-block moving mean).
 const ENVELOPE_SMOOTH_BLOCKS: usize = 1;
+/// Fewest envelope blocks for an envelope r (10 blocks = 50 ms): over a handful of smoothed
+/// block peaks the correlation means nothing, so shorter clips get none.
+const MIN_ENVELOPE_BLOCKS: usize = 10;
 /// SNR reported when the residual is exactly zero (keeps the score finite for JSON).
 const MAX_SNR_DB: f64 = 300.0;
 
@@ -24,8 +27,9 @@ pub struct Scores {
     /// Pearson r of the waveforms at the best lag (negative when the recovered signal is
     /// inverted; the lag maximises the signed r, so a polarity error shows).
     pub r: f64,
-    /// Pearson r of the peak envelopes at the best lag (see [`peak_envelope`]).
-    pub envelope_r: f64,
+    /// Pearson r of the peak envelopes at the best lag (see [`peak_envelope`]); `None` when
+    /// the overlap is shorter than [`MIN_ENVELOPE_BLOCKS`] envelope blocks (50 ms).
+    pub envelope_r: Option<f64>,
     /// SNR (dB) of the recovered signal after best gain and lag:
     /// 10·log10(Σref² / Σ(ref − g·rec)²) with the least-squares g. For rec = ref + noise this
     /// reads 10·log10(1 + S/N), within 0.05 dB of the true S/N above 20 dB.
@@ -34,6 +38,16 @@ pub struct Scores {
     pub lag_samples: i64,
     /// Samples compared (the overlap at the best lag).
     pub samples: usize,
+}
+
+impl Scores {
+    /// The envelope r with `decimals` decimals, or "n/a (< 50 ms)" when the clip was too short
+    /// to measure it.
+    #[must_use]
+    pub fn envelope_r_text(&self, decimals: usize) -> String {
+        self.envelope_r
+            .map_or_else(|| "n/a (< 50 ms)".to_owned(), |e| format!("{e:.decimals$}"))
+    }
 }
 
 /// Pearson correlation of `a` and `b` over their common length (the shorter one's). 0 when it
@@ -222,10 +236,11 @@ pub fn evaluate(
     let window = (f64::from(sample_rate_hz) * ENVELOPE_WINDOW_S)
         .round()
         .max(1.0) as usize;
-    let envelope_r = pearson(
-        &peak_envelope(rec_part, window),
-        &peak_envelope(ref_part, window),
+    let (env_rec, env_ref) = (
+        peak_envelope(rec_part, window),
+        peak_envelope(ref_part, window),
     );
+    let envelope_r = (env_rec.len() >= MIN_ENVELOPE_BLOCKS).then(|| pearson(&env_rec, &env_ref));
     Some(Scores {
         r,
         envelope_r,
@@ -283,7 +298,7 @@ mod tests {
         let x = music(22_050);
         let s = evaluate(&x, &x, 100, FS).unwrap();
         assert!((s.r - 1.0).abs() < 1e-9, "{s:?}");
-        assert!((s.envelope_r - 1.0).abs() < 1e-9, "{s:?}");
+        assert!((s.envelope_r.unwrap() - 1.0).abs() < 1e-9, "{s:?}");
         assert!(s.snr_db > 100.0, "{s:?}");
         assert_eq!(s.lag_samples, 0);
         assert_eq!(s.samples, x.len());
@@ -346,7 +361,7 @@ mod tests {
         let scaled: Vec<f32> = x.iter().map(|v| 0.3 * v).collect();
         let s = evaluate(&scaled, &x, 30, FS).unwrap();
         assert!(s.snr_db > 100.0, "{s:?}");
-        assert!(s.envelope_r > 0.999, "{s:?}");
+        assert!(s.envelope_r.unwrap() > 0.999, "{s:?}");
     }
 
     #[test]
@@ -356,6 +371,23 @@ mod tests {
         let s = evaluate(&a, &b, 40, FS).unwrap();
         assert!(s.r.abs() < 0.05, "{s:?}");
         assert!(s.snr_db < 0.1, "{s:?}");
+    }
+
+    #[test]
+    fn clips_under_fifty_ms_get_no_envelope_r() {
+        let tone = |ms: usize| -> Vec<f32> {
+            (0..44_100 * ms / 1000)
+                .map(|i| (i as f32 * 0.07).sin() * (1.0 + (i as f32 * 0.002).sin()))
+                .collect()
+        };
+        let short = tone(30);
+        let s = evaluate(&short, &short, 0, 44_100).unwrap();
+        assert!(s.r > 0.999 && s.envelope_r.is_none(), "{s:?}");
+        assert_eq!(s.envelope_r_text(3), "n/a (< 50 ms)");
+        let long = tone(60);
+        let s = evaluate(&long, &long, 0, 44_100).unwrap();
+        assert!(s.envelope_r.is_some_and(|e| e > 0.999), "{s:?}");
+        assert_eq!(s.envelope_r_text(2), "1.00");
     }
 
     #[test]
@@ -377,7 +409,7 @@ mod tests {
             .collect();
         let s = evaluate(&a, &b, 10, FS).unwrap();
         assert!(s.r.abs() < 0.1, "{s:?}");
-        assert!(s.envelope_r > 0.98, "{s:?}");
+        assert!(s.envelope_r.unwrap() > 0.98, "{s:?}");
     }
 
     #[test]

@@ -340,8 +340,11 @@ pub fn waveform_ui(
             match &c.recon.scores {
                 Some(s) => {
                     ui.label(format!(
-                        "vs reference: r {:.3}  ·  envelope r {:.3}  ·  SNR {:.1} dB  ·  lag {} samples",
-                        s.r, s.envelope_r, s.snr_db, s.lag_samples
+                        "vs reference: r {:.3}  ·  envelope r {}  ·  SNR {:.1} dB  ·  lag {} samples",
+                        s.r,
+                        s.envelope_r_text(3),
+                        s.snr_db,
+                        s.lag_samples
                     ));
                 }
                 None => {
