@@ -28,7 +28,7 @@ pub struct Scores {
     /// inverted; the lag maximises the signed r, so a polarity error shows).
     pub r: f64,
     /// Pearson r of the peak envelopes at the best lag (see [`peak_envelope`]); `None` when
-    /// the overlap is shorter than [`MIN_ENVELOPE_BLOCKS`] envelope blocks (50 ms).
+    /// the overlap is shorter than 10 envelope blocks (50 ms).
     pub envelope_r: Option<f64>,
     /// SNR (dB) of the recovered signal after best gain and lag:
     /// 10·log10(Σref² / Σ(ref − g·rec)²) with the least-squares g. For rec = ref + noise this
