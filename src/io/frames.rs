@@ -64,7 +64,8 @@ pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
 /// share one size. The other frames are not decoded, but they are read and checked, so an
 /// unreadable frame or one of another size anywhere in the group is still reported: every
 /// frame's header, and for PNG every chunk's checksum, which catches truncated files and
-/// damaged image data (TIFF has no checksums; only its header is checked).
+/// damaged image data; TIFF has no checksums, so there the image data must only lie inside
+/// the file, which catches truncation.
 ///
 /// # Errors
 /// As [`load_group`].
@@ -111,6 +112,8 @@ pub fn load_group_frames(
             let bytes = std::fs::read(path).map_err(|e| bad(&e))?;
             if bytes.starts_with(&PNG_SIGNATURE) {
                 check_png_chunks(&bytes).map_err(|e| bad(&e))?;
+            } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
+                check_tiff_extent(&bytes).map_err(|e| bad(&e))?;
             }
             let (w, h) = image::ImageReader::new(std::io::Cursor::new(&bytes))
                 .with_guessed_format()
@@ -174,6 +177,44 @@ fn check_png_chunks(bytes: &[u8]) -> Result<(), String> {
         }
         at += 12 + len;
     }
+}
+
+/// Reads a TIFF file's first image directory without decoding it: the image data its strips
+/// or tiles point to must lie inside the file (TIFF has no checksums, so this catches
+/// truncation, not damaged bytes).
+fn check_tiff_extent(bytes: &[u8]) -> Result<(), String> {
+    use tiff::tags::Tag;
+    let mut dec =
+        tiff::decoder::Decoder::new(std::io::Cursor::new(bytes)).map_err(|e| e.to_string())?;
+    for (offsets, counts) in [
+        (Tag::StripOffsets, Tag::StripByteCounts),
+        (Tag::TileOffsets, Tag::TileByteCounts),
+    ] {
+        let offsets = dec
+            .find_tag_unsigned_vec::<u64>(offsets)
+            .map_err(|e| e.to_string())?;
+        let counts = dec
+            .find_tag_unsigned_vec::<u64>(counts)
+            .map_err(|e| e.to_string())?;
+        let (Some(offsets), Some(counts)) = (offsets, counts) else {
+            continue;
+        };
+        let end = offsets
+            .iter()
+            .zip(&counts)
+            .map(|(o, c)| o.saturating_add(*c))
+            .max()
+            .unwrap_or(0);
+        let len = bytes.len() as u64;
+        return if end > len {
+            Err(format!(
+                "TIFF file is truncated: its image data runs to byte {end}, the file has {len} bytes"
+            ))
+        } else {
+            Ok(())
+        };
+    }
+    Err("TIFF file has no image data (no strip or tile offsets)".into())
 }
 
 /// Saves a grey image (values in `[0, 1]`, clamped) as an 8- or 16-bit PNG, atomically.
@@ -267,6 +308,51 @@ mod tests {
         let err = load_group_frames(&group(&frames), 3..10).unwrap_err();
         assert!(matches!(err, LoadError::BadFrame { .. }), "{err}");
         assert!(err.to_string().contains("f011.png"), "{err}");
+    }
+
+    #[test]
+    fn truncated_tiff_outside_the_window_is_reported() {
+        let dir = tempfile::tempdir().unwrap();
+        let frames: Vec<PathBuf> = (0..8)
+            .map(|k| {
+                let p = dir.path().join(format!("f{k:03}.tif"));
+                let img = image::GrayImage::from_fn(40, 30, |x, y| {
+                    image::Luma([((x * 7 + y * 13) as usize % 251 + k) as u8])
+                });
+                img.save(&p).unwrap();
+                p
+            })
+            .collect();
+        let group = GroupEntry {
+            index: 0,
+            dir: dir.path().to_path_buf(),
+            frames: frames.clone(),
+        };
+        assert_eq!(load_group_frames(&group, 1..8).unwrap().len(), 7);
+        let good = std::fs::read(&frames[0]).unwrap();
+        // Cut short: here the directory sits after the image data, so it goes too.
+        std::fs::write(&frames[0], &good[..good.len() / 2]).unwrap();
+        let err = load_group_frames(&group, 1..8).unwrap_err().to_string();
+        assert!(err.contains("f000.tif"), "{err}");
+        // A directory whose strip points past the end of the file (little-endian "II"): the
+        // header still reads, the extent check catches it.
+        let le16 = |b: &[u8], at: usize| usize::from(u16::from_le_bytes([b[at], b[at + 1]]));
+        let ifd = u32::from_le_bytes([good[4], good[5], good[6], good[7]]) as usize;
+        let entry = (0..le16(&good, ifd))
+            .map(|k| ifd + 2 + 12 * k)
+            .find(|&e| le16(&good, e) == 273)
+            .unwrap();
+        let mut moved = good.clone();
+        let past_end = u32::try_from(good.len()).unwrap().to_le_bytes();
+        moved[entry + 8..entry + 12].copy_from_slice(&past_end);
+        std::fs::write(&frames[0], &moved).unwrap();
+        let err = load_group_frames(&group, 1..8).unwrap_err().to_string();
+        assert!(
+            err.contains("f000.tif") && err.contains("truncated"),
+            "{err}"
+        );
+        std::fs::write(&frames[0], &good).unwrap();
+        assert_eq!(load_group_frames(&group, 1..8).unwrap().len(), 7);
     }
 
     #[test]
