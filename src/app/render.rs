@@ -73,8 +73,6 @@ pub fn finite_range(values: &[f32]) -> Option<(f32, f32)> {
     (lo <= hi).then_some((lo, hi))
 }
 
-pub use crate::viz::{ROBUST_TAIL, robust_range};
-
 /// A grey frame (contrast stretched to its range) as a texture.
 #[must_use]
 pub fn grey(img: &Image) -> ColorImage {

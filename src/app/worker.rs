@@ -176,7 +176,7 @@ pub fn render_stage(
         }
         Stage::Depth => {
             if let Some(d) = &cache.depth {
-                let range = render::robust_range(&d.map.z_um.data);
+                let range = crate::viz::robust_range(&d.map.z_um.data);
                 out.push((ViewImage::Depth, Arc::new(render::heat(&d.map.z_um, range))));
             }
         }

@@ -1,6 +1,6 @@
 //! Frame loading: PNG or TIFF, 8 or 16 bit, grey or colour, converted to grey `f32` in `[0, 1]`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use image::{DynamicImage, ImageBuffer, Luma};
 use rayon::prelude::*;
@@ -82,59 +82,55 @@ pub fn load_group_frames(
         .par_iter()
         .map(|p| load_frame(p))
         .collect::<Result<_, _>>()?;
-    if let Some(first) = frames.first() {
-        for (img, path) in frames.iter().zip(paths) {
-            if !img.same_size(first) {
-                return Err(LoadError::MixedSizes {
-                    found_w: img.width,
-                    found_h: img.height,
-                    want_w: first.width,
-                    want_h: first.height,
-                    path: path.clone(),
-                });
-            }
-        }
-    }
-    if let Some(first) = frames.first() {
-        let (want_w, want_h) = (first.width, first.height);
-        let others: Vec<&PathBuf> = group
-            .frames
-            .iter()
-            .enumerate()
-            .filter(|(k, _)| !(range.start..range.end).contains(k))
-            .map(|(_, p)| p)
-            .collect();
-        others.par_iter().try_for_each(|path| {
-            let bad = |e: &dyn std::fmt::Display| LoadError::BadFrame {
-                problem: e.to_string(),
+    let Some(first) = frames.first() else {
+        return Ok(frames);
+    };
+    let want = (first.width, first.height);
+    let same_size = |found: (usize, usize), path: &Path| {
+        if found == want {
+            Ok(())
+        } else {
+            Err(LoadError::MixedSizes {
+                found_w: found.0,
+                found_h: found.1,
+                want_w: want.0,
+                want_h: want.1,
                 path: path.to_path_buf(),
-            };
-            let bytes = std::fs::read(path).map_err(|e| bad(&e))?;
-            if bytes.starts_with(&PNG_SIGNATURE) {
-                check_png_chunks(&bytes).map_err(|e| bad(&e))?;
-            } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
-                check_tiff_extent(&bytes).map_err(|e| bad(&e))?;
-            }
-            let (w, h) = image::ImageReader::new(std::io::Cursor::new(&bytes))
-                .with_guessed_format()
-                .map_err(|e| bad(&e))?
-                .into_dimensions()
-                .map_err(|e| bad(&e))?;
-            let (w, h) = (w as usize, h as usize);
-            if (w, h) == (want_w, want_h) {
-                Ok(())
-            } else {
-                Err(LoadError::MixedSizes {
-                    found_w: w,
-                    found_h: h,
-                    want_w,
-                    want_h,
-                    path: path.to_path_buf(),
-                })
-            }
-        })?;
+            })
+        }
+    };
+    for (img, path) in frames.iter().zip(paths) {
+        same_size((img.width, img.height), path)?;
     }
+    group
+        .frames
+        .par_iter()
+        .enumerate()
+        .filter(|(k, _)| !range.contains(k))
+        .try_for_each(|(_, path)| same_size(check_undecoded_frame(path)?, path))?;
     Ok(frames)
+}
+
+/// Reads a frame that is not decoded and returns its size: its header must read, a PNG's
+/// chunks must match their checksums ([`check_png_chunks`]) and a TIFF's image data must lie
+/// inside the file ([`check_tiff_extent`]).
+fn check_undecoded_frame(path: &Path) -> Result<(usize, usize), LoadError> {
+    let bad = |e: &dyn std::fmt::Display| LoadError::BadFrame {
+        problem: e.to_string(),
+        path: path.to_path_buf(),
+    };
+    let bytes = std::fs::read(path).map_err(|e| bad(&e))?;
+    if bytes.starts_with(&PNG_SIGNATURE) {
+        check_png_chunks(&bytes).map_err(|e| bad(&e))?;
+    } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
+        check_tiff_extent(&bytes).map_err(|e| bad(&e))?;
+    }
+    let (w, h) = image::ImageReader::new(std::io::Cursor::new(&bytes))
+        .with_guessed_format()
+        .map_err(|e| bad(&e))?
+        .into_dimensions()
+        .map_err(|e| bad(&e))?;
+    Ok((w as usize, h as usize))
 }
 
 /// The eight bytes every PNG file starts with.
@@ -153,22 +149,25 @@ fn check_png_chunks(bytes: &[u8]) -> Result<(), String> {
             ));
         };
         let len = u32::from_be_bytes([head[0], head[1], head[2], head[3]]) as usize;
-        let kind = String::from_utf8_lossy(&head[4..8]).into_owned();
+        let kind = &head[4..8];
+        let name = || String::from_utf8_lossy(kind);
         let body = at + 4..at + 8 + len;
         let Some(crc) = bytes.get(body.end..body.end + 4) else {
             return Err(format!(
-                "PNG file is truncated inside its {kind} chunk at byte {at} (the file has {} bytes)",
+                "PNG file is truncated inside its {} chunk at byte {at} (the file has {} bytes)",
+                name(),
                 bytes.len()
             ));
         };
         let want = u32::from_be_bytes([crc[0], crc[1], crc[2], crc[3]]);
         if crc32fast::hash(&bytes[body]) != want {
             return Err(format!(
-                "PNG data is damaged: the {kind} chunk at byte {at} fails its CRC check"
+                "PNG data is damaged: the {} chunk at byte {at} fails its CRC check",
+                name()
             ));
         }
-        has_data |= kind == "IDAT";
-        if kind == "IEND" {
+        has_data |= kind == b"IDAT";
+        if kind == b"IEND" {
             return if has_data {
                 Ok(())
             } else {
@@ -265,6 +264,27 @@ pub fn save_grey_png(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::PathBuf;
+
+    /// A group of the frames `paths` in `dir`.
+    fn entry(dir: &Path, paths: &[PathBuf]) -> GroupEntry {
+        GroupEntry {
+            index: 0,
+            dir: dir.to_path_buf(),
+            frames: paths.to_vec(),
+        }
+    }
+
+    /// Writes frames `f000.EXT`, `f001.EXT`, … with `write(k, path)`; returns their paths.
+    fn write_frames(dir: &Path, n: usize, ext: &str, write: impl Fn(usize, &Path)) -> Vec<PathBuf> {
+        (0..n)
+            .map(|k| {
+                let p = dir.join(format!("f{k:03}.{ext}"));
+                write(k, &p);
+                p
+            })
+            .collect()
+    }
 
     #[test]
     fn sixteen_bit_png_round_trips_exactly() {
@@ -287,11 +307,7 @@ mod tests {
             p
         };
         let mut frames: Vec<PathBuf> = (0..12).map(|k| frame(k, 8)).collect();
-        let group = |frames: &[PathBuf]| GroupEntry {
-            index: 0,
-            dir: dir.path().to_path_buf(),
-            frames: frames.to_vec(),
-        };
+        let group = |frames: &[PathBuf]| entry(dir.path(), frames);
         let window = load_group_frames(&group(&frames), 3..10).unwrap();
         assert_eq!(window.len(), 7);
         // Another size outside the window.
@@ -313,21 +329,13 @@ mod tests {
     #[test]
     fn truncated_tiff_outside_the_window_is_reported() {
         let dir = tempfile::tempdir().unwrap();
-        let frames: Vec<PathBuf> = (0..8)
-            .map(|k| {
-                let p = dir.path().join(format!("f{k:03}.tif"));
-                let img = image::GrayImage::from_fn(40, 30, |x, y| {
-                    image::Luma([((x * 7 + y * 13) as usize % 251 + k) as u8])
-                });
-                img.save(&p).unwrap();
-                p
-            })
-            .collect();
-        let group = GroupEntry {
-            index: 0,
-            dir: dir.path().to_path_buf(),
-            frames: frames.clone(),
-        };
+        let frames = write_frames(dir.path(), 8, "tif", |k, p| {
+            let img = image::GrayImage::from_fn(40, 30, |x, y| {
+                image::Luma([((x * 7 + y * 13) as usize % 251 + k) as u8])
+            });
+            img.save(p).unwrap();
+        });
+        let group = entry(dir.path(), &frames);
         assert_eq!(load_group_frames(&group, 1..8).unwrap().len(), 7);
         let good = std::fs::read(&frames[0]).unwrap();
         // Cut short: here the directory sits after the image data, so it goes too.
@@ -358,19 +366,11 @@ mod tests {
     #[test]
     fn damaged_or_truncated_png_outside_the_window_is_reported() {
         let dir = tempfile::tempdir().unwrap();
-        let frames: Vec<PathBuf> = (0..12)
-            .map(|k| {
-                let p = dir.path().join(format!("f{k:03}.png"));
-                let img = Image::from_fn(40, 30, |x, y| ((x * 7 + y * 13 + k) % 17) as f32 / 16.0);
-                save_grey_png(&img, &p, false, false).unwrap();
-                p
-            })
-            .collect();
-        let group = GroupEntry {
-            index: 0,
-            dir: dir.path().to_path_buf(),
-            frames: frames.clone(),
-        };
+        let frames = write_frames(dir.path(), 12, "png", |k, p| {
+            let img = Image::from_fn(40, 30, |x, y| ((x * 7 + y * 13 + k) % 17) as f32 / 16.0);
+            save_grey_png(&img, p, false, false).unwrap();
+        });
+        let group = entry(dir.path(), &frames);
         let good = std::fs::read(&frames[1]).unwrap();
         // One flipped bit inside the image data: the header still reads.
         let idat = good.windows(4).position(|w| w == b"IDAT").unwrap();

@@ -173,8 +173,9 @@ fn io_err(problem: String, path: &Path) -> VideoError {
     })
 }
 
-/// The folder holding `out_dir` and the name the temporary folders are derived from.
-fn temp_parent_and_name(out_dir: &Path) -> (PathBuf, String) {
+/// The folder holding `out_dir` and the start of its temporary folders' names: an import run
+/// by process PID writes into `{prefix}{PID}{TEMP_SUFFIX}` there.
+fn temp_parent_and_prefix(out_dir: &Path) -> (PathBuf, String) {
     let name = out_dir
         .file_name()
         .map_or_else(|| "scan".into(), |n| n.to_string_lossy().into_owned());
@@ -182,15 +183,18 @@ fn temp_parent_and_name(out_dir: &Path) -> (PathBuf, String) {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    (parent, name)
+    (parent, format!(".{name}.import-"))
 }
+
+/// See [`temp_parent_and_prefix`].
+const TEMP_SUFFIX: &str = ".tmp";
 
 /// Creates the hidden sibling folder the scan is written into.
 fn make_temp_dir(out_dir: &Path) -> Result<TempDir, VideoError> {
-    let (parent, name) = temp_parent_and_name(out_dir);
+    let (parent, prefix) = temp_parent_and_prefix(out_dir);
     std::fs::create_dir_all(&parent)
         .map_err(|e| io_err(format!("cannot create output folder: {e}"), &parent))?;
-    let path = parent.join(format!(".{name}.import-{}.tmp", std::process::id()));
+    let path = parent.join(format!("{prefix}{}{TEMP_SUFFIX}", std::process::id()));
     std::fs::create_dir(&path)
         .map_err(|e| io_err(format!("cannot create temporary folder: {e}"), &path))?;
     Ok(TempDir { path, keep: false })
@@ -224,8 +228,7 @@ fn remove_stale_imports(out_dir: &Path) -> Vec<PathBuf> {
     if !proc_fs.exists() {
         return Vec::new();
     }
-    let (parent, name) = temp_parent_and_name(out_dir);
-    let prefix = format!(".{name}.import-");
+    let (parent, prefix) = temp_parent_and_prefix(out_dir);
     let Ok(entries) = std::fs::read_dir(&parent) else {
         return Vec::new();
     };
@@ -235,7 +238,7 @@ fn remove_stale_imports(out_dir: &Path) -> Vec<PathBuf> {
         let Some(pid) = file_name
             .to_str()
             .and_then(|n| n.strip_prefix(&prefix))
-            .and_then(|n| n.strip_suffix(".tmp"))
+            .and_then(|n| n.strip_suffix(TEMP_SUFFIX))
             .and_then(|n| n.parse::<u32>().ok())
         else {
             continue;

@@ -275,7 +275,6 @@ impl PipelineParams {
 
 pub use cache::{FlowDetail, GroupInput, StageCache};
 
-/// The median of `v` (the upper one of an even count); None when empty. NaN sorts last.
 /// The `lo` and `hi` quantiles (0–1) of the finite values, from at most about `samples` of them
 /// taken at an even stride; None when none is finite.
 #[must_use]
@@ -294,6 +293,7 @@ pub fn sampled_quantiles(values: &[f32], lo: f64, hi: f64, samples: usize) -> Op
     Some((a, b))
 }
 
+/// The median of `v` (the upper one of an even count); None when empty. NaN sorts last.
 pub(crate) fn median(mut v: Vec<f64>) -> Option<f64> {
     if v.is_empty() {
         return None;

@@ -930,6 +930,7 @@ impl Problem {
         let mut other = if jacobi { Some(st.clone()) } else { None };
         let max = params.max_iterations as usize;
         let pixels = (lay.width * lay.height) as f64;
+        let tolerance = f64::from(params.tolerance_px);
         let mut done = 0;
         let mut next = block_iterations;
         let mut last: Option<(usize, f64)> = None;
@@ -949,7 +950,6 @@ impl Problem {
             };
             done += k;
             let per_px = delta / pixels;
-            let tolerance = f64::from(params.tolerance_px);
             if per_px < tolerance {
                 return (u32::try_from(done).unwrap_or(u32::MAX), true);
             }

@@ -523,10 +523,11 @@ fn build_line(side: WallSide, bands: &[Option<(f32, f32)>], trim_px: usize) -> O
 /// percentiles of the smoothed depths (no walls when they are within 10× the map's noise of
 /// each other); in each column the longest run of rows deeper than mid-depth is the groove's
 /// inside, each wall is centred on its mid-depth crossing, and its band reaches the land and
-/// bottom levels (measured on the shorter complete side, between 15% and 85% of the depth). With [`WallMethod::SlopeRuns`] the map is differenced along y over
-/// ±`smooth_px` rows and turned into the physical slope ∂Z/∂Y; in each column, rows with
-/// ∂Z/∂Y > `min_slope` (left wall) or < −`min_slope` (right wall) form runs, and the groove is
-/// the longest rising run followed directly by a falling one. A column's band is kept only when it
+/// bottom levels (measured on the shorter complete side, between 15% and 85% of the depth).
+/// With [`WallMethod::SlopeRuns`] the map is differenced along y over ±`smooth_px` rows and
+/// turned into the physical slope ∂Z/∂Y; in each column, rows with ∂Z/∂Y > `min_slope` (left
+/// wall) or < −`min_slope` (right wall) form runs, and the groove is the longest rising run
+/// followed directly by a falling one. A column's band is kept only when it
 /// agrees with the median band over `column_window_px` nearby columns; the rest are voids,
 /// filled by interpolation (`filled`). Bands lose `trim_px` rows at each end. Walls that are
 /// found nowhere are left out of the result (Left first).
@@ -551,7 +552,6 @@ pub fn find_walls(
             ),
         });
     }
-    let cy = (height as f64 - 1.0) / 2.0;
     let zs = smooth_nan(&z.data, width, height, params.smooth_px);
     let bands: Vec<[Option<(f32, f32)>; 2]> = match params.method {
         WallMethod::DepthLevels => {
@@ -582,6 +582,7 @@ pub fn find_walls(
                 .collect()
         }
         WallMethod::SlopeRuns => {
+            let cy = (height as f64 - 1.0) / 2.0;
             let slope = slope_map(
                 &zs,
                 width,

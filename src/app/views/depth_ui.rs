@@ -7,10 +7,11 @@ use super::frame_ui::StageData;
 use super::{
     AXIS_WIDTH_PT, empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines,
 };
-use crate::app::render::{heat_colour, robust_range};
+use crate::app::render::heat_colour;
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
 use crate::pipeline::Stage;
+use crate::viz::robust_range;
 
 /// Colour bands in the colour bar.
 const BAR_BANDS: usize = 64;

@@ -27,6 +27,18 @@ fn clip(dir: &Path, name: &str, frames: usize, sixteen_bit: bool) -> (PathBuf, V
 
 fn no_progress(_: usize, _: usize) {}
 
+/// Imports `clip` into `out` with the default metadata, no progress and no cancel.
+fn import(clip: &Path, out: &Path, layout: &GroupLayout) -> Result<ImportSummary, VideoError> {
+    import_video(
+        clip,
+        out,
+        layout,
+        &ClipMeta::default(),
+        &no_progress,
+        &AtomicBool::new(false),
+    )
+}
+
 fn layout(fpg: usize, stride: Option<usize>) -> GroupLayout {
     GroupLayout {
         frames_per_group: fpg,
@@ -126,15 +138,7 @@ fn unfinished_imports_of_killed_runs_are_removed_and_live_ones_kept() {
             }
         }
     }
-    let s = import_video(
-        &path,
-        &out,
-        &layout(7, None),
-        &ClipMeta::default(),
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap();
+    let s = import(&path, &out, &layout(7, None)).unwrap();
     if Path::new("/proc/self").exists() {
         assert_eq!(s.removed_stale, vec![dead.clone()]);
         assert!(!dead.exists());
@@ -167,15 +171,7 @@ fn sixteen_bit_clip_keeps_sixteen_bits_and_groups_skip_frames() {
         first_frame: 1,
         max_groups: Some(2),
     };
-    let s = import_video(
-        &path,
-        &out,
-        &lay,
-        &ClipMeta::default(),
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap();
+    let s = import(&path, &out, &lay).unwrap();
     assert_eq!((s.groups, s.bit_depth), (2, 16));
     // Decoding stops once both groups are full: frames 1..=7 and 10..=16.
     assert_eq!(s.frames_decoded, 17);
@@ -199,15 +195,7 @@ fn sixteen_bit_clip_keeps_sixteen_bits_and_groups_skip_frames() {
 fn missing_clip_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("scan");
-    let e = import_video(
-        &dir.path().join("nope.avi"),
-        &out,
-        &layout(7, None),
-        &ClipMeta::default(),
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap_err();
+    let e = import(&dir.path().join("nope.avi"), &out, &layout(7, None)).unwrap_err();
     assert!(matches!(e, VideoError::Missing { .. }), "{e}");
     assert!(e.to_string().contains("nope.avi"), "{e}");
     assert!(!out.exists());
@@ -219,15 +207,7 @@ fn text_file_named_mp4_is_not_a_video() {
     let fake = dir.path().join("notes.mp4");
     std::fs::write(&fake, "these are my notes, not a movie\n".repeat(20)).unwrap();
     let out = dir.path().join("scan");
-    let e = import_video(
-        &fake,
-        &out,
-        &layout(7, None),
-        &ClipMeta::default(),
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap_err();
+    let e = import(&fake, &out, &layout(7, None)).unwrap_err();
     let msg = e.to_string();
     assert!(msg.contains("notes.mp4"), "{msg}");
     assert!(
@@ -251,15 +231,7 @@ fn non_empty_output_folder_is_refused_and_untouched() {
     let out = dir.path().join("busy");
     std::fs::create_dir(&out).unwrap();
     std::fs::write(out.join("keep.txt"), b"mine").unwrap();
-    let e = import_video(
-        &path,
-        &out,
-        &layout(7, None),
-        &ClipMeta::default(),
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap_err();
+    let e = import(&path, &out, &layout(7, None)).unwrap_err();
     assert!(matches!(e, VideoError::OutputExists { .. }), "{e}");
     assert!(e.to_string().contains("busy"), "{e}");
     assert_eq!(std::fs::read(out.join("keep.txt")).unwrap(), b"mine");
@@ -272,15 +244,7 @@ fn non_empty_output_folder_is_refused_and_untouched() {
     // An empty folder is accepted and filled.
     let empty = dir.path().join("empty");
     std::fs::create_dir(&empty).unwrap();
-    import_video(
-        &path,
-        &empty,
-        &layout(7, None),
-        &ClipMeta::default(),
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap();
+    import(&path, &empty, &layout(7, None)).unwrap();
     assert_eq!(Scan::open(&empty).unwrap().groups.len(), 1);
 }
 
@@ -289,15 +253,7 @@ fn clip_shorter_than_one_group_leaves_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let (path, _) = clip(dir.path(), "short.avi", 6, false);
     let out = dir.path().join("scan");
-    let e = import_video(
-        &path,
-        &out,
-        &layout(7, None),
-        &ClipMeta::default(),
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap_err();
+    let e = import(&path, &out, &layout(7, None)).unwrap_err();
     assert!(
         matches!(
             e,
@@ -335,15 +291,7 @@ fn cancel_leaves_nothing_and_bad_settings_are_named() {
     assert!(matches!(e, VideoError::Cancelled), "{e}");
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
 
-    let e = import_video(
-        &path,
-        &out,
-        &layout(6, None),
-        &ClipMeta::default(),
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap_err();
+    let e = import(&path, &out, &layout(6, None)).unwrap_err();
     assert!(e.to_string().contains("frames_per_group"), "{e}");
     let bad = ClipMeta {
         rpm: f64::NAN,
@@ -458,15 +406,7 @@ fn import_speed_full_size_frames() {
     encode_grey_clip(&path, &imgs, false, 25).unwrap();
     eprintln!("encode 48 frames 1280x1024 (FFV1): {:?}", t.elapsed());
     let t = std::time::Instant::now();
-    let s = import_video(
-        &path,
-        &dir.path().join("scan"),
-        &layout(12, None),
-        &ClipMeta::default(),
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap();
+    let s = import(&path, &dir.path().join("scan"), &layout(12, None)).unwrap();
     eprintln!(
         "import 48 frames 1280x1024 into {} groups: {:?}",
         s.groups,
