@@ -156,7 +156,7 @@ impl Default for FlowParams {
             solver: Solver::GaussSeidel,
             lambda: 0.05,
             max_iterations: 100,
-            tolerance_px: 1e-5,
+            tolerance_px: 1e-4,
             gradient_threshold: 1e-3,
             lk_window_px: 7,
             groove_weight: 1.0,
@@ -212,13 +212,20 @@ pub const WALL_SLOPE_MAX_RATIO: f64 = 2.0;
 const BLOCK_CACHE_BYTES: usize = 896 * 1024;
 /// Longest block of iterations between convergence checks.
 const MAX_BLOCK_ITERATIONS: usize = 16;
+/// Convergence threshold of the plain pass whose flow [`estimate_wall_sides`] reads when the
+/// groove method estimates its own walls (the user's τ when that is tighter). Wall sides come
+/// from a parallax slope of about 2·10⁻⁴ px/px, so that pass must converge whatever τ the
+/// groove pass uses: on the paper's optics, letting it stop at τ = 5·10⁻⁵ px (36 iterations)
+/// put the constraint on the wrong pixels and the recovered 1 kHz tone fell to r 0.54.
+pub const WALL_PRESOLVE_TOLERANCE_PX: f32 = 1e-5;
 
 /// Computes the flow of one derivative set.
 ///
 /// `focal_px` is the focal length in pixels (the constraint's f); `walls` gives c per pixel
 /// (when `None` the groove method estimates it itself: a plain Horn–Schunck pass, then
 /// [`estimate_wall_sides`] on its u, then the groove pass warm-started from the plain flow;
-/// each pass may run up to `max_iterations`, and `iterations` counts both).
+/// each pass may run up to `max_iterations`, and `iterations` counts both). The plain pass
+/// stops at [`WALL_PRESOLVE_TOLERANCE_PX`] or τ, whichever is tighter; the groove pass at τ.
 ///
 /// Horn–Schunck confidence is the gradient magnitude (0 below `gradient_threshold`; the
 /// flow there is the smoothness fill-in). Lucas–Kanade confidence is the smallest
@@ -310,7 +317,11 @@ pub fn compute_flow_from(
                 w
             }
             None => {
-                let (it, _) = plain().solve(&mut st, params, simd);
+                let presolve = FlowParams {
+                    tolerance_px: params.tolerance_px.min(WALL_PRESOLVE_TOLERANCE_PX),
+                    ..params.clone()
+                };
+                let (it, _) = plain().solve(&mut st, &presolve, simd);
                 first_iterations = it;
                 let (u, v) = st.to_images(&lay, d.base_flow_px);
                 let interim = FlowField {
@@ -1849,6 +1860,44 @@ mod tests {
             assert!(frac > 0.9, "{frac}");
         }
         assert!(estimate_wall_sides(&compute_flow_dummy(), f64::NAN).is_err());
+    }
+
+    #[test]
+    fn wall_presolve_converges_whatever_the_groove_tolerance() {
+        // A loose τ must not cut short the plain pass the wall sides are estimated from: with
+        // τ = 10⁻³ the groove flow still starts from a plain pass run to the wall tolerance.
+        let (w, h) = (96, 96);
+        let frames = tilted_plane(w, h, 12, 1.0, 1.0, TILT_FOCAL_PX);
+        let d = middle(&frames, -1.0, &DerivativeParams::default());
+        let plain = compute_flow(
+            &d,
+            TILT_FOCAL_PX,
+            None,
+            &FlowParams {
+                tolerance_px: WALL_PRESOLVE_TOLERANCE_PX,
+                ..params(FlowMethod::HornSchunck)
+            },
+        )
+        .unwrap();
+        let loose = FlowParams {
+            tolerance_px: 1e-3,
+            ..params(FlowMethod::GrooveHornSchunck)
+        };
+        let groove = compute_flow(&d, TILT_FOCAL_PX, None, &loose).unwrap();
+        eprintln!(
+            "plain pass {} iterations; groove at τ = 1e-3: {} in all",
+            plain.iterations, groove.iterations
+        );
+        assert!(
+            plain.iterations > 2 * MAX_BLOCK_ITERATIONS as u32,
+            "{}",
+            plain.iterations
+        );
+        assert!(
+            groove.iterations > plain.iterations,
+            "{}",
+            groove.iterations
+        );
     }
 
     fn compute_flow_dummy() -> FlowField {
