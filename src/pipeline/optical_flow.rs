@@ -135,7 +135,10 @@ pub struct FlowParams {
     pub lambda: f32,
     /// Iteration cap (paper: 100).
     pub max_iterations: u32,
-    /// Convergence threshold τ: stop when the mean absolute update falls below it (px).
+    /// Convergence threshold τ: stop when the mean absolute update falls below it (px). The
+    /// default, 10⁻⁴, is set for the groove method (its wall-estimating plain pass converges to
+    /// [`WALL_PRESOLVE_TOLERANCE_PX`] regardless); a plain Horn–Schunck field meant to be fully
+    /// converged (a `.flo` export, the depth scenes) is closer with 10⁻⁵.
     pub tolerance_px: f32,
     /// Pixels whose gradient magnitude is below this carry no flow (confidence 0).
     pub gradient_threshold: f32,
@@ -883,31 +886,52 @@ impl Problem {
                 ) else {
                     return;
                 };
-                let above = y
-                    .checked_sub(1)
-                    .and_then(|yy| walls.sign.get(yy * w..(yy + 1) * w));
-                let below = walls.sign.get((y + 1) * w..(y + 2) * w);
+                // A missing row above or below stands in as the row itself, with its edges
+                // switched off, so the loop below is branch-free and vectorises.
+                fn or_own<'a>(row: Option<&'a [i8]>, own: &'a [i8]) -> (&'a [i8], f64) {
+                    match row {
+                        Some(r) if r.len() == own.len() => (r, 1.0),
+                        _ => (own, 0.0),
+                    }
+                }
+                let (above, has_above) = or_own(
+                    y.checked_sub(1)
+                        .and_then(|yy| walls.sign.get(yy * w..(yy + 1) * w)),
+                    sides,
+                );
+                let (below, has_below) = or_own(walls.sign.get((y + 1) * w..(y + 2) * w), sides);
                 let (k_above, k_below) = (ks(y as f64 - 0.5), ks(y as f64 + 0.5));
                 // Edge to the row above (o) and below (d): constrained when both ends share
-                // c ≠ 0.
-                let edge = |c: i8, other: Option<&[i8]>, x: usize, k: &[f64; 2]| match other {
-                    Some(row) if c != 0 && row.get(x) == Some(&c) => (1.0, k[usize::from(c > 0)]),
-                    _ => (0.0, 0.0),
+                // c ≠ 0; then (1, k of that side), else (0, 0).
+                let edge = |c: i8, other: i8, present: f64, k: &[f64; 2]| {
+                    let m = if c != 0 && other == c { present } else { 0.0 };
+                    let kc = if c > 0 { k[1] } else { k[0] };
+                    (m, if m != 0.0 { kc } else { 0.0 })
                 };
-                for (x, &c) in sides.iter().enumerate() {
-                    let coefs = groove_px(
+                let [r0, r1, r2, r3, r4, r5, r6] = rows;
+                let outs = (
+                    &mut r0[..w],
+                    &mut r1[..w],
+                    &mut r2[..w],
+                    &mut r3[..w],
+                    &mut r4[..w],
+                    &mut r5[..w],
+                    &mut r6[..w],
+                );
+                let (ix, iy, it, above, below) =
+                    (&ix[..w], &iy[..w], &it[..w], &above[..w], &below[..w]);
+                for (x, &c) in sides[..w].iter().enumerate() {
+                    let v = groove_px(
                         [ix[x], iy[x], it[x]].map(f64::from),
                         lambda,
                         gamma,
                         base,
-                        edge(c, above, x, &k_above),
-                        edge(c, below, x, &k_below),
+                        edge(c, above[x], has_above, &k_above),
+                        edge(c, below[x], has_below, &k_below),
                     );
-                    for (row, v) in rows.iter_mut().zip(coefs) {
-                        if let Some(dst) = row.get_mut(x) {
-                            *dst = v;
-                        }
-                    }
+                    (
+                        outs.0[x], outs.1[x], outs.2[x], outs.3[x], outs.4[x], outs.5[x], outs.6[x],
+                    ) = (v[0], v[1], v[2], v[3], v[4], v[5], v[6]);
                 }
             },
         )
