@@ -161,6 +161,8 @@ fn ui_frame_times(scan: PathBuf) {
 }
 
 fn main() {
+    // As the `groovescope` binary does at start-up (the workbench included).
+    groovescope::alloc::keep_freed_buffers();
     let mut c = Criterion::default().sample_size(10).configure_from_args();
     let tmp = tempfile::tempdir().expect("tempdir");
     let params = PipelineParams::default();
