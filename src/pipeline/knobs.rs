@@ -26,7 +26,10 @@ pub const KNOB_DOCS: &[(&str, &str)] = &[
         "flow.lambda",
         "smoothness weight λ (α); larger = smoother flow",
     ),
-    ("flow.max_iterations", "iteration cap (paper: 100)"),
+    (
+        "flow.max_iterations",
+        "iteration cap (paper: 100; the groove method's wall-estimating plain pass may run up to 100 regardless)",
+    ),
     (
         "flow.tolerance_px",
         "convergence threshold τ on the mean flow update, px (groove method: its wall-estimating plain pass converges to 1e-5 regardless)",
