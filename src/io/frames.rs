@@ -111,35 +111,38 @@ pub fn load_group_frames(
     Ok(frames)
 }
 
-/// Reads a frame that is not decoded and returns its size: its header must read, a PNG's
-/// chunks must match their checksums ([`check_png_chunks`]) and a TIFF's image data must lie
-/// inside the file ([`check_tiff_extent`]).
+/// Reads a frame that is not decoded and returns its size: a PNG's chunks must match their
+/// checksums ([`check_png_chunks`]), a TIFF's image data must lie inside the file
+/// ([`check_tiff_extent`]), and any other file's header must read.
 fn check_undecoded_frame(path: &Path) -> Result<(usize, usize), LoadError> {
     let bad = |e: &dyn std::fmt::Display| LoadError::BadFrame {
         problem: e.to_string(),
         path: path.to_path_buf(),
     };
     let bytes = std::fs::read(path).map_err(|e| bad(&e))?;
-    if bytes.starts_with(&PNG_SIGNATURE) {
-        check_png_chunks(&bytes).map_err(|e| bad(&e))?;
+    let (w, h) = if bytes.starts_with(&PNG_SIGNATURE) {
+        check_png_chunks(&bytes).map_err(|e| bad(&e))?
     } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
-        check_tiff_extent(&bytes).map_err(|e| bad(&e))?;
-    }
-    let (w, h) = image::ImageReader::new(std::io::Cursor::new(&bytes))
-        .with_guessed_format()
-        .map_err(|e| bad(&e))?
-        .into_dimensions()
-        .map_err(|e| bad(&e))?;
+        check_tiff_extent(&bytes).map_err(|e| bad(&e))?
+    } else {
+        image::ImageReader::new(std::io::Cursor::new(&bytes))
+            .with_guessed_format()
+            .map_err(|e| bad(&e))?
+            .into_dimensions()
+            .map_err(|e| bad(&e))?
+    };
     Ok((w as usize, h as usize))
 }
 
 /// The eight bytes every PNG file starts with.
 const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
 
-/// Walks the chunks of a PNG file without decompressing it: each chunk must lie inside the
-/// file and match its CRC-32, there must be image data, and the file must end with `IEND`.
-fn check_png_chunks(bytes: &[u8]) -> Result<(), String> {
+/// Walks the chunks of a PNG file without decompressing it: the first must be the 13-byte
+/// `IHDR`, each must lie inside the file and match its CRC-32, there must be image data, and
+/// the file must end with `IEND`. Returns the width and height `IHDR` gives.
+fn check_png_chunks(bytes: &[u8]) -> Result<(u32, u32), String> {
     let mut at = PNG_SIGNATURE.len();
+    let mut size = None;
     let mut has_data = false;
     loop {
         let Some(head) = bytes.get(at..at + 8) else {
@@ -166,12 +169,24 @@ fn check_png_chunks(bytes: &[u8]) -> Result<(), String> {
                 name()
             ));
         }
+        if at == PNG_SIGNATURE.len() {
+            if kind != b"IHDR" || len != 13 {
+                return Err(format!("PNG file starts with a {} chunk, not IHDR", name()));
+            }
+            // The header's first eight data bytes follow the 8 bytes of length and type.
+            let Some(dims) = bytes.get(at + 8..at + 16) else {
+                return Err("PNG header is truncated".into());
+            };
+            size = Some((
+                u32::from_be_bytes([dims[0], dims[1], dims[2], dims[3]]),
+                u32::from_be_bytes([dims[4], dims[5], dims[6], dims[7]]),
+            ));
+        }
         has_data |= kind == b"IDAT";
         if kind == b"IEND" {
-            return if has_data {
-                Ok(())
-            } else {
-                Err("PNG file has no image data (no IDAT chunk)".into())
+            return match (size, has_data) {
+                (Some(size), true) => Ok(size),
+                _ => Err("PNG file has no image data (no IDAT chunk)".into()),
             };
         }
         at += 12 + len;
@@ -180,8 +195,8 @@ fn check_png_chunks(bytes: &[u8]) -> Result<(), String> {
 
 /// Reads a TIFF file's first image directory without decoding it: the image data its strips
 /// or tiles point to must lie inside the file (TIFF has no checksums, so this catches
-/// truncation, not damaged bytes).
-fn check_tiff_extent(bytes: &[u8]) -> Result<(), String> {
+/// truncation, not damaged bytes). Returns the width and height the directory gives.
+fn check_tiff_extent(bytes: &[u8]) -> Result<(u32, u32), String> {
     use tiff::tags::Tag;
     let mut dec =
         tiff::decoder::Decoder::new(std::io::Cursor::new(bytes)).map_err(|e| e.to_string())?;
@@ -210,7 +225,7 @@ fn check_tiff_extent(bytes: &[u8]) -> Result<(), String> {
                 "TIFF file is truncated: its image data runs to byte {end}, the file has {len} bytes"
             ))
         } else {
-            Ok(())
+            dec.dimensions().map_err(|e| e.to_string())
         };
     }
     Err("TIFF file has no image data (no strip or tile offsets)".into())

@@ -41,12 +41,17 @@ pub struct Scores {
 }
 
 impl Scores {
-    /// The envelope r with `decimals` decimals, or "n/a (< 50 ms)" when the clip was too short
-    /// to measure it.
+    /// The envelope r with `decimals` decimals, or "n/a (< 50 ms)" (the shortest clip that
+    /// gets one) when the clip was too short to measure it.
     #[must_use]
     pub fn envelope_r_text(&self, decimals: usize) -> String {
-        self.envelope_r
-            .map_or_else(|| "n/a (< 50 ms)".to_owned(), |e| format!("{e:.decimals$}"))
+        self.envelope_r.map_or_else(
+            || {
+                let ms = MIN_ENVELOPE_BLOCKS as f64 * ENVELOPE_WINDOW_S * 1000.0;
+                format!("n/a (< {ms:.0} ms)")
+            },
+            |e| format!("{e:.decimals$}"),
+        )
     }
 }
 

@@ -28,11 +28,11 @@ pub const KNOB_DOCS: &[(&str, &str)] = &[
     ),
     (
         "flow.max_iterations",
-        "iteration cap (paper: 100; the groove method's wall-estimating plain pass may run up to 100 regardless)",
+        "iteration cap (paper: 100; the groove method's wall-estimating plain pass keeps its own cap of at least that)",
     ),
     (
         "flow.tolerance_px",
-        "convergence threshold τ on the mean flow update, px (groove method: its wall-estimating plain pass converges to 1e-5 regardless)",
+        "convergence threshold τ on the mean flow update, px (the groove method's wall-estimating plain pass keeps its own, tighter threshold)",
     ),
     (
         "flow.gradient_threshold",

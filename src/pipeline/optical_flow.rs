@@ -895,18 +895,14 @@ impl Problem {
                 };
                 // A missing row above or below stands in as the row itself, with its edges
                 // switched off, so the loop below is branch-free and vectorises.
-                fn or_own<'a>(row: Option<&'a [i8]>, own: &'a [i8]) -> (&'a [i8], f64) {
-                    match row {
-                        Some(r) if r.len() == own.len() => (r, 1.0),
-                        _ => (own, 0.0),
-                    }
-                }
-                let (above, has_above) = or_own(
-                    y.checked_sub(1)
-                        .and_then(|yy| walls.sign.get(yy * w..(yy + 1) * w)),
-                    sides,
-                );
-                let (below, has_below) = or_own(walls.sign.get((y + 1) * w..(y + 2) * w), sides);
+                let (above, has_above) = y
+                    .checked_sub(1)
+                    .and_then(|yy| walls.sign.get(yy * w..(yy + 1) * w))
+                    .map_or((sides, 0.0), |r| (r, 1.0));
+                let (below, has_below) = walls
+                    .sign
+                    .get((y + 1) * w..(y + 2) * w)
+                    .map_or((sides, 0.0), |r| (r, 1.0));
                 let (k_above, k_below) = (ks(y as f64 - 0.5), ks(y as f64 + 0.5));
                 // Edge to the row above (o) and below (d): constrained when both ends share
                 // c ≠ 0; then (1, k of that side), else (0, 0).
@@ -915,16 +911,7 @@ impl Problem {
                     let kc = if c > 0 { k[1] } else { k[0] };
                     (m, if m != 0.0 { kc } else { 0.0 })
                 };
-                let [r0, r1, r2, r3, r4, r5, r6] = rows;
-                let outs = (
-                    &mut r0[..w],
-                    &mut r1[..w],
-                    &mut r2[..w],
-                    &mut r3[..w],
-                    &mut r4[..w],
-                    &mut r5[..w],
-                    &mut r6[..w],
-                );
+                let mut outs = rows.each_mut().map(|r| &mut r[..w]);
                 let (ix, iy, it, above, below) =
                     (&ix[..w], &iy[..w], &it[..w], &above[..w], &below[..w]);
                 for (x, &c) in sides[..w].iter().enumerate() {
@@ -936,9 +923,9 @@ impl Problem {
                         edge(c, above[x], has_above, &k_above),
                         edge(c, below[x], has_below, &k_below),
                     );
-                    (
-                        outs.0[x], outs.1[x], outs.2[x], outs.3[x], outs.4[x], outs.5[x], outs.6[x],
-                    ) = (v[0], v[1], v[2], v[3], v[4], v[5], v[6]);
+                    for (out, c) in outs.iter_mut().zip(v) {
+                        out[x] = c;
+                    }
                 }
             },
         )
