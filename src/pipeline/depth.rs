@@ -705,21 +705,35 @@ const MEDIAN_LANES: usize = 8;
 /// Largest window (m²) handled by the network; larger ones use selection per pixel.
 const MAX_NETWORK_INPUTS: usize = 49;
 
-/// A selection network that leaves the median of `n` inputs at `target` once the inputs are
-/// padded to `size` with −∞ (the first `lo_pad`) and +∞: Batcher's odd–even merge sort pruned
-/// to the comparators the median depends on.
+/// A selection network that leaves the median of `n` inputs at `target`: Batcher's odd–even
+/// merge sort on `n` inputs padded to a power of two with −∞ (the first slots) and +∞, with
+/// the comparators that touch a pad resolved while it is built (they are no-ops or relabel
+/// the slots), then pruned to the comparators the median depends on. It works on the `n`
+/// inputs alone (5×5: 114 comparators instead of the 191 of the padded sort).
 struct MedianNetwork {
-    size: usize,
-    lo_pad: usize,
+    n: usize,
     target: usize,
+    /// (low, high): the smaller value goes to `low`, the larger to `high`; both < `n`.
     pairs: Vec<(usize, usize)>,
 }
 
 impl MedianNetwork {
     fn new(n: usize) -> Self {
+        #[derive(Clone, Copy, PartialEq)]
+        enum Slot {
+            Low,
+            Input(usize),
+            High,
+        }
         let size = n.next_power_of_two();
         let lo_pad = (size - n) / 2;
-        let target = lo_pad + n / 2;
+        let mut slots: Vec<Slot> = (0..size)
+            .map(|s| match s.checked_sub(lo_pad) {
+                None => Slot::Low,
+                Some(i) if i < n => Slot::Input(i),
+                Some(_) => Slot::High,
+            })
+            .collect();
         let mut pairs = Vec::new();
         let mut p = 1;
         while p < size {
@@ -728,8 +742,19 @@ impl MedianNetwork {
                 let mut j = k % p;
                 while j + k < size {
                     for i in 0..k.min(size - j - k) {
-                        if (i + j) / (2 * p) == (i + j + k) / (2 * p) {
-                            pairs.push((i + j, i + j + k));
+                        let (a, b) = (i + j, i + j + k);
+                        if a / (2 * p) != b / (2 * p) {
+                            continue;
+                        }
+                        let (Some(&sa), Some(&sb)) = (slots.get(a), slots.get(b)) else {
+                            continue;
+                        };
+                        match (sa, sb) {
+                            (Slot::Input(x), Slot::Input(y)) => pairs.push((x, y)),
+                            // Already in order: nothing moves.
+                            (Slot::Low, _) | (_, Slot::High) => {}
+                            // Out of order: the values swap slots.
+                            _ => slots.swap(a, b),
                         }
                     }
                     j += 2 * k;
@@ -738,7 +763,11 @@ impl MedianNetwork {
             }
             p *= 2;
         }
-        let mut needed = vec![false; size];
+        let target = match slots.get(lo_pad + n / 2) {
+            Some(&Slot::Input(t)) => t,
+            _ => 0,
+        };
+        let mut needed = vec![false; n];
         if let Some(t) = needed.get_mut(target) {
             *t = true;
         }
@@ -757,15 +786,29 @@ impl MedianNetwork {
         }
         kept.reverse();
         Self {
-            size,
-            lo_pad,
+            n,
             target,
             pairs: kept,
         }
     }
 
-    /// Medians of `MEDIAN_LANES` pixels whose windows were loaded into `v[lo_pad..lo_pad + n]`.
+    /// Medians of `MEDIAN_LANES` pixels whose windows were loaded into `v[..n]` (finite values
+    /// only); None when `v` is shorter. Runs on AVX2 where the CPU has it (same results).
     fn run(&self, v: &mut [[f32; MEDIAN_LANES]]) -> Option<[f32; MEDIAN_LANES]> {
+        let v = v.get_mut(..self.n)?;
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU reported AVX2, all that `run_avx2` requires.
+                unsafe { self.run_avx2(v) };
+                return v.get(self.target).copied();
+            }
+        }
+        self.run_portable(v)
+    }
+
+    /// The comparators in plain code (the compiler vectorises the lanes).
+    fn run_portable(&self, v: &mut [[f32; MEDIAN_LANES]]) -> Option<[f32; MEDIAN_LANES]> {
         for &(a, b) in &self.pairs {
             let (Some(&va), Some(&vb)) = (v.get(a), v.get(b)) else {
                 return None;
@@ -783,6 +826,31 @@ impl MedianNetwork {
             }
         }
         v.get(self.target).copied()
+    }
+
+    /// The comparators on AVX2 registers, the same choices as the portable loop in
+    /// [`MedianNetwork::run`] (min keeps the second value on a tie, max the first).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn run_avx2(&self, v: &mut [[f32; MEDIAN_LANES]]) {
+        use std::arch::x86_64::{_mm256_loadu_ps, _mm256_max_ps, _mm256_min_ps, _mm256_storeu_ps};
+        const { assert!(MEDIAN_LANES == 8) };
+
+        for &(a, b) in &self.pairs {
+            let (Some(va), Some(vb)) = (v.get(a), v.get(b)) else {
+                return;
+            };
+            // SAFETY: `va` and `vb` are 8 f32 each, as the unaligned loads read.
+            let (x, y) = unsafe { (_mm256_loadu_ps(va.as_ptr()), _mm256_loadu_ps(vb.as_ptr())) };
+            if let Some(d) = v.get_mut(a) {
+                // SAFETY: 8 f32, as the unaligned store writes.
+                unsafe { _mm256_storeu_ps(d.as_mut_ptr(), _mm256_min_ps(x, y)) };
+            }
+            if let Some(d) = v.get_mut(b) {
+                // SAFETY: as above.
+                unsafe { _mm256_storeu_ps(d.as_mut_ptr(), _mm256_max_ps(y, x)) };
+            }
+        }
     }
 }
 
@@ -823,34 +891,45 @@ fn median_filter(v: &[f32], width: usize, height: usize, m: usize, out: &mut [f3
     }
     let n = m * m;
     let net = (n <= MAX_NETWORK_INPUTS).then(|| MedianNetwork::new(n));
+    // Per row, the count of non-finite values left of each column (w + 1 entries), so that a
+    // block's window is checked with two lookups per row.
+    let stride = width + 1;
+    let mut bad = vec![0_u32; stride * height];
+    bad.par_chunks_mut(stride)
+        .zip(v.par_chunks(width))
+        .for_each(|(counts, row)| {
+            let mut c = 0;
+            for (k, &e) in counts.iter_mut().skip(1).zip(row) {
+                c += u32::from(!e.is_finite());
+                *k = c;
+            }
+        });
+    let clean = |y0: usize, y1: usize, x0: usize, x1: usize| {
+        (y0..y1).all(|yy| bad.get(yy * stride + x1) == bad.get(yy * stride + x0))
+    };
     out.par_chunks_mut(width).enumerate().for_each_init(
         || (Vec::new(), Vec::new()),
         |(buf, lanes): &mut (Vec<f32>, Vec<[f32; MEDIAN_LANES]>), (y, row)| {
             let ry = r.min(y).min(height - 1 - y);
             let mut x = 0;
             while x < width {
-                let block_ok = ry == r && x >= r && x + MEDIAN_LANES + r <= width;
+                let block_ok = ry == r
+                    && x >= r
+                    && x + MEDIAN_LANES + r <= width
+                    && clean(y - r, y + r + 1, x - r, x + MEDIAN_LANES + r);
                 if let (true, Some(net)) = (block_ok, net.as_ref()) {
                     lanes.clear();
-                    lanes.resize(net.size, [f32::INFINITY; MEDIAN_LANES]);
-                    let mut finite = true;
-                    for (k, lane) in lanes.iter_mut().enumerate() {
-                        if k < net.lo_pad {
-                            *lane = [f32::NEG_INFINITY; MEDIAN_LANES];
-                        } else if k < net.lo_pad + n {
-                            let (dy, dx) = ((k - net.lo_pad) / m, (k - net.lo_pad) % m);
-                            let base = (y + dy - r) * width + x + dx - r;
+                    for yy in y - r..=y + r {
+                        let row0 = yy * width + x - r;
+                        for base in row0..row0 + m {
                             if let Some(src) = v.get(base..base + MEDIAN_LANES) {
-                                for (d, &s) in lane.iter_mut().zip(src) {
-                                    *d = s;
-                                    finite &= s.is_finite();
-                                }
-                            } else {
-                                finite = false;
+                                let mut lane = [0.0; MEDIAN_LANES];
+                                lane.copy_from_slice(src);
+                                lanes.push(lane);
                             }
                         }
                     }
-                    if finite && let Some(med) = net.run(lanes) {
+                    if let Some(med) = net.run(lanes) {
                         if let Some(o) = row.get_mut(x..x + MEDIAN_LANES) {
                             o.copy_from_slice(&med);
                         }
@@ -1434,6 +1513,31 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    #[test]
+    fn median_network_paths_agree_with_sorting_including_ties() {
+        assert_eq!(MedianNetwork::new(25).pairs.len(), 114);
+        let mut rng = Rng::new(9);
+        for n in [1, 9, 25, 49] {
+            let net = MedianNetwork::new(n);
+            for _ in 0..200 {
+                // Few distinct values, so ties are common.
+                let input: Vec<[f32; MEDIAN_LANES]> = (0..n)
+                    .map(|_| std::array::from_fn(|_| (rng.gauss() * 3.0).round() as f32))
+                    .collect();
+                let want: [f32; MEDIAN_LANES] = std::array::from_fn(|l| {
+                    let mut col: Vec<f32> = input.iter().map(|v| v[l]).collect();
+                    col.sort_by(f32::total_cmp);
+                    col[n / 2]
+                });
+                let mut a = input.clone();
+                assert_eq!(net.run_portable(&mut a), Some(want), "n {n}");
+                let mut b = input.clone();
+                assert_eq!(net.run(&mut b), Some(want), "n {n}");
+            }
+            assert_eq!(net.run(&mut vec![[0.0; MEDIAN_LANES]; n - 1]), None);
         }
     }
 
