@@ -37,7 +37,7 @@ use serde::{Deserialize, Serialize};
 
 use super::optical_flow::FlowField;
 use super::{StageError, check_range};
-use crate::image::Image;
+use crate::image::{Image, zeros_par};
 use crate::io::Geometry;
 
 /// Knobs of [`estimate_depth`].
@@ -1162,28 +1162,39 @@ pub fn estimate_depth(
     } else {
         average(flows, width, height, geom, params, &mut warnings)
     };
-    let unmeasured = iota.iter().filter(|v| v.is_nan()).count();
+    let unmeasured = iota.par_iter().filter(|v| v.is_nan()).count();
     if unmeasured > 0 {
         warnings.push(format!(
             "{unmeasured} of {} pixels were never measured",
             width * height
         ));
     }
-    let mut smooth = vec![f32::NAN; width * height];
+    let mut smooth = zeros_par(width * height);
     median_filter(&iota, width, height, params.median_px, &mut smooth);
-    let mut nonpositive = 0;
-    let mut z = vec![f32::NAN; width * height];
-    let mut zvar = vec![f32::NAN; width * height];
-    for (((zo, vo), &io), &vi) in z.iter_mut().zip(zvar.iter_mut()).zip(&smooth).zip(&var) {
-        if io > 0.0 {
-            let io = f64::from(io);
-            *zo = (z_ref / io) as f32;
-            // Z = Z_ref/ι̃ → Var Z = Var ι̃ · Z_ref²/ι̃⁴.
-            *vo = (f64::from(vi) * (z_ref / (io * io)).powi(2)) as f32;
-        } else if io.is_finite() {
-            nonpositive += 1;
-        }
-    }
+    let mut z = zeros_par(width * height);
+    let mut zvar = zeros_par(width * height);
+    let nonpositive: usize = z
+        .par_chunks_mut(CHUNK_PX)
+        .zip(zvar.par_chunks_mut(CHUNK_PX))
+        .zip(smooth.par_chunks(CHUNK_PX).zip(var.par_chunks(CHUNK_PX)))
+        .map(|((zs, vs), (ios, vis))| {
+            let mut nonpositive = 0;
+            for (((zo, vo), &io), &vi) in zs.iter_mut().zip(vs.iter_mut()).zip(ios).zip(vis) {
+                (*zo, *vo) = if io > 0.0 {
+                    let io = f64::from(io);
+                    // Z = Z_ref/ι̃ → Var Z = Var ι̃ · Z_ref²/ι̃⁴.
+                    (
+                        (z_ref / io) as f32,
+                        (f64::from(vi) * (z_ref / (io * io)).powi(2)) as f32,
+                    )
+                } else {
+                    nonpositive += usize::from(io.is_finite());
+                    (f32::NAN, f32::NAN)
+                };
+            }
+            nonpositive
+        })
+        .sum();
     if nonpositive > 0 {
         warnings.push(format!(
             "{nonpositive} pixels have a non-positive inverse depth (flow toward +x) and are NaN"
