@@ -765,7 +765,7 @@ impl SplitState {
 
 /// Coefficients per plain pixel: `gx, gy, gt` = `Ix, Iy, It / sqrt(λ + Ix² + Iy²)`.
 const PLAIN_COEFS: usize = 3;
-/// Coefficients per groove pixel: `wu, wd, puu, puv, pvv, pu0, pv0` (see [`groove_px`]).
+/// Coefficients per groove pixel: `wu, wd, puu, puv, pvv, pu0, pv0` (see [`GrooveRow::fill`]).
 const GROOVE_COEFS: usize = 7;
 
 /// Which stencil the solver runs.
@@ -805,38 +805,51 @@ impl Problem {
         f: impl Fn(usize, &mut [Vec<f32>; C]) + Sync,
     ) -> Self {
         let (w, ne, no) = (lay.width, lay.ne, lay.no);
-        let mut coef_e = zeros_par(C * ne * lay.height);
-        let mut coef_o = zeros_par(C * no * lay.height);
+        let (len_e, len_o) = (C * ne * lay.height, C * no * lay.height);
+        let mut coef_e: Vec<f32> = Vec::with_capacity(len_e);
+        let mut coef_o: Vec<f32> = Vec::with_capacity(len_o);
         // Width ≥ 2 (checked by the caller), so both halves have columns; `max(1)` only keeps
         // the chunk size valid.
-        coef_e
+        coef_e.spare_capacity_mut()[..len_e]
             .par_chunks_mut((C * ne).max(1))
-            .zip(coef_o.par_chunks_mut((C * no).max(1)))
+            .zip(coef_o.spare_capacity_mut()[..len_o].par_chunks_mut((C * no).max(1)))
             .enumerate()
             .for_each_init(
                 || std::array::from_fn(|_| vec![0.0_f32; w]),
                 |rows: &mut [Vec<f32>; C], (y, (re, ro))| {
                     f(y, rows);
-                    for (k, full) in rows.iter().enumerate() {
+                    for (k, full) in rows.iter_mut().enumerate() {
+                        // `f` may not change the length: every column is split below.
+                        full.resize(w, 0.0);
                         let (Some(e), Some(o)) = (
                             re.get_mut(k * ne..(k + 1) * ne),
                             ro.get_mut(k * no..(k + 1) * no),
                         ) else {
                             continue;
                         };
+                        // `no` = ⌊w/2⌋ pairs fill o and the first `no` of e; an odd width's last
+                        // column is the last of e (ne = no + 1).
                         let pairs = full.chunks_exact(2);
                         if let (Some(&last), Some(e_last)) =
                             (pairs.remainder().first(), e.get_mut(no))
                         {
-                            *e_last = last;
+                            e_last.write(last);
                         }
                         for ((pair, de), d_o) in pairs.zip(e.iter_mut()).zip(o.iter_mut()) {
-                            *de = pair[0];
-                            *d_o = pair[1];
+                            de.write(pair[0]);
+                            d_o.write(pair[1]);
                         }
                     }
                 },
             );
+        // SAFETY: the capacities are at least `len_e` and `len_o`, and the loop above wrote
+        // every element of both: the chunks cover them, coefficient k of a chunk is the range
+        // k·n..(k + 1)·n of its half, and each range is filled in full (w columns split into
+        // ⌈w/2⌉ even and ⌊w/2⌋ odd ones).
+        unsafe {
+            coef_e.set_len(len_e);
+            coef_o.set_len(len_o);
+        }
         Self {
             lay: *lay,
             kernel,
@@ -871,13 +884,22 @@ impl Problem {
         focal_px: f64,
         params: &FlowParams,
     ) -> Self {
+        Self::groove_with(lay, d, walls, focal_px, params, Simd::detect())
+    }
+
+    /// [`Problem::groove`] built with the given instruction set.
+    fn groove_with(
+        lay: &Layout,
+        d: &Derivatives,
+        walls: &WallSideMap,
+        focal_px: f64,
+        params: &FlowParams,
+        simd: Simd,
+    ) -> Self {
         let (w, h) = (lay.width, lay.height);
         let lambda = f64::from(params.lambda);
         let gamma = f64::from(params.groove_weight) * lambda;
         let base = f64::from(d.base_flow_px);
-        let centre = (h as f64 - 1.0) * 0.5;
-        // k = c/(f − c·ŷ) of a constrained edge at height y_mid, for c = −1 and c = +1.
-        let ks = |y_mid: f64| [-1.0_f64, 1.0].map(|c| c / (focal_px - c * (y_mid - centre)));
         Self::build_rows::<GROOVE_COEFS>(
             lay,
             Kernel::Groove {
@@ -894,39 +916,28 @@ impl Problem {
                     return;
                 };
                 // A missing row above or below stands in as the row itself, with its edges
-                // switched off, so the loop below is branch-free and vectorises.
+                // switched off, so the loop over the row is branch-free and vectorises.
                 let (above, has_above) = y
                     .checked_sub(1)
                     .and_then(|yy| walls.sign.get(yy * w..(yy + 1) * w))
-                    .map_or((sides, 0.0), |r| (r, 1.0));
+                    .map_or((sides, false), |r| (r, true));
                 let (below, has_below) = walls
                     .sign
                     .get((y + 1) * w..(y + 2) * w)
-                    .map_or((sides, 0.0), |r| (r, 1.0));
-                let (k_above, k_below) = (ks(y as f64 - 0.5), ks(y as f64 + 0.5));
-                // Edge to the row above (o) and below (d): constrained when both ends share
-                // c ≠ 0; then (1, k of that side), else (0, 0).
-                let edge = |c: i8, other: i8, present: f64, k: &[f64; 2]| {
-                    let m = if c != 0 && other == c { present } else { 0.0 };
-                    let kc = if c > 0 { k[1] } else { k[0] };
-                    (m, if m != 0.0 { kc } else { 0.0 })
+                    .map_or((sides, false), |r| (r, true));
+                let row = GrooveRow {
+                    lambda: params.lambda,
+                    edges: groove_row_edges(y, h, focal_px, lambda, gamma, base),
+                    ix,
+                    iy,
+                    it,
+                    sides,
+                    above,
+                    below,
+                    has_above,
+                    has_below,
                 };
-                let mut outs = rows.each_mut().map(|r| &mut r[..w]);
-                let (ix, iy, it, above, below) =
-                    (&ix[..w], &iy[..w], &it[..w], &above[..w], &below[..w]);
-                for (x, &c) in sides[..w].iter().enumerate() {
-                    let v = groove_px(
-                        [ix[x], iy[x], it[x]].map(f64::from),
-                        lambda,
-                        gamma,
-                        base,
-                        edge(c, above[x], has_above, &k_above),
-                        edge(c, below[x], has_below, &k_below),
-                    );
-                    for (out, c) in outs.iter_mut().zip(v) {
-                        out[x] = c;
-                    }
-                }
+                simd.groove_row(&row, rows);
             },
         )
     }
@@ -1322,38 +1333,132 @@ fn abs_diff_sum(a: &[f32], b: &[f32]) -> f64 {
     f64::from(acc.iter().sum::<f32>()) + f64::from(tail)
 }
 
-/// Groove coefficients of one pixel (see the module docs):
-/// `[wu, wd, puu, puv, pvv, pu0, pv0]` such that with `N_u = q·Σ4u + wu·u_up + wd·u_down`,
-/// `N_v = q·Σ4v` (q = λ/4): `u = puu·N_u + puv·N_v + pu0`, `v = puv·N_u + pvv·N_v + pv0`.
-///
-/// `(m, k)` per vertical edge (o: above, d: below): m = 1 on a constrained wall edge with
-/// k = c/(f − c·ŷ), else (0, 0).
-fn groove_px(
-    [ix, iy, it]: [f64; 3],
+/// The edge terms of one row (see the module docs) for c = −1 (index 0) and c = +1 (1),
+/// computed in f64 and rounded once: `A − λ` and the weight of u across an edge above (o) or
+/// below (d), and the base-flow term of N_u for an edge above only, below only, or both. The
+/// last is kept whole because its two halves nearly cancel (k_o ≈ k_d).
+#[derive(Clone, Copy, Debug, Default)]
+struct RowEdges {
+    a_o: [f32; 2],
+    a_d: [f32; 2],
+    wu: [f32; 2],
+    wd: [f32; 2],
+    e_o: [f32; 2],
+    e_d: [f32; 2],
+    e_od: [f32; 2],
+}
+
+/// [`RowEdges`] of row `y`: an edge between rows at height y_mid carries
+/// k = c/(f − c·ŷ) (ŷ = y_mid about the image centre), α = 1 − k/2, β = 1 + k/2.
+fn groove_row_edges(
+    y: usize,
+    height: usize,
+    focal_px: f64,
     lambda: f64,
     gamma: f64,
     base: f64,
-    (m_o, k_o): (f64, f64),
-    (m_d, k_d): (f64, f64),
-) -> [f32; GROOVE_COEFS] {
+) -> RowEdges {
     let q = 0.25 * lambda;
     // A constrained edge carries (q + γ)·r_e² in place of q·(Δu)².
     let w = q + gamma;
-    let (alpha_o, beta_o) = (1.0 - 0.5 * k_o, 1.0 + 0.5 * k_o);
-    let (alpha_d, beta_d) = (1.0 - 0.5 * k_d, 1.0 + 0.5 * k_d);
-    let a = lambda + m_d * (w * alpha_d * alpha_d - q) + m_o * (w * beta_o * beta_o - q);
-    let wu = m_o * (w * alpha_o * beta_o - q);
-    let wd = m_d * (w * alpha_d * beta_d - q);
-    let e = -w * (m_o * beta_o * k_o - m_d * alpha_d * k_d) * base;
-    let inv_det = 1.0 / ((a + ix * ix) * (lambda + iy * iy) - ix * ix * iy * iy);
-    let puu = (lambda + iy * iy) * inv_det;
-    let puv = -ix * iy * inv_det;
-    let pvv = (a + ix * ix) * inv_det;
-    let ru = e - ix * it;
-    let rv = -iy * it;
-    let pu0 = puu * ru + puv * rv;
-    let pv0 = puv * ru + pvv * rv;
-    [wu, wd, puu, puv, pvv, pu0, pv0].map(|c| c as f32)
+    let centre = (height as f64 - 1.0) * 0.5;
+    let per_side = |f: &dyn Fn(f64, f64) -> f64| {
+        [-1.0_f64, 1.0].map(|c| {
+            let k = |y_mid: f64| c / (focal_px - c * (y_mid - centre));
+            f(k(y as f64 - 0.5), k(y as f64 + 0.5)) as f32
+        })
+    };
+    // α and β of the edge above (k_o) and below (k_d).
+    let (alpha, beta) = (|k: f64| 1.0 - 0.5 * k, |k: f64| 1.0 + 0.5 * k);
+    RowEdges {
+        a_o: per_side(&|k_o, _| w * beta(k_o) * beta(k_o) - q),
+        a_d: per_side(&|_, k_d| w * alpha(k_d) * alpha(k_d) - q),
+        wu: per_side(&|k_o, _| w * alpha(k_o) * beta(k_o) - q),
+        wd: per_side(&|_, k_d| w * alpha(k_d) * beta(k_d) - q),
+        e_o: per_side(&|k_o, _| -w * beta(k_o) * k_o * base),
+        e_d: per_side(&|_, k_d| w * alpha(k_d) * k_d * base),
+        e_od: per_side(&|k_o, k_d| -w * (beta(k_o) * k_o - alpha(k_d) * k_d) * base),
+    }
+}
+
+/// One image row of the groove coefficient build.
+struct GrooveRow<'a> {
+    lambda: f32,
+    edges: RowEdges,
+    ix: &'a [f32],
+    iy: &'a [f32],
+    it: &'a [f32],
+    /// Wall side per pixel of this row, the row above and the row below (a missing row stands
+    /// in as this one, with `has_*` false).
+    sides: &'a [i8],
+    above: &'a [i8],
+    below: &'a [i8],
+    has_above: bool,
+    has_below: bool,
+}
+
+impl GrooveRow<'_> {
+    /// Writes coefficient k of every column to `out[k]` (see the module docs):
+    /// `[wu, wd, puu, puv, pvv, pu0, pv0]` such that with `N_u = q·Σ4u + wu·u_up + wd·u_down`,
+    /// `N_v = q·Σ4v` (q = λ/4): `u = puu·N_u + puv·N_v + pu0`, `v = puv·N_u + pvv·N_v + pv0`.
+    /// The determinant is expanded to `(A + Ix²)(λ + Iy²) − Ix²Iy² = A·(λ + Iy²) + λ·Ix²`, a
+    /// sum of positive terms, so f32 keeps it accurate. Branch-free, so it vectorises.
+    #[inline(always)]
+    fn fill(&self, out: &mut [Vec<f32>; GROOVE_COEFS]) {
+        let w = self.sides.len();
+        let (Some(ix), Some(iy), Some(it), Some(above), Some(below)) = (
+            self.ix.get(..w),
+            self.iy.get(..w),
+            self.it.get(..w),
+            self.above.get(..w),
+            self.below.get(..w),
+        ) else {
+            return;
+        };
+        let [o_wu, o_wd, o_uu, o_uv, o_vv, o_u0, o_v0] = out.each_mut();
+        let (Some(o_wu), Some(o_wd), Some(o_uu), Some(o_uv), Some(o_vv), Some(o_u0), Some(o_v0)) = (
+            o_wu.get_mut(..w),
+            o_wd.get_mut(..w),
+            o_uu.get_mut(..w),
+            o_uv.get_mut(..w),
+            o_vv.get_mut(..w),
+            o_u0.get_mut(..w),
+            o_v0.get_mut(..w),
+        ) else {
+            return;
+        };
+        let (lambda, g) = (self.lambda, &self.edges);
+        let or0 = |m: bool, v: f32| if m { v } else { 0.0 };
+        for x in 0..w {
+            let c = self.sides[x];
+            // Constrained edges: both ends share c ≠ 0.
+            let m_o = c != 0 && self.has_above && above[x] == c;
+            let m_d = c != 0 && self.has_below && below[x] == c;
+            let s = usize::from(c > 0);
+            let pick = |v: [f32; 2]| if s == 1 { v[1] } else { v[0] };
+            let a = lambda + (or0(m_o, pick(g.a_o)) + or0(m_d, pick(g.a_d)));
+            let e = if m_o && m_d {
+                pick(g.e_od)
+            } else {
+                or0(m_o, pick(g.e_o)) + or0(m_d, pick(g.e_d))
+            };
+            let (gx, gy, gt) = (ix[x], iy[x], it[x]);
+            let (ix2, iy2) = (gx * gx, gy * gy);
+            let inv_det = 1.0 / (a * (lambda + iy2) + lambda * ix2);
+            let puu = (lambda + iy2) * inv_det;
+            let puv = -(gx * gy) * inv_det;
+            let pvv = (a + ix2) * inv_det;
+            let ru = e - gx * gt;
+            let rv = -(gy * gt);
+            o_wu[x] = or0(m_o, pick(g.wu));
+            o_wd[x] = or0(m_d, pick(g.wd));
+            o_uu[x] = puu;
+            o_uv[x] = puv;
+            o_vv[x] = pvv;
+            o_u0[x] = puu * ru + puv * rv;
+            o_v0[x] = puv * ru + pvv * rv;
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1382,6 +1487,17 @@ impl Simd {
         Simd::Baseline
     }
 
+    /// One row of the groove coefficients: see [`GrooveRow::fill`].
+    fn groove_row(self, row: &GrooveRow, out: &mut [Vec<f32>; GROOVE_COEFS]) {
+        match self {
+            Simd::Baseline => row.fill(out),
+            // SAFETY: `Simd::Avx2` is only created by `detect` after the CPU reported AVX2,
+            // which is all `groove_row_avx2` requires.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { groove_row_avx2(row, out) },
+        }
+    }
+
     /// Updates one half-row: see [`row_impl`].
     #[allow(clippy::too_many_arguments)]
     fn row<const GROOVE: bool, const RELAX: bool>(
@@ -1402,6 +1518,13 @@ impl Simd {
             Simd::Avx2 => unsafe { row_avx2::<GROOVE, RELAX>(k, odd, lr, up, dn, coef, dst) },
         }
     }
+}
+
+/// [`GrooveRow::fill`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn groove_row_avx2(row: &GrooveRow, out: &mut [Vec<f32>; GROOVE_COEFS]) {
+    row.fill(out);
 }
 
 /// [`row_impl`] compiled for AVX2.
@@ -1442,7 +1565,7 @@ fn plain_update(nb: Neighbours, gx: f32, gy: f32, gt: f32) -> (f32, f32) {
     (ub - gx * t, vb - gy * t)
 }
 
-/// Groove Horn–Schunck update from `[wu, wd, puu, puv, pvv, pu0, pv0]` (see [`groove_px`]).
+/// Groove Horn–Schunck update from `[wu, wd, puu, puv, pvv, pu0, pv0]` (see [`GrooveRow::fill`]).
 #[inline(always)]
 fn groove_update(q: f32, nb: Neighbours, c: [f32; GROOVE_COEFS]) -> (f32, f32) {
     let [wu, wd, puu, puv, pvv, pu0, pv0] = c;
@@ -2064,6 +2187,17 @@ mod tests {
             height: h,
             sign: (0..w * h).map(|i| [0, 1, -1][(i / w / 40) % 3]).collect(),
         };
+        let p = FlowParams::default();
+        let built = Problem::groove_with(&lay, &d, &walls, 100.0, &p, Simd::Baseline);
+        let fast = Problem::groove_with(&lay, &d, &walls, 100.0, &p, Simd::detect());
+        assert!(built.coef_e == fast.coef_e && built.coef_o == fast.coef_o);
+        assert!(
+            built
+                .coef_e
+                .iter()
+                .chain(&built.coef_o)
+                .all(|c| c.is_finite())
+        );
         for solver in [Solver::GaussSeidel, Solver::Jacobi] {
             for omega in [1.0, 1.7] {
                 let p = FlowParams {
