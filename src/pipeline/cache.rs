@@ -420,18 +420,28 @@ fn shift_flow(flow: &FlowField, shift_px: f64) -> FlowField {
                 let (Some(&first), Some(&end)) = (row.first(), row.last()) else {
                     return;
                 };
-                for (x, d) in dst.iter_mut().enumerate() {
-                    let xs = x as f64 + whole;
-                    *d = if xs < 0.0 {
-                        first
-                    } else if xs >= last as f64 {
-                        end
-                    } else {
-                        // In range: 0 ≤ i < last.
-                        let i = xs as usize;
-                        let (a, b) = (row[i], row[i + 1]);
-                        a + (b - a) * t
-                    };
+                // Column x reads i = x + whole: before the row, the first value; from the last
+                // column on, the last; in between, a + (b − a)·t of columns i and i + 1.
+                let n = dst.len().min(row.len());
+                let (lo, hi) = if whole >= 0.0 {
+                    let k = (whole as usize).min(n);
+                    (0, last.saturating_sub(k).min(n))
+                } else {
+                    let k = ((-whole) as usize).min(n);
+                    (k, n)
+                };
+                let k0 = (lo as f64 + whole) as usize;
+                let (head, rest) = dst.split_at_mut(lo);
+                let (mid, tail) = rest.split_at_mut(hi.max(lo) - lo);
+                head.fill(first);
+                tail.fill(end);
+                if let (Some(a), Some(b)) = (
+                    row.get(k0..k0 + mid.len()),
+                    row.get(k0 + 1..k0 + 1 + mid.len()),
+                ) {
+                    for ((d, &a), &b) in mid.iter_mut().zip(a).zip(b) {
+                        *d = a + (b - a) * t;
+                    }
                 }
             });
         Image {

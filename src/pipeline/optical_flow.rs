@@ -709,24 +709,32 @@ impl SplitState {
     fn from_images(lay: &Layout, u: &Image, v: &Image, base: f32) -> Self {
         let mut st = Self::zeros(lay);
         let w = lay.width;
-        let clean = |x: f32| if x.is_finite() { x } else { 0.0 };
+        // Splits a row into its even and odd columns.
+        let split = |row: &[f32], even: &mut [f32], odd: &mut [f32], base: f32| {
+            let clean = |x: f32| {
+                let y = x - base;
+                if y.is_finite() { y } else { 0.0 }
+            };
+            let pairs = row.chunks_exact(2);
+            if let (Some(&last), Some(e_last)) =
+                (pairs.remainder().first(), even.get_mut(odd.len()))
+            {
+                *e_last = clean(last);
+            }
+            for ((pair, e), o) in pairs.zip(even.iter_mut()).zip(odd.iter_mut()) {
+                *e = clean(pair[0]);
+                *o = clean(pair[1]);
+            }
+        };
         st.e.par_chunks_mut(2 * lay.ne)
             .zip(st.o.par_chunks_mut(2 * lay.no.max(1)))
             .zip(u.data.par_chunks(w))
             .zip(v.data.par_chunks(w))
             .for_each(|(((er, or), ur), vr)| {
                 let (eu, ev) = er.split_at_mut(lay.ne);
-                for (i, (a, b)) in eu.iter_mut().zip(ev.iter_mut()).enumerate() {
-                    *a = ur.get(2 * i).map_or(0.0, |&x| clean(x - base));
-                    *b = vr.get(2 * i).map_or(0.0, |&x| clean(x));
-                }
-                if lay.no > 0 {
-                    let (ou, ov) = or.split_at_mut(lay.no);
-                    for (i, (a, b)) in ou.iter_mut().zip(ov.iter_mut()).enumerate() {
-                        *a = ur.get(2 * i + 1).map_or(0.0, |&x| clean(x - base));
-                        *b = vr.get(2 * i + 1).map_or(0.0, |&x| clean(x));
-                    }
-                }
+                let (ou, ov) = or.split_at_mut(lay.no.min(or.len()));
+                split(ur, eu, ou, base);
+                split(vr, ev, ov, 0.0);
             });
         st
     }
@@ -736,23 +744,29 @@ impl SplitState {
         let (w, h) = (lay.width, lay.height);
         let mut u = zeros_par(w * h);
         let mut v = zeros_par(w * h);
+        // Interleaves a row's even and odd columns.
+        let merge = |row: &mut [f32], even: &[f32], odd: &[f32], base: f32| {
+            let mut pairs = row.chunks_exact_mut(2);
+            for ((pair, &e), &o) in (&mut pairs).zip(even).zip(odd) {
+                pair[0] = e + base;
+                pair[1] = o + base;
+            }
+            if let (Some(last), Some(&e_last)) =
+                (pairs.into_remainder().first_mut(), even.get(odd.len()))
+            {
+                *last = e_last + base;
+            }
+        };
         u.par_chunks_mut(w)
             .zip(v.par_chunks_mut(w))
             .zip(self.e.par_chunks(2 * lay.ne))
             .zip(self.o.par_chunks(2 * lay.no.max(1)))
             .for_each(|(((ur, vr), er), or)| {
                 let (eu, ev) = er.split_at(lay.ne);
-                for (i, (&a, &b)) in eu.iter().zip(ev).enumerate() {
-                    ur[2 * i] = a + base;
-                    vr[2 * i] = b;
-                }
-                if lay.no > 0 {
-                    let (ou, ov) = or.split_at(lay.no);
-                    for (i, (&a, &b)) in ou.iter().zip(ov).enumerate() {
-                        ur[2 * i + 1] = a + base;
-                        vr[2 * i + 1] = b;
-                    }
-                }
+                let (ou, ov) = or.split_at(lay.no.min(or.len()));
+                merge(ur, eu, ou, base);
+                // Adding −0 leaves every value, −0 included, as it is.
+                merge(vr, ev, ov, -0.0);
             });
         let wrap = |data| Image {
             width: w,
