@@ -322,6 +322,138 @@ impl Filter {
         }
     }
 
+    /// The measurement information of row `y` summed directly over the (2r+1)² window in f32
+    /// (r ≤ [`DIRECT_WINDOW_MAX_R`]): the vertical moments of each column relative to row y,
+    /// then the horizontal sums of those relative to each pixel. Pixels outside the image
+    /// weigh 0. Fills `sc.info` (zeroed by the caller).
+    #[inline(always)]
+    fn direct_info(&self, y: usize, meas: &Measurements, sc: &mut SweepScratch) {
+        let (w, h, r) = (self.width, self.height, self.r);
+        let inv_r = (1.0 / self.noise_var) as f32;
+        let padded = w + 2 * r;
+        sc.moments.clear();
+        sc.moments.resize(5 * padded, 0.0);
+        let [m0, m1, m2, m3, m4] = split5(&mut sc.moments, padded);
+        for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+            let (Some(wr), Some(mr)) = (
+                meas.w.get(yy * w..(yy + 1) * w),
+                meas.wm.get(yy * w..(yy + 1) * w),
+            ) else {
+                continue;
+            };
+            let dy = yy as f32 - y as f32;
+            let cols = m0[r..r + w]
+                .iter_mut()
+                .zip(&mut m1[r..r + w])
+                .zip(&mut m2[r..r + w])
+                .zip(&mut m3[r..r + w])
+                .zip(&mut m4[r..r + w]);
+            for (((((c0, c1), c2), c3), c4), (&wv, &mv)) in cols.zip(wr.iter().zip(mr)) {
+                *c0 += wv;
+                *c1 += dy * wv;
+                *c2 += dy * dy * wv;
+                *c3 += mv;
+                *c4 += dy * mv;
+            }
+        }
+        // info block p accumulates Σ_dx weight(dx)·moment[x + dx] for its moment and dx power:
+        // (αα: dx², Σw), (αβ: dx, Σw·dy), (αι: dx, Σw), (ββ: 1, Σw·dy²), (βι: 1, Σw·dy),
+        // (ιι: 1, Σw), (α: dx, Σwm), (β: 1, Σwm·dy), (ι: 1, Σwm).
+        let terms: [(u32, &[f32]); 9] = [
+            (2, m0),
+            (1, m1),
+            (1, m0),
+            (0, m2),
+            (0, m1),
+            (0, m0),
+            (1, m3),
+            (0, m4),
+            (0, m3),
+        ];
+        for (out, (power, moment)) in sc.info.chunks_exact_mut(w).zip(terms) {
+            for dx in 0..=2 * r {
+                let d = dx as f32 - r as f32;
+                let f = d.powi(power as i32);
+                if let Some(src) = moment.get(dx..dx + w) {
+                    for (o, &m) in out.iter_mut().zip(src) {
+                        *o += f * m;
+                    }
+                }
+            }
+            for o in out.iter_mut() {
+                *o *= inv_r;
+            }
+        }
+    }
+
+    /// The measurement information of row `y` from the column sums `vs` slid down the band
+    /// (absolute rows), by prefix sums along the row in f64: for any window size. Fills
+    /// `sc.info` (zeroed by the caller) where the window holds weight.
+    fn prefix_info(&self, y: usize, vs: &[ColumnSums], sc: &mut SweepScratch) {
+        let (w, r) = (self.width, self.r);
+        let yf = y as f64;
+        let inv_r = 1.0 / self.noise_var;
+        // Prefix sums along the row of the column sums taken relative to row y
+        // (Σw, Σw·dy, Σw·dy², Σwm, Σwm·dy), weighted by the absolute column X and X²:
+        // pre[X] = Σ_{X′<X} [c0, c0·X′, c0·X′², c1, c1·X′, c2, c3, c3·X′, c4].
+        sc.prefix.clear();
+        sc.prefix.reserve(w + 1);
+        let mut acc = [0.0_f64; 9];
+        sc.prefix.push(acc);
+        for (xc, c) in vs.iter().enumerate() {
+            let xf = xc as f64;
+            let c1 = c[1] - yf * c[0];
+            let c2 = c[2] - 2.0 * yf * c[1] + yf * yf * c[0];
+            let c4 = c[4] - yf * c[3];
+            let terms = [
+                c[0],
+                c[0] * xf,
+                c[0] * xf * xf,
+                c1,
+                c1 * xf,
+                c2,
+                c[3],
+                c[3] * xf,
+                c4,
+            ];
+            for (a, v) in acc.iter_mut().zip(terms) {
+                *a += v;
+            }
+            sc.prefix.push(acc);
+        }
+        // Window sums over x − r ..= x + r, moved to dx = X − x:
+        // Σc·dx = T1 − x·T0, Σc·dx² = T2 − 2x·T1 + x²·T0. Then
+        // J = Σ w·h·hᵀ/R packed (αα, αβ, αι, ββ, βι, ιι) and b = Σ w·m·h/R.
+        for x in 0..w {
+            let (Some(hi), Some(lo)) = (
+                sc.prefix.get((x + r + 1).min(w)),
+                sc.prefix.get(x.saturating_sub(r)),
+            ) else {
+                continue;
+            };
+            let t: [f64; 9] = std::array::from_fn(|i| hi[i] - lo[i]);
+            if t[0] > 0.0 {
+                let xf = x as f64;
+                let v = [
+                    t[2] - 2.0 * xf * t[1] + xf * xf * t[0],
+                    t[4] - xf * t[3],
+                    t[1] - xf * t[0],
+                    t[5],
+                    t[3],
+                    t[0],
+                    t[7] - xf * t[6],
+                    t[8],
+                    t[6],
+                ];
+                for (p, e) in v.into_iter().enumerate() {
+                    if let Some(d) = sc.info.get_mut(p * w + x) {
+                        *d = (e * inv_r) as f32;
+                    }
+                }
+            }
+        }
+    }
+
     /// One row of one frame: prediction from the previous frame (when `steps` is Some) fused
     /// with the measurement update from the column sums `vs` of the window about row `y`.
     /// Returns the number of diverged predictions.
@@ -332,80 +464,26 @@ impl Filter {
     /// place, which is safe because content moves toward −x: a pixel's source cells lie at or
     /// right of it and are read before its block is written.
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn sweep_row(
         &self,
         y: usize,
         row: &mut [Cell],
         vs: &[ColumnSums],
+        meas: &Measurements,
         steps: Option<f64>,
         measured: bool,
         sc: &mut SweepScratch,
     ) -> usize {
         let (w, r) = (self.width, self.r);
-        let yf = y as f64;
-        let inv_r = 1.0 / self.noise_var;
         let k = self.land_shift_px * steps.unwrap_or(0.0);
         // Phase A.
         sc.info.clear();
-        sc.info.resize(w, [0.0; 9]);
-        if measured {
-            // Prefix sums along the row of the column sums taken relative to row y
-            // (Σw, Σw·dy, Σw·dy², Σwm, Σwm·dy), weighted by the absolute column X and X²:
-            // pre[X] = Σ_{X′<X} [c0, c0·X′, c0·X′², c1, c1·X′, c2, c3, c3·X′, c4].
-            sc.prefix.clear();
-            sc.prefix.reserve(w + 1);
-            let mut acc = [0.0_f64; 9];
-            sc.prefix.push(acc);
-            for (xc, c) in vs.iter().enumerate() {
-                let xf = xc as f64;
-                let c1 = c[1] - yf * c[0];
-                let c2 = c[2] - 2.0 * yf * c[1] + yf * yf * c[0];
-                let c4 = c[4] - yf * c[3];
-                let terms = [
-                    c[0],
-                    c[0] * xf,
-                    c[0] * xf * xf,
-                    c1,
-                    c1 * xf,
-                    c2,
-                    c[3],
-                    c[3] * xf,
-                    c4,
-                ];
-                for (a, v) in acc.iter_mut().zip(terms) {
-                    *a += v;
-                }
-                sc.prefix.push(acc);
-            }
-            // Window sums over x − r ..= x + r, moved to dx = X − x:
-            // Σc·dx = T1 − x·T0, Σc·dx² = T2 − 2x·T1 + x²·T0. Then
-            // J = Σ w·h·hᵀ/R packed (αα, αβ, αι, ββ, βι, ιι) and b = Σ w·m·h/R.
-            for (x, info) in sc.info.iter_mut().enumerate() {
-                let (Some(hi), Some(lo)) = (
-                    sc.prefix.get((x + r + 1).min(w)),
-                    sc.prefix.get(x.saturating_sub(r)),
-                ) else {
-                    continue;
-                };
-                let t: [f64; 9] = std::array::from_fn(|i| hi[i] - lo[i]);
-                if t[0] > 0.0 {
-                    let xf = x as f64;
-                    let v = [
-                        t[2] - 2.0 * xf * t[1] + xf * xf * t[0],
-                        t[4] - xf * t[3],
-                        t[1] - xf * t[0],
-                        t[5],
-                        t[3],
-                        t[0],
-                        t[7] - xf * t[6],
-                        t[8],
-                        t[6],
-                    ];
-                    for (d, e) in info.iter_mut().zip(v) {
-                        *d = (e * inv_r) as f32;
-                    }
-                }
-            }
+        sc.info.resize(9 * w, 0.0);
+        if measured && r <= DIRECT_WINDOW_MAX_R {
+            self.direct_info(y, meas, sc);
+        } else if measured {
+            self.prefix_info(y, vs, sc);
         }
         sc.src.clear();
         if steps.is_some() {
@@ -457,10 +535,10 @@ impl Filter {
                 for (p, s) in st.iter_mut().enumerate() {
                     s[l] = cell[p];
                 }
-                if let Some(src) = sc.info.get(x).filter(|_| l < n) {
-                    for (p, d) in info.iter_mut().enumerate() {
-                        d[l] = src[p];
-                    }
+            }
+            for (p, d) in info.iter_mut().enumerate() {
+                if let Some(src) = sc.info.get(p * w + x0..p * w + x0 + n) {
+                    d[..n].copy_from_slice(src);
                 }
             }
             if let Some(steps) = steps {
@@ -532,10 +610,12 @@ impl Filter {
     ) -> usize {
         let (w, h, r) = (self.width, self.height, self.r);
         let measured = meas.valid > 0;
+        // Column sums slid down the band: only for windows too wide to sum directly.
+        let slid = measured && r > DIRECT_WINDOW_MAX_R;
         let mut vs = std::mem::take(&mut sc.vs);
         vs.clear();
         vs.resize(w, [0.0; 5]);
-        if measured {
+        if slid {
             for yy in y0.saturating_sub(r)..(y0 + r).min(h) {
                 self.slide(&mut vs, meas, yy, 1.0);
             }
@@ -543,7 +623,7 @@ impl Filter {
         let mut diverged = 0;
         for (i, row) in band.chunks_mut(w).enumerate() {
             let y = y0 + i;
-            if measured {
+            if slid {
                 if y + r < h {
                     self.slide(&mut vs, meas, y + r, 1.0);
                 }
@@ -551,11 +631,25 @@ impl Filter {
                     self.slide(&mut vs, meas, y - r - 1, -1.0);
                 }
             }
-            diverged += self.sweep_row(y, row, &vs, steps, measured, sc);
+            diverged += self.sweep_row(y, row, &vs, meas, steps, measured, sc);
         }
         sc.vs = vs;
         diverged
     }
+}
+
+/// Largest neighbourhood half-side whose window sums are taken directly in f32 (O(r) work per
+/// pixel); larger windows use running sums in f64.
+const DIRECT_WINDOW_MAX_R: usize = 4;
+
+/// The five consecutive blocks of length `n` at the start of `v`.
+fn split5(v: &mut [f32], n: usize) -> [&mut [f32]; 5] {
+    let (a, rest) = v.split_at_mut(n);
+    let (b, rest) = rest.split_at_mut(n);
+    let (c, rest) = rest.split_at_mut(n);
+    let (d, rest) = rest.split_at_mut(n);
+    let (e, _) = rest.split_at_mut(n);
+    [a, b, c, d, e]
 }
 
 /// Pixels predicted and updated together (f32 lanes the compiler maps onto SIMD registers).
@@ -568,8 +662,12 @@ type Lane = [f32; LANES];
 struct SweepScratch {
     /// Vertical window sums per column.
     vs: Vec<ColumnSums>,
-    /// Per pixel: J (αα, αβ, αι, ββ, βι, ιι) and b (α, β, ι) of this frame.
-    info: Vec<[f32; 9]>,
+    /// J (αα, αβ, αι, ββ, βι, ιι) and b (α, β, ι) of this frame, one block of the row's
+    /// pixels each.
+    info: Vec<f32>,
+    /// Per column (padded by r zero columns each side): the window's vertical moments
+    /// Σw, Σw·dy, Σw·dy², Σwm, Σwm·dy, one block each (direct window sums).
+    moments: Vec<f32>,
     /// Per pixel: source cell and interpolation weight of the prediction (u32::MAX: prior).
     src: Vec<(u32, f32)>,
     /// Prefix sums along the row of the window moments.
@@ -1382,6 +1480,52 @@ mod tests {
         let bits = |s: &[Cell]| -> Vec<u32> { s.iter().flatten().map(|v| v.to_bits()).collect() };
         assert!(plain.iter().flatten().any(|&v| v != 1.0 && v.is_finite()));
         assert_eq!(bits(&plain), bits(&simd));
+    }
+
+    #[test]
+    fn direct_and_prefix_window_sums_agree() {
+        let g = paper_geometry();
+        let (w, h) = (41, 23);
+        let flows = plane_flows(w, h, 1, &g, [4000.0, 0.3, -0.5], 0.05, 7);
+        let land = g.focal_px * g.frame_step_um / g.working_distance_um;
+        let mut meas = Measurements::default();
+        meas.fill(&flows[0], -land, 1e-3);
+        // Some pixels without weight, so windows are partly empty.
+        for i in (0..w * h).step_by(5) {
+            meas.w[i] = 0.0;
+            meas.wm[i] = 0.0;
+        }
+        for r in 1..=DIRECT_WINDOW_MAX_R {
+            let filter = Filter {
+                width: w,
+                height: h,
+                r,
+                land_shift_px: land,
+                noise_var: 1e-4 / (land * land),
+                q: [0.0; 3],
+                p0: [1.0; 3],
+            };
+            for y in [0, r, h / 2, h - 1] {
+                let mut vs = vec![[0.0; 5]; w];
+                for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
+                    filter.slide(&mut vs, &meas, yy, 1.0);
+                }
+                let mut sc = SweepScratch::default();
+                sc.info = vec![0.0; 9 * w];
+                filter.prefix_info(y, &vs, &mut sc);
+                let want = std::mem::take(&mut sc.info);
+                sc.info = vec![0.0; 9 * w];
+                filter.direct_info(y, &meas, &mut sc);
+                let scale = want.iter().fold(0.0_f32, |m, v| m.max(v.abs()));
+                assert!(scale > 0.0);
+                for (i, (a, b)) in sc.info.iter().zip(&want).enumerate() {
+                    assert!(
+                        (a - b).abs() <= 1e-5 * scale,
+                        "r {r} y {y} [{i}]: {a} vs {b}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
