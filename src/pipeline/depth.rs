@@ -1510,8 +1510,10 @@ mod tests {
                 for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
                     filter.slide(&mut vs, &meas, yy, 1.0);
                 }
-                let mut sc = SweepScratch::default();
-                sc.info = vec![0.0; 9 * w];
+                let mut sc = SweepScratch {
+                    info: vec![0.0; 9 * w],
+                    ..SweepScratch::default()
+                };
                 filter.prefix_info(y, &vs, &mut sc);
                 let want = std::mem::take(&mut sc.info);
                 sc.info = vec![0.0; 9 * w];
