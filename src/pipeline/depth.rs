@@ -468,7 +468,7 @@ impl Filter {
     fn sweep_row(
         &self,
         y: usize,
-        row: &mut [Cell],
+        row: &mut [f32],
         vs: &[ColumnSums],
         meas: &Measurements,
         steps: Option<f64>,
@@ -487,8 +487,9 @@ impl Filter {
         }
         sc.src.clear();
         if steps.is_some() {
+            let iotas = row.get(IOTA * w..(IOTA + 1) * w).unwrap_or_default();
             for x in 0..w {
-                let iota = row.get(x).map_or(f64::NAN, |c| f64::from(c[IOTA]));
+                let iota = iotas.get(x).map_or(f64::NAN, |&v| f64::from(v));
                 let xs = x as f64 + k * iota;
                 let i0 = xs.floor();
                 // The source lies at or right of x; anything else (new content entering at the
@@ -507,34 +508,55 @@ impl Filter {
         let mut x0 = 0;
         while x0 < w {
             let n = LANES.min(w - x0);
-            let mut st = [[0.0_f32; LANES]; PLANES];
+            let mut st: [Lane; PLANES] = std::array::from_fn(|p| [prior[p]; LANES]);
             let mut info = [[0.0_f32; LANES]; 9];
             let mut fresh = [true; LANES];
-            for l in 0..LANES {
-                let x = x0 + l;
-                let cell = if l >= n {
-                    prior
-                } else if steps.is_some() {
-                    match sc.src.get(x) {
-                        Some(&(i, tt)) if i != u32::MAX => {
-                            let i = i as usize;
-                            match (row.get(i), row.get(i + 1)) {
-                                (Some(a), Some(b)) => {
-                                    fresh[l] = false;
-                                    std::array::from_fn(|p| a[p] + (b[p] - a[p]) * tt)
-                                }
-                                _ => prior,
+            if steps.is_some() {
+                let srcs = sc.src.get(x0..x0 + n).unwrap_or_default();
+                // Usually every lane reads the same offset d: cells x0 + d + l and the next.
+                let d = srcs
+                    .first()
+                    .map_or(w, |&(i, _)| (i as usize).saturating_sub(x0));
+                let uniform = n == LANES
+                    && x0.saturating_add(d).saturating_add(LANES) < w
+                    && srcs
+                        .iter()
+                        .enumerate()
+                        .all(|(l, &(i, _))| i as usize == x0 + d + l);
+                if uniform {
+                    let t: Lane = std::array::from_fn(|l| srcs.get(l).map_or(0.0, |s| s.1));
+                    for (p, s) in st.iter_mut().enumerate() {
+                        let at = p * w + x0 + d;
+                        if let (Some(a), Some(b)) =
+                            (row.get(at..at + LANES), row.get(at + 1..at + 1 + LANES))
+                        {
+                            *s = lanes(|l| a[l] + (b[l] - a[l]) * t[l]);
+                        }
+                    }
+                    fresh = [false; LANES];
+                } else {
+                    for (l, &(i, tt)) in srcs.iter().enumerate() {
+                        let i = i as usize;
+                        if i == u32::MAX as usize || i + 1 >= w {
+                            continue;
+                        }
+                        for (p, s) in st.iter_mut().enumerate() {
+                            if let (Some(&a), Some(&b)) =
+                                (row.get(p * w + i), row.get(p * w + i + 1))
+                            {
+                                s[l] = a + (b - a) * tt;
                             }
                         }
-                        _ => prior,
+                        fresh[l] = false;
                     }
-                } else {
-                    fresh[l] = false;
-                    row.get(x).copied().unwrap_or(prior)
-                };
-                for (p, s) in st.iter_mut().enumerate() {
-                    s[l] = cell[p];
                 }
+            } else {
+                for (p, s) in st.iter_mut().enumerate() {
+                    if let Some(src) = row.get(p * w + x0..p * w + x0 + n) {
+                        s[..n].copy_from_slice(src);
+                    }
+                }
+                fresh[..n].fill(false);
             }
             for (p, d) in info.iter_mut().enumerate() {
                 if let Some(src) = sc.info.get(p * w + x0..p * w + x0 + n) {
@@ -553,9 +575,9 @@ impl Filter {
             if measured {
                 update_lanes(&mut st, &info);
             }
-            if let Some(cells) = row.get_mut(x0..x0 + n) {
-                for (l, cell) in cells.iter_mut().enumerate() {
-                    *cell = std::array::from_fn(|p| st[p][l]);
+            for (p, s) in st.iter().enumerate() {
+                if let Some(dst) = row.get_mut(p * w + x0..p * w + x0 + n) {
+                    dst.copy_from_slice(&s[..n]);
                 }
             }
             x0 += LANES;
@@ -569,7 +591,7 @@ impl Filter {
     fn frame_band(
         &self,
         y0: usize,
-        band: &mut [Cell],
+        band: &mut [f32],
         meas: &Measurements,
         steps: Option<f64>,
         sc: &mut SweepScratch,
@@ -590,7 +612,7 @@ impl Filter {
     fn frame_band_avx2(
         &self,
         y0: usize,
-        band: &mut [Cell],
+        band: &mut [f32],
         meas: &Measurements,
         steps: Option<f64>,
         sc: &mut SweepScratch,
@@ -603,7 +625,7 @@ impl Filter {
     fn frame_band_impl(
         &self,
         y0: usize,
-        band: &mut [Cell],
+        band: &mut [f32],
         meas: &Measurements,
         steps: Option<f64>,
         sc: &mut SweepScratch,
@@ -621,7 +643,7 @@ impl Filter {
             }
         }
         let mut diverged = 0;
-        for (i, row) in band.chunks_mut(w).enumerate() {
+        for (i, row) in band.chunks_mut(PLANES * w).enumerate() {
             let y = y0 + i;
             if slid {
                 if y + r < h {
@@ -1054,8 +1076,12 @@ fn kalman(
     warnings: &mut Vec<String>,
 ) -> (Vec<f32>, Vec<f32>) {
     let (w, h) = (filter.width, filter.height);
-    let mut state: Vec<Cell> = Vec::new();
-    state.par_extend(rayon::iter::repeat_n(filter.prior(), w * h));
+    // Per row, one block of w values for each state plane.
+    let prior = filter.prior();
+    let mut state = zeros_par(PLANES * w * h);
+    state.par_chunks_mut(w).enumerate().for_each(|(i, plane)| {
+        plane.fill(prior.get(i % PLANES).copied().unwrap_or(0.0));
+    });
     let mut meas = Measurements::default();
     let mut prev_index: Option<usize> = None;
     let mut diverged = 0;
@@ -1066,7 +1092,7 @@ fn kalman(
         prev_index = Some(flow.frame_index);
         let meas = &meas;
         diverged += state
-            .par_chunks_mut(BAND_ROWS * w)
+            .par_chunks_mut(BAND_ROWS * PLANES * w)
             .enumerate()
             .map_init(SweepScratch::default, |sc, (band, rows)| {
                 filter.frame_band(band * BAND_ROWS, rows, meas, steps, sc)
@@ -1079,17 +1105,27 @@ fn kalman(
         ));
     }
     let limit = (UNMEASURED_SHARE * INITIAL_VARIANCE) as f32;
-    state
-        .par_iter()
-        .map(|c| {
-            let (i, v) = (c[IOTA], c[VAR_IOTA]);
-            if v.is_finite() && v < limit && i.is_finite() {
-                (i, v)
-            } else {
-                (f32::NAN, f32::NAN)
+    let mut iota = zeros_par(w * h);
+    let mut var = zeros_par(w * h);
+    iota.par_chunks_mut(w)
+        .zip(var.par_chunks_mut(w))
+        .zip(state.par_chunks(PLANES * w))
+        .for_each(|((io_row, var_row), row)| {
+            let (Some(is), Some(vs)) = (
+                row.get(IOTA * w..(IOTA + 1) * w),
+                row.get(VAR_IOTA * w..(VAR_IOTA + 1) * w),
+            ) else {
+                return;
+            };
+            for (((o, ov), &i), &v) in io_row.iter_mut().zip(var_row.iter_mut()).zip(is).zip(vs) {
+                (*o, *ov) = if v.is_finite() && v < limit && i.is_finite() {
+                    (i, v)
+                } else {
+                    (f32::NAN, f32::NAN)
+                };
             }
-        })
-        .unzip()
+        });
+    (iota, var)
 }
 
 /// Adds the warnings about one flow field (dropped, non-finite flow, frame gap).
@@ -1465,7 +1501,8 @@ mod tests {
                 INITIAL_VARIANCE,
             ],
         };
-        let mut plain = vec![filter.prior(); w * h];
+        let prior = filter.prior();
+        let mut plain: Vec<f32> = (0..h * PLANES * w).map(|i| prior[i / w % PLANES]).collect();
         let mut simd = plain.clone();
         let mut meas = Measurements::default();
         for (k, flow) in flows.iter().enumerate() {
@@ -1477,8 +1514,8 @@ mod tests {
             let b = unsafe { filter.frame_band_avx2(0, &mut simd, &meas, steps, &mut sc) };
             assert_eq!(a, b);
         }
-        let bits = |s: &[Cell]| -> Vec<u32> { s.iter().flatten().map(|v| v.to_bits()).collect() };
-        assert!(plain.iter().flatten().any(|&v| v != 1.0 && v.is_finite()));
+        let bits = |s: &[f32]| -> Vec<u32> { s.iter().map(|v| v.to_bits()).collect() };
+        assert!(plain.iter().any(|&v| v != 1.0 && v.is_finite()));
         assert_eq!(bits(&plain), bits(&simd));
     }
 
