@@ -13,9 +13,10 @@
 //! confidence ≥ `min_confidence` gives m = u/u_land = ι̃ + α̃·dx + β̃·dy + noise, with
 //! u_land = −f·U/Z_ref, dx = x − x₀, dy = y − y₀ and noise variance
 //! `measurement_noise_px2`/(u_land²·w), w = confidence / mean confidence of the frame. The
-//! weighted least-squares information J = Σ w·h·hᵀ/R, b = Σ w·m·h/R (h = (dx, dy, 1)) comes from
-//! running box sums (no per-pixel window loops), and the update is the information-form Kalman
-//! step Λ⁺ = P⁻¹ + J, µ⁺ = (Λ⁺)⁻¹·(P⁻¹·µ + b).
+//! weighted least-squares information J = Σ w·h·hᵀ/R, b = Σ w·m·h/R (h = (dx, dy, 1)) is summed
+//! separably (vertical moments per column, then along the row): directly in f32 for windows up
+//! to 9×9, by running and prefix sums in f64 for wider ones. The update is the information-form
+//! Kalman step Λ⁺ = P⁻¹ + J, µ⁺ = (Λ⁺)⁻¹·(P⁻¹·µ + b).
 //!
 //! **Prediction (state transform under a translation U along X).** The plane
 //! 1/Z = α(x − cx) + β(y − cy) + γ is, in camera coordinates, f·α·X + f·β·Y + γ·Z = 1. After
@@ -458,11 +459,13 @@ impl Filter {
     /// with the measurement update from the column sums `vs` of the window about row `y`.
     /// Returns the number of diverged predictions.
     ///
-    /// Phase A: prefix sums along the row of the column moments give each pixel's information
-    /// J and b by differences, and the old state gives its source position x + f·U·ι·steps. Phase B then
-    /// predicts and updates [`LANES`] pixels at a time in f32 lanes; it overwrites cells in
-    /// place, which is safe because content moves toward −x: a pixel's source cells lie at or
-    /// right of it and are read before its block is written.
+    /// `row` holds the row's state planar: one block of w values per state term.
+    ///
+    /// Phase A: each pixel's information J and b ([`Filter::direct_info`] or
+    /// [`Filter::prefix_info`]), and from the old state its source position
+    /// x + f·U·ι·steps. Phase B then predicts and updates [`LANES`] pixels at a time in f32
+    /// lanes; it overwrites the state in place, which is safe because content moves toward −x:
+    /// a pixel's sources lie at or right of it and are read before its block is written.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn sweep_row(
