@@ -88,9 +88,9 @@
 //! of rows in cache while they are updated `2K` times (trapezoids per thread, then the small
 //! inverted triangles at the band seams). Red–black Gauss–Seidel and Jacobi (ping-pong
 //! buffers) share this machinery. Convergence (`mean |Δu| + |Δv| < τ`) is measured on the
-//! last iteration of each block; after two blocks, the next one is cut to the iterations a
-//! geometric fit of the measured changes predicts are still needed, so a solve stops close
-//! to where τ is reached rather than up to a whole block past it.
+//! last iteration of each block, and also on its middle one; the next block is cut to the
+//! iterations a geometric fit of those two changes predicts are still needed, so a solve
+//! stops close to where τ is reached rather than up to a whole block past it.
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -1012,7 +1012,7 @@ impl Problem {
             let k = next.min(max - done);
             let levels = k * per_iteration;
             let bands = threads.min(lay.height / (2 * levels + 2)).max(1);
-            let delta = match other.as_mut() {
+            let (mid, delta) = match other.as_mut() {
                 None => self.block(simd, &mut [&mut *st], levels, bands, params.sor_omega),
                 Some(b) => {
                     let delta = self.block(simd, &mut [&mut *st, &mut *b], levels, bands, 1.0);
@@ -1028,8 +1028,11 @@ impl Problem {
                 return (u32::try_from(done).unwrap_or(u32::MAX), true);
             }
             if block_override.is_none() {
-                next = last
-                    .and_then(|before| iterations_to_tolerance(before, (done, per_px), tolerance))
+                // The decay rate from the block's middle iteration (or, for a short block, the
+                // previous block's last) to its last one predicts the iterations still needed.
+                let before = (k >= 2).then(|| (done - k + k / 2, mid / pixels)).or(last);
+                next = before
+                    .and_then(|b| iterations_to_tolerance(b, (done, per_px), tolerance))
                     .unwrap_or(block_iterations)
                     .clamp(1, block_iterations);
             }
@@ -1043,7 +1046,7 @@ impl Problem {
     /// blocked: each of `bands` row bands first runs the trapezoid that needs no rows of its
     /// neighbours (a wavefront, so the rows being updated stay in cache), then the inverted
     /// triangles around each band seam finish the levels. Returns Σ(|Δu| + |Δv|) over the
-    /// last iteration.
+    /// middle iteration (the ⌊k/2⌋-th of k; 0 when k < 2) and over the last one.
     fn block(
         &self,
         simd: Simd,
@@ -1051,26 +1054,31 @@ impl Problem {
         levels: usize,
         bands: usize,
         omega: f32,
-    ) -> f64 {
+    ) -> (f64, f64) {
         let h = self.lay.height;
         let bounds: Vec<(usize, usize)> = (0..bands)
             .map(|b| (b * h / bands, (b + 1) * h / bands))
             .collect();
-        let measure_from = if states.len() == 1 {
-            levels.saturating_sub(2)
-        } else {
-            levels - 1
-        };
+        // Levels per iteration: two half-sweeps (red–black, one state) or one sweep (Jacobi).
+        let per = if states.len() == 1 { 2 } else { 1 };
+        let iterations = levels / per;
+        let mid = iterations / 2;
         let sched = Schedule {
             levels,
-            measure_from,
+            measure_from: levels.saturating_sub(per),
+            mid: if mid >= 1 && mid < iterations {
+                (mid - 1) * per..mid * per
+            } else {
+                0..0
+            },
             omega,
         };
         let chunks = split_chunks(&self.lay, states, &bounds);
-        let mut delta: f64 = chunks
+        let add = |a: (f64, f64), b: (f64, f64)| (a.0 + b.0, a.1 + b.1);
+        let mut delta = chunks
             .into_par_iter()
             .map(|mut ch| self.phase_one(simd, &mut ch, &sched))
-            .sum();
+            .reduce(|| (0.0, 0.0), add);
         if bands > 1 {
             let reach = levels + 1;
             let zones: Vec<(usize, usize)> = bounds[1..]
@@ -1078,17 +1086,20 @@ impl Problem {
                 .map(|&(seam, _)| (seam - reach, seam + reach))
                 .collect();
             let chunks = split_chunks(&self.lay, states, &zones);
-            delta += chunks
-                .into_par_iter()
-                .map(|mut ch| self.phase_two(simd, &mut ch, &sched))
-                .sum::<f64>();
+            delta = add(
+                delta,
+                chunks
+                    .into_par_iter()
+                    .map(|mut ch| self.phase_two(simd, &mut ch, &sched))
+                    .reduce(|| (0.0, 0.0), add),
+            );
         }
         delta
     }
 
     /// The band's own trapezoid: level h covers rows `[a + h + 1, b − h − 1)` (no shrink at
     /// the image top and bottom), visited as a wavefront (row s − h at step s).
-    fn phase_one(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) -> f64 {
+    fn phase_one(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) -> (f64, f64) {
         let (a, b, h_img) = (ch.y0, ch.y0 + ch.rows, self.lay.height);
         let lo = |lvl: usize| if a == 0 { 0 } else { a + lvl + 1 };
         let hi = |lvl: usize| {
@@ -1099,20 +1110,14 @@ impl Problem {
             }
         };
         let mut scratch = Vec::new();
-        let mut delta = 0.0;
+        let mut delta = (0.0, 0.0);
         for step in a..b + s.levels {
             for lvl in 0..s.levels.min(step + 1) {
                 let y = step - lvl;
                 if y >= lo(lvl) && y < hi(lvl) {
-                    delta += self.update_row(
-                        simd,
-                        ch,
-                        y,
-                        lvl,
-                        lvl >= s.measure_from,
-                        s.omega,
-                        &mut scratch,
-                    );
+                    s.add(lvl, &mut delta, |measure| {
+                        self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
+                    });
                 }
             }
         }
@@ -1120,21 +1125,15 @@ impl Problem {
     }
 
     /// The seam's inverted triangles: level h covers rows `[seam − h − 1, seam + h + 1)`.
-    fn phase_two(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) -> f64 {
+    fn phase_two(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) -> (f64, f64) {
         let seam = ch.y0 + s.levels + 1;
         let mut scratch = Vec::new();
-        let mut delta = 0.0;
+        let mut delta = (0.0, 0.0);
         for lvl in 0..s.levels {
             for y in seam - lvl - 1..seam + lvl + 1 {
-                delta += self.update_row(
-                    simd,
-                    ch,
-                    y,
-                    lvl,
-                    lvl >= s.measure_from,
-                    s.omega,
-                    &mut scratch,
-                );
+                s.add(lvl, &mut delta, |measure| {
+                    self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
+                });
             }
         }
         delta
@@ -1277,9 +1276,27 @@ fn iterations_to_tolerance(
 /// Level count and the first measured level of one block.
 struct Schedule {
     levels: usize,
+    /// Levels of the last iteration, whose changes are measured.
     measure_from: usize,
+    /// Levels of the middle iteration, measured too (empty for short blocks).
+    mid: std::ops::Range<usize>,
     /// Over-relaxation factor (1 for Jacobi).
     omega: f32,
+}
+
+impl Schedule {
+    /// Runs `update(measure)` for one row at level `lvl` and adds what it measured to the
+    /// middle-iteration (`.0`) or last-iteration (`.1`) sum.
+    #[inline(always)]
+    fn add(&self, lvl: usize, delta: &mut (f64, f64), update: impl FnOnce(bool) -> f64) {
+        if lvl >= self.measure_from {
+            delta.1 += update(true);
+        } else if self.mid.contains(&lvl) {
+            delta.0 += update(true);
+        } else {
+            update(false);
+        }
+    }
 }
 
 /// Mutable rows `[y0, y0 + rows)` of one (red–black) or two (Jacobi) states: `(e, o)` each.
