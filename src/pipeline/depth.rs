@@ -588,78 +588,118 @@ impl Filter {
         diverged
     }
 
-    /// One frame over a band of rows starting at `y0`: slides the vertical window sums down the
-    /// band and sweeps each row. Returns the number of diverged predictions. Runs the AVX2
-    /// build of the same code where the CPU has it (no FMA, so the results are identical).
-    fn frame_band(
+    /// A band of rows starting at `y0` through every frame: row by row, the row's state runs
+    /// through the frames in order (for wide windows, each frame's column sums slide down the
+    /// band with it), so only one row of state is kept and it stays in cache. Rows never
+    /// exchange state (content moves along x only), so this is the same arithmetic, in the same
+    /// order per row and frame, as sweeping the whole image one frame at a time. Writes ι̃ and
+    /// Var ι̃ of the band (NaN where never measured) and returns the number of diverged
+    /// predictions. Runs the AVX2 build of the same code where the CPU has it (no FMA, so the
+    /// results are identical).
+    fn band(
         &self,
         y0: usize,
-        band: &mut [f32],
-        meas: &Measurements,
-        steps: Option<f64>,
+        frames: &[FrameInput],
+        out: (&mut [f32], &mut [f32]),
         sc: &mut SweepScratch,
     ) -> usize {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU reported AVX2, all that `frame_band_avx2` requires.
-                return unsafe { self.frame_band_avx2(y0, band, meas, steps, sc) };
+                // SAFETY: the CPU reported AVX2, all that `band_avx2` requires.
+                return unsafe { self.band_avx2(y0, frames, out, sc) };
             }
         }
-        self.frame_band_impl(y0, band, meas, steps, sc)
+        self.band_impl(y0, frames, out, sc)
     }
 
-    /// [`Filter::frame_band_impl`] compiled for AVX2.
+    /// [`Filter::band_impl`] compiled for AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn frame_band_avx2(
+    fn band_avx2(
         &self,
         y0: usize,
-        band: &mut [f32],
-        meas: &Measurements,
-        steps: Option<f64>,
+        frames: &[FrameInput],
+        out: (&mut [f32], &mut [f32]),
         sc: &mut SweepScratch,
     ) -> usize {
-        self.frame_band_impl(y0, band, meas, steps, sc)
+        self.band_impl(y0, frames, out, sc)
     }
 
-    /// See [`Filter::frame_band`].
+    /// See [`Filter::band`].
     #[inline(always)]
-    fn frame_band_impl(
+    fn band_impl(
         &self,
         y0: usize,
-        band: &mut [f32],
-        meas: &Measurements,
-        steps: Option<f64>,
+        frames: &[FrameInput],
+        (iota, var): (&mut [f32], &mut [f32]),
         sc: &mut SweepScratch,
     ) -> usize {
         let (w, h, r) = (self.width, self.height, self.r);
-        let measured = meas.valid > 0;
         // Column sums slid down the band: only for windows too wide to sum directly.
-        let slid = measured && r > DIRECT_WINDOW_MAX_R;
+        let slid = |f: &FrameInput| f.measured() && r > DIRECT_WINDOW_MAX_R;
         let mut vs = std::mem::take(&mut sc.vs);
-        vs.clear();
-        vs.resize(w, [0.0; 5]);
-        if slid {
-            for yy in y0.saturating_sub(r)..(y0 + r).min(h) {
-                self.slide(&mut vs, meas, yy, 1.0);
+        vs.resize_with(frames.len(), Vec::new);
+        for (sums, f) in vs.iter_mut().zip(frames) {
+            sums.clear();
+            sums.resize(w, [0.0; 5]);
+            if slid(f) {
+                for yy in y0.saturating_sub(r)..(y0 + r).min(h) {
+                    self.slide(sums, &f.meas, yy, 1.0);
+                }
             }
         }
+        let prior = self.prior();
+        let mut row = std::mem::take(&mut sc.row);
+        let limit = (UNMEASURED_SHARE * INITIAL_VARIANCE) as f32;
         let mut diverged = 0;
-        for (i, row) in band.chunks_mut(PLANES * w).enumerate() {
+        for (i, (io_row, var_row)) in iota.chunks_mut(w).zip(var.chunks_mut(w)).enumerate() {
             let y = y0 + i;
-            if slid {
-                if y + r < h {
-                    self.slide(&mut vs, meas, y + r, 1.0);
-                }
-                if i > 0 && y > r {
-                    self.slide(&mut vs, meas, y - r - 1, -1.0);
-                }
+            row.clear();
+            for &p in &prior {
+                row.resize(row.len() + w, p);
             }
-            diverged += self.sweep_row(y, row, &vs, meas, steps, measured, sc);
+            for (sums, f) in vs.iter_mut().zip(frames) {
+                if slid(f) {
+                    if y + r < h {
+                        self.slide(sums, &f.meas, y + r, 1.0);
+                    }
+                    if i > 0 && y > r {
+                        self.slide(sums, &f.meas, y - r - 1, -1.0);
+                    }
+                }
+                diverged += self.sweep_row(y, &mut row, sums, &f.meas, f.steps, f.measured(), sc);
+            }
+            let (Some(is), Some(vs)) = (
+                row.get(IOTA * w..(IOTA + 1) * w),
+                row.get(VAR_IOTA * w..(VAR_IOTA + 1) * w),
+            ) else {
+                continue;
+            };
+            for (((o, ov), &i), &v) in io_row.iter_mut().zip(var_row.iter_mut()).zip(is).zip(vs) {
+                (*o, *ov) = if v.is_finite() && v < limit && i.is_finite() {
+                    (i, v)
+                } else {
+                    (f32::NAN, f32::NAN)
+                };
+            }
         }
         sc.vs = vs;
+        sc.row = row;
         diverged
+    }
+}
+
+/// One flow field as the filter reads it: its measurements and the frame steps since the
+/// previous field (None for the first).
+struct FrameInput {
+    meas: Measurements,
+    steps: Option<f64>,
+}
+
+impl FrameInput {
+    fn measured(&self) -> bool {
+        self.meas.valid > 0
     }
 }
 
@@ -685,8 +725,10 @@ type Lane = [f32; LANES];
 /// Per-thread buffers of the row sweeps.
 #[derive(Default)]
 struct SweepScratch {
-    /// Vertical window sums per column.
-    vs: Vec<ColumnSums>,
+    /// Per frame: vertical window sums per column (wide windows only).
+    vs: Vec<Vec<ColumnSums>>,
+    /// The state of the row being filtered, planar.
+    row: Vec<f32>,
     /// J (αα, αβ, αι, ββ, βι, ιι) and b (α, β, ι) of this frame, one block of the row's
     /// pixels each.
     info: Vec<f32>,
@@ -1079,55 +1121,34 @@ fn kalman(
     warnings: &mut Vec<String>,
 ) -> (Vec<f32>, Vec<f32>) {
     let (w, h) = (filter.width, filter.height);
-    // Per row, one block of w values for each state plane.
-    let prior = filter.prior();
-    let mut state = zeros_par(PLANES * w * h);
-    state.par_chunks_mut(w).enumerate().for_each(|(i, plane)| {
-        plane.fill(prior.get(i % PLANES).copied().unwrap_or(0.0));
-    });
-    let mut meas = Measurements::default();
     let mut prev_index: Option<usize> = None;
-    let mut diverged = 0;
-    for (k, flow) in flows.iter().enumerate() {
-        meas.fill(flow, u_land, min_confidence);
-        note_frame(k, flow, &meas, prev_index, warnings);
-        let steps = prev_index.map(|p| flow.frame_index.saturating_sub(p) as f64);
-        prev_index = Some(flow.frame_index);
-        let meas = &meas;
-        diverged += state
-            .par_chunks_mut(BAND_ROWS * PLANES * w)
-            .enumerate()
-            .map_init(SweepScratch::default, |sc, (band, rows)| {
-                filter.frame_band(band * BAND_ROWS, rows, meas, steps, sc)
-            })
-            .sum::<usize>();
-    }
+    let frames: Vec<FrameInput> = flows
+        .iter()
+        .enumerate()
+        .map(|(k, flow)| {
+            let mut meas = Measurements::default();
+            meas.fill(flow, u_land, min_confidence);
+            note_frame(k, flow, &meas, prev_index, warnings);
+            let steps = prev_index.map(|p| flow.frame_index.saturating_sub(p) as f64);
+            prev_index = Some(flow.frame_index);
+            FrameInput { meas, steps }
+        })
+        .collect();
+    let mut iota = zeros_par(w * h);
+    let mut var = zeros_par(w * h);
+    let diverged = iota
+        .par_chunks_mut(BAND_ROWS * w)
+        .zip(var.par_chunks_mut(BAND_ROWS * w))
+        .enumerate()
+        .map_init(SweepScratch::default, |sc, (band, out)| {
+            filter.band(band * BAND_ROWS, &frames, out, sc)
+        })
+        .sum::<usize>();
     if diverged > 0 {
         warnings.push(format!(
             "{diverged} pixel predictions diverged (plane scale 1 − f·U·α < {MIN_PLANE_SCALE}) and restarted from the prior"
         ));
     }
-    let limit = (UNMEASURED_SHARE * INITIAL_VARIANCE) as f32;
-    let mut iota = zeros_par(w * h);
-    let mut var = zeros_par(w * h);
-    iota.par_chunks_mut(w)
-        .zip(var.par_chunks_mut(w))
-        .zip(state.par_chunks(PLANES * w))
-        .for_each(|((io_row, var_row), row)| {
-            let (Some(is), Some(vs)) = (
-                row.get(IOTA * w..(IOTA + 1) * w),
-                row.get(VAR_IOTA * w..(VAR_IOTA + 1) * w),
-            ) else {
-                return;
-            };
-            for (((o, ov), &i), &v) in io_row.iter_mut().zip(var_row.iter_mut()).zip(is).zip(vs) {
-                (*o, *ov) = if v.is_finite() && v < limit && i.is_finite() {
-                    (i, v)
-                } else {
-                    (f32::NAN, f32::NAN)
-                };
-            }
-        });
     (iota, var)
 }
 
@@ -1444,12 +1465,14 @@ mod tests {
         let (w, h) = (96, 64);
         let p = [4000.0, 0.0, 0.8];
         let flows = plane_flows(w, h, 6, &g, p, 0.0, 1);
-        for kalman in [true, false] {
+        // 11 px: wider than the direct window sums, so the f64 running sums are used.
+        for (kalman, neighbourhood_px) in [(true, 5), (true, 11), (false, 5)] {
             let map = estimate_depth(
                 &flows,
                 &g,
                 &DepthParams {
                     kalman,
+                    neighbourhood_px,
                     ..DepthParams::default()
                 },
             )
@@ -1504,22 +1527,29 @@ mod tests {
                 INITIAL_VARIANCE,
             ],
         };
-        let prior = filter.prior();
-        let mut plain: Vec<f32> = (0..h * PLANES * w).map(|i| prior[i / w % PLANES]).collect();
-        let mut simd = plain.clone();
-        let mut meas = Measurements::default();
-        for (k, flow) in flows.iter().enumerate() {
-            meas.fill(flow, -land, 1e-3);
-            let steps = (k > 0).then_some(1.0);
-            let mut sc = SweepScratch::default();
-            let a = filter.frame_band_impl(0, &mut plain, &meas, steps, &mut sc);
-            // SAFETY: AVX2 was detected above.
-            let b = unsafe { filter.frame_band_avx2(0, &mut simd, &meas, steps, &mut sc) };
-            assert_eq!(a, b);
-        }
+        let frames: Vec<FrameInput> = flows
+            .iter()
+            .enumerate()
+            .map(|(k, flow)| {
+                let mut meas = Measurements::default();
+                meas.fill(flow, -land, 1e-3);
+                FrameInput {
+                    meas,
+                    steps: (k > 0).then_some(1.0),
+                }
+            })
+            .collect();
+        let (mut plain, mut plain_var) = (vec![0.0; w * h], vec![0.0; w * h]);
+        let (mut simd, mut simd_var) = (plain.clone(), plain_var.clone());
+        let mut sc = SweepScratch::default();
+        let a = filter.band_impl(0, &frames, (&mut plain, &mut plain_var), &mut sc);
+        // SAFETY: AVX2 was detected above.
+        let b = unsafe { filter.band_avx2(0, &frames, (&mut simd, &mut simd_var), &mut sc) };
+        assert_eq!(a, b);
         let bits = |s: &[f32]| -> Vec<u32> { s.iter().map(|v| v.to_bits()).collect() };
         assert!(plain.iter().any(|&v| v != 1.0 && v.is_finite()));
         assert_eq!(bits(&plain), bits(&simd));
+        assert_eq!(bits(&plain_var), bits(&simd_var));
     }
 
     #[test]
