@@ -1005,6 +1005,8 @@ impl Problem {
         let max = params.max_iterations as usize;
         let pixels = (lay.width * lay.height) as f64;
         let tolerance = f64::from(params.tolerance_px);
+        // With τ = 0 nothing can converge: the changes are not measured at all.
+        let measure = tolerance > 0.0;
         let mut done = 0;
         let mut next = block_iterations;
         let mut last: Option<(usize, f64)> = None;
@@ -1013,9 +1015,17 @@ impl Problem {
             let levels = k * per_iteration;
             let bands = threads.min(lay.height / (2 * levels + 2)).max(1);
             let (mid, delta) = match other.as_mut() {
-                None => self.block(simd, &mut [&mut *st], levels, bands, params.sor_omega),
+                None => self.block(
+                    simd,
+                    &mut [&mut *st],
+                    levels,
+                    bands,
+                    params.sor_omega,
+                    measure,
+                ),
                 Some(b) => {
-                    let delta = self.block(simd, &mut [&mut *st, &mut *b], levels, bands, 1.0);
+                    let delta =
+                        self.block(simd, &mut [&mut *st, &mut *b], levels, bands, 1.0, measure);
                     if !levels.is_multiple_of(2) {
                         std::mem::swap(st, b);
                     }
@@ -1046,7 +1056,8 @@ impl Problem {
     /// blocked: each of `bands` row bands first runs the trapezoid that needs no rows of its
     /// neighbours (a wavefront, so the rows being updated stay in cache), then the inverted
     /// triangles around each band seam finish the levels. Returns Σ(|Δu| + |Δv|) over the
-    /// middle iteration (the ⌊k/2⌋-th of k; 0 when k < 2) and over the last one.
+    /// middle iteration (the ⌊k/2⌋-th of k; 0 when k < 2) and over the last one, or zeros
+    /// when not `measure`.
     fn block(
         &self,
         simd: Simd,
@@ -1054,6 +1065,7 @@ impl Problem {
         levels: usize,
         bands: usize,
         omega: f32,
+        measure: bool,
     ) -> (f64, f64) {
         let h = self.lay.height;
         let bounds: Vec<(usize, usize)> = (0..bands)
@@ -1065,8 +1077,12 @@ impl Problem {
         let mid = iterations / 2;
         let sched = Schedule {
             levels,
-            measure_from: levels.saturating_sub(per),
-            mid: if mid >= 1 && mid < iterations {
+            measure_from: if measure {
+                levels.saturating_sub(per)
+            } else {
+                usize::MAX
+            },
+            mid: if measure && mid >= 1 && mid < iterations {
                 (mid - 1) * per..mid * per
             } else {
                 0..0
