@@ -323,6 +323,12 @@ impl Filter {
         }
     }
 
+    /// Whether the window is narrow enough (r ≤ [`DIRECT_WINDOW_MAX_R`]) to be summed directly
+    /// ([`Filter::direct_info`]) rather than by running sums ([`Filter::prefix_info`]).
+    fn sums_directly(&self) -> bool {
+        self.r <= DIRECT_WINDOW_MAX_R
+    }
+
     /// The measurement information of row `y` summed directly over the (2r+1)² window in f32
     /// (r ≤ [`DIRECT_WINDOW_MAX_R`]): the vertical moments of each column relative to row y,
     /// then the horizontal sums of those relative to each pixel. Pixels outside the image
@@ -455,9 +461,10 @@ impl Filter {
         }
     }
 
-    /// One row of one frame: prediction from the previous frame (when `steps` is Some) fused
-    /// with the measurement update from the column sums `vs` of the window about row `y`.
-    /// Returns the number of diverged predictions.
+    /// One row of frame `f`: prediction from the previous frame (when `f.steps` is Some) fused
+    /// with the measurement update from the window about row `y` (`vs`: that frame's column
+    /// sums, read only for windows too wide to sum directly). Returns the number of diverged
+    /// predictions.
     ///
     /// `row` holds the row's state planar: one block of w values per state term.
     ///
@@ -467,24 +474,22 @@ impl Filter {
     /// lanes; it overwrites the state in place, which is safe because content moves toward −x:
     /// a pixel's sources lie at or right of it and are read before its block is written.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
     fn sweep_row(
         &self,
         y: usize,
         row: &mut [f32],
+        f: &FrameInput,
         vs: &[ColumnSums],
-        meas: &Measurements,
-        steps: Option<f64>,
-        measured: bool,
         sc: &mut SweepScratch,
     ) -> usize {
-        let (w, r) = (self.width, self.r);
+        let w = self.width;
+        let (steps, measured) = (f.steps, f.measured());
         let k = self.land_shift_px * steps.unwrap_or(0.0);
         // Phase A.
         sc.info.clear();
         sc.info.resize(9 * w, 0.0);
-        if measured && r <= DIRECT_WINDOW_MAX_R {
-            self.direct_info(y, meas, sc);
+        if measured && self.sums_directly() {
+            self.direct_info(y, &f.meas, sc);
         } else if measured {
             self.prefix_info(y, vs, sc);
         }
@@ -637,13 +642,13 @@ impl Filter {
     ) -> usize {
         let (w, h, r) = (self.width, self.height, self.r);
         // Column sums slid down the band: only for windows too wide to sum directly.
-        let slid = |f: &FrameInput| f.measured() && r > DIRECT_WINDOW_MAX_R;
+        let slid = |f: &FrameInput| f.measured() && !self.sums_directly();
         let mut vs = std::mem::take(&mut sc.vs);
         vs.resize_with(frames.len(), Vec::new);
         for (sums, f) in vs.iter_mut().zip(frames) {
             sums.clear();
-            sums.resize(w, [0.0; 5]);
             if slid(f) {
+                sums.resize(w, [0.0; 5]);
                 for yy in y0.saturating_sub(r)..(y0 + r).min(h) {
                     self.slide(sums, &f.meas, yy, 1.0);
                 }
@@ -668,7 +673,7 @@ impl Filter {
                         self.slide(sums, &f.meas, y - r - 1, -1.0);
                     }
                 }
-                diverged += self.sweep_row(y, &mut row, sums, &f.meas, f.steps, f.measured(), sc);
+                diverged += self.sweep_row(y, &mut row, f, sums, sc);
             }
             let (Some(is), Some(vs)) = (
                 row.get(IOTA * w..(IOTA + 1) * w),
@@ -993,8 +998,8 @@ impl MedianNetwork {
         v.get(self.target).copied()
     }
 
-    /// The comparators on AVX2 registers, the same choices as the portable loop in
-    /// [`MedianNetwork::run`] (min keeps the second value on a tie, max the first).
+    /// The comparators on AVX2 registers, the same choices as
+    /// [`MedianNetwork::run_portable`] (min keeps the second value on a tie, max the first).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn run_avx2(&self, v: &mut [[f32; MEDIAN_LANES]]) {

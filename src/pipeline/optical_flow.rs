@@ -346,7 +346,7 @@ pub fn compute_flow_from(
                 &estimated
             }
         };
-        let problem = Problem::groove(&lay, d, walls, focal_px, params);
+        let problem = Problem::groove(&lay, d, walls, focal_px, params, simd);
         let (it, conv) = problem.solve(&mut st, params, simd);
         (st, first_iterations.saturating_add(it), conv)
     } else {
@@ -574,21 +574,20 @@ fn box_mean(im: &Image, rx: usize, ry: usize) -> Vec<f64> {
                 let b = (x + rx + 1).min(w);
                 (prefix[b] - prefix[a]) / (b - a) as f64
             };
-            // Columns whose box lies inside the row, [rx, w − rx): one vectorisable loop.
-            let (lo, hi) = (rx, w.saturating_sub(rx));
+            // Columns whose box lies inside the row, [rx, w − rx) (empty when w ≤ 2·rx): one
+            // vectorisable loop over two offset slices of the running sums.
+            let lo = rx.min(w);
+            let hi = w.saturating_sub(rx).max(lo);
             let full = (2 * rx + 1) as f64;
-            if hi > lo
-                && let (Some(mid), Some(ends), Some(starts)) = (
-                    dst.get_mut(lo..hi),
-                    prefix.get(lo + rx + 1..hi + rx + 1),
-                    prefix.get(lo - rx..hi - rx),
-                )
-            {
+            if let (Some(mid), Some(ends), Some(starts)) = (
+                dst.get_mut(lo..hi),
+                prefix.get(lo + rx + 1..hi + rx + 1),
+                prefix.get(lo.saturating_sub(rx)..hi.saturating_sub(rx)),
+            ) {
                 for ((d, &b), &a) in mid.iter_mut().zip(ends).zip(starts) {
                     *d = (b - a) / full;
                 }
             }
-            let (lo, hi) = (lo.min(w), hi.max(lo.min(w)));
             for x in (0..lo).chain(hi..w) {
                 if let Some(d) = dst.get_mut(x) {
                     *d = mean(x);
@@ -729,22 +728,11 @@ impl SplitState {
     fn from_images(lay: &Layout, u: &Image, v: &Image, base: f32) -> Self {
         let mut st = Self::zeros(lay);
         let w = lay.width;
-        // Splits a row into its even and odd columns.
         let split = |row: &[f32], even: &mut [f32], odd: &mut [f32], base: f32| {
-            let clean = |x: f32| {
+            split_columns(row, even, odd, |d, x| {
                 let y = x - base;
-                if y.is_finite() { y } else { 0.0 }
-            };
-            let pairs = row.chunks_exact(2);
-            if let (Some(&last), Some(e_last)) =
-                (pairs.remainder().first(), even.get_mut(odd.len()))
-            {
-                *e_last = clean(last);
-            }
-            for ((pair, e), o) in pairs.zip(even.iter_mut()).zip(odd.iter_mut()) {
-                *e = clean(pair[0]);
-                *o = clean(pair[1]);
-            }
+                *d = if y.is_finite() { y } else { 0.0 };
+            });
         };
         st.e.par_chunks_mut(2 * lay.ne)
             .zip(st.o.par_chunks_mut(2 * lay.no.max(1)))
@@ -794,6 +782,22 @@ impl SplitState {
             data,
         };
         (wrap(u), wrap(v))
+    }
+}
+
+/// Splits a row of w values into its ⌈w/2⌉ even columns and ⌊w/2⌋ odd ones: `put(slot, value)`
+/// for each. With `even` and `odd` of exactly those lengths every slot is put once: the
+/// ⌊w/2⌋ column pairs fill `odd` and the first ⌊w/2⌋ of `even`, an odd width's last column
+/// the last of `even`.
+#[inline(always)]
+fn split_columns<T>(row: &[f32], even: &mut [T], odd: &mut [T], put: impl Fn(&mut T, f32)) {
+    let pairs = row.chunks_exact(2);
+    if let (Some(&last), Some(e_last)) = (pairs.remainder().first(), even.get_mut(odd.len())) {
+        put(e_last, last);
+    }
+    for ((pair, e), o) in pairs.zip(even.iter_mut()).zip(odd.iter_mut()) {
+        put(e, pair[0]);
+        put(o, pair[1]);
     }
 }
 
@@ -861,25 +865,16 @@ impl Problem {
                         ) else {
                             continue;
                         };
-                        // `no` = ⌊w/2⌋ pairs fill o and the first `no` of e; an odd width's last
-                        // column is the last of e (ne = no + 1).
-                        let pairs = full.chunks_exact(2);
-                        if let (Some(&last), Some(e_last)) =
-                            (pairs.remainder().first(), e.get_mut(no))
-                        {
-                            e_last.write(last);
-                        }
-                        for ((pair, de), d_o) in pairs.zip(e.iter_mut()).zip(o.iter_mut()) {
-                            de.write(pair[0]);
-                            d_o.write(pair[1]);
-                        }
+                        split_columns(full, e, o, |d, x| {
+                            d.write(x);
+                        });
                     }
                 },
             );
         // SAFETY: the capacities are at least `len_e` and `len_o`, and the loop above wrote
         // every element of both: the chunks cover them, coefficient k of a chunk is the range
-        // k·n..(k + 1)·n of its half, and each range is filled in full (w columns split into
-        // ⌈w/2⌉ even and ⌊w/2⌋ odd ones).
+        // k·n..(k + 1)·n of its half, and `split_columns` puts every slot of a w-column row's
+        // ⌈w/2⌉ even and ⌊w/2⌋ odd ranges.
         unsafe {
             coef_e.set_len(len_e);
             coef_o.set_len(len_o);
@@ -911,18 +906,8 @@ impl Problem {
         })
     }
 
+    /// The groove system, its coefficient rows built with `simd`.
     fn groove(
-        lay: &Layout,
-        d: &Derivatives,
-        walls: &WallSideMap,
-        focal_px: f64,
-        params: &FlowParams,
-    ) -> Self {
-        Self::groove_with(lay, d, walls, focal_px, params, Simd::detect())
-    }
-
-    /// [`Problem::groove`] built with the given instruction set.
-    fn groove_with(
         lay: &Layout,
         d: &Derivatives,
         walls: &WallSideMap,
@@ -2279,8 +2264,8 @@ mod tests {
             sign: (0..w * h).map(|i| [0, 1, -1][(i / w / 40) % 3]).collect(),
         };
         let p = FlowParams::default();
-        let built = Problem::groove_with(&lay, &d, &walls, 100.0, &p, Simd::Baseline);
-        let fast = Problem::groove_with(&lay, &d, &walls, 100.0, &p, Simd::detect());
+        let built = Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::Baseline);
+        let fast = Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect());
         assert!(built.coef_e == fast.coef_e && built.coef_o == fast.coef_o);
         assert!(
             built
@@ -2300,7 +2285,7 @@ mod tests {
                 };
                 for problem in [
                     Problem::plain(&lay, &d, p.lambda),
-                    Problem::groove(&lay, &d, &walls, 100.0, &p),
+                    Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect()),
                 ] {
                     let mut reference = SplitState::zeros(&lay);
                     let (it, _) =

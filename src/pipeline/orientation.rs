@@ -235,20 +235,9 @@ fn read_write(bufs: &mut [Vec<f64>; 3], r: usize, w: usize) -> (&[f64], &mut [f6
 
 /// One IRLS pass over centred points: residuals of `plane` = (a, b, c), new Lorentzian weights
 /// w = 1/(1 + r²·k) (k = 1/(2σ²); k = 0 gives unit weights) into `w_new`, and the sums for the
-/// next weighted fit plus the weighted residual of `plane` under `w_old`.
+/// next weighted fit plus the weighted residual of `plane` under `w_old`. The whole chunks of
+/// [`LANES`] points run on AVX2 when `allow_avx2` and the CPU has it (the same bits either way).
 fn irls_pass(
-    set: &PointSet,
-    plane: [f64; 3],
-    k: f64,
-    w_old: &[f64],
-    w_new: &mut [f64],
-) -> [f64; N_SUMS] {
-    irls_pass_with(set, plane, k, w_old, w_new, true)
-}
-
-/// [`irls_pass`]; the whole chunks run on AVX2 when `allow_avx2` and the CPU has it (the same
-/// bits either way).
-fn irls_pass_with(
     set: &PointSet,
     plane: [f64; 3],
     k: f64,
@@ -256,53 +245,72 @@ fn irls_pass_with(
     w_new: &mut [f64],
     allow_avx2: bool,
 ) -> [f64; N_SUMS] {
-    #[cfg(target_arch = "x86_64")]
-    let avx2 = allow_avx2 && std::arch::is_x86_feature_detected!("avx2");
-    #[cfg(not(target_arch = "x86_64"))]
-    let avx2 = false & allow_avx2;
     let [a, b, c] = plane;
     let mut acc = [[0.0_f64; LANES]; N_SUMS];
     let n = set.len().min(w_old.len()).min(w_new.len());
     let full = n - n % LANES;
-    // One point into lane `l` of the accumulators; returns its new weight.
-    let point = |acc: &mut [[f64; LANES]; N_SUMS], l: usize, p: [f64; 4]| -> f64 {
-        let [x, y, z, wo] = p;
-        let r = z - a * x - b * y - c;
-        let w = 1.0 / (1.0 + r * r * k);
-        let terms = [
-            w,
-            w * x,
-            w * y,
-            w * z,
-            w * x * x,
-            w * x * y,
-            w * y * y,
-            w * x * z,
-            w * y * z,
-            wo * r.abs(),
-            wo,
-        ];
-        for (s, t) in acc.iter_mut().zip(terms) {
-            if let Some(s) = s.get_mut(l) {
-                *s += t;
+    let (chunk_old, chunk_new) = (&w_old[..full], &mut w_new[..full]);
+    #[cfg(target_arch = "x86_64")]
+    if allow_avx2 && std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU reported AVX2, all that `irls_chunks_avx2` requires.
+        unsafe { irls_chunks_avx2(set, plane, k, chunk_old, chunk_new, &mut acc) };
+    } else {
+        irls_chunks(set, plane, k, chunk_old, chunk_new, &mut acc);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = allow_avx2;
+        irls_chunks(set, plane, k, chunk_old, chunk_new, &mut acc);
+    }
+    // The points after the whole chunks, into lane 0.
+    for i in full..n {
+        if let (Some(&x), Some(&y), Some(&z), Some(&wo)) =
+            (set.x.get(i), set.y.get(i), set.z.get(i), w_old.get(i))
+        {
+            let r = z - a * x - b * y - c;
+            let w = 1.0 / (1.0 + r * r * k);
+            let terms = [
+                w,
+                w * x,
+                w * y,
+                w * z,
+                w * x * x,
+                w * x * y,
+                w * y * y,
+                w * x * z,
+                w * y * z,
+                wo * r.abs(),
+                wo,
+            ];
+            for (s, t) in acc.iter_mut().zip(terms) {
+                s[0] += t;
+            }
+            if let Some(wn) = w_new.get_mut(i) {
+                *wn = w;
             }
         }
-        w
-    };
-    if avx2 {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: the CPU reported AVX2, all that `irls_chunks_avx2` requires.
-        unsafe {
-            irls_chunks_avx2(set, plane, k, &w_old[..full], &mut w_new[..full], &mut acc);
-        }
     }
-    let chunks = set.x[..full]
+    acc.map(|lanes| lanes.iter().sum())
+}
+
+/// The whole-chunk part of [`irls_pass`]: the first `w_old.len()` points (a multiple of
+/// [`LANES`]), point l of each chunk into lane l of `acc`.
+fn irls_chunks(
+    set: &PointSet,
+    [a, b, c]: [f64; 3],
+    k: f64,
+    w_old: &[f64],
+    w_new: &mut [f64],
+    acc: &mut [[f64; LANES]; N_SUMS],
+) {
+    let chunks = set
+        .x
         .chunks_exact(LANES)
-        .zip(set.y[..full].chunks_exact(LANES))
-        .zip(set.z[..full].chunks_exact(LANES))
-        .zip(w_old[..full].chunks_exact(LANES))
-        .zip(w_new[..full].chunks_exact_mut(LANES));
-    for ((((xc, yc), zc), woc), wnc) in chunks.filter(|_| !avx2) {
+        .zip(set.y.chunks_exact(LANES))
+        .zip(set.z.chunks_exact(LANES))
+        .zip(w_old.chunks_exact(LANES))
+        .zip(w_new.chunks_exact_mut(LANES));
+    for ((((xc, yc), zc), woc), wnc) in chunks {
         let (Ok(xc), Ok(yc), Ok(zc), Ok(woc), Ok(wnc)) = (
             <&[f64; LANES]>::try_from(xc),
             <&[f64; LANES]>::try_from(yc),
@@ -332,22 +340,11 @@ fn irls_pass_with(
             acc[10][l] += wo;
         }
     }
-    for i in full..n {
-        if let (Some(&x), Some(&y), Some(&z), Some(&wo)) =
-            (set.x.get(i), set.y.get(i), set.z.get(i), w_old.get(i))
-        {
-            let w = point(&mut acc, 0, [x, y, z, wo]);
-            if let Some(wn) = w_new.get_mut(i) {
-                *wn = w;
-            }
-        }
-    }
-    acc.map(|lanes| lanes.iter().sum())
 }
 
-/// The whole-chunk part of [`irls_pass`] on AVX2 registers: lane l of each 4-wide vector is
-/// lane l of the portable accumulators, with the same operations in the same order (no FMA),
-/// so the sums are bit for bit the same. `w_old` and `w_new` are the first `4·m` points.
+/// [`irls_chunks`] on AVX2 registers: lane l of each 4-wide vector is lane l of its
+/// accumulators, with the same operations in the same order (no FMA), so the sums are bit for
+/// bit the same.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn irls_chunks_avx2(
@@ -531,7 +528,7 @@ fn fit_set(
     // Round 1: plain least squares (k = 0 writes unit weights into buffer `ic`).
     let sums = {
         let (wo, wn) = read_write(&mut sc.w, ip, ic);
-        irls_pass(set, [0.0; 3], 0.0, wo, wn)
+        irls_pass(set, [0.0; 3], 0.0, wo, wn, true)
     };
     let Some(mut plane) = solve_plane(&sums) else {
         return Err(StageError::BadInput {
@@ -558,7 +555,7 @@ fn fit_set(
         let k = 0.5 / (sigma_next * sigma_next);
         let sums = {
             let (wo, wn) = read_write(&mut sc.w, ic, inx);
-            irls_pass(set, plane, k, wo, wn)
+            irls_pass(set, plane, k, wo, wn, true)
         };
         let res = sums[9] / sums[10];
         let at_floor = |s: Option<f64>| s.is_some_and(|s| s <= params.sigma_min_um);
@@ -1146,8 +1143,8 @@ mod tests {
         let w_old: Vec<f64> = (0..103).map(|_| next() + 0.5).collect();
         let (mut a, mut b) = (vec![0.0; 103], vec![0.0; 103]);
         let plane = [0.25, -0.15, 0.05];
-        let sa = irls_pass_with(&set, plane, 0.7, &w_old, &mut a, false);
-        let sb = irls_pass_with(&set, plane, 0.7, &w_old, &mut b, true);
+        let sa = irls_pass(&set, plane, 0.7, &w_old, &mut a, false);
+        let sb = irls_pass(&set, plane, 0.7, &w_old, &mut b, true);
         assert_eq!(sa.map(f64::to_bits), sb.map(f64::to_bits));
         assert_eq!(
             a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
