@@ -1749,18 +1749,17 @@ fn row_impl<const GROOVE: bool, const RELAX: bool, const AVX2: bool>(
     // inside; its left neighbours start at lr[i0 + off − 1] = lr[0].
     let i0 = cr.first;
     let i1 = n.min(nl - off).max(i0);
-    let blocks = (i1 - i0) / LANES;
-    let full = blocks * LANES;
-    if blocks > 0 {
-        let cols = i0..i0 + full;
+    let m = i1 - i0;
+    if m > 0 {
+        let cols = i0..i1;
         let rows = Rows {
-            lu: &lu[..=full],
-            lv: &lv[..=full],
+            lu: &lu[..=m],
+            lv: &lv[..=m],
             uu: &uu[cols.clone()],
             du: &du[cols.clone()],
             uv: &uv[cols.clone()],
             dv: &dv[cols.clone()],
-            coef: &coef[..full * ncoef],
+            coef: &coef[..m.div_ceil(LANES) * LANES * ncoef],
         };
         let (ou, ov) = (&mut ou[cols.clone()], &mut ov[cols]);
         #[cfg(target_arch = "x86_64")]
@@ -1774,8 +1773,8 @@ fn row_impl<const GROOVE: bool, const RELAX: bool, const AVX2: bool>(
         #[cfg(not(target_arch = "x86_64"))]
         blocks_portable::<GROOVE, RELAX>(k, &rows, ou, ov);
     }
-    // The core's last partial block, then the border columns (mirror the missing neighbour).
-    for i in (i0 + full..i1).chain(0..i0.min(n)).chain(i1..n) {
+    // The border columns: mirror the missing neighbour.
+    for i in (0..i0.min(n)).chain(i1..n) {
         let left = (i + off).checked_sub(1);
         let right = (i + off < nl).then_some(i + off);
         let (li, ri) = match (left, right) {
@@ -1804,9 +1803,9 @@ fn row_impl<const GROOVE: bool, const RELAX: bool, const AVX2: bool>(
     }
 }
 
-/// The inputs of a half-row's core, `m` = a whole number of blocks long: left neighbours
-/// `lu[i]`, right ones `lu[i + 1]` (so `lu` and `lv` hold m + 1 values), the rows above and
-/// below, and the core's m/8 coefficient blocks.
+/// The inputs of a half-row's core of m columns: left neighbours `lu[i]`, right ones
+/// `lu[i + 1]` (so `lu` and `lv` hold m + 1 values), the rows above and below, and the core's
+/// ⌈m/8⌉ coefficient blocks (the last one padded).
 struct Rows<'a> {
     lu: &'a [f32],
     lv: &'a [f32],
@@ -1823,12 +1822,12 @@ struct Rows<'a> {
 struct L8([f32; LANES]);
 
 impl L8 {
+    /// The first 8 values of `s`, zeros past its end.
     #[inline(always)]
     fn load(s: &[f32]) -> Self {
         let mut out = [0.0; LANES];
-        if let Some(src) = s.get(..LANES) {
-            out.copy_from_slice(src);
-        }
+        let len = s.len().min(LANES);
+        out[..len].copy_from_slice(&s[..len]);
         Self(out)
     }
 
@@ -1862,7 +1861,8 @@ impl L8 {
     }
 }
 
-/// The core blocks in portable code: [`blocks_avx2`] operation for operation on [`L8`].
+/// The core blocks in portable code: [`blocks_avx2`] operation for operation on [`L8`]; the
+/// last block may be partial (its missing lanes compute on zeros and are not stored).
 #[inline(always)]
 fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
     k: Consts,
@@ -1873,8 +1873,8 @@ fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
     let (quarter, q, omega) = (L8::splat(0.25), L8::splat(k.q), L8::splat(k.omega));
     let cols = ou
-        .chunks_exact_mut(LANES)
-        .zip(ov.chunks_exact_mut(LANES))
+        .chunks_mut(LANES)
+        .zip(ov.chunks_mut(LANES))
         .zip(r.coef.chunks_exact(LANES * ncoef))
         .enumerate();
     for (bi, ((ou, ov), coef)) in cols {
@@ -1904,14 +1904,16 @@ fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
             a = old_u.add(omega.mul(a.sub(old_u)));
             b = old_v.add(omega.mul(b.sub(old_v)));
         }
-        ou.copy_from_slice(&a.0);
-        ov.copy_from_slice(&b.0);
+        let (nu, nv) = (ou.len(), ov.len());
+        ou.copy_from_slice(&a.0[..nu]);
+        ov.copy_from_slice(&b.0[..nv]);
     }
 }
 
 /// The core blocks with AVX2 intrinsics: [`plain_update`] / [`groove_update`] and [`relax`]
 /// on 8 columns at once, operation for operation (no fused multiply–add), so the result has
-/// the same bits as [`blocks_portable`].
+/// the same bits as [`blocks_portable`]. A last partial block is loaded and stored through a
+/// lane mask.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
@@ -1921,97 +1923,184 @@ fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
     ov: &mut [f32],
 ) {
     use std::arch::x86_64::{
-        __m256, _mm256_add_ps, _mm256_loadu_ps, _mm256_mul_ps, _mm256_set1_ps, _mm256_storeu_ps,
-        _mm256_sub_ps,
+        _mm256_cmpgt_epi32, _mm256_loadu_ps, _mm256_maskload_ps, _mm256_maskstore_ps,
+        _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_epi32, _mm256_storeu_ps,
     };
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
-    let m = ou.len().min(ov.len()) / LANES * LANES;
-    // Every slice read below holds at least m (+ 1 for the neighbour rows) values, so the
-    // pointer arithmetic stays inside them.
+    let m = ou.len().min(ov.len());
+    // Every slice read below holds at least m (+ 1 for the neighbour rows) values, the
+    // coefficients ⌈m/8⌉ whole blocks, so the pointer arithmetic stays inside them.
     if r.lu.len() <= m
         || r.lv.len() <= m
         || [r.uu, r.du, r.uv, r.dv].iter().any(|s| s.len() < m)
-        || r.coef.len() < m * ncoef
+        || r.coef.len() < m.div_ceil(LANES) * LANES * ncoef
     {
         return;
     }
-    let (quarter, q, omega) = (
-        _mm256_set1_ps(0.25),
-        _mm256_set1_ps(k.q),
-        _mm256_set1_ps(k.omega),
-    );
+    let k = AvxConsts {
+        quarter: _mm256_set1_ps(0.25),
+        q: _mm256_set1_ps(k.q),
+        omega: _mm256_set1_ps(k.omega),
+    };
     // One advancing pointer per row, the v half at a fixed distance from the u half: fewer
     // live pointers than one per stream, so the loop keeps them all in registers.
-    let (mut pl, mut pup, mut pdn, mut pc) =
-        (r.lu.as_ptr(), r.uu.as_ptr(), r.du.as_ptr(), r.coef.as_ptr());
-    let mut po = ou.as_mut_ptr();
     let dist = |v: *const f32, u: *const f32| (v as isize - u as isize) / 4;
-    let (dl, dup, ddn, dout) = (
-        dist(r.lv.as_ptr(), pl),
-        dist(r.uv.as_ptr(), pup),
-        dist(r.dv.as_ptr(), pdn),
-        dist(ov.as_ptr(), po),
-    );
+    let mut p = BlockPtrs {
+        l: r.lu.as_ptr(),
+        up: r.uu.as_ptr(),
+        dn: r.du.as_ptr(),
+        c: r.coef.as_ptr(),
+        o: ou.as_mut_ptr(),
+        dl: dist(r.lv.as_ptr(), r.lu.as_ptr()),
+        dup: dist(r.uv.as_ptr(), r.uu.as_ptr()),
+        ddn: dist(r.dv.as_ptr(), r.du.as_ptr()),
+        dout: dist(ov.as_ptr(), ou.as_ptr()),
+    };
     for _ in 0..m / LANES {
-        // SAFETY: m is a whole number of blocks, and every slice was checked above to hold
-        // what the m/8 steps read (lu, lv up to m + 1; the rows; m·C coefficients) and
-        // write; each v pointer is its u pointer moved by the distance between the two
-        // slices' starts.
+        // SAFETY: the m/8 whole blocks lie inside the slices checked above (lu, lv up to
+        // m + 1; the rows; the coefficient blocks), read and written; each v pointer is its
+        // u pointer moved by the distance between the two slices' starts, and the pointers
+        // end at most one past the rows.
         unsafe {
-            let ld = |p: *const f32| -> __m256 { _mm256_loadu_ps(p) };
-            let (lu, ru, uu, du) = (ld(pl), ld(pl.add(1)), ld(pup), ld(pdn));
-            let (lv, rv, uv, dv) = (
-                ld(pl.offset(dl)),
-                ld(pl.offset(dl + 1)),
-                ld(pup.offset(dup)),
-                ld(pdn.offset(ddn)),
+            block_avx2::<GROOVE, RELAX>(
+                &k,
+                &p,
+                |at| _mm256_loadu_ps(at),
+                |at, x| _mm256_storeu_ps(at, x),
             );
-            let c = |j: usize| ld(pc.add(j * LANES));
-            let su = _mm256_add_ps(_mm256_add_ps(lu, ru), _mm256_add_ps(uu, du));
-            let sv = _mm256_add_ps(_mm256_add_ps(lv, rv), _mm256_add_ps(uv, dv));
-            let (mut a, mut b) = if GROOVE {
-                let nu = _mm256_add_ps(
-                    _mm256_add_ps(_mm256_mul_ps(q, su), _mm256_mul_ps(c(0), uu)),
-                    _mm256_mul_ps(c(1), du),
-                );
-                let nv = _mm256_mul_ps(q, sv);
-                let (puu, puv, pvv) = (c(2), c(3), c(4));
-                (
-                    _mm256_add_ps(
-                        _mm256_add_ps(_mm256_mul_ps(puu, nu), _mm256_mul_ps(puv, nv)),
-                        c(5),
-                    ),
-                    _mm256_add_ps(
-                        _mm256_add_ps(_mm256_mul_ps(puv, nu), _mm256_mul_ps(pvv, nv)),
-                        c(6),
-                    ),
-                )
-            } else {
-                let (ub, vb) = (_mm256_mul_ps(quarter, su), _mm256_mul_ps(quarter, sv));
-                let (gx, gy) = (c(0), c(1));
-                let t = _mm256_add_ps(
-                    _mm256_add_ps(_mm256_mul_ps(gx, ub), _mm256_mul_ps(gy, vb)),
-                    c(2),
-                );
-                (
-                    _mm256_sub_ps(ub, _mm256_mul_ps(gx, t)),
-                    _mm256_sub_ps(vb, _mm256_mul_ps(gy, t)),
-                )
-            };
-            let pov = po.offset(dout);
-            if RELAX {
-                let (old_u, old_v) = (_mm256_loadu_ps(po), _mm256_loadu_ps(pov));
-                a = _mm256_add_ps(old_u, _mm256_mul_ps(omega, _mm256_sub_ps(a, old_u)));
-                b = _mm256_add_ps(old_v, _mm256_mul_ps(omega, _mm256_sub_ps(b, old_v)));
-            }
-            _mm256_storeu_ps(po, a);
-            _mm256_storeu_ps(pov, b);
-            pl = pl.add(LANES);
-            pup = pup.add(LANES);
-            pdn = pdn.add(LANES);
-            pc = pc.add(LANES * ncoef);
-            po = po.add(LANES);
+            p.advance(ncoef);
         }
+    }
+    let tail = m % LANES;
+    if tail > 0 {
+        // Lanes below `tail` (at most 7, so the cast is exact).
+        let mask = _mm256_cmpgt_epi32(
+            _mm256_set1_epi32(tail as i32),
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+        );
+        // SAFETY: as above for the lanes below `tail`, the only ones the masked loads and
+        // stores touch (the right neighbours reach lu[m], inside); the coefficient block is
+        // whole (padded).
+        unsafe {
+            block_avx2::<GROOVE, RELAX>(
+                &k,
+                &p,
+                |at| _mm256_maskload_ps(at, mask),
+                |at, x| _mm256_maskstore_ps(at, mask, x),
+            );
+        }
+    }
+}
+
+/// Broadcast constants of [`blocks_avx2`].
+#[cfg(target_arch = "x86_64")]
+struct AvxConsts {
+    quarter: std::arch::x86_64::__m256,
+    q: std::arch::x86_64::__m256,
+    omega: std::arch::x86_64::__m256,
+}
+
+/// Where [`blocks_avx2`] is: one pointer per row (left/right neighbours, up, down, the
+/// coefficient block, the output), and the distance in floats from each row's u half to its
+/// v half.
+#[cfg(target_arch = "x86_64")]
+struct BlockPtrs {
+    l: *const f32,
+    up: *const f32,
+    dn: *const f32,
+    c: *const f32,
+    o: *mut f32,
+    dl: isize,
+    dup: isize,
+    ddn: isize,
+    dout: isize,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl BlockPtrs {
+    /// Moves on by one block of columns, `ncoef` blocks of coefficients.
+    ///
+    /// # Safety
+    /// The next block must lie inside the rows, or start one past their end.
+    #[inline(always)]
+    unsafe fn advance(&mut self, ncoef: usize) {
+        // SAFETY: the caller's.
+        unsafe {
+            self.l = self.l.add(LANES);
+            self.up = self.up.add(LANES);
+            self.dn = self.dn.add(LANES);
+            self.c = self.c.add(LANES * ncoef);
+            self.o = self.o.add(LANES);
+        }
+    }
+}
+
+/// One block of 8 columns at `p`, the rows read through `load` and written through `store`
+/// (plain or masked); the coefficient block is read whole.
+///
+/// # Safety
+/// `load` and `store` must be sound at every address the block reaches from `p`: the rows'
+/// u and v halves at lanes 0..8 (the left/right row also at 1..9) and the output's u and v
+/// halves; the coefficient block must lie inside its row.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn block_avx2<const GROOVE: bool, const RELAX: bool>(
+    k: &AvxConsts,
+    p: &BlockPtrs,
+    load: impl Fn(*const f32) -> std::arch::x86_64::__m256,
+    store: impl Fn(*mut f32, std::arch::x86_64::__m256),
+) {
+    use std::arch::x86_64::{_mm256_add_ps, _mm256_loadu_ps, _mm256_mul_ps, _mm256_sub_ps};
+    // SAFETY: the caller's.
+    unsafe {
+        let (lu, ru, uu, du) = (load(p.l), load(p.l.add(1)), load(p.up), load(p.dn));
+        let (lv, rv, uv, dv) = (
+            load(p.l.offset(p.dl)),
+            load(p.l.offset(p.dl + 1)),
+            load(p.up.offset(p.dup)),
+            load(p.dn.offset(p.ddn)),
+        );
+        let c = |j: usize| _mm256_loadu_ps(p.c.add(j * LANES));
+        let su = _mm256_add_ps(_mm256_add_ps(lu, ru), _mm256_add_ps(uu, du));
+        let sv = _mm256_add_ps(_mm256_add_ps(lv, rv), _mm256_add_ps(uv, dv));
+        let (mut a, mut b) = if GROOVE {
+            let nu = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(k.q, su), _mm256_mul_ps(c(0), uu)),
+                _mm256_mul_ps(c(1), du),
+            );
+            let nv = _mm256_mul_ps(k.q, sv);
+            let (puu, puv, pvv) = (c(2), c(3), c(4));
+            (
+                _mm256_add_ps(
+                    _mm256_add_ps(_mm256_mul_ps(puu, nu), _mm256_mul_ps(puv, nv)),
+                    c(5),
+                ),
+                _mm256_add_ps(
+                    _mm256_add_ps(_mm256_mul_ps(puv, nu), _mm256_mul_ps(pvv, nv)),
+                    c(6),
+                ),
+            )
+        } else {
+            let (ub, vb) = (_mm256_mul_ps(k.quarter, su), _mm256_mul_ps(k.quarter, sv));
+            let (gx, gy) = (c(0), c(1));
+            let t = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(gx, ub), _mm256_mul_ps(gy, vb)),
+                c(2),
+            );
+            (
+                _mm256_sub_ps(ub, _mm256_mul_ps(gx, t)),
+                _mm256_sub_ps(vb, _mm256_mul_ps(gy, t)),
+            )
+        };
+        let pov = p.o.offset(p.dout);
+        if RELAX {
+            let (old_u, old_v) = (load(p.o), load(pov));
+            a = _mm256_add_ps(old_u, _mm256_mul_ps(k.omega, _mm256_sub_ps(a, old_u)));
+            b = _mm256_add_ps(old_v, _mm256_mul_ps(k.omega, _mm256_sub_ps(b, old_v)));
+        }
+        store(p.o, a);
+        store(pov, b);
     }
 }
 
