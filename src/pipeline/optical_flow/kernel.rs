@@ -1,0 +1,528 @@
+//! The Horn–Schunck row kernels: one half-row's update, portable and on AVX2 intrinsics.
+
+use super::*;
+
+/// The vector instruction set the row kernels may use (detected once per call). AVX-512
+/// measured no faster than AVX2 here: the sweeps are bound by cache bandwidth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Simd {
+    /// Whatever the build target allows.
+    Baseline,
+    /// 256-bit AVX2.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+}
+
+impl Simd {
+    pub(super) fn detect() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                return Simd::Avx2;
+            }
+        }
+        Simd::Baseline
+    }
+
+    /// One row of the groove coefficients: see [`GrooveRow::fill`].
+    pub(super) fn groove_row(self, row: &GrooveRow, out: &mut [Vec<f32>; GROOVE_COEFS]) {
+        match self {
+            Simd::Baseline => row.fill(out),
+            // SAFETY: `Simd::Avx2` is only created by `detect` after the CPU reported AVX2,
+            // which is all `groove_row_avx2` requires.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { groove_row_avx2(row, out) },
+        }
+    }
+
+    /// Updates one half-row: see [`row_impl`].
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn row<const GROOVE: bool, const RELAX: bool>(
+        self,
+        k: Consts,
+        odd: bool,
+        lr: &[f32],
+        up: &[f32],
+        dn: &[f32],
+        coef: &[f32],
+        dst: &mut [f32],
+    ) {
+        match self {
+            Simd::Baseline => row_impl::<GROOVE, RELAX, false>(k, odd, lr, up, dn, coef, dst),
+            // SAFETY: `Simd::Avx2` is only created by `detect` after the CPU reported AVX2,
+            // which is all `row_avx2` requires.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { row_avx2::<GROOVE, RELAX>(k, odd, lr, up, dn, coef, dst) },
+        }
+    }
+}
+
+/// [`GrooveRow::fill`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(super) fn groove_row_avx2(row: &GrooveRow, out: &mut [Vec<f32>; GROOVE_COEFS]) {
+    row.fill(out);
+}
+
+/// [`row_impl`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+pub(super) fn row_avx2<const GROOVE: bool, const RELAX: bool>(
+    k: Consts,
+    odd: bool,
+    lr: &[f32],
+    up: &[f32],
+    dn: &[f32],
+    coef: &[f32],
+    dst: &mut [f32],
+) {
+    row_impl::<GROOVE, RELAX, true>(k, odd, lr, up, dn, coef, dst);
+}
+
+/// Neighbours of one pixel: left, right, up, down of u, then of v.
+#[derive(Clone, Copy)]
+pub(super) struct Neighbours {
+    pub(super) lu: f32,
+    pub(super) ru: f32,
+    pub(super) uu: f32,
+    pub(super) du: f32,
+    pub(super) lv: f32,
+    pub(super) rv: f32,
+    pub(super) uv: f32,
+    pub(super) dv: f32,
+}
+
+/// Plain Horn–Schunck update from `gx, gy, gt` (gradients over sqrt(λ + Ix² + Iy²)).
+#[inline(always)]
+pub(super) fn plain_update(nb: Neighbours, gx: f32, gy: f32, gt: f32) -> (f32, f32) {
+    let ub = 0.25 * ((nb.lu + nb.ru) + (nb.uu + nb.du));
+    let vb = 0.25 * ((nb.lv + nb.rv) + (nb.uv + nb.dv));
+    let t = gx * ub + gy * vb + gt;
+    (ub - gx * t, vb - gy * t)
+}
+
+/// Groove Horn–Schunck update from `[wu, wd, puu, puv, pvv, pu0, pv0]` (see [`GrooveRow::fill`]).
+#[inline(always)]
+pub(super) fn groove_update(q: f32, nb: Neighbours, c: [f32; GROOVE_COEFS]) -> (f32, f32) {
+    let [wu, wd, puu, puv, pvv, pu0, pv0] = c;
+    let nu = q * ((nb.lu + nb.ru) + (nb.uu + nb.du)) + wu * nb.uu + wd * nb.du;
+    let nv = q * ((nb.lv + nb.rv) + (nb.uv + nb.dv));
+    (puu * nu + puv * nv + pu0, puv * nu + pvv * nv + pv0)
+}
+
+/// Updates one half-row `dst = [u(n) | v(n)]` from the other half of the same row
+/// `lr = [u(m) | v(m)]`, the same half of the rows above and below (`up`, `dn`, mirrored at
+/// the image edges) and the half-row's coefficients `coef` (laid out as [`CoefRow`] says).
+///
+/// Even half (`odd == false`): column 2i has left/right neighbours `lr[i − 1]`, `lr[i]`; odd
+/// half: `lr[i]`, `lr[i + 1]`. A neighbour beyond the image border is mirrored, i.e. replaced
+/// by the opposite one. The core, where both neighbours are inside, runs in whole blocks of
+/// [`LANES`] columns (with AVX2 intrinsics when `AVX2`, which only [`row_avx2`] sets); the
+/// core's last partial block and the border columns go one at a time.
+#[inline(always)]
+pub(super) fn row_impl<const GROOVE: bool, const RELAX: bool, const AVX2: bool>(
+    k: Consts,
+    odd: bool,
+    lr: &[f32],
+    up: &[f32],
+    dn: &[f32],
+    coef: &[f32],
+    dst: &mut [f32],
+) {
+    let n = dst.len() / 2;
+    let nl = lr.len() / 2;
+    let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
+    let off = usize::from(odd);
+    let cr = CoefRow {
+        n,
+        first: 1 - off,
+        c: ncoef,
+    };
+    if n == 0 || nl == 0 || up.len() < 2 * n || dn.len() < 2 * n || coef.len() < cr.len() {
+        return;
+    }
+    let (lu, lv) = lr.split_at(nl);
+    let (uu, uv) = up.split_at(n);
+    let (du, dv) = dn.split_at(n);
+    let (ou, ov) = dst.split_at_mut(n);
+    // Core: columns [i0, i1), where left = lr[i + off − 1] and right = lr[i + off] are both
+    // inside; its left neighbours start at lr[i0 + off − 1] = lr[0].
+    let i0 = cr.first;
+    let i1 = n.min(nl - off).max(i0);
+    let m = i1 - i0;
+    if m > 0 {
+        let cols = i0..i1;
+        let rows = Rows {
+            lu: &lu[..=m],
+            lv: &lv[..=m],
+            uu: &uu[cols.clone()],
+            du: &du[cols.clone()],
+            uv: &uv[cols.clone()],
+            dv: &dv[cols.clone()],
+            coef: &coef[..m.div_ceil(LANES) * LANES * ncoef],
+        };
+        let (ou, ov) = (&mut ou[cols.clone()], &mut ov[cols]);
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: `AVX2` is only set by `row_avx2`, whose caller checked that the CPU has
+            // AVX2, all `blocks_avx2` requires.
+            unsafe { blocks_avx2::<GROOVE, RELAX>(k, &rows, ou, ov) };
+        } else {
+            blocks_portable::<GROOVE, RELAX>(k, &rows, ou, ov);
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        blocks_portable::<GROOVE, RELAX>(k, &rows, ou, ov);
+    }
+    // The border columns: mirror the missing neighbour.
+    for i in (0..i0.min(n)).chain(i1..n) {
+        let left = (i + off).checked_sub(1);
+        let right = (i + off < nl).then_some(i + off);
+        let (li, ri) = match (left, right) {
+            (Some(l), Some(r)) => (l, r),
+            (Some(l), None) => (l, l),
+            (None, Some(r)) => (r, r),
+            (None, None) => continue,
+        };
+        let nb = Neighbours {
+            lu: lu[li],
+            ru: lu[ri],
+            uu: uu[i],
+            du: du[i],
+            lv: lv[li],
+            rv: lv[ri],
+            uv: uv[i],
+            dv: dv[i],
+        };
+        let c = |j: usize| coef[cr.at(i, j)];
+        let (a, b) = if GROOVE {
+            groove_update(k.q, nb, std::array::from_fn(c))
+        } else {
+            plain_update(nb, c(0), c(1), c(2))
+        };
+        (ou[i], ov[i]) = relax::<RELAX>(k.omega, (ou[i], ov[i]), (a, b));
+    }
+}
+
+/// The inputs of a half-row's core of m columns: left neighbours `lu[i]`, right ones
+/// `lu[i + 1]` (so `lu` and `lv` hold m + 1 values), the rows above and below, and the core's
+/// ⌈m/8⌉ coefficient blocks (the last one padded).
+pub(super) struct Rows<'a> {
+    pub(super) lu: &'a [f32],
+    pub(super) lv: &'a [f32],
+    pub(super) uu: &'a [f32],
+    pub(super) du: &'a [f32],
+    pub(super) uv: &'a [f32],
+    pub(super) dv: &'a [f32],
+    pub(super) coef: &'a [f32],
+}
+
+/// Eight f32 lanes for the portable core: element-wise operations the compiler turns into
+/// vector instructions of whatever the target has.
+#[derive(Clone, Copy)]
+pub(super) struct L8([f32; LANES]);
+
+impl L8 {
+    /// The first 8 values of `s`, zeros past its end.
+    #[inline(always)]
+    pub(super) fn load(s: &[f32]) -> Self {
+        let mut out = [0.0; LANES];
+        let len = s.len().min(LANES);
+        out[..len].copy_from_slice(&s[..len]);
+        Self(out)
+    }
+
+    #[inline(always)]
+    pub(super) fn splat(x: f32) -> Self {
+        Self([x; LANES])
+    }
+
+    #[inline(always)]
+    pub(super) fn zip(self, o: Self, f: impl Fn(f32, f32) -> f32) -> Self {
+        let mut out = self.0;
+        for (a, &b) in out.iter_mut().zip(&o.0) {
+            *a = f(*a, b);
+        }
+        Self(out)
+    }
+
+    #[inline(always)]
+    pub(super) fn add(self, o: Self) -> Self {
+        self.zip(o, |a, b| a + b)
+    }
+
+    #[inline(always)]
+    pub(super) fn sub(self, o: Self) -> Self {
+        self.zip(o, |a, b| a - b)
+    }
+
+    #[inline(always)]
+    pub(super) fn mul(self, o: Self) -> Self {
+        self.zip(o, |a, b| a * b)
+    }
+}
+
+/// The core blocks in portable code: [`blocks_avx2`] operation for operation on [`L8`]; the
+/// last block may be partial (its missing lanes compute on zeros and are not stored).
+#[inline(always)]
+pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
+    k: Consts,
+    r: &Rows,
+    ou: &mut [f32],
+    ov: &mut [f32],
+) {
+    let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
+    let (quarter, q, omega) = (L8::splat(0.25), L8::splat(k.q), L8::splat(k.omega));
+    let cols = ou
+        .chunks_mut(LANES)
+        .zip(ov.chunks_mut(LANES))
+        .zip(r.coef.chunks_exact(LANES * ncoef))
+        .enumerate();
+    for (bi, ((ou, ov), coef)) in cols {
+        let i = bi * LANES;
+        let at = |s: &[f32], j: usize| L8::load(s.get(j..).unwrap_or_default());
+        let (lu, ru, uu, du) = (at(r.lu, i), at(r.lu, i + 1), at(r.uu, i), at(r.du, i));
+        let (lv, rv, uv, dv) = (at(r.lv, i), at(r.lv, i + 1), at(r.uv, i), at(r.dv, i));
+        let c = |j: usize| at(coef, j * LANES);
+        let su = lu.add(ru).add(uu.add(du));
+        let sv = lv.add(rv).add(uv.add(dv));
+        let (mut a, mut b) = if GROOVE {
+            let nu = q.mul(su).add(c(0).mul(uu)).add(c(1).mul(du));
+            let nv = q.mul(sv);
+            let (puu, puv, pvv) = (c(2), c(3), c(4));
+            (
+                puu.mul(nu).add(puv.mul(nv)).add(c(5)),
+                puv.mul(nu).add(pvv.mul(nv)).add(c(6)),
+            )
+        } else {
+            let (ub, vb) = (quarter.mul(su), quarter.mul(sv));
+            let (gx, gy) = (c(0), c(1));
+            let t = gx.mul(ub).add(gy.mul(vb)).add(c(2));
+            (ub.sub(gx.mul(t)), vb.sub(gy.mul(t)))
+        };
+        if RELAX {
+            let (old_u, old_v) = (L8::load(ou), L8::load(ov));
+            a = old_u.add(omega.mul(a.sub(old_u)));
+            b = old_v.add(omega.mul(b.sub(old_v)));
+        }
+        let (nu, nv) = (ou.len(), ov.len());
+        ou.copy_from_slice(&a.0[..nu]);
+        ov.copy_from_slice(&b.0[..nv]);
+    }
+}
+
+/// The core blocks with AVX2 intrinsics: [`plain_update`] / [`groove_update`] and [`relax`]
+/// on 8 columns at once, operation for operation (no fused multiply–add), so the result has
+/// the same bits as [`blocks_portable`]. A last partial block is loaded and stored through a
+/// lane mask.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+pub(super) fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
+    k: Consts,
+    r: &Rows,
+    ou: &mut [f32],
+    ov: &mut [f32],
+) {
+    use std::arch::x86_64::{
+        _mm256_cmpgt_epi32, _mm256_loadu_ps, _mm256_maskload_ps, _mm256_maskstore_ps,
+        _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_epi32, _mm256_storeu_ps,
+    };
+    let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
+    let m = ou.len().min(ov.len());
+    // Every slice read below holds at least m (+ 1 for the neighbour rows) values, the
+    // coefficients ⌈m/8⌉ whole blocks, so the pointer arithmetic stays inside them.
+    if r.lu.len() <= m
+        || r.lv.len() <= m
+        || [r.uu, r.du, r.uv, r.dv].iter().any(|s| s.len() < m)
+        || r.coef.len() < m.div_ceil(LANES) * LANES * ncoef
+    {
+        return;
+    }
+    let k = AvxConsts {
+        quarter: _mm256_set1_ps(0.25),
+        q: _mm256_set1_ps(k.q),
+        omega: _mm256_set1_ps(k.omega),
+    };
+    // One advancing pointer per row, the v half at a fixed distance from the u half: fewer
+    // live pointers than one per stream, so the loop keeps them all in registers.
+    let dist = |v: *const f32, u: *const f32| (v as isize - u as isize) / 4;
+    let mut p = BlockPtrs {
+        l: r.lu.as_ptr(),
+        up: r.uu.as_ptr(),
+        dn: r.du.as_ptr(),
+        c: r.coef.as_ptr(),
+        o: ou.as_mut_ptr(),
+        dl: dist(r.lv.as_ptr(), r.lu.as_ptr()),
+        dup: dist(r.uv.as_ptr(), r.uu.as_ptr()),
+        ddn: dist(r.dv.as_ptr(), r.du.as_ptr()),
+        dout: dist(ov.as_ptr(), ou.as_ptr()),
+    };
+    for _ in 0..m / LANES {
+        // SAFETY: the m/8 whole blocks lie inside the slices checked above (lu, lv up to
+        // m + 1; the rows; the coefficient blocks), read and written; each v pointer is its
+        // u pointer moved by the distance between the two slices' starts, and the pointers
+        // end at most one past the rows.
+        unsafe {
+            block_avx2::<GROOVE, RELAX>(
+                &k,
+                &p,
+                |at| _mm256_loadu_ps(at),
+                |at, x| _mm256_storeu_ps(at, x),
+            );
+            p.advance(ncoef);
+        }
+    }
+    let tail = m % LANES;
+    if tail > 0 {
+        // Lanes below `tail` (at most 7, so the cast is exact).
+        let mask = _mm256_cmpgt_epi32(
+            _mm256_set1_epi32(tail as i32),
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+        );
+        // SAFETY: as above for the lanes below `tail`, the only ones the masked loads and
+        // stores touch (the right neighbours reach lu[m], inside); the coefficient block is
+        // whole (padded).
+        unsafe {
+            block_avx2::<GROOVE, RELAX>(
+                &k,
+                &p,
+                |at| _mm256_maskload_ps(at, mask),
+                |at, x| _mm256_maskstore_ps(at, mask, x),
+            );
+        }
+    }
+}
+
+/// Broadcast constants of [`blocks_avx2`].
+#[cfg(target_arch = "x86_64")]
+pub(super) struct AvxConsts {
+    pub(super) quarter: std::arch::x86_64::__m256,
+    pub(super) q: std::arch::x86_64::__m256,
+    pub(super) omega: std::arch::x86_64::__m256,
+}
+
+/// Where [`blocks_avx2`] is: one pointer per row (left/right neighbours, up, down, the
+/// coefficient block, the output), and the distance in floats from each row's u half to its
+/// v half.
+#[cfg(target_arch = "x86_64")]
+pub(super) struct BlockPtrs {
+    pub(super) l: *const f32,
+    pub(super) up: *const f32,
+    pub(super) dn: *const f32,
+    pub(super) c: *const f32,
+    pub(super) o: *mut f32,
+    pub(super) dl: isize,
+    pub(super) dup: isize,
+    pub(super) ddn: isize,
+    pub(super) dout: isize,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl BlockPtrs {
+    /// Moves on by one block of columns, `ncoef` blocks of coefficients.
+    ///
+    /// # Safety
+    /// The next block must lie inside the rows, or start one past their end.
+    #[inline(always)]
+    pub(super) unsafe fn advance(&mut self, ncoef: usize) {
+        // SAFETY: the caller's.
+        unsafe {
+            self.l = self.l.add(LANES);
+            self.up = self.up.add(LANES);
+            self.dn = self.dn.add(LANES);
+            self.c = self.c.add(LANES * ncoef);
+            self.o = self.o.add(LANES);
+        }
+    }
+}
+
+/// One block of 8 columns at `p`, the rows read through `load` and written through `store`
+/// (plain or masked); the coefficient block is read whole.
+///
+/// # Safety
+/// `load` and `store` must be sound at every address the block reaches from `p`: the rows'
+/// u and v halves at lanes 0..8 (the left/right row also at 1..9) and the output's u and v
+/// halves; the coefficient block must lie inside its row.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+pub(super) unsafe fn block_avx2<const GROOVE: bool, const RELAX: bool>(
+    k: &AvxConsts,
+    p: &BlockPtrs,
+    load: impl Fn(*const f32) -> std::arch::x86_64::__m256,
+    store: impl Fn(*mut f32, std::arch::x86_64::__m256),
+) {
+    use std::arch::x86_64::{_mm256_add_ps, _mm256_loadu_ps, _mm256_mul_ps, _mm256_sub_ps};
+    // SAFETY: the caller's.
+    unsafe {
+        let (lu, ru, uu, du) = (load(p.l), load(p.l.add(1)), load(p.up), load(p.dn));
+        let (lv, rv, uv, dv) = (
+            load(p.l.offset(p.dl)),
+            load(p.l.offset(p.dl + 1)),
+            load(p.up.offset(p.dup)),
+            load(p.dn.offset(p.ddn)),
+        );
+        let c = |j: usize| _mm256_loadu_ps(p.c.add(j * LANES));
+        let su = _mm256_add_ps(_mm256_add_ps(lu, ru), _mm256_add_ps(uu, du));
+        let sv = _mm256_add_ps(_mm256_add_ps(lv, rv), _mm256_add_ps(uv, dv));
+        let (mut a, mut b) = if GROOVE {
+            let nu = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(k.q, su), _mm256_mul_ps(c(0), uu)),
+                _mm256_mul_ps(c(1), du),
+            );
+            let nv = _mm256_mul_ps(k.q, sv);
+            let (puu, puv, pvv) = (c(2), c(3), c(4));
+            (
+                _mm256_add_ps(
+                    _mm256_add_ps(_mm256_mul_ps(puu, nu), _mm256_mul_ps(puv, nv)),
+                    c(5),
+                ),
+                _mm256_add_ps(
+                    _mm256_add_ps(_mm256_mul_ps(puv, nu), _mm256_mul_ps(pvv, nv)),
+                    c(6),
+                ),
+            )
+        } else {
+            let (ub, vb) = (_mm256_mul_ps(k.quarter, su), _mm256_mul_ps(k.quarter, sv));
+            let (gx, gy) = (c(0), c(1));
+            let t = _mm256_add_ps(
+                _mm256_add_ps(_mm256_mul_ps(gx, ub), _mm256_mul_ps(gy, vb)),
+                c(2),
+            );
+            (
+                _mm256_sub_ps(ub, _mm256_mul_ps(gx, t)),
+                _mm256_sub_ps(vb, _mm256_mul_ps(gy, t)),
+            )
+        };
+        let pov = p.o.offset(p.dout);
+        if RELAX {
+            let (old_u, old_v) = (load(p.o), load(pov));
+            a = _mm256_add_ps(old_u, _mm256_mul_ps(k.omega, _mm256_sub_ps(a, old_u)));
+            b = _mm256_add_ps(old_v, _mm256_mul_ps(k.omega, _mm256_sub_ps(b, old_v)));
+        }
+        store(p.o, a);
+        store(pov, b);
+    }
+}
+
+/// Successive over-relaxation: `old + ω·(new − old)` when `RELAX`, else `new`.
+#[inline(always)]
+pub(super) fn relax<const RELAX: bool>(omega: f32, old: (f32, f32), new: (f32, f32)) -> (f32, f32) {
+    if RELAX {
+        (
+            old.0 + omega * (new.0 - old.0),
+            old.1 + omega * (new.1 - old.1),
+        )
+    } else {
+        new
+    }
+}
+
+/// Scalars every row update of one solve shares.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Consts {
+    /// λ/4 (groove kernel).
+    pub(super) q: f32,
+    /// Over-relaxation factor ω (used when the kernel relaxes).
+    pub(super) omega: f32,
+}

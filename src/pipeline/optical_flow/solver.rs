@@ -1,0 +1,564 @@
+//! The Horn–Schunck system and its temporally blocked solve: the wavefront over row bands, the seam triangles and the convergence schedule.
+
+use super::*;
+
+/// A Horn–Schunck system ready to iterate: per half-row blocks of coefficients laid out as
+/// [`CoefRow`] says.
+pub(super) struct Problem {
+    pub(super) lay: Layout,
+    pub(super) kernel: Kernel,
+    pub(super) coef_e: Vec<f32>,
+    pub(super) coef_o: Vec<f32>,
+}
+
+impl Problem {
+    /// Fills the coefficient arrays a row at a time: `f(y, rows)` writes coefficient k of every
+    /// column of image row `y` into `rows[k]` (natural column order, so the caller's loop can
+    /// vectorise); the rows are then split into their even and odd halves, in blocks.
+    pub(super) fn build_rows<const C: usize>(
+        lay: &Layout,
+        kernel: Kernel,
+        f: impl Fn(usize, &mut [Vec<f32>; C]) + Sync,
+    ) -> Self {
+        let w = lay.width;
+        let halves = [CoefRow::new(lay, 0, C), CoefRow::new(lay, 1, C)];
+        let (len_e, len_o) = (halves[0].len() * lay.height, halves[1].len() * lay.height);
+        let mut coef_e: Vec<f32> = Vec::with_capacity(len_e);
+        let mut coef_o: Vec<f32> = Vec::with_capacity(len_o);
+        // Width ≥ 2 (checked by the caller), so both halves have columns; `max(1)` only keeps
+        // the chunk size valid.
+        coef_e.spare_capacity_mut()[..len_e]
+            .par_chunks_mut(halves[0].len().max(1))
+            .zip(coef_o.spare_capacity_mut()[..len_o].par_chunks_mut(halves[1].len().max(1)))
+            .enumerate()
+            .for_each_init(
+                // The image row's C coefficients, then their even and odd columns.
+                || [w, lay.ne, lay.no].map(|n| std::array::from_fn(|_| vec![0.0_f32; n])),
+                |[rows, even, odd]: &mut [[Vec<f32>; C]; 3], (y, (re, ro))| {
+                    f(y, rows);
+                    for ((full, e), o) in rows.iter_mut().zip(even.iter_mut()).zip(odd.iter_mut()) {
+                        // `f` may not change the length: every column is split below.
+                        full.resize(w, 0.0);
+                        split_columns(full, e, o, |d, x| *d = x);
+                    }
+                    halves[0].scatter(even, re);
+                    halves[1].scatter(odd, ro);
+                },
+            );
+        // SAFETY: the capacities are at least `len_e` and `len_o`, and the loop above wrote
+        // every element of both: the chunks cover them, a chunk is one half-row of
+        // `CoefRow::len` values, and `CoefRow::scatter` writes every coefficient of every slot
+        // and the padding: each of its blocks' C runs of 8.
+        unsafe {
+            coef_e.set_len(len_e);
+            coef_o.set_len(len_o);
+        }
+        Self {
+            lay: *lay,
+            kernel,
+            coef_e,
+            coef_o,
+        }
+    }
+
+    pub(super) fn plain(lay: &Layout, d: &Derivatives, lambda: f32) -> Self {
+        let w = lay.width;
+        Self::build_rows::<PLAIN_COEFS>(lay, Kernel::Plain, |y, [gx, gy, gt]| {
+            let span = y * w..(y + 1) * w;
+            let (Some(ix), Some(iy), Some(it)) = (
+                d.ix.data.get(span.clone()),
+                d.iy.data.get(span.clone()),
+                d.it.data.get(span),
+            ) else {
+                return;
+            };
+            let outs = gx.iter_mut().zip(gy.iter_mut()).zip(gt.iter_mut());
+            for (((a, b), c), ((&ix, &iy), &it)) in outs.zip(ix.iter().zip(iy).zip(it)) {
+                let s = 1.0 / (lambda + ix * ix + iy * iy).sqrt();
+                (*a, *b, *c) = (ix * s, iy * s, it * s);
+            }
+        })
+    }
+
+    /// The groove system, its coefficient rows built with `simd`.
+    pub(super) fn groove(
+        lay: &Layout,
+        d: &Derivatives,
+        walls: &WallSideMap,
+        focal_px: f64,
+        params: &FlowParams,
+        simd: Simd,
+    ) -> Self {
+        let (w, h) = (lay.width, lay.height);
+        let lambda = f64::from(params.lambda);
+        let gamma = f64::from(params.groove_weight) * lambda;
+        let base = f64::from(d.base_flow_px);
+        Self::build_rows::<GROOVE_COEFS>(
+            lay,
+            Kernel::Groove {
+                q: 0.25 * params.lambda,
+            },
+            |y, rows| {
+                let span = y * w..(y + 1) * w;
+                let (Some(ix), Some(iy), Some(it), Some(sides)) = (
+                    d.ix.data.get(span.clone()),
+                    d.iy.data.get(span.clone()),
+                    d.it.data.get(span.clone()),
+                    walls.sign.get(span),
+                ) else {
+                    return;
+                };
+                // A missing row above or below stands in as the row itself, with its edges
+                // switched off, so the loop over the row is branch-free and vectorises.
+                let (above, has_above) = y
+                    .checked_sub(1)
+                    .and_then(|yy| walls.sign.get(yy * w..(yy + 1) * w))
+                    .map_or((sides, false), |r| (r, true));
+                let (below, has_below) = walls
+                    .sign
+                    .get((y + 1) * w..(y + 2) * w)
+                    .map_or((sides, false), |r| (r, true));
+                let row = GrooveRow {
+                    lambda: params.lambda,
+                    edges: groove_row_edges(y, h, focal_px, lambda, gamma, base),
+                    ix,
+                    iy,
+                    it,
+                    sides,
+                    above,
+                    below,
+                    has_above,
+                    has_below,
+                };
+                simd.groove_row(&row, rows);
+            },
+        )
+    }
+
+    /// Iterates from the state in `st`; returns (iterations, converged).
+    pub(super) fn solve(
+        &self,
+        st: &mut SplitState,
+        params: &FlowParams,
+        simd: Simd,
+    ) -> (u32, bool) {
+        self.solve_with(st, params, simd, rayon::current_num_threads(), None)
+    }
+
+    /// [`Problem::solve`] with at most `max_bands` row bands and, if given, a fixed block length.
+    pub(super) fn solve_with(
+        &self,
+        st: &mut SplitState,
+        params: &FlowParams,
+        simd: Simd,
+        max_bands: usize,
+        block_override: Option<usize>,
+    ) -> (u32, bool) {
+        let lay = &self.lay;
+        let jacobi = params.solver == Solver::Jacobi;
+        let floats_per_px = self.kernel.coefs() + if jacobi { 4 } else { 2 };
+        let row_bytes = lay.width * floats_per_px * std::mem::size_of::<f32>();
+        let rows_fit = (BLOCK_CACHE_BYTES / row_bytes.max(1)).max(4);
+        // Levels (half-sweeps for red–black, sweeps for Jacobi) per block.
+        let per_iteration = if jacobi { 1 } else { 2 };
+        let block_iterations = block_override
+            .unwrap_or((rows_fit - 2) / per_iteration)
+            .clamp(1, MAX_BLOCK_ITERATIONS);
+        let threads = max_bands.max(1);
+        let mut other = if jacobi { Some(st.clone()) } else { None };
+        let max = params.max_iterations as usize;
+        let pixels = (lay.width * lay.height) as f64;
+        let tolerance = f64::from(params.tolerance_px);
+        // With τ = 0 nothing can converge: the changes are not measured at all.
+        let measure = tolerance > 0.0;
+        let mut done = 0;
+        let mut next = block_iterations;
+        let mut last: Option<(usize, f64)> = None;
+        while done < max {
+            let k = next.min(max - done);
+            let levels = k * per_iteration;
+            let bands = threads.min(lay.height / (2 * levels + 2)).max(1);
+            let (mid, delta) = match other.as_mut() {
+                None => self.block(
+                    simd,
+                    &mut [&mut *st],
+                    levels,
+                    bands,
+                    params.sor_omega,
+                    measure,
+                ),
+                Some(b) => {
+                    let delta =
+                        self.block(simd, &mut [&mut *st, &mut *b], levels, bands, 1.0, measure);
+                    if !levels.is_multiple_of(2) {
+                        std::mem::swap(st, b);
+                    }
+                    delta
+                }
+            };
+            done += k;
+            let per_px = delta / pixels;
+            if per_px < tolerance {
+                return (u32::try_from(done).unwrap_or(u32::MAX), true);
+            }
+            if block_override.is_none() {
+                // The decay rate from the block's middle iteration (or, for a short block, the
+                // previous block's last) to its last one predicts the iterations still needed.
+                let before = (k >= 2).then(|| (done - k + k / 2, mid / pixels)).or(last);
+                next = before
+                    .and_then(|b| iterations_to_tolerance(b, (done, per_px), tolerance))
+                    .unwrap_or(block_iterations)
+                    .clamp(1, block_iterations);
+            }
+            last = Some((done, per_px));
+        }
+        (u32::try_from(done).unwrap_or(u32::MAX), false)
+    }
+
+    /// Runs `levels` levels (red–black half-sweeps with one state, Jacobi sweeps with two:
+    /// level h reads state `h % 2` and writes the other) over the whole image, temporally
+    /// blocked: each of `bands` row bands first runs the trapezoid that needs no rows of its
+    /// neighbours (a wavefront, so the rows being updated stay in cache), then the inverted
+    /// triangles around each band seam finish the levels. Returns Σ(|Δu| + |Δv|) over the
+    /// middle iteration (the ⌊k/2⌋-th of k; 0 when k < 2) and over the last one, or zeros
+    /// when not `measure`.
+    pub(super) fn block(
+        &self,
+        simd: Simd,
+        states: &mut [&mut SplitState],
+        levels: usize,
+        bands: usize,
+        omega: f32,
+        measure: bool,
+    ) -> (f64, f64) {
+        let h = self.lay.height;
+        let bounds: Vec<(usize, usize)> = (0..bands)
+            .map(|b| (b * h / bands, (b + 1) * h / bands))
+            .collect();
+        // Levels per iteration: two half-sweeps (red–black, one state) or one sweep (Jacobi).
+        let per = if states.len() == 1 { 2 } else { 1 };
+        let iterations = levels / per;
+        let mid = iterations / 2;
+        let sched = Schedule {
+            levels,
+            measure_from: if measure {
+                levels.saturating_sub(per)
+            } else {
+                usize::MAX
+            },
+            mid: if measure && mid >= 1 && mid < iterations {
+                (mid - 1) * per..mid * per
+            } else {
+                0..0
+            },
+            omega,
+        };
+        let chunks = split_chunks(&self.lay, states, &bounds);
+        let add = |a: (f64, f64), b: (f64, f64)| (a.0 + b.0, a.1 + b.1);
+        let mut delta = chunks
+            .into_par_iter()
+            .map(|mut ch| self.phase_one(simd, &mut ch, &sched))
+            .reduce(|| (0.0, 0.0), add);
+        if bands > 1 {
+            let reach = levels + 1;
+            let zones: Vec<(usize, usize)> = bounds[1..]
+                .iter()
+                .map(|&(seam, _)| (seam - reach, seam + reach))
+                .collect();
+            let chunks = split_chunks(&self.lay, states, &zones);
+            delta = add(
+                delta,
+                chunks
+                    .into_par_iter()
+                    .map(|mut ch| self.phase_two(simd, &mut ch, &sched))
+                    .reduce(|| (0.0, 0.0), add),
+            );
+        }
+        delta
+    }
+
+    /// The band's own trapezoid: level h covers rows `[a + h + 1, b − h − 1)` (no shrink at
+    /// the image top and bottom), visited as a wavefront (row s − h at step s).
+    pub(super) fn phase_one(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) -> (f64, f64) {
+        let (a, b, h_img) = (ch.y0, ch.y0 + ch.rows, self.lay.height);
+        let lo = |lvl: usize| if a == 0 { 0 } else { a + lvl + 1 };
+        let hi = |lvl: usize| {
+            if b == h_img {
+                h_img
+            } else {
+                b.saturating_sub(lvl + 1)
+            }
+        };
+        let mut scratch = Vec::new();
+        let mut delta = (0.0, 0.0);
+        for step in a..b + s.levels {
+            for lvl in 0..s.levels.min(step + 1) {
+                let y = step - lvl;
+                if y >= lo(lvl) && y < hi(lvl) {
+                    s.add(lvl, &mut delta, |measure| {
+                        self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
+                    });
+                }
+            }
+        }
+        delta
+    }
+
+    /// The seam's inverted triangles: level h covers rows `[seam − h − 1, seam + h + 1)`.
+    pub(super) fn phase_two(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) -> (f64, f64) {
+        let seam = ch.y0 + s.levels + 1;
+        let mut scratch = Vec::new();
+        let mut delta = (0.0, 0.0);
+        for lvl in 0..s.levels {
+            for y in seam - lvl - 1..seam + lvl + 1 {
+                s.add(lvl, &mut delta, |measure| {
+                    self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
+                });
+            }
+        }
+        delta
+    }
+
+    /// Updates image row `y` at level `lvl`; returns Σ(|Δu| + |Δv|) when `measure`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn update_row(
+        &self,
+        simd: Simd,
+        ch: &mut Chunk,
+        y: usize,
+        lvl: usize,
+        measure: bool,
+        omega: f32,
+        scratch: &mut Vec<f32>,
+    ) -> f64 {
+        let lay = &self.lay;
+        // Top and bottom rows have no neighbour beyond the image: that slot is fed the pixel's
+        // own previous value, so at the fixed point the missing edge contributes nothing (free
+        // boundary). Any valid row index stands in for it when slicing.
+        let (up_own, dn_own) = (y == 0, y + 1 == lay.height);
+        let up = if up_own { y + 1 } else { y - 1 };
+        let dn = if dn_own { y - 1 } else { y + 1 };
+        let (r, r_up, r_dn) = (y - ch.y0, up - ch.y0, dn - ch.y0);
+        let mut delta = 0.0;
+        if ch.bufs.len() == 1 {
+            // Red–black: colour lvl % 2; red = (x + y) even, i.e. half (y + colour) % 2.
+            let hp = (y + lvl) % 2;
+            let (n_same, n_other) = (lay.half(hp), lay.half(1 - hp));
+            let Some((e, o)) = ch.bufs.first_mut() else {
+                return 0.0;
+            };
+            let (same, other): (&mut [f32], &[f32]) = if hp == 0 { (e, o) } else { (o, e) };
+            let lr = &other[r * 2 * n_other..(r + 1) * 2 * n_other];
+            let (up_row, mid, dn_row) = rows3(same, 2 * n_same, r, r_up, r_dn);
+            let keep_old = measure || up_own || dn_own;
+            if keep_old {
+                scratch.clear();
+                scratch.extend_from_slice(mid);
+            }
+            let up_row = if up_own { &scratch[..] } else { up_row };
+            let dn_row = if dn_own { &scratch[..] } else { dn_row };
+            self.run_row(simd, hp, y, omega, lr, up_row, dn_row, mid);
+            if measure {
+                delta += abs_diff_sum(mid, scratch);
+            }
+        } else {
+            // Jacobi: read state lvl % 2, write the other, both halves.
+            let (first, second) = ch.bufs.split_at_mut(1);
+            let (Some(s0), Some(s1)) = (first.first_mut(), second.first_mut()) else {
+                return 0.0;
+            };
+            let (src, dst) = if lvl.is_multiple_of(2) {
+                (s0, s1)
+            } else {
+                (s1, s0)
+            };
+            for hp in 0..2 {
+                let (n_same, n_other) = (lay.half(hp), lay.half(1 - hp));
+                let (src_same, src_other, dst_same): (&[f32], &[f32], &mut [f32]) = if hp == 0 {
+                    (&*src.0, &*src.1, &mut *dst.0)
+                } else {
+                    (&*src.1, &*src.0, &mut *dst.1)
+                };
+                let row = |rr: usize, n: usize| rr * 2 * n..(rr + 1) * 2 * n;
+                let lr = &src_other[row(r, n_other)];
+                let old = &src_same[row(r, n_same)];
+                let up_row = if up_own {
+                    old
+                } else {
+                    &src_same[row(r_up, n_same)]
+                };
+                let dn_row = if dn_own {
+                    old
+                } else {
+                    &src_same[row(r_dn, n_same)]
+                };
+                let mid = &mut dst_same[row(r, n_same)];
+                self.run_row(simd, hp, y, omega, lr, up_row, dn_row, mid);
+                if measure {
+                    delta += abs_diff_sum(mid, old);
+                }
+            }
+        }
+        delta
+    }
+
+    /// One half-row through the selected kernel.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn run_row(
+        &self,
+        simd: Simd,
+        hp: usize,
+        y: usize,
+        omega: f32,
+        lr: &[f32],
+        up: &[f32],
+        dn: &[f32],
+        dst: &mut [f32],
+    ) {
+        let len = CoefRow::new(&self.lay, hp, self.kernel.coefs()).len();
+        let coef_all = if hp == 0 { &self.coef_e } else { &self.coef_o };
+        let coef = &coef_all[y * len..(y + 1) * len];
+        let odd = hp == 1;
+        let relax = omega != 1.0;
+        let k = Consts {
+            q: match self.kernel {
+                Kernel::Plain => 0.0,
+                Kernel::Groove { q } => q,
+            },
+            omega,
+        };
+        match self.kernel {
+            Kernel::Plain if relax => simd.row::<false, true>(k, odd, lr, up, dn, coef, dst),
+            Kernel::Plain => simd.row::<false, false>(k, odd, lr, up, dn, coef, dst),
+            Kernel::Groove { .. } if relax => simd.row::<true, true>(k, odd, lr, up, dn, coef, dst),
+            Kernel::Groove { .. } => simd.row::<true, false>(k, odd, lr, up, dn, coef, dst),
+        }
+    }
+}
+
+/// Iterations still needed for the per-pixel change to fall below `tolerance`, if the
+/// changes `d0` after `k0` iterations and `d1` after `k1` fit a geometric decay; a block ends
+/// there instead of running its full length past the point of convergence.
+pub(super) fn iterations_to_tolerance(
+    (k0, d0): (usize, f64),
+    (k1, d1): (usize, f64),
+    tolerance: f64,
+) -> Option<usize> {
+    if k1 <= k0 || !(d1 > 0.0 && d0 > d1 && tolerance > 0.0) {
+        return None;
+    }
+    let log_rate = (d1 / d0).ln() / (k1 - k0) as f64;
+    let n = ((tolerance / d1).ln() / log_rate).ceil();
+    (n.is_finite() && n >= 1.0).then(|| n.min(usize::MAX as f64) as usize)
+}
+
+/// Level count and the first measured level of one block.
+pub(super) struct Schedule {
+    pub(super) levels: usize,
+    /// Levels of the last iteration, whose changes are measured.
+    pub(super) measure_from: usize,
+    /// Levels of the middle iteration, measured too (empty for short blocks).
+    pub(super) mid: std::ops::Range<usize>,
+    /// Over-relaxation factor (1 for Jacobi).
+    pub(super) omega: f32,
+}
+
+impl Schedule {
+    /// Runs `update(measure)` for one row at level `lvl` and adds what it measured to the
+    /// middle-iteration (`.0`) or last-iteration (`.1`) sum.
+    #[inline(always)]
+    pub(super) fn add(&self, lvl: usize, delta: &mut (f64, f64), update: impl FnOnce(bool) -> f64) {
+        if lvl >= self.measure_from {
+            delta.1 += update(true);
+        } else if self.mid.contains(&lvl) {
+            delta.0 += update(true);
+        } else {
+            update(false);
+        }
+    }
+}
+
+/// Mutable rows `[y0, y0 + rows)` of one (red–black) or two (Jacobi) states: `(e, o)` each.
+pub(super) struct Chunk<'a> {
+    pub(super) y0: usize,
+    pub(super) rows: usize,
+    pub(super) bufs: Vec<(&'a mut [f32], &'a mut [f32])>,
+}
+
+/// Cuts every state into the disjoint, sorted row ranges `bounds`.
+pub(super) fn split_chunks<'a>(
+    lay: &Layout,
+    states: &'a mut [&mut SplitState],
+    bounds: &[(usize, usize)],
+) -> Vec<Chunk<'a>> {
+    let mut chunks: Vec<Chunk<'a>> = bounds
+        .iter()
+        .map(|&(lo, hi)| Chunk {
+            y0: lo,
+            rows: hi - lo,
+            bufs: Vec::with_capacity(states.len()),
+        })
+        .collect();
+    let (se, so) = (2 * lay.ne, 2 * lay.no);
+    for st in states.iter_mut() {
+        let st: &'a mut SplitState = st;
+        let (mut e, mut o): (&'a mut [f32], &'a mut [f32]) = (&mut st.e, &mut st.o);
+        let mut at = 0;
+        for ch in &mut chunks {
+            let skip = ch.y0 - at;
+            let (_, e_rest) = std::mem::take(&mut e).split_at_mut(skip * se);
+            let (_, o_rest) = std::mem::take(&mut o).split_at_mut(skip * so);
+            let (ce, e_next) = e_rest.split_at_mut(ch.rows * se);
+            let (co, o_next) = o_rest.split_at_mut(ch.rows * so);
+            ch.bufs.push((ce, co));
+            e = e_next;
+            o = o_next;
+            at = ch.y0 + ch.rows;
+        }
+    }
+    chunks
+}
+
+/// Rows `up` and `dn` (read) and `mid` (written) of a buffer with row stride `stride`;
+/// `up`, `dn` ∈ {mid − 1, mid + 1}.
+pub(super) fn rows3(
+    buf: &mut [f32],
+    stride: usize,
+    mid: usize,
+    up: usize,
+    dn: usize,
+) -> (&[f32], &mut [f32], &[f32]) {
+    let (before, rest) = buf.split_at_mut(mid * stride);
+    let (m, after) = rest.split_at_mut(stride);
+    let (before, after): (&[f32], &[f32]) = (before, after);
+    let pick = |r: usize| -> &[f32] {
+        if r < mid {
+            &before[r * stride..(r + 1) * stride]
+        } else {
+            &after[(r - mid - 1) * stride..(r - mid) * stride]
+        }
+    };
+    (pick(up), m, pick(dn))
+}
+
+/// Σ|a − b| with lane accumulators so the loop vectorises.
+pub(super) fn abs_diff_sum(a: &[f32], b: &[f32]) -> f64 {
+    pub(super) const LANES: usize = 16;
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0_f32; LANES];
+    let mut ca = a.chunks_exact(LANES);
+    let mut cb = b.chunks_exact(LANES);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for k in 0..LANES {
+            acc[k] += (x[k] - y[k]).abs();
+        }
+    }
+    let tail: f32 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| (x - y).abs())
+        .sum();
+    f64::from(acc.iter().sum::<f32>()) + f64::from(tail)
+}
