@@ -14,6 +14,7 @@ pub(super) enum Simd {
 }
 
 impl Simd {
+    #[inline]
     pub(super) fn detect() -> Self {
         #[cfg(target_arch = "x86_64")]
         {
@@ -25,6 +26,7 @@ impl Simd {
     }
 
     /// One row of the groove coefficients: see [`GrooveRow::fill`].
+    #[inline]
     pub(super) fn groove_row(self, row: &GrooveRow, out: &mut [Vec<f32>; GROOVE_COEFS]) {
         match self {
             Simd::Baseline => row.fill(out),
@@ -37,6 +39,7 @@ impl Simd {
 
     /// Updates one half-row: see [`row_impl`].
     #[allow(clippy::too_many_arguments)]
+    #[inline]
     pub(super) fn row<const GROOVE: bool, const RELAX: bool>(
         self,
         k: Consts,

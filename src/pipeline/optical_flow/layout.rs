@@ -14,6 +14,7 @@ pub(super) struct Layout {
 }
 
 impl Layout {
+    #[inline]
     pub(super) fn new(width: usize, height: usize) -> Self {
         Self {
             width,
@@ -24,6 +25,7 @@ impl Layout {
     }
 
     /// Columns in half `hp` (0 = even, 1 = odd).
+    #[inline]
     pub(super) fn half(&self, hp: usize) -> usize {
         if hp == 0 { self.ne } else { self.no }
     }
@@ -142,6 +144,7 @@ pub(super) enum Kernel {
 }
 
 impl Kernel {
+    #[inline]
     pub(super) fn coefs(self) -> usize {
         match self {
             Kernel::Plain => PLAIN_COEFS,
@@ -171,6 +174,7 @@ pub(super) struct CoefRow {
 
 impl CoefRow {
     /// Half `hp` (0 = even, 1 = odd) of `lay` with `c` coefficients per column.
+    #[inline]
     pub(super) fn new(lay: &Layout, hp: usize, c: usize) -> Self {
         Self {
             n: lay.half(hp),
@@ -180,6 +184,7 @@ impl CoefRow {
     }
 
     /// Values per half-row, padding included.
+    #[inline]
     pub(super) fn len(self) -> usize {
         self.n.div_ceil(LANES) * LANES * self.c
     }

@@ -521,6 +521,7 @@ pub(super) fn split_chunks<'a>(
 
 /// Rows `up` and `dn` (read) and `mid` (written) of a buffer with row stride `stride`;
 /// `up`, `dn` ∈ {mid − 1, mid + 1}.
+#[inline]
 pub(super) fn rows3(
     buf: &mut [f32],
     stride: usize,
@@ -542,6 +543,7 @@ pub(super) fn rows3(
 }
 
 /// Σ|a − b| with lane accumulators so the loop vectorises.
+#[inline]
 pub(super) fn abs_diff_sum(a: &[f32], b: &[f32]) -> f64 {
     pub(super) const LANES: usize = 16;
     let n = a.len().min(b.len());
