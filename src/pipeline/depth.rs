@@ -239,7 +239,11 @@ impl Measurements {
                 }
                 (sum, valid, bad)
             })
-            .reduce(|| (0.0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+            // Summed in chunk order: a parallel reduce adds in whatever order the threads
+            // split the work, and the last bits of the sum would vary from run to run.
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold((0.0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
         // Weights are relative to the mean confidence; all-zero confidences weigh 1 each.
         let scale = if sum > 0.0 {
             (valid as f64 / sum) as f32

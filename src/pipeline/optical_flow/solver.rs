@@ -221,7 +221,7 @@ impl Problem {
     /// neighbours (a wavefront, so the rows being updated stay in cache), then the inverted
     /// triangles around each band seam finish the levels. Returns Σ(|Δu| + |Δv|) over the
     /// middle iteration (the ⌊k/2⌋-th of k; 0 when k < 2) and over the last one, or zeros
-    /// when not `measure`.
+    /// when not `measure`; the same bits whatever the number of bands.
     pub(super) fn block(
         &self,
         simd: Simd,
@@ -253,12 +253,15 @@ impl Problem {
             },
             omega,
         };
+        // Each row's measured changes, summed level by level in increasing order and then
+        // row by row, so the totals do not depend on the bands (or the threads).
+        let mut per_row = vec![(0.0_f64, 0.0_f64); if measure { h } else { 0 }];
         let chunks = split_chunks(&self.lay, states, &bounds);
-        let add = |a: (f64, f64), b: (f64, f64)| (a.0 + b.0, a.1 + b.1);
-        let mut delta = chunks
+        let sums = split_rows(&mut per_row, &bounds);
+        chunks
             .into_par_iter()
-            .map(|mut ch| self.phase_one(simd, &mut ch, &sched))
-            .reduce(|| (0.0, 0.0), add);
+            .zip(sums)
+            .for_each(|(mut ch, acc)| self.phase_one(simd, &mut ch, &sched, acc));
         if bands > 1 {
             let reach = levels + 1;
             let zones: Vec<(usize, usize)> = bounds[1..]
@@ -266,20 +269,26 @@ impl Problem {
                 .map(|&(seam, _)| (seam - reach, seam + reach))
                 .collect();
             let chunks = split_chunks(&self.lay, states, &zones);
-            delta = add(
-                delta,
-                chunks
-                    .into_par_iter()
-                    .map(|mut ch| self.phase_two(simd, &mut ch, &sched))
-                    .reduce(|| (0.0, 0.0), add),
-            );
+            let sums = split_rows(&mut per_row, &zones);
+            chunks
+                .into_par_iter()
+                .zip(sums)
+                .for_each(|(mut ch, acc)| self.phase_two(simd, &mut ch, &sched, acc));
         }
-        delta
+        per_row
+            .iter()
+            .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
 
     /// The band's own trapezoid: level h covers rows `[a + h + 1, b − h − 1)` (no shrink at
     /// the image top and bottom), visited as a wavefront (row s − h at step s).
-    pub(super) fn phase_one(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) -> (f64, f64) {
+    pub(super) fn phase_one(
+        &self,
+        simd: Simd,
+        ch: &mut Chunk,
+        s: &Schedule,
+        acc: &mut [(f64, f64)],
+    ) {
         let (a, b, h_img) = (ch.y0, ch.y0 + ch.rows, self.lay.height);
         let lo = |lvl: usize| if a == 0 { 0 } else { a + lvl + 1 };
         let hi = |lvl: usize| {
@@ -290,33 +299,35 @@ impl Problem {
             }
         };
         let mut scratch = Vec::new();
-        let mut delta = (0.0, 0.0);
         for step in a..b + s.levels {
             for lvl in 0..s.levels.min(step + 1) {
                 let y = step - lvl;
                 if y >= lo(lvl) && y < hi(lvl) {
-                    s.add(lvl, &mut delta, |measure| {
+                    s.add(lvl, acc.get_mut(y - a), |measure| {
                         self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
                     });
                 }
             }
         }
-        delta
     }
 
     /// The seam's inverted triangles: level h covers rows `[seam − h − 1, seam + h + 1)`.
-    pub(super) fn phase_two(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) -> (f64, f64) {
+    pub(super) fn phase_two(
+        &self,
+        simd: Simd,
+        ch: &mut Chunk,
+        s: &Schedule,
+        acc: &mut [(f64, f64)],
+    ) {
         let seam = ch.y0 + s.levels + 1;
         let mut scratch = Vec::new();
-        let mut delta = (0.0, 0.0);
         for lvl in 0..s.levels {
             for y in seam - lvl - 1..seam + lvl + 1 {
-                s.add(lvl, &mut delta, |measure| {
+                s.add(lvl, acc.get_mut(y - ch.y0), |measure| {
                     self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
                 });
             }
         }
-        delta
     }
 
     /// Updates image row `y` at level `lvl`; returns Σ(|Δu| + |Δv|) when `measure`.
@@ -465,15 +476,29 @@ pub(super) struct Schedule {
 
 impl Schedule {
     /// Runs `update(measure)` for one row at level `lvl` and adds what it measured to the
-    /// middle-iteration (`.0`) or last-iteration (`.1`) sum.
+    /// row's middle-iteration (`.0`) or last-iteration (`.1`) sum in `row` (present whenever
+    /// the block measures).
     #[inline(always)]
-    pub(super) fn add(&self, lvl: usize, delta: &mut (f64, f64), update: impl FnOnce(bool) -> f64) {
-        if lvl >= self.measure_from {
-            delta.1 += update(true);
-        } else if self.mid.contains(&lvl) {
-            delta.0 += update(true);
-        } else {
-            update(false);
+    pub(super) fn add(
+        &self,
+        lvl: usize,
+        row: Option<&mut (f64, f64)>,
+        update: impl FnOnce(bool) -> f64,
+    ) {
+        let slot = row.map(|r| {
+            if lvl >= self.measure_from {
+                &mut r.1
+            } else {
+                &mut r.0
+            }
+        });
+        match slot {
+            Some(sum) if lvl >= self.measure_from || self.mid.contains(&lvl) => {
+                *sum += update(true);
+            }
+            _ => {
+                update(false);
+            }
         }
     }
 }
@@ -517,6 +542,27 @@ pub(super) fn split_chunks<'a>(
         }
     }
     chunks
+}
+
+/// The disjoint, sorted row ranges `bounds` of a per-row array (each empty when `rows` is).
+pub(super) fn split_rows<'a, T>(
+    mut rows: &'a mut [T],
+    bounds: &[(usize, usize)],
+) -> Vec<&'a mut [T]> {
+    let mut at = 0;
+    bounds
+        .iter()
+        .map(|&(lo, hi)| {
+            if rows.is_empty() {
+                return &mut [][..];
+            }
+            let (_, rest) = std::mem::take(&mut rows).split_at_mut(lo - at);
+            let (mine, next) = rest.split_at_mut(hi - lo);
+            rows = next;
+            at = hi;
+            mine
+        })
+        .collect()
 }
 
 /// Rows `up` and `dn` (read) and `mid` (written) of a buffer with row stride `stride`;

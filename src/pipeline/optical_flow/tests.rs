@@ -538,6 +538,47 @@ fn blocking_bands_and_simd_do_not_change_the_result() {
     }
 }
 
+/// With τ > 0 each block measures its changes; their sums, and so where the solve stops, do
+/// not depend on how many row bands (threads) ran it.
+#[test]
+fn measured_stops_do_not_depend_on_the_bands() {
+    let (w, h) = (37, 230);
+    let frames = tilted_plane(w, h, 7, 0.6, 1.0, 100.0);
+    let d = middle(&frames, 0.0, &no_prewarp());
+    let lay = Layout::new(w, h);
+    let walls = WallSideMap {
+        width: w,
+        height: h,
+        sign: (0..w * h).map(|i| [0, 1, -1][(i / w / 40) % 3]).collect(),
+    };
+    let p = FlowParams {
+        tolerance_px: 1e-4,
+        ..FlowParams::default()
+    };
+    for problem in [
+        Problem::plain(&lay, &d, p.lambda),
+        Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect()),
+    ] {
+        // One measured block of 5 iterations: the same sums, to the bit.
+        let sums: Vec<(f64, f64)> = (1..=4)
+            .map(|bands| {
+                let mut st = SplitState::zeros(&lay);
+                problem.block(Simd::detect(), &mut [&mut st], 10, bands, 1.0, true)
+            })
+            .collect();
+        assert!(sums[0].0 > 0.0 && sums[0].1 > 0.0);
+        assert!(sums.iter().all(|s| s == &sums[0]), "{sums:?}");
+        let mut reference = SplitState::zeros(&lay);
+        let stop = problem.solve_with(&mut reference, &p, Simd::detect(), 1, None);
+        for bands in [2, 3, 4] {
+            let mut st = SplitState::zeros(&lay);
+            let got = problem.solve_with(&mut st, &p, Simd::detect(), bands, None);
+            assert_eq!(got, stop, "bands {bands}");
+            assert!(st.e == reference.e && st.o == reference.o, "bands {bands}");
+        }
+    }
+}
+
 /// Straightforward red–black Gauss–Seidel on the full grid, for comparison.
 fn naive_plain_gs(d: &Derivatives, lambda: f32, iterations: usize) -> (Vec<f32>, Vec<f32>) {
     let (w, h) = (d.ix.width, d.ix.height);
