@@ -121,8 +121,8 @@ pub(super) fn groove_update(q: f32, nb: Neighbours, c: [f32; GROOVE_COEFS]) -> (
 /// Even half (`odd == false`): column 2i has left/right neighbours `lr[i − 1]`, `lr[i]`; odd
 /// half: `lr[i]`, `lr[i + 1]`. A neighbour beyond the image border is mirrored, i.e. replaced
 /// by the opposite one. The core, where both neighbours are inside, runs in whole blocks of
-/// [`LANES`] columns (with AVX2 intrinsics when `AVX2`, which only [`row_avx2`] sets); the
-/// core's last partial block and the border columns go one at a time.
+/// [`LANES`] columns, the last one possibly partial (with AVX2 intrinsics when `AVX2`, which
+/// only [`row_avx2`] sets); the two border columns go one at a time.
 #[inline(always)]
 pub(super) fn row_impl<const GROOVE: bool, const RELAX: bool, const AVX2: bool>(
     k: Consts,

@@ -113,11 +113,11 @@ impl SplitState {
 /// ⌊w/2⌋ column pairs fill `odd` and the first ⌊w/2⌋ of `even`, an odd width's last column
 /// the last of `even`.
 #[inline(always)]
-pub(super) fn split_columns<T>(
+pub(super) fn split_columns(
     row: &[f32],
-    even: &mut [T],
-    odd: &mut [T],
-    put: impl Fn(&mut T, f32),
+    even: &mut [f32],
+    odd: &mut [f32],
+    put: impl Fn(&mut f32, f32),
 ) {
     let pairs = row.chunks_exact(2);
     if let (Some(&last), Some(e_last)) = (pairs.remainder().first(), even.get_mut(odd.len())) {

@@ -487,17 +487,26 @@ fn groove_solution_satisfies_euler_lagrange() {
     }
 }
 
-#[test]
-fn blocking_bands_and_simd_do_not_change_the_result() {
+/// A 37×230 tilted plane (odd width: halves of 19 and 18 columns, whole and partial blocks)
+/// with wall sides in stripes of 40 rows, for the band and SIMD tests.
+fn banded_problem() -> (Layout, Derivatives, WallSideMap) {
     let (w, h) = (37, 230);
     let frames = tilted_plane(w, h, 7, 0.6, 1.0, 100.0);
-    let d = middle(&frames, 0.0, &no_prewarp());
-    let lay = Layout::new(w, h);
     let walls = WallSideMap {
         width: w,
         height: h,
         sign: (0..w * h).map(|i| [0, 1, -1][(i / w / 40) % 3]).collect(),
     };
+    (
+        Layout::new(w, h),
+        middle(&frames, 0.0, &no_prewarp()),
+        walls,
+    )
+}
+
+#[test]
+fn blocking_bands_and_simd_do_not_change_the_result() {
+    let (lay, d, walls) = banded_problem();
     let p = FlowParams::default();
     let built = Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::Baseline);
     let fast = Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect());
@@ -542,15 +551,7 @@ fn blocking_bands_and_simd_do_not_change_the_result() {
 /// not depend on how many row bands (threads) ran it.
 #[test]
 fn measured_stops_do_not_depend_on_the_bands() {
-    let (w, h) = (37, 230);
-    let frames = tilted_plane(w, h, 7, 0.6, 1.0, 100.0);
-    let d = middle(&frames, 0.0, &no_prewarp());
-    let lay = Layout::new(w, h);
-    let walls = WallSideMap {
-        width: w,
-        height: h,
-        sign: (0..w * h).map(|i| [0, 1, -1][(i / w / 40) % 3]).collect(),
-    };
+    let (lay, d, walls) = banded_problem();
     let p = FlowParams {
         tolerance_px: 1e-4,
         ..FlowParams::default()
