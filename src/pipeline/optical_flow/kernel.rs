@@ -226,9 +226,20 @@ pub(super) struct Rows<'a> {
 pub(super) struct L8([f32; LANES]);
 
 impl L8 {
-    /// The first 8 values of `s`, zeros past its end.
+    /// The first 8 values of `s` (all zeros when it holds fewer).
     #[inline(always)]
     pub(super) fn load(s: &[f32]) -> Self {
+        let mut out = [0.0; LANES];
+        if let Some(whole) = s.get(..LANES) {
+            out.copy_from_slice(whole);
+        }
+        Self(out)
+    }
+
+    /// The first values of `s`, up to 8, zeros after them (a copy of variable length: kept
+    /// apart from [`L8::load`], which it would stop from staying in registers).
+    #[inline(always)]
+    pub(super) fn load_partial(s: &[f32]) -> Self {
         let mut out = [0.0; LANES];
         let len = s.len().min(LANES);
         out[..len].copy_from_slice(&s[..len]);
@@ -265,8 +276,10 @@ impl L8 {
     }
 }
 
-/// The core blocks in portable code: [`blocks_avx2`] operation for operation on [`L8`]; the
-/// last block may be partial (its missing lanes compute on zeros and are not stored).
+/// The core blocks in portable code: [`blocks_avx2`] operation for operation on [`L8`]. Whole
+/// blocks load fixed-length runs, which the compiler keeps in vector registers; a partial last
+/// block loads what there is (a copy of variable length, kept out of the whole blocks' loop),
+/// computes its missing lanes on zeros and does not store them.
 #[inline(always)]
 pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
     k: Consts,
@@ -275,43 +288,106 @@ pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
     ov: &mut [f32],
 ) {
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
-    let (quarter, q, omega) = (L8::splat(0.25), L8::splat(k.q), L8::splat(k.omega));
+    let m = ou.len().min(ov.len());
+    let whole = m / LANES * LANES;
+    let (ou, tail_u) = ou.split_at_mut(whole);
+    let (ov, tail_v) = ov.split_at_mut(whole);
+    let mut coefs = r.coef.chunks_exact(LANES * ncoef);
     let cols = ou
-        .chunks_mut(LANES)
-        .zip(ov.chunks_mut(LANES))
-        .zip(r.coef.chunks_exact(LANES * ncoef))
+        .chunks_exact_mut(LANES)
+        .zip(ov.chunks_exact_mut(LANES))
+        .zip(coefs.by_ref())
         .enumerate();
     for (bi, ((ou, ov), coef)) in cols {
         let i = bi * LANES;
-        let at = |s: &[f32], j: usize| L8::load(s.get(j..).unwrap_or_default());
-        let (lu, ru, uu, du) = (at(r.lu, i), at(r.lu, i + 1), at(r.uu, i), at(r.du, i));
-        let (lv, rv, uv, dv) = (at(r.lv, i), at(r.lv, i + 1), at(r.uv, i), at(r.dv, i));
-        let c = |j: usize| at(coef, j * LANES);
-        let su = lu.add(ru).add(uu.add(du));
-        let sv = lv.add(rv).add(uv.add(dv));
-        let (mut a, mut b) = if GROOVE {
-            let nu = q.mul(su).add(c(0).mul(uu)).add(c(1).mul(du));
-            let nv = q.mul(sv);
-            let (puu, puv, pvv) = (c(2), c(3), c(4));
-            (
-                puu.mul(nu).add(puv.mul(nv)).add(c(5)),
-                puv.mul(nu).add(pvv.mul(nv)).add(c(6)),
-            )
-        } else {
-            let (ub, vb) = (quarter.mul(su), quarter.mul(sv));
-            let (gx, gy) = (c(0), c(1));
-            let t = gx.mul(ub).add(gy.mul(vb)).add(c(2));
-            (ub.sub(gx.mul(t)), vb.sub(gy.mul(t)))
+        let load = |s: &[f32], j: usize| L8::load(s.get(j..).unwrap_or_default());
+        // The left and right neighbours from one checked run of 9.
+        let pair = |s: &[f32]| match s.get(i..i + LANES + 1) {
+            Some(run) => (L8::load(run), L8::load(run.get(1..).unwrap_or_default())),
+            None => (L8::splat(0.0), L8::splat(0.0)),
         };
-        if RELAX {
-            let (old_u, old_v) = (L8::load(ou), L8::load(ov));
-            a = old_u.add(omega.mul(a.sub(old_u)));
-            b = old_v.add(omega.mul(b.sub(old_v)));
-        }
-        let (nu, nv) = (ou.len(), ov.len());
-        ou.copy_from_slice(&a.0[..nu]);
-        ov.copy_from_slice(&b.0[..nv]);
+        let ((lu, ru), (lv, rv)) = (pair(r.lu), pair(r.lv));
+        let inputs = BlockInputs {
+            lu,
+            ru,
+            uu: load(r.uu, i),
+            du: load(r.du, i),
+            lv,
+            rv,
+            uv: load(r.uv, i),
+            dv: load(r.dv, i),
+            old: (L8::load(ou), L8::load(ov)),
+        };
+        let (a, b) = portable_block::<GROOVE, RELAX>(k, &inputs, |j| load(coef, j * LANES));
+        ou.copy_from_slice(&a.0);
+        ov.copy_from_slice(&b.0);
     }
+    if let (false, Some(coef)) = (tail_u.is_empty(), coefs.next()) {
+        let at = |s: &[f32], j: usize| L8::load_partial(s.get(j..).unwrap_or_default());
+        let i = whole;
+        let inputs = BlockInputs {
+            lu: at(r.lu, i),
+            ru: at(r.lu, i + 1),
+            uu: at(r.uu, i),
+            du: at(r.du, i),
+            lv: at(r.lv, i),
+            rv: at(r.lv, i + 1),
+            uv: at(r.uv, i),
+            dv: at(r.dv, i),
+            old: (at(tail_u, 0), at(tail_v, 0)),
+        };
+        let (a, b) = portable_block::<GROOVE, RELAX>(k, &inputs, |j| at(coef, j * LANES));
+        let (nu, nv) = (tail_u.len().min(LANES), tail_v.len().min(LANES));
+        tail_u[..nu].copy_from_slice(&a.0[..nu]);
+        tail_v[..nv].copy_from_slice(&b.0[..nv]);
+    }
+}
+
+/// What one block of [`blocks_portable`] reads: the neighbours of its 8 lanes and their old
+/// u and v (used when relaxing).
+struct BlockInputs {
+    lu: L8,
+    ru: L8,
+    uu: L8,
+    du: L8,
+    lv: L8,
+    rv: L8,
+    uv: L8,
+    dv: L8,
+    old: (L8, L8),
+}
+
+/// The new u and v of one block of [`blocks_portable`], coefficient j read by `c(j)`.
+#[inline(always)]
+fn portable_block<const GROOVE: bool, const RELAX: bool>(
+    k: Consts,
+    x: &BlockInputs,
+    c: impl Fn(usize) -> L8,
+) -> (L8, L8) {
+    let su = x.lu.add(x.ru).add(x.uu.add(x.du));
+    let sv = x.lv.add(x.rv).add(x.uv.add(x.dv));
+    let (mut a, mut b) = if GROOVE {
+        let q = L8::splat(k.q);
+        let nu = q.mul(su).add(c(0).mul(x.uu)).add(c(1).mul(x.du));
+        let nv = q.mul(sv);
+        let (puu, puv, pvv) = (c(2), c(3), c(4));
+        (
+            puu.mul(nu).add(puv.mul(nv)).add(c(5)),
+            puv.mul(nu).add(pvv.mul(nv)).add(c(6)),
+        )
+    } else {
+        let quarter = L8::splat(0.25);
+        let (ub, vb) = (quarter.mul(su), quarter.mul(sv));
+        let (gx, gy) = (c(0), c(1));
+        let t = gx.mul(ub).add(gy.mul(vb)).add(c(2));
+        (ub.sub(gx.mul(t)), vb.sub(gy.mul(t)))
+    };
+    if RELAX {
+        let (omega, (old_u, old_v)) = (L8::splat(k.omega), x.old);
+        a = old_u.add(omega.mul(a.sub(old_u)));
+        b = old_v.add(omega.mul(b.sub(old_v)));
+    }
+    (a, b)
 }
 
 /// The core blocks with AVX2 intrinsics: [`plain_update`] / [`groove_update`] and [`relax`]
