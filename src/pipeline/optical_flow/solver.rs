@@ -485,17 +485,9 @@ impl Schedule {
         row: Option<&mut (f64, f64)>,
         update: impl FnOnce(bool) -> f64,
     ) {
-        let slot = row.map(|r| {
-            if lvl >= self.measure_from {
-                &mut r.1
-            } else {
-                &mut r.0
-            }
-        });
-        match slot {
-            Some(sum) if lvl >= self.measure_from || self.mid.contains(&lvl) => {
-                *sum += update(true);
-            }
+        match row {
+            Some(r) if lvl >= self.measure_from => r.1 += update(true),
+            Some(r) if self.mid.contains(&lvl) => r.0 += update(true),
             _ => {
                 update(false);
             }
