@@ -83,37 +83,6 @@ pub(super) fn row_avx2<const GROOVE: bool, const RELAX: bool>(
     row_impl::<GROOVE, RELAX, true>(k, odd, lr, up, dn, coef, dst);
 }
 
-/// Neighbours of one pixel: left, right, up, down of u, then of v.
-#[derive(Clone, Copy)]
-pub(super) struct Neighbours {
-    pub(super) lu: f32,
-    pub(super) ru: f32,
-    pub(super) uu: f32,
-    pub(super) du: f32,
-    pub(super) lv: f32,
-    pub(super) rv: f32,
-    pub(super) uv: f32,
-    pub(super) dv: f32,
-}
-
-/// Plain Horn–Schunck update from `gx, gy, gt` (gradients over sqrt(λ + Ix² + Iy²)).
-#[inline(always)]
-pub(super) fn plain_update(nb: Neighbours, gx: f32, gy: f32, gt: f32) -> (f32, f32) {
-    let ub = 0.25 * ((nb.lu + nb.ru) + (nb.uu + nb.du));
-    let vb = 0.25 * ((nb.lv + nb.rv) + (nb.uv + nb.dv));
-    let t = gx * ub + gy * vb + gt;
-    (ub - gx * t, vb - gy * t)
-}
-
-/// Groove Horn–Schunck update from `[wu, wd, puu, puv, pvv, pu0, pv0]` (see [`GrooveRow::fill`]).
-#[inline(always)]
-pub(super) fn groove_update(q: f32, nb: Neighbours, c: [f32; GROOVE_COEFS]) -> (f32, f32) {
-    let [wu, wd, puu, puv, pvv, pu0, pv0] = c;
-    let nu = q * ((nb.lu + nb.ru) + (nb.uu + nb.du)) + wu * nb.uu + wd * nb.du;
-    let nv = q * ((nb.lv + nb.rv) + (nb.uv + nb.dv));
-    (puu * nu + puv * nv + pu0, puv * nu + pvv * nv + pv0)
-}
-
 /// Updates one half-row `dst = [u(n) | v(n)]` from the other half of the same row
 /// `lr = [u(m) | v(m)]`, the same half of the rows above and below (`up`, `dn`, mirrored at
 /// the image edges) and the half-row's coefficients `coef` (laid out as [`CoefRow`] says).
@@ -122,7 +91,8 @@ pub(super) fn groove_update(q: f32, nb: Neighbours, c: [f32; GROOVE_COEFS]) -> (
 /// half: `lr[i]`, `lr[i + 1]`. A neighbour beyond the image border is mirrored, i.e. replaced
 /// by the opposite one. The core, where both neighbours are inside, runs in whole blocks of
 /// [`LANES`] columns, the last one possibly partial (with AVX2 intrinsics when `AVX2`, which
-/// only [`row_avx2`] sets); the two border columns go one at a time.
+/// only [`row_avx2`] sets); the two border columns go one at a time through the portable
+/// block, all lanes alike.
 #[inline(always)]
 pub(super) fn row_impl<const GROOVE: bool, const RELAX: bool, const AVX2: bool>(
     k: Consts,
@@ -145,39 +115,37 @@ pub(super) fn row_impl<const GROOVE: bool, const RELAX: bool, const AVX2: bool>(
     if n == 0 || nl == 0 || up.len() < 2 * n || dn.len() < 2 * n || coef.len() < cr.len() {
         return;
     }
-    let (lu, lv) = lr.split_at(nl);
-    let (uu, uv) = up.split_at(n);
-    let (du, dv) = dn.split_at(n);
-    let (ou, ov) = dst.split_at_mut(n);
     // Core: columns [i0, i1), where left = lr[i + off − 1] and right = lr[i + off] are both
     // inside; its left neighbours start at lr[i0 + off − 1] = lr[0].
     let i0 = cr.first;
     let i1 = n.min(nl - off).max(i0);
-    let m = i1 - i0;
-    if m > 0 {
-        let cols = i0..i1;
+    if i1 > i0 {
         let rows = Rows {
-            lu: &lu[..=m],
-            lv: &lv[..=m],
-            uu: &uu[cols.clone()],
-            du: &du[cols.clone()],
-            uv: &uv[cols.clone()],
-            dv: &dv[cols.clone()],
-            coef: &coef[..m.div_ceil(LANES) * LANES * ncoef],
+            lr,
+            nl,
+            up,
+            dn,
+            n,
+            i0,
+            m: i1 - i0,
+            coef,
         };
-        let (ou, ov) = (&mut ou[cols.clone()], &mut ov[cols]);
         #[cfg(target_arch = "x86_64")]
         if AVX2 {
             // SAFETY: `AVX2` is only set by `row_avx2`, whose caller checked that the CPU has
             // AVX2, all `blocks_avx2` requires.
-            unsafe { blocks_avx2::<GROOVE, RELAX>(k, &rows, ou, ov) };
+            unsafe { blocks_avx2::<GROOVE, RELAX>(k, &rows, dst) };
         } else {
-            blocks_portable::<GROOVE, RELAX>(k, &rows, ou, ov);
+            blocks_portable::<GROOVE, RELAX>(k, &rows, rows.outputs(dst));
         }
         #[cfg(not(target_arch = "x86_64"))]
-        blocks_portable::<GROOVE, RELAX>(k, &rows, ou, ov);
+        blocks_portable::<GROOVE, RELAX>(k, &rows, rows.outputs(dst));
     }
     // The border columns: mirror the missing neighbour.
+    let (lu, lv) = lr.split_at(nl);
+    let (uu, uv) = up.split_at(n);
+    let (du, dv) = dn.split_at(n);
+    let (ou, ov) = dst.split_at_mut(n);
     for i in (0..i0.min(n)).chain(i1..n) {
         let left = (i + off).checked_sub(1);
         let right = (i + off < nl).then_some(i + off);
@@ -187,37 +155,67 @@ pub(super) fn row_impl<const GROOVE: bool, const RELAX: bool, const AVX2: bool>(
             (None, Some(r)) => (r, r),
             (None, None) => continue,
         };
-        let nb = Neighbours {
-            lu: lu[li],
-            ru: lu[ri],
-            uu: uu[i],
-            du: du[i],
-            lv: lv[li],
-            rv: lv[ri],
-            uv: uv[i],
-            dv: dv[i],
+        let one = L8::splat;
+        let inputs = BlockInputs {
+            lu: one(lu[li]),
+            ru: one(lu[ri]),
+            uu: one(uu[i]),
+            du: one(du[i]),
+            lv: one(lv[li]),
+            rv: one(lv[ri]),
+            uv: one(uv[i]),
+            dv: one(dv[i]),
+            old: (one(ou[i]), one(ov[i])),
         };
-        let c = |j: usize| coef[cr.at(i, j)];
-        let (a, b) = if GROOVE {
-            groove_update(k.q, nb, std::array::from_fn(c))
-        } else {
-            plain_update(nb, c(0), c(1), c(2))
-        };
-        (ou[i], ov[i]) = relax::<RELAX>(k.omega, (ou[i], ov[i]), (a, b));
+        let (a, b) = portable_block::<GROOVE, RELAX>(k, &inputs, |j| one(coef[cr.at(i, j)]));
+        (ou[i], ov[i]) = (a.0[0], b.0[0]);
     }
 }
 
-/// The inputs of a half-row's core of m columns: left neighbours `lu[i]`, right ones
-/// `lu[i + 1]` (so `lu` and `lv` hold m + 1 values), the rows above and below, and the core's
-/// ⌈m/8⌉ coefficient blocks (the last one padded).
+/// A half-row's core, the `m` columns from `i0` whose two neighbours lie inside, and what it
+/// reads: the other half of the row `lr = [u(nl) | v(nl)]` (the core's left neighbours start
+/// at `lr[0]`, its right ones at `lr[1]`), this half of the rows above and below
+/// (`[u(n) | v(n)]`) and the core's ⌈m/8⌉ coefficient blocks (the last one padded). The
+/// output, `[u(n) | v(n)]` too, goes beside it. Each row stays whole, so the AVX2 loop reaches
+/// a row's v half from its u half by a fixed distance inside one slice.
 pub(super) struct Rows<'a> {
-    pub(super) lu: &'a [f32],
-    pub(super) lv: &'a [f32],
-    pub(super) uu: &'a [f32],
-    pub(super) du: &'a [f32],
-    pub(super) uv: &'a [f32],
-    pub(super) dv: &'a [f32],
+    pub(super) lr: &'a [f32],
+    pub(super) nl: usize,
+    pub(super) up: &'a [f32],
+    pub(super) dn: &'a [f32],
+    pub(super) n: usize,
+    pub(super) i0: usize,
+    pub(super) m: usize,
     pub(super) coef: &'a [f32],
+}
+
+impl Rows<'_> {
+    /// The core's inputs as runs: left neighbours of u and v (m + 1 values each, the right
+    /// ones one on), then u and v of the rows above and below (m each). `row_impl` checked
+    /// the lengths this slices by.
+    #[inline(always)]
+    fn inputs(&self) -> [&[f32]; 6] {
+        let (m, n, i0, nl) = (self.m, self.n, self.i0, self.nl);
+        [
+            &self.lr[..=m],
+            &self.lr[nl..=nl + m],
+            &self.up[i0..i0 + m],
+            &self.up[n + i0..n + i0 + m],
+            &self.dn[i0..i0 + m],
+            &self.dn[n + i0..n + i0 + m],
+        ]
+    }
+
+    /// The core's u and v runs of the output row `dst = [u(n) | v(n)]` (empty if it is short).
+    #[inline(always)]
+    fn outputs<'d>(&self, dst: &'d mut [f32]) -> (&'d mut [f32], &'d mut [f32]) {
+        let (u, v) = dst.split_at_mut(self.n.min(dst.len()));
+        let core = self.i0..self.i0 + self.m;
+        match (u.get_mut(core.clone()), v.get_mut(core)) {
+            (Some(u), Some(v)) => (u, v),
+            _ => (&mut [], &mut []),
+        }
+    }
 }
 
 /// Eight f32 lanes for the portable core: element-wise operations the compiler turns into
@@ -284,11 +282,11 @@ impl L8 {
 pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
     k: Consts,
     r: &Rows,
-    ou: &mut [f32],
-    ov: &mut [f32],
+    (ou, ov): (&mut [f32], &mut [f32]),
 ) {
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
     let m = ou.len().min(ov.len());
+    let [lu, lv, uu, uv, du, dv] = r.inputs();
     let whole = m / LANES * LANES;
     let (ou, tail_u) = ou.split_at_mut(whole);
     let (ov, tail_v) = ov.split_at_mut(whole);
@@ -306,16 +304,16 @@ pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
             Some(run) => (L8::load(run), L8::load(run.get(1..).unwrap_or_default())),
             None => (L8::splat(0.0), L8::splat(0.0)),
         };
-        let ((lu, ru), (lv, rv)) = (pair(r.lu), pair(r.lv));
+        let ((lu, ru), (lv, rv)) = (pair(lu), pair(lv));
         let inputs = BlockInputs {
             lu,
             ru,
-            uu: load(r.uu, i),
-            du: load(r.du, i),
+            uu: load(uu, i),
+            du: load(du, i),
             lv,
             rv,
-            uv: load(r.uv, i),
-            dv: load(r.dv, i),
+            uv: load(uv, i),
+            dv: load(dv, i),
             old: (L8::load(ou), L8::load(ov)),
         };
         let (a, b) = portable_block::<GROOVE, RELAX>(k, &inputs, |j| load(coef, j * LANES));
@@ -326,14 +324,14 @@ pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
         let at = |s: &[f32], j: usize| L8::load_partial(s.get(j..).unwrap_or_default());
         let i = whole;
         let inputs = BlockInputs {
-            lu: at(r.lu, i),
-            ru: at(r.lu, i + 1),
-            uu: at(r.uu, i),
-            du: at(r.du, i),
-            lv: at(r.lv, i),
-            rv: at(r.lv, i + 1),
-            uv: at(r.uv, i),
-            dv: at(r.dv, i),
+            lu: at(lu, i),
+            ru: at(lu, i + 1),
+            uu: at(uu, i),
+            du: at(du, i),
+            lv: at(lv, i),
+            rv: at(lv, i + 1),
+            uv: at(uv, i),
+            dv: at(dv, i),
             old: (at(tail_u, 0), at(tail_v, 0)),
         };
         let (a, b) = portable_block::<GROOVE, RELAX>(k, &inputs, |j| at(coef, j * LANES));
@@ -390,31 +388,35 @@ fn portable_block<const GROOVE: bool, const RELAX: bool>(
     (a, b)
 }
 
-/// The core blocks with AVX2 intrinsics: [`plain_update`] / [`groove_update`] and [`relax`]
-/// on 8 columns at once, operation for operation (no fused multiply–add), so the result has
-/// the same bits as [`blocks_portable`]. A last partial block is loaded and stored through a
+/// The core blocks with AVX2 intrinsics: [`portable_block`] on 8 columns at once, operation
+/// for operation (no fused multiply–add), so the result has the same bits as
+/// [`blocks_portable`]. A last partial block is loaded and stored through a
 /// lane mask.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 pub(super) fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
     k: Consts,
     r: &Rows,
-    ou: &mut [f32],
-    ov: &mut [f32],
+    dst: &mut [f32],
 ) {
     use std::arch::x86_64::{
         _mm256_cmpgt_epi32, _mm256_loadu_ps, _mm256_maskload_ps, _mm256_maskstore_ps,
         _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_epi32, _mm256_storeu_ps,
     };
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
-    let m = ou.len().min(ov.len());
-    // Every slice read below holds at least m (+ 1 for the neighbour rows) values, the
-    // coefficients ⌈m/8⌉ whole blocks, so the pointer arithmetic stays inside them.
-    if r.lu.len() <= m
-        || r.lv.len() <= m
-        || [r.uu, r.du, r.uv, r.dv].iter().any(|s| s.len() < m)
-        || r.coef.len() < m.div_ceil(LANES) * LANES * ncoef
-    {
+    let (m, n, i0, nl) = (r.m, r.n, r.i0, r.nl);
+    // What the loop reads and writes lies inside: lr's u half up to m + 1 values and its v
+    // half from nl; each of up, dn and dst from i0 and from n + i0, m values; the
+    // coefficients ⌈m/8⌉ whole blocks.
+    let (Some(l), Some(up), Some(dn), Some(out)) = (
+        r.lr.get(..nl + m + 1),
+        r.up.get(i0..n + i0 + m),
+        r.dn.get(i0..n + i0 + m),
+        dst.get_mut(i0..n + i0 + m),
+    ) else {
+        return;
+    };
+    if m >= nl || i0 + m > n || r.coef.len() < m.div_ceil(LANES) * LANES * ncoef {
         return;
     }
     let k = AvxConsts {
@@ -422,25 +424,25 @@ pub(super) fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
         q: _mm256_set1_ps(k.q),
         omega: _mm256_set1_ps(k.omega),
     };
-    // One advancing pointer per row, the v half at a fixed distance from the u half: fewer
-    // live pointers than one per stream, so the loop keeps them all in registers.
-    let dist = |v: *const f32, u: *const f32| (v as isize - u as isize) / 4;
+    // One advancing pointer per row, the v half at a fixed distance from the u half inside
+    // the same slice: fewer live pointers than one per stream, so the loop keeps them all in
+    // registers.
     let mut p = BlockPtrs {
-        l: r.lu.as_ptr(),
-        up: r.uu.as_ptr(),
-        dn: r.du.as_ptr(),
+        l: l.as_ptr(),
+        up: up.as_ptr(),
+        dn: dn.as_ptr(),
         c: r.coef.as_ptr(),
-        o: ou.as_mut_ptr(),
-        dl: dist(r.lv.as_ptr(), r.lu.as_ptr()),
-        dup: dist(r.uv.as_ptr(), r.uu.as_ptr()),
-        ddn: dist(r.dv.as_ptr(), r.du.as_ptr()),
-        dout: dist(ov.as_ptr(), ou.as_ptr()),
+        o: out.as_mut_ptr(),
+        dl: nl as isize,
+        dup: n as isize,
+        ddn: n as isize,
+        dout: n as isize,
     };
     for _ in 0..m / LANES {
-        // SAFETY: the m/8 whole blocks lie inside the slices checked above (lu, lv up to
-        // m + 1; the rows; the coefficient blocks), read and written; each v pointer is its
-        // u pointer moved by the distance between the two slices' starts, and the pointers
-        // end at most one past the rows.
+        // SAFETY: the m/8 whole blocks lie inside the slices checked above, read and
+        // written: each u half at offsets below m (+ 1 for the right neighbours), each v half
+        // the checked distance further in the same slice; the pointers end at most at the
+        // core's end.
         unsafe {
             block_avx2::<GROOVE, RELAX>(
                 &k,
@@ -459,8 +461,8 @@ pub(super) fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
             _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
         );
         // SAFETY: as above for the lanes below `tail`, the only ones the masked loads and
-        // stores touch (the right neighbours reach lu[m], inside); the coefficient block is
-        // whole (padded).
+        // stores touch (the right neighbours reach offset m, inside); the coefficient block
+        // is whole (padded).
         unsafe {
             block_avx2::<GROOVE, RELAX>(
                 &k,
@@ -581,19 +583,6 @@ pub(super) unsafe fn block_avx2<const GROOVE: bool, const RELAX: bool>(
         }
         store(p.o, a);
         store(pov, b);
-    }
-}
-
-/// Successive over-relaxation: `old + ω·(new − old)` when `RELAX`, else `new`.
-#[inline(always)]
-pub(super) fn relax<const RELAX: bool>(omega: f32, old: (f32, f32), new: (f32, f32)) -> (f32, f32) {
-    if RELAX {
-        (
-            old.0 + omega * (new.0 - old.0),
-            old.1 + omega * (new.1 - old.1),
-        )
-    } else {
-        new
     }
 }
 

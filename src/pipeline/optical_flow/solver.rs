@@ -256,24 +256,18 @@ impl Problem {
         // Each row's measured changes, summed level by level in increasing order and then
         // row by row, so the totals do not depend on the bands (or the threads).
         let mut per_row = vec![(0.0_f64, 0.0_f64); if measure { h } else { 0 }];
-        let chunks = split_chunks(&self.lay, states, &bounds);
-        let sums = split_rows(&mut per_row, &bounds);
-        chunks
+        split_chunks(&self.lay, states, &mut per_row, &bounds)
             .into_par_iter()
-            .zip(sums)
-            .for_each(|(mut ch, acc)| self.phase_one(simd, &mut ch, &sched, acc));
+            .for_each(|mut ch| self.phase_one(simd, &mut ch, &sched));
         if bands > 1 {
             let reach = levels + 1;
             let zones: Vec<(usize, usize)> = bounds[1..]
                 .iter()
                 .map(|&(seam, _)| (seam - reach, seam + reach))
                 .collect();
-            let chunks = split_chunks(&self.lay, states, &zones);
-            let sums = split_rows(&mut per_row, &zones);
-            chunks
+            split_chunks(&self.lay, states, &mut per_row, &zones)
                 .into_par_iter()
-                .zip(sums)
-                .for_each(|(mut ch, acc)| self.phase_two(simd, &mut ch, &sched, acc));
+                .for_each(|mut ch| self.phase_two(simd, &mut ch, &sched));
         }
         per_row
             .iter()
@@ -282,14 +276,10 @@ impl Problem {
 
     /// The band's own trapezoid: level h covers rows `[a + h + 1, b − h − 1)` (no shrink at
     /// the image top and bottom), visited as a wavefront (row s − h at step s).
-    pub(super) fn phase_one(
-        &self,
-        simd: Simd,
-        ch: &mut Chunk,
-        s: &Schedule,
-        acc: &mut [(f64, f64)],
-    ) {
+    pub(super) fn phase_one(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) {
         let (a, b, h_img) = (ch.y0, ch.y0 + ch.rows, self.lay.height);
+        // Taken out so that a row's sum and the chunk's state can be borrowed at once.
+        let sums = std::mem::take(&mut ch.sums);
         let lo = |lvl: usize| if a == 0 { 0 } else { a + lvl + 1 };
         let hi = |lvl: usize| {
             if b == h_img {
@@ -303,7 +293,7 @@ impl Problem {
             for lvl in 0..s.levels.min(step + 1) {
                 let y = step - lvl;
                 if y >= lo(lvl) && y < hi(lvl) {
-                    s.add(lvl, acc.get_mut(y - a), |measure| {
+                    s.add(lvl, sums.get_mut(y - a), |measure| {
                         self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
                     });
                 }
@@ -312,18 +302,13 @@ impl Problem {
     }
 
     /// The seam's inverted triangles: level h covers rows `[seam − h − 1, seam + h + 1)`.
-    pub(super) fn phase_two(
-        &self,
-        simd: Simd,
-        ch: &mut Chunk,
-        s: &Schedule,
-        acc: &mut [(f64, f64)],
-    ) {
+    pub(super) fn phase_two(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) {
         let seam = ch.y0 + s.levels + 1;
+        let sums = std::mem::take(&mut ch.sums);
         let mut scratch = Vec::new();
         for lvl in 0..s.levels {
             for y in seam - lvl - 1..seam + lvl + 1 {
-                s.add(lvl, acc.get_mut(y - ch.y0), |measure| {
+                s.add(lvl, sums.get_mut(y - ch.y0), |measure| {
                     self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
                 });
             }
@@ -495,50 +480,48 @@ impl Schedule {
     }
 }
 
-/// Mutable rows `[y0, y0 + rows)` of one (red–black) or two (Jacobi) states: `(e, o)` each.
+/// Mutable rows `[y0, y0 + rows)` of one (red–black) or two (Jacobi) states: `(e, o)` each,
+/// and of the per-row sums of measured changes (empty when the block measures nothing).
 pub(super) struct Chunk<'a> {
     pub(super) y0: usize,
     pub(super) rows: usize,
     pub(super) bufs: Vec<(&'a mut [f32], &'a mut [f32])>,
+    pub(super) sums: &'a mut [(f64, f64)],
 }
 
-/// Cuts every state into the disjoint, sorted row ranges `bounds`.
+/// Cuts every state, and the per-row sums, into the disjoint, sorted row ranges `bounds`.
 pub(super) fn split_chunks<'a>(
     lay: &Layout,
     states: &'a mut [&mut SplitState],
+    sums: &'a mut [(f64, f64)],
     bounds: &[(usize, usize)],
 ) -> Vec<Chunk<'a>> {
     let mut chunks: Vec<Chunk<'a>> = bounds
         .iter()
-        .map(|&(lo, hi)| Chunk {
+        .zip(split_rows(sums, 1, bounds))
+        .map(|(&(lo, hi), sums)| Chunk {
             y0: lo,
             rows: hi - lo,
             bufs: Vec::with_capacity(states.len()),
+            sums,
         })
         .collect();
-    let (se, so) = (2 * lay.ne, 2 * lay.no);
     for st in states.iter_mut() {
         let st: &'a mut SplitState = st;
-        let (mut e, mut o): (&'a mut [f32], &'a mut [f32]) = (&mut st.e, &mut st.o);
-        let mut at = 0;
-        for ch in &mut chunks {
-            let skip = ch.y0 - at;
-            let (_, e_rest) = std::mem::take(&mut e).split_at_mut(skip * se);
-            let (_, o_rest) = std::mem::take(&mut o).split_at_mut(skip * so);
-            let (ce, e_next) = e_rest.split_at_mut(ch.rows * se);
-            let (co, o_next) = o_rest.split_at_mut(ch.rows * so);
-            ch.bufs.push((ce, co));
-            e = e_next;
-            o = o_next;
-            at = ch.y0 + ch.rows;
+        let es = split_rows(&mut st.e, 2 * lay.ne, bounds);
+        let os = split_rows(&mut st.o, 2 * lay.no, bounds);
+        for ((ch, e), o) in chunks.iter_mut().zip(es).zip(os) {
+            ch.bufs.push((e, o));
         }
     }
     chunks
 }
 
-/// The disjoint, sorted row ranges `bounds` of a per-row array (each empty when `rows` is).
-pub(super) fn split_rows<'a, T>(
+/// The disjoint, sorted row ranges `bounds` of an array of rows `stride` values long (each
+/// empty when the array is).
+fn split_rows<'a, T>(
     mut rows: &'a mut [T],
+    stride: usize,
     bounds: &[(usize, usize)],
 ) -> Vec<&'a mut [T]> {
     let mut at = 0;
@@ -548,8 +531,8 @@ pub(super) fn split_rows<'a, T>(
             if rows.is_empty() {
                 return &mut [][..];
             }
-            let (_, rest) = std::mem::take(&mut rows).split_at_mut(lo - at);
-            let (mine, next) = rest.split_at_mut(hi - lo);
+            let (_, rest) = std::mem::take(&mut rows).split_at_mut((lo - at) * stride);
+            let (mine, next) = rest.split_at_mut((hi - lo) * stride);
             rows = next;
             at = hi;
             mine
