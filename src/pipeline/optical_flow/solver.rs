@@ -7,8 +7,8 @@ use super::*;
 pub(super) struct Problem {
     pub(super) lay: Layout,
     pub(super) kernel: Kernel,
-    pub(super) coef_e: Vec<f32>,
-    pub(super) coef_o: Vec<f32>,
+    pub(super) coef_e: Aligned,
+    pub(super) coef_o: Aligned,
 }
 
 impl Problem {
@@ -23,36 +23,40 @@ impl Problem {
         let w = lay.width;
         let halves = [CoefRow::new(lay, 0, C), CoefRow::new(lay, 1, C)];
         let (len_e, len_o) = (halves[0].len() * lay.height, halves[1].len() * lay.height);
-        let mut coef_e: Vec<f32> = Vec::with_capacity(len_e);
-        let mut coef_o: Vec<f32> = Vec::with_capacity(len_o);
-        // Width ≥ 2 (checked by the caller), so both halves have columns; `max(1)` only keeps
-        // the chunk size valid.
-        coef_e.spare_capacity_mut()[..len_e]
-            .par_chunks_mut(halves[0].len().max(1))
-            .zip(coef_o.spare_capacity_mut()[..len_o].par_chunks_mut(halves[1].len().max(1)))
-            .enumerate()
-            .for_each_init(
-                // The image row's C coefficients, then their even and odd columns.
-                || [w, lay.ne, lay.no].map(|n| std::array::from_fn(|_| vec![0.0_f32; n])),
-                |[rows, even, odd]: &mut [[Vec<f32>; C]; 3], (y, (re, ro))| {
-                    f(y, rows);
-                    for ((full, e), o) in rows.iter_mut().zip(even.iter_mut()).zip(odd.iter_mut()) {
-                        // `f` may not change the length: every column is split below.
-                        full.resize(w, 0.0);
-                        split_columns(full, e, o, |d, x| *d = x);
-                    }
-                    halves[0].scatter(even, re);
-                    halves[1].scatter(odd, ro);
-                },
-            );
-        // SAFETY: the capacities are at least `len_e` and `len_o`, and the loop above wrote
-        // every element of both: the chunks cover them, a chunk is one half-row of
-        // `CoefRow::len` values, and `CoefRow::scatter` writes every coefficient of every slot
-        // and the padding: each of its blocks' C runs of 8.
-        unsafe {
-            coef_e.set_len(len_e);
-            coef_o.set_len(len_o);
-        }
+        let (le, lo) = (halves[0].len().max(1), halves[1].len().max(1));
+        // Both arrays are filled at once, row by row: the outer builder's closure runs the
+        // whole parallel loop inside the inner one's.
+        let mut coef_o = None;
+        let coef_e = Aligned::build(len_e, 0, |ce| {
+            coef_o = Some(Aligned::build(len_o, 0, |co| {
+                // Width ≥ 2 (checked by the caller), so both halves have columns; `max(1)`
+                // only keeps the chunk size valid.
+                ce.par_chunks_mut(le)
+                    .zip(co.par_chunks_mut(lo))
+                    .enumerate()
+                    .for_each_init(
+                        // The image row's C coefficients, then their even and odd columns.
+                        || [w, lay.ne, lay.no].map(|n| std::array::from_fn(|_| vec![0.0_f32; n])),
+                        |[rows, even, odd]: &mut [[Vec<f32>; C]; 3], (y, (re, ro))| {
+                            f(y, rows);
+                            for ((full, e), o) in
+                                rows.iter_mut().zip(even.iter_mut()).zip(odd.iter_mut())
+                            {
+                                // `f` may not change the length: every column is split below.
+                                full.resize(w, 0.0);
+                                split_columns(full, e, o, |d, x| *d = x);
+                            }
+                            // Every chunk is one half-row of `CoefRow::len` values, and
+                            // `CoefRow::scatter` writes every coefficient of every slot and the
+                            // padding: each of its blocks' C runs of 8. So the chunks, which
+                            // cover both arrays, fill them whole (the builders' contract).
+                            halves[0].scatter(even, re);
+                            halves[1].scatter(odd, ro);
+                        },
+                    );
+            }));
+        });
+        let coef_o = coef_o.unwrap_or_default();
         Self {
             lay: *lay,
             kernel,
@@ -176,26 +180,16 @@ impl Problem {
         let mut last: Option<(usize, f64)> = None;
         while done < max {
             let k = next.min(max - done);
-            let levels = k * per_iteration;
-            let bands = threads.min(lay.height / (2 * levels + 2)).max(1);
-            let (mid, delta) = match other.as_mut() {
-                None => self.block(
-                    simd,
-                    &mut [&mut *st],
-                    levels,
-                    bands,
-                    params.sor_omega,
-                    measure,
-                ),
-                Some(b) => {
-                    let delta =
-                        self.block(simd, &mut [&mut *st, &mut *b], levels, bands, 1.0, measure);
-                    if !levels.is_multiple_of(2) {
-                        std::mem::swap(st, b);
-                    }
-                    delta
-                }
-            };
+            let (mid, delta) = self.block(
+                simd,
+                st,
+                other.as_mut(),
+                k,
+                threads,
+                params.sor_omega,
+                measure,
+                PASS_LEVELS,
+            );
             done += k;
             let per_px = delta / pixels;
             if per_px < tolerance {
@@ -215,21 +209,89 @@ impl Problem {
         (u32::try_from(done).unwrap_or(u32::MAX), false)
     }
 
+    /// Runs `k` iterations from `st` (and `other`, a Jacobi solve's second state; the result
+    /// ends in `st`) as wavefront passes of at most `pass_levels` levels each. Returns
+    /// Σ(|Δu| + |Δv|) over the middle iteration (the ⌊k/2⌋-th of k; 0 when k < 2) and over
+    /// the last one, or zeros when not `measure`. How the iterations are cut into passes
+    /// changes only the memory traffic: every cut gives the same bits, sums included.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn block(
+        &self,
+        simd: Simd,
+        st: &mut SplitState,
+        mut other: Option<&mut SplitState>,
+        k: usize,
+        threads: usize,
+        omega: f32,
+        measure: bool,
+        pass_levels: usize,
+    ) -> (f64, f64) {
+        // Levels per iteration: two half-sweeps (red–black, one state) or one sweep (Jacobi).
+        let per = if other.is_some() { 1 } else { 2 };
+        let passes = k.div_ceil((pass_levels / per).max(1)).max(1);
+        let mid = k / 2;
+        let mut sums = (0.0, 0.0);
+        let mut start = 0;
+        for p in 0..passes {
+            let end = k * (p + 1) / passes;
+            if end == start {
+                continue;
+            }
+            let levels = (end - start) * per;
+            let bands = threads.min(self.lay.height / (2 * levels + 2)).max(1);
+            // The middle iteration, counted from this pass's start, if this pass runs it.
+            let mid_here =
+                (measure && mid >= 1 && mid < k && mid > start && mid <= end).then(|| mid - start);
+            let last_here = measure && end == k;
+            let (m, l) = match other.as_deref_mut() {
+                None => self.pass(
+                    simd,
+                    &mut [&mut *st],
+                    levels,
+                    bands,
+                    omega,
+                    mid_here,
+                    last_here,
+                ),
+                Some(b) => {
+                    let sums = self.pass(
+                        simd,
+                        &mut [&mut *st, &mut *b],
+                        levels,
+                        bands,
+                        1.0,
+                        mid_here,
+                        last_here,
+                    );
+                    if !levels.is_multiple_of(2) {
+                        std::mem::swap(st, b);
+                    }
+                    sums
+                }
+            };
+            sums = (sums.0 + m, sums.1 + l);
+            start = end;
+        }
+        sums
+    }
+
     /// Runs `levels` levels (red–black half-sweeps with one state, Jacobi sweeps with two:
     /// level h reads state `h % 2` and writes the other) over the whole image, temporally
     /// blocked: each of `bands` row bands first runs the trapezoid that needs no rows of its
     /// neighbours (a wavefront, so the rows being updated stay in cache), then the inverted
-    /// triangles around each band seam finish the levels. Returns Σ(|Δu| + |Δv|) over the
-    /// middle iteration (the ⌊k/2⌋-th of k; 0 when k < 2) and over the last one, or zeros
-    /// when not `measure`; the same bits whatever the number of bands.
-    pub(super) fn block(
+    /// triangles around each band seam finish the levels. Returns Σ(|Δu| + |Δv|) over
+    /// iteration `mid` (1-based, if given) and, if `last`, over the last one (zeros for what
+    /// is not measured); the same bits whatever the number of bands.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn pass(
         &self,
         simd: Simd,
         states: &mut [&mut SplitState],
         levels: usize,
         bands: usize,
         omega: f32,
-        measure: bool,
+        mid: Option<usize>,
+        last: bool,
     ) -> (f64, f64) {
         let h = self.lay.height;
         let bounds: Vec<(usize, usize)> = (0..bands)
@@ -238,21 +300,20 @@ impl Problem {
         // Levels per iteration: two half-sweeps (red–black, one state) or one sweep (Jacobi).
         let per = if states.len() == 1 { 2 } else { 1 };
         let iterations = levels / per;
-        let mid = iterations / 2;
         let sched = Schedule {
             levels,
-            measure_from: if measure {
+            measure_from: if last {
                 levels.saturating_sub(per)
             } else {
                 usize::MAX
             },
-            mid: if measure && mid >= 1 && mid < iterations {
-                (mid - 1) * per..mid * per
-            } else {
-                0..0
+            mid: match mid {
+                Some(m) if m >= 1 && m <= iterations => (m - 1) * per..m * per,
+                _ => 0..0,
             },
             omega,
         };
+        let measure = last || !sched.mid.is_empty();
         // Each row's measured changes, summed level by level in increasing order and then
         // row by row, so the totals do not depend on the bands (or the threads).
         let mut per_row = vec![(0.0_f64, 0.0_f64); if measure { h } else { 0 }];
