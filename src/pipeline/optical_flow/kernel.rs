@@ -43,7 +43,7 @@ impl Simd {
     pub(super) fn row<const GROOVE: bool, const RELAX: bool>(
         self,
         k: Consts,
-        odd: bool,
+        edges: Edges,
         lr: &[f32],
         up: &[f32],
         dn: &[f32],
@@ -51,11 +51,11 @@ impl Simd {
         dst: &mut [f32],
     ) {
         match self {
-            Simd::Baseline => row_impl::<GROOVE, RELAX, false>(k, odd, lr, up, dn, coef, dst),
+            Simd::Baseline => row_impl::<GROOVE, RELAX, false>(k, edges, lr, up, dn, coef, dst),
             // SAFETY: `Simd::Avx2` is only created by `detect` after the CPU reported AVX2,
             // which is all `row_avx2` requires.
             #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => unsafe { row_avx2::<GROOVE, RELAX>(k, odd, lr, up, dn, coef, dst) },
+            Simd::Avx2 => unsafe { row_avx2::<GROOVE, RELAX>(k, edges, lr, up, dn, coef, dst) },
         }
     }
 }
@@ -73,149 +73,86 @@ pub(super) fn groove_row_avx2(row: &GrooveRow, out: &mut [Vec<f32>; GROOVE_COEFS
 #[allow(clippy::too_many_arguments)]
 pub(super) fn row_avx2<const GROOVE: bool, const RELAX: bool>(
     k: Consts,
-    odd: bool,
+    edges: Edges,
     lr: &[f32],
     up: &[f32],
     dn: &[f32],
     coef: &[f32],
     dst: &mut [f32],
 ) {
-    row_impl::<GROOVE, RELAX, true>(k, odd, lr, up, dn, coef, dst);
+    row_impl::<GROOVE, RELAX, true>(k, edges, lr, up, dn, coef, dst);
 }
 
-/// Updates one half-row `dst = [u(n) | v(n)]` from the other half of the same row
-/// `lr = [u(m) | v(m)]`, the same half of the rows above and below (`up`, `dn`, mirrored at
-/// the image edges) and the half-row's coefficients `coef` (laid out as [`CoefRow`] says).
+/// Where a half-row's neighbours in the other half stop being whole vectors (see [`Layout`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Edges {
+    /// The odd half (column i's neighbours are the other half's i and i + 1) or the even one
+    /// (i − 1 and i).
+    pub(super) odd: bool,
+    /// The half's vector and lane holding the image's last column, whose missing right
+    /// neighbour is mirrored (`usize::MAX` when the other half holds that column).
+    pub(super) last: (usize, usize),
+}
+
+impl Edges {
+    /// Half `hp` of `lay`.
+    #[inline]
+    pub(super) fn new(lay: &Layout, hp: usize) -> Self {
+        // The last image column is even (half 0) when the width is odd.
+        let holds_last = (lay.width % 2 == 1) == (hp == 0);
+        let i = lay.half(hp).saturating_sub(1);
+        Self {
+            odd: hp == 1,
+            last: if holds_last && lay.m > 0 {
+                (i % lay.m, i / lay.m)
+            } else {
+                (usize::MAX, 0)
+            },
+        }
+    }
+}
+
+/// Updates one half-row `dst = [u | v]` from the other half of the same row `lr = [u | v]`,
+/// the same half of the rows above and below (`up`, `dn`, mirrored at the image edges) and
+/// the half-row's coefficient blocks `coef` ([`CoefRow`]), all lane-major ([`Layout`]): m
+/// vectors in each u and v part, m = `dst.len() / 16`.
 ///
-/// Even half (`odd == false`): column 2i has left/right neighbours `lr[i − 1]`, `lr[i]`; odd
-/// half: `lr[i]`, `lr[i + 1]`. A neighbour beyond the image border is mirrored, i.e. replaced
-/// by the opposite one. The core, where both neighbours are inside, runs in whole blocks of
-/// [`LANES`] columns, the last one possibly partial (with AVX2 intrinsics when `AVX2`, which
-/// only [`row_avx2`] sets); the two border columns go one at a time through the portable
-/// block, all lanes alike.
+/// Even half: column i's left and right neighbours are the other half's columns i − 1 and i,
+/// for vector k its vectors k − 1 and k; for k = 0 the left ones are vector m − 1 moved up a
+/// lane, column 0's (lane 0) missing one mirrored, i.e. replaced by the right one. Odd half:
+/// columns i and i + 1, vectors k and k + 1; for k = m − 1 the right ones are vector 0 moved
+/// down a lane. The image's last column mirrors its missing right neighbour (`edges.last`).
+/// Padding slots compute values that no column reads. With AVX2 intrinsics when `AVX2`, which
+/// only [`row_avx2`] sets.
 #[inline(always)]
 pub(super) fn row_impl<const GROOVE: bool, const RELAX: bool, const AVX2: bool>(
     k: Consts,
-    odd: bool,
+    edges: Edges,
     lr: &[f32],
     up: &[f32],
     dn: &[f32],
     coef: &[f32],
     dst: &mut [f32],
 ) {
-    let n = dst.len() / 2;
-    let nl = lr.len() / 2;
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
-    let off = usize::from(odd);
-    let cr = CoefRow {
-        n,
-        first: 1 - off,
-        c: ncoef,
-    };
-    if n == 0 || nl == 0 || up.len() < 2 * n || dn.len() < 2 * n || coef.len() < cr.len() {
+    let m = dst.len() / (2 * LANES);
+    let len = 2 * m * LANES;
+    if m == 0
+        || lr.len() < len
+        || up.len() < len
+        || dn.len() < len
+        || coef.len() < m * LANES * ncoef
+    {
         return;
     }
-    // Core: columns [i0, i1), where left = lr[i + off − 1] and right = lr[i + off] are both
-    // inside; its left neighbours start at lr[i0 + off − 1] = lr[0].
-    let i0 = cr.first;
-    let i1 = n.min(nl - off).max(i0);
-    if i1 > i0 {
-        let rows = Rows {
-            lr,
-            nl,
-            up,
-            dn,
-            n,
-            i0,
-            m: i1 - i0,
-            coef,
-        };
-        #[cfg(target_arch = "x86_64")]
-        if AVX2 {
-            // SAFETY: `AVX2` is only set by `row_avx2`, whose caller checked that the CPU has
-            // AVX2, all `blocks_avx2` requires.
-            unsafe { blocks_avx2::<GROOVE, RELAX>(k, &rows, dst) };
-        } else {
-            blocks_portable::<GROOVE, RELAX>(k, &rows, rows.outputs(dst));
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        blocks_portable::<GROOVE, RELAX>(k, &rows, rows.outputs(dst));
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2` is only set by `row_avx2`, whose caller checked that the CPU has
+        // AVX2, all `blocks_avx2` requires.
+        unsafe { blocks_avx2::<GROOVE, RELAX>(k, edges, m, lr, up, dn, coef, dst) };
+        return;
     }
-    // The border columns: mirror the missing neighbour.
-    let (lu, lv) = lr.split_at(nl);
-    let (uu, uv) = up.split_at(n);
-    let (du, dv) = dn.split_at(n);
-    let (ou, ov) = dst.split_at_mut(n);
-    for i in (0..i0.min(n)).chain(i1..n) {
-        let left = (i + off).checked_sub(1);
-        let right = (i + off < nl).then_some(i + off);
-        let (li, ri) = match (left, right) {
-            (Some(l), Some(r)) => (l, r),
-            (Some(l), None) => (l, l),
-            (None, Some(r)) => (r, r),
-            (None, None) => continue,
-        };
-        let one = L8::splat;
-        let inputs = BlockInputs {
-            lu: one(lu[li]),
-            ru: one(lu[ri]),
-            uu: one(uu[i]),
-            du: one(du[i]),
-            lv: one(lv[li]),
-            rv: one(lv[ri]),
-            uv: one(uv[i]),
-            dv: one(dv[i]),
-            old: (one(ou[i]), one(ov[i])),
-        };
-        let (a, b) = portable_block::<GROOVE, RELAX>(k, &inputs, |j| one(coef[cr.at(i, j)]));
-        (ou[i], ov[i]) = (a.0[0], b.0[0]);
-    }
-}
-
-/// A half-row's core, the `m` columns from `i0` whose two neighbours lie inside, and what it
-/// reads: the other half of the row `lr = [u(nl) | v(nl)]` (the core's left neighbours start
-/// at `lr[0]`, its right ones at `lr[1]`), this half of the rows above and below
-/// (`[u(n) | v(n)]`) and the core's ⌈m/8⌉ coefficient blocks (the last one padded). The
-/// output, `[u(n) | v(n)]` too, goes beside it. Each row stays whole, so the AVX2 loop reaches
-/// a row's v half from its u half by a fixed distance inside one slice.
-pub(super) struct Rows<'a> {
-    pub(super) lr: &'a [f32],
-    pub(super) nl: usize,
-    pub(super) up: &'a [f32],
-    pub(super) dn: &'a [f32],
-    pub(super) n: usize,
-    pub(super) i0: usize,
-    pub(super) m: usize,
-    pub(super) coef: &'a [f32],
-}
-
-impl Rows<'_> {
-    /// The core's inputs as runs: left neighbours of u and v (m + 1 values each, the right
-    /// ones one on), then u and v of the rows above and below (m each). `row_impl` checked
-    /// the lengths this slices by.
-    #[inline(always)]
-    fn inputs(&self) -> [&[f32]; 6] {
-        let (m, n, i0, nl) = (self.m, self.n, self.i0, self.nl);
-        [
-            &self.lr[..=m],
-            &self.lr[nl..=nl + m],
-            &self.up[i0..i0 + m],
-            &self.up[n + i0..n + i0 + m],
-            &self.dn[i0..i0 + m],
-            &self.dn[n + i0..n + i0 + m],
-        ]
-    }
-
-    /// The core's u and v runs of the output row `dst = [u(n) | v(n)]` (empty if it is short).
-    #[inline(always)]
-    fn outputs<'d>(&self, dst: &'d mut [f32]) -> (&'d mut [f32], &'d mut [f32]) {
-        let (u, v) = dst.split_at_mut(self.n.min(dst.len()));
-        let core = self.i0..self.i0 + self.m;
-        match (u.get_mut(core.clone()), v.get_mut(core)) {
-            (Some(u), Some(v)) => (u, v),
-            _ => (&mut [], &mut []),
-        }
-    }
+    blocks_portable::<GROOVE, RELAX>(k, edges, m, lr, up, dn, coef, dst);
 }
 
 /// Eight f32 lanes for the portable core: element-wise operations the compiler turns into
@@ -234,13 +171,19 @@ impl L8 {
         Self(out)
     }
 
-    /// The first values of `s`, up to 8, zeros after them (a copy of variable length: kept
-    /// apart from [`L8::load`], which it would stop from staying in registers).
+    /// `[first, a0, …, a6]`: moved up a lane.
     #[inline(always)]
-    pub(super) fn load_partial(s: &[f32]) -> Self {
-        let mut out = [0.0; LANES];
-        let len = s.len().min(LANES);
-        out[..len].copy_from_slice(&s[..len]);
+    pub(super) fn up_lane(self, first: f32) -> Self {
+        let mut out = [first; LANES];
+        out[1..].copy_from_slice(&self.0[..LANES - 1]);
+        Self(out)
+    }
+
+    /// `[a1, …, a7, last]`: moved down a lane.
+    #[inline(always)]
+    pub(super) fn down_lane(self, last: f32) -> Self {
+        let mut out = [last; LANES];
+        out[..LANES - 1].copy_from_slice(&self.0[1..]);
         Self(out)
     }
 
@@ -274,70 +217,85 @@ impl L8 {
     }
 }
 
-/// The core blocks in portable code: [`blocks_avx2`] operation for operation on [`L8`]. Whole
-/// blocks load fixed-length runs, which the compiler keeps in vector registers; a partial last
-/// block loads what there is (a copy of variable length, kept out of the whole blocks' loop),
-/// computes its missing lanes on zeros and does not store them.
+/// The half-row in portable code: [`blocks_avx2`] operation for operation on [`L8`] (the
+/// lane moves at the edges move values only, so both give the same bits).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
     k: Consts,
-    r: &Rows,
-    (ou, ov): (&mut [f32], &mut [f32]),
+    edges: Edges,
+    m: usize,
+    lr: &[f32],
+    up: &[f32],
+    dn: &[f32],
+    coef: &[f32],
+    dst: &mut [f32],
 ) {
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
-    let m = ou.len().min(ov.len());
-    let [lu, lv, uu, uv, du, dv] = r.inputs();
-    let whole = m / LANES * LANES;
-    let (ou, tail_u) = ou.split_at_mut(whole);
-    let (ov, tail_v) = ov.split_at_mut(whole);
-    let mut coefs = r.coef.chunks_exact(LANES * ncoef);
-    let cols = ou
-        .chunks_exact_mut(LANES)
-        .zip(ov.chunks_exact_mut(LANES))
-        .zip(coefs.by_ref())
-        .enumerate();
-    for (bi, ((ou, ov), coef)) in cols {
-        let i = bi * LANES;
-        let load = |s: &[f32], j: usize| L8::load(s.get(j..).unwrap_or_default());
-        // The left and right neighbours from one checked run of 9.
-        let pair = |s: &[f32]| match s.get(i..i + LANES + 1) {
-            Some(run) => (L8::load(run), L8::load(run.get(1..).unwrap_or_default())),
-            None => (L8::splat(0.0), L8::splat(0.0)),
-        };
-        let ((lu, ru), (lv, rv)) = (pair(lu), pair(lv));
-        let inputs = BlockInputs {
-            lu,
-            ru,
-            uu: load(uu, i),
-            du: load(du, i),
-            lv,
-            rv,
-            uv: load(uv, i),
-            dv: load(dv, i),
-            old: (L8::load(ou), L8::load(ov)),
-        };
-        let (a, b) = portable_block::<GROOVE, RELAX>(k, &inputs, |j| load(coef, j * LANES));
-        ou.copy_from_slice(&a.0);
-        ov.copy_from_slice(&b.0);
+    let slots = m * LANES;
+    // Part `part` (0 = u, 1 = v) of a lane-major row, as its m vectors.
+    fn part_vectors(s: &[f32], part: usize, slots: usize) -> &[[f32; LANES]] {
+        s.get(part * slots..(part + 1) * slots)
+            .map_or(&[][..], |p| p.as_chunks::<LANES>().0)
     }
-    if let (false, Some(coef)) = (tail_u.is_empty(), coefs.next()) {
-        let at = |s: &[f32], j: usize| L8::load_partial(s.get(j..).unwrap_or_default());
-        let i = whole;
-        let inputs = BlockInputs {
-            lu: at(lu, i),
-            ru: at(lu, i + 1),
-            uu: at(uu, i),
-            du: at(du, i),
-            lv: at(lv, i),
-            rv: at(lv, i + 1),
-            uv: at(uv, i),
-            dv: at(dv, i),
-            old: (at(tail_u, 0), at(tail_v, 0)),
+    let vectors = |s, part| part_vectors(s, part, slots);
+    let (lu, lv) = (vectors(lr, 0), vectors(lr, 1));
+    let at = |s: &[[f32; LANES]], i: usize| L8(s.get(i).copied().unwrap_or_default());
+    let (last_k, last_lane) = edges.last;
+    let (dst_u, dst_v) = dst.split_at_mut(slots);
+    let outs = dst_u
+        .as_chunks_mut::<LANES>()
+        .0
+        .iter_mut()
+        .zip(dst_v.as_chunks_mut::<LANES>().0.iter_mut());
+    let ins = vectors(up, 0)
+        .iter()
+        .zip(vectors(up, 1))
+        .zip(vectors(dn, 0).iter().zip(vectors(dn, 1)))
+        .zip(coef.chunks_exact(LANES * ncoef));
+    for (kk, ((ou, ov), (((uu, uv), (du, dv)), c))) in outs.zip(ins).enumerate() {
+        let (left, mut right) = if edges.odd {
+            let left = (at(lu, kk), at(lv, kk));
+            let right = if kk + 1 < m {
+                (at(lu, kk + 1), at(lv, kk + 1))
+            } else {
+                (
+                    at(lu, 0).down_lane(left.0.0[LANES - 1]),
+                    at(lv, 0).down_lane(left.1.0[LANES - 1]),
+                )
+            };
+            (left, right)
+        } else {
+            let right = (at(lu, kk), at(lv, kk));
+            let left = if kk > 0 {
+                (at(lu, kk - 1), at(lv, kk - 1))
+            } else {
+                (
+                    at(lu, m - 1).up_lane(right.0.0[0]),
+                    at(lv, m - 1).up_lane(right.1.0[0]),
+                )
+            };
+            (left, right)
         };
-        let (a, b) = portable_block::<GROOVE, RELAX>(k, &inputs, |j| at(coef, j * LANES));
-        let (nu, nv) = (tail_u.len().min(LANES), tail_v.len().min(LANES));
-        tail_u[..nu].copy_from_slice(&a.0[..nu]);
-        tail_v[..nv].copy_from_slice(&b.0[..nv]);
+        if kk == last_k {
+            right.0.0[last_lane] = left.0.0[last_lane];
+            right.1.0[last_lane] = left.1.0[last_lane];
+        }
+        let inputs = BlockInputs {
+            lu: left.0,
+            ru: right.0,
+            uu: L8(*uu),
+            du: L8(*du),
+            lv: left.1,
+            rv: right.1,
+            uv: L8(*uv),
+            dv: L8(*dv),
+            old: (L8(*ou), L8(*ov)),
+        };
+        let (a, b) = portable_block::<GROOVE, RELAX>(k, &inputs, |j| {
+            L8::load(c.get(j * LANES..).unwrap_or_default())
+        });
+        (*ou, *ov) = (a.0, b.0);
     }
 }
 
@@ -388,88 +346,113 @@ fn portable_block<const GROOVE: bool, const RELAX: bool>(
     (a, b)
 }
 
-/// The core blocks with AVX2 intrinsics: [`portable_block`] on 8 columns at once, operation
-/// for operation (no fused multiply–add), so the result has the same bits as
-/// [`blocks_portable`]. A last partial block is loaded and stored through a
-/// lane mask.
+/// The half-row with AVX2 intrinsics: [`portable_block`] on 8 columns at once, operation for
+/// operation (no fused multiply–add), so the result has the same bits as [`blocks_portable`].
+/// Every load starts a vector of the lane-major layout, so none straddles two cache lines
+/// when the rows start lines; each vector of the other half is loaded once and carried.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
 pub(super) fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
     k: Consts,
-    r: &Rows,
+    edges: Edges,
+    m: usize,
+    lr: &[f32],
+    up: &[f32],
+    dn: &[f32],
+    coef: &[f32],
     dst: &mut [f32],
 ) {
     use std::arch::x86_64::{
-        _mm256_cmpgt_epi32, _mm256_loadu_ps, _mm256_maskload_ps, _mm256_maskstore_ps,
-        _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_epi32, _mm256_storeu_ps,
+        __m256, _mm256_blend_ps, _mm256_blendv_ps, _mm256_castsi256_ps, _mm256_cmpeq_epi32,
+        _mm256_loadu_ps, _mm256_permutevar8x32_ps, _mm256_set1_epi32, _mm256_set1_ps,
+        _mm256_setr_epi32,
     };
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
-    let (m, n, i0, nl) = (r.m, r.n, r.i0, r.nl);
-    // What the loop reads and writes lies inside: lr's u half up to m + 1 values and its v
-    // half from nl; each of up, dn and dst from i0 and from n + i0, m values; the
-    // coefficients ⌈m/8⌉ whole blocks.
-    let (Some(l), Some(up), Some(dn), Some(out)) = (
-        r.lr.get(..nl + m + 1),
-        r.up.get(i0..n + i0 + m),
-        r.dn.get(i0..n + i0 + m),
-        dst.get_mut(i0..n + i0 + m),
+    let slots = m * LANES;
+    // Everything the loop reads and writes: two parts of m vectors in each row, m blocks of
+    // coefficients.
+    let (Some(l), Some(up), Some(dn), Some(out), Some(c)) = (
+        lr.get(..2 * slots),
+        up.get(..2 * slots),
+        dn.get(..2 * slots),
+        dst.get_mut(..2 * slots),
+        coef.get(..m * LANES * ncoef),
     ) else {
         return;
     };
-    if m >= nl || i0 + m > n || r.coef.len() < m.div_ceil(LANES) * LANES * ncoef {
-        return;
-    }
-    let k = AvxConsts {
+    let kc = AvxConsts {
         quarter: _mm256_set1_ps(0.25),
         q: _mm256_set1_ps(k.q),
         omega: _mm256_set1_ps(k.omega),
     };
-    // One advancing pointer per row, the v half at a fixed distance from the u half inside
-    // the same slice: fewer live pointers than one per stream, so the loop keeps them all in
-    // registers.
+    let (last_k, last_lane) = edges.last;
+    // All ones in the mirrored lane (lane numbers are below 8, so the cast is exact).
+    let mirror = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
+        _mm256_set1_epi32(last_lane as i32),
+        _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+    ));
+    let lp = l.as_ptr();
+    // Vector `i` (< m) of the other half's u and v parts.
+    // SAFETY (every call): i < m, so both loads lie inside `l`, checked above.
+    let pair = |i: usize| unsafe {
+        (
+            _mm256_loadu_ps(lp.add(i * LANES)),
+            _mm256_loadu_ps(lp.add(slots + i * LANES)),
+        )
+    };
     let mut p = BlockPtrs {
-        l: l.as_ptr(),
         up: up.as_ptr(),
         dn: dn.as_ptr(),
-        c: r.coef.as_ptr(),
+        c: c.as_ptr(),
         o: out.as_mut_ptr(),
-        dl: nl as isize,
-        dup: n as isize,
-        ddn: n as isize,
-        dout: n as isize,
+        dv: slots as isize,
     };
-    for _ in 0..m / LANES {
-        // SAFETY: the m/8 whole blocks lie inside the slices checked above, read and
-        // written: each u half at offsets below m (+ 1 for the right neighbours), each v half
-        // the checked distance further in the same slice; the pointers end at most at the
-        // core's end.
-        unsafe {
-            block_avx2::<GROOVE, RELAX>(
-                &k,
-                &p,
-                |at| _mm256_loadu_ps(at),
-                |at, x| _mm256_storeu_ps(at, x),
+    // One block at `p`, its right neighbours mirrored into the last column's lane there.
+    let mut step = |kk: usize, left: (__m256, __m256), mut right: (__m256, __m256)| {
+        if kk == last_k {
+            right = (
+                _mm256_blendv_ps(right.0, left.0, mirror),
+                _mm256_blendv_ps(right.1, left.1, mirror),
             );
+        }
+        // SAFETY: `p` is at block kk < m: its u and v vectors of up, dn and the output and
+        // its coefficient block lie inside the slices checked above.
+        unsafe {
+            block_avx2::<GROOVE, RELAX>(&kc, &p, [left.0, right.0, left.1, right.1]);
             p.advance(ncoef);
         }
-    }
-    let tail = m % LANES;
-    if tail > 0 {
-        // Lanes below `tail` (at most 7, so the cast is exact).
-        let mask = _mm256_cmpgt_epi32(
-            _mm256_set1_epi32(tail as i32),
-            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+    };
+    if edges.odd {
+        let first = pair(0);
+        let mut left = first;
+        for kk in 0..m - 1 {
+            let right = pair(kk + 1);
+            step(kk, left, right);
+            left = right;
+        }
+        // Vector 0 moved down a lane, lane 7 mirrored (or padding).
+        let down = _mm256_setr_epi32(1, 2, 3, 4, 5, 6, 7, 7);
+        let right = (
+            _mm256_blend_ps::<0x80>(_mm256_permutevar8x32_ps(first.0, down), left.0),
+            _mm256_blend_ps::<0x80>(_mm256_permutevar8x32_ps(first.1, down), left.1),
         );
-        // SAFETY: as above for the lanes below `tail`, the only ones the masked loads and
-        // stores touch (the right neighbours reach offset m, inside); the coefficient block
-        // is whole (padded).
-        unsafe {
-            block_avx2::<GROOVE, RELAX>(
-                &k,
-                &p,
-                |at| _mm256_maskload_ps(at, mask),
-                |at, x| _mm256_maskstore_ps(at, mask, x),
-            );
+        step(m - 1, left, right);
+    } else {
+        // Vector m − 1 moved up a lane, lane 0 (column 0) mirrored.
+        let upw = _mm256_setr_epi32(0, 0, 1, 2, 3, 4, 5, 6);
+        let (wrap, first) = (pair(m - 1), pair(0));
+        let mut left = (
+            _mm256_blend_ps::<0x01>(_mm256_permutevar8x32_ps(wrap.0, upw), first.0),
+            _mm256_blend_ps::<0x01>(_mm256_permutevar8x32_ps(wrap.1, upw), first.1),
+        );
+        let mut right = first;
+        for kk in 0..m {
+            if kk > 0 {
+                right = pair(kk);
+            }
+            step(kk, left, right);
+            left = right;
         }
     }
 }
@@ -482,25 +465,20 @@ pub(super) struct AvxConsts {
     pub(super) omega: std::arch::x86_64::__m256,
 }
 
-/// Where [`blocks_avx2`] is: one pointer per row (left/right neighbours, up, down, the
-/// coefficient block, the output), and the distance in floats from each row's u half to its
-/// v half.
+/// Where [`blocks_avx2`] is: one pointer per row (up, down, the coefficient block, the
+/// output) and the distance in floats from each row's u part to its v part.
 #[cfg(target_arch = "x86_64")]
 pub(super) struct BlockPtrs {
-    pub(super) l: *const f32,
     pub(super) up: *const f32,
     pub(super) dn: *const f32,
     pub(super) c: *const f32,
     pub(super) o: *mut f32,
-    pub(super) dl: isize,
-    pub(super) dup: isize,
-    pub(super) ddn: isize,
-    pub(super) dout: isize,
+    pub(super) dv: isize,
 }
 
 #[cfg(target_arch = "x86_64")]
 impl BlockPtrs {
-    /// Moves on by one block of columns, `ncoef` blocks of coefficients.
+    /// Moves on by one vector, `ncoef` vectors of coefficients.
     ///
     /// # Safety
     /// The next block must lie inside the rows, or start one past their end.
@@ -508,7 +486,6 @@ impl BlockPtrs {
     pub(super) unsafe fn advance(&mut self, ncoef: usize) {
         // SAFETY: the caller's.
         unsafe {
-            self.l = self.l.add(LANES);
             self.up = self.up.add(LANES);
             self.dn = self.dn.add(LANES);
             self.c = self.c.add(LANES * ncoef);
@@ -517,32 +494,28 @@ impl BlockPtrs {
     }
 }
 
-/// One block of 8 columns at `p`, the rows read through `load` and written through `store`
-/// (plain or masked); the coefficient block is read whole.
+/// One block of 8 columns at `p`, its left and right neighbours given (`[lu, ru, lv, rv]`);
+/// the coefficient block is read whole.
 ///
 /// # Safety
-/// `load` and `store` must be sound at every address the block reaches from `p`: the rows'
-/// u and v halves at lanes 0..8 (the left/right row also at 1..9) and the output's u and v
-/// halves; the coefficient block must lie inside its row.
+/// The u and v vectors of up, dn and the output at `p`, and the coefficient block, must lie
+/// inside their rows.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
 pub(super) unsafe fn block_avx2<const GROOVE: bool, const RELAX: bool>(
     k: &AvxConsts,
     p: &BlockPtrs,
-    load: impl Fn(*const f32) -> std::arch::x86_64::__m256,
-    store: impl Fn(*mut f32, std::arch::x86_64::__m256),
+    [lu, ru, lv, rv]: [std::arch::x86_64::__m256; 4],
 ) {
-    use std::arch::x86_64::{_mm256_add_ps, _mm256_loadu_ps, _mm256_mul_ps, _mm256_sub_ps};
+    use std::arch::x86_64::{
+        _mm256_add_ps, _mm256_loadu_ps, _mm256_mul_ps, _mm256_storeu_ps, _mm256_sub_ps,
+    };
     // SAFETY: the caller's.
     unsafe {
-        let (lu, ru, uu, du) = (load(p.l), load(p.l.add(1)), load(p.up), load(p.dn));
-        let (lv, rv, uv, dv) = (
-            load(p.l.offset(p.dl)),
-            load(p.l.offset(p.dl + 1)),
-            load(p.up.offset(p.dup)),
-            load(p.dn.offset(p.ddn)),
-        );
+        let load = |at: *const f32| _mm256_loadu_ps(at);
+        let (uu, du) = (load(p.up), load(p.dn));
+        let (uv, dv) = (load(p.up.offset(p.dv)), load(p.dn.offset(p.dv)));
         let c = |j: usize| _mm256_loadu_ps(p.c.add(j * LANES));
         let su = _mm256_add_ps(_mm256_add_ps(lu, ru), _mm256_add_ps(uu, du));
         let sv = _mm256_add_ps(_mm256_add_ps(lv, rv), _mm256_add_ps(uv, dv));
@@ -575,14 +548,14 @@ pub(super) unsafe fn block_avx2<const GROOVE: bool, const RELAX: bool>(
                 _mm256_sub_ps(vb, _mm256_mul_ps(gy, t)),
             )
         };
-        let pov = p.o.offset(p.dout);
+        let pov = p.o.offset(p.dv);
         if RELAX {
             let (old_u, old_v) = (load(p.o), load(pov));
             a = _mm256_add_ps(old_u, _mm256_mul_ps(k.omega, _mm256_sub_ps(a, old_u)));
             b = _mm256_add_ps(old_v, _mm256_mul_ps(k.omega, _mm256_sub_ps(b, old_v)));
         }
-        store(p.o, a);
-        store(pov, b);
+        _mm256_storeu_ps(p.o, a);
+        _mm256_storeu_ps(pov, b);
     }
 }
 

@@ -2,7 +2,11 @@
 
 use super::*;
 
-/// Sizes of the red–black split: half-row `E` holds even columns, `O` odd ones.
+/// Sizes of the red–black split: half-row `E` holds even columns, `O` odd ones. Each half-row
+/// is stored lane-major: its columns are cut into [`LANES`] runs of `m` (the last one padded),
+/// and vector k holds column k of every run, lane l being column `l·m + k` of the half. The
+/// left and right neighbours of vector k's columns in the other half are then whole vectors
+/// too (k − 1 and k, or k and k + 1), so the kernel never loads across a vector boundary.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Layout {
     pub(super) width: usize,
@@ -11,16 +15,20 @@ pub(super) struct Layout {
     pub(super) ne: usize,
     /// Odd-column count, ⌊w/2⌋.
     pub(super) no: usize,
+    /// Vectors per half-row (both halves): ⌈ne/8⌉.
+    pub(super) m: usize,
 }
 
 impl Layout {
     #[inline]
     pub(super) fn new(width: usize, height: usize) -> Self {
+        let ne = width.div_ceil(2);
         Self {
             width,
             height,
-            ne: width.div_ceil(2),
+            ne,
             no: width / 2,
+            m: ne.div_ceil(LANES),
         }
     }
 
@@ -28,6 +36,38 @@ impl Layout {
     #[inline]
     pub(super) fn half(&self, hp: usize) -> usize {
         if hp == 0 { self.ne } else { self.no }
+    }
+
+    /// Slots of one of a half-row's u or v parts (columns and padding).
+    #[inline]
+    pub(super) fn slots(&self) -> usize {
+        self.m * LANES
+    }
+
+    /// Floats per stored half-row: `[u | v]`, [`Layout::slots`] each.
+    #[inline]
+    pub(super) fn stride(&self) -> usize {
+        2 * self.slots()
+    }
+
+    /// Where column `i` of a half sits in a u or v part: vector `i mod m`, lane `i div m`.
+    #[cfg(test)]
+    pub(super) fn slot(&self, i: usize) -> usize {
+        (i % self.m) * LANES + i / self.m
+    }
+
+    /// Calls `f(i, slot)` for the half's first `n` columns in column order, without division.
+    #[inline(always)]
+    pub(super) fn each_slot(&self, n: usize, mut f: impl FnMut(usize, usize)) {
+        for lane in 0..LANES {
+            for k in 0..self.m {
+                let i = lane * self.m + k;
+                if i >= n {
+                    return;
+                }
+                f(i, k * LANES + lane);
+            }
+        }
     }
 }
 
@@ -113,9 +153,10 @@ impl PartialEq for Aligned {
     }
 }
 
-/// Flow state in split layout: per row, `[u(n) | v(n)]` for each half. The even half's
-/// kernel core starts at its column 1, the odd half's at column 0: those elements start
-/// cache lines.
+/// Flow state in split layout: per row, `[u | v]` for each half, lane-major as [`Layout`]
+/// says (padding slots hold values no column reads). Rows start cache lines when
+/// [`Layout::stride`] allows (a multiple of 16 floats, as at any width that is a multiple
+/// of 32).
 #[derive(Clone, Debug, Default)]
 pub(super) struct SplitState {
     pub(super) e: Aligned,
@@ -124,9 +165,10 @@ pub(super) struct SplitState {
 
 impl SplitState {
     pub(super) fn zeros(lay: &Layout) -> Self {
+        let len = lay.stride() * lay.height;
         Self {
-            e: Aligned::zeros(2 * lay.ne * lay.height, 1),
-            o: Aligned::zeros(2 * lay.no * lay.height, 0),
+            e: Aligned::zeros(len, 0),
+            o: Aligned::zeros(len, 0),
         }
     }
 
@@ -134,22 +176,21 @@ impl SplitState {
     /// non-finite values start at 0.
     pub(super) fn from_images(lay: &Layout, u: &Image, v: &Image, base: f32) -> Self {
         let mut st = Self::zeros(lay);
-        let w = lay.width;
-        let split = |row: &[f32], even: &mut [f32], odd: &mut [f32], base: f32| {
-            split_columns(row, even, odd, |d, x| {
-                let y = x - base;
-                *d = if y.is_finite() { y } else { 0.0 };
-            });
-        };
-        st.e.par_chunks_mut(2 * lay.ne)
-            .zip(st.o.par_chunks_mut(2 * lay.no.max(1)))
+        let (w, stride, slots) = (lay.width, lay.stride(), lay.slots());
+        st.e.par_chunks_mut(stride)
+            .zip(st.o.par_chunks_mut(stride))
             .zip(u.data.par_chunks(w))
             .zip(v.data.par_chunks(w))
             .for_each(|(((er, or), ur), vr)| {
-                let (eu, ev) = er.split_at_mut(lay.ne);
-                let (ou, ov) = or.split_at_mut(lay.no.min(or.len()));
-                split(ur, eu, ou, base);
-                split(vr, ev, ov, 0.0);
+                for (hp, dst) in [(0, er), (1, or)] {
+                    let (du, dv) = dst.split_at_mut(slots);
+                    lay.each_slot(lay.half(hp), |i, at| {
+                        let x = 2 * i + hp;
+                        let ux = ur[x] - base;
+                        du[at] = if ux.is_finite() { ux } else { 0.0 };
+                        dv[at] = if vr[x].is_finite() { vr[x] } else { 0.0 };
+                    });
+                }
             });
         st
     }
@@ -157,59 +198,75 @@ impl SplitState {
     /// Back to images; `base` is added to u.
     pub(super) fn to_images(&self, lay: &Layout, base: f32) -> (Image, Image) {
         let (w, h) = (lay.width, lay.height);
-        let mut u = zeros_par(w * h);
-        let mut v = zeros_par(w * h);
-        // Interleaves a row's even and odd columns.
-        let merge = |row: &mut [f32], even: &[f32], odd: &[f32], base: f32| {
-            let mut pairs = row.chunks_exact_mut(2);
-            for ((pair, &e), &o) in (&mut pairs).zip(even).zip(odd) {
-                pair[0] = e + base;
-                pair[1] = o + base;
-            }
-            if let (Some(last), Some(&e_last)) =
-                (pairs.into_remainder().first_mut(), even.get(odd.len()))
-            {
-                *last = e_last + base;
+        let (stride, slots) = (lay.stride(), lay.slots());
+        let (m, ne, no) = (lay.m, lay.ne, lay.no);
+        let fill = |out: &mut [MaybeUninit<f32>], part: usize, base: f32| {
+            out.par_chunks_mut(w)
+                .zip(self.e.par_chunks(stride))
+                .zip(self.o.par_chunks(stride))
+                .for_each_init(
+                    // Each half's values in column order (padding slots last).
+                    || [vec![0.0_f32; slots], vec![0.0_f32; slots]],
+                    |[even, odd], ((row, er), or)| {
+                        from_lanes(m, &er[part * slots..(part + 1) * slots], even);
+                        from_lanes(m, &or[part * slots..(part + 1) * slots], odd);
+                        // Interleaves the halves; adding −0 leaves every value, −0 included,
+                        // as it is.
+                        let mut pairs = row.chunks_exact_mut(2);
+                        for ((pair, &e), &o) in (&mut pairs).zip(&even[..no]).zip(&odd[..no]) {
+                            pair[0].write(e + base);
+                            pair[1].write(o + base);
+                        }
+                        if let (Some(last), Some(&e)) =
+                            (pairs.into_remainder().first_mut(), even.get(ne - 1))
+                        {
+                            last.write(e + base);
+                        }
+                    },
+                );
+        };
+        let image = |part: usize, base: f32| {
+            let mut data: Vec<f32> = Vec::with_capacity(w * h);
+            fill(&mut data.spare_capacity_mut()[..w * h], part, base);
+            // SAFETY: the capacity is at least w·h, and `fill` wrote every element: each row
+            // chunk of w values gets ⌊w/2⌋ pairs (no = ⌊w/2⌋ ≤ ne ≤ 8m values in each half's
+            // array) and, for an odd width, the last even column in the remainder.
+            unsafe { data.set_len(w * h) };
+            Image {
+                width: w,
+                height: h,
+                data,
             }
         };
-        u.par_chunks_mut(w)
-            .zip(v.par_chunks_mut(w))
-            .zip(self.e.par_chunks(2 * lay.ne))
-            .zip(self.o.par_chunks(2 * lay.no.max(1)))
-            .for_each(|(((ur, vr), er), or)| {
-                let (eu, ev) = er.split_at(lay.ne);
-                let (ou, ov) = or.split_at(lay.no.min(or.len()));
-                merge(ur, eu, ou, base);
-                // Adding −0 leaves every value, −0 included, as it is.
-                merge(vr, ev, ov, -0.0);
-            });
-        let wrap = |data| Image {
-            width: w,
-            height: h,
-            data,
-        };
-        (wrap(u), wrap(v))
+        (image(0, base), image(1, -0.0))
     }
 }
 
-/// Splits a row of w values into its ⌈w/2⌉ even columns and ⌊w/2⌋ odd ones: `put(slot, value)`
-/// for each. With `even` and `odd` of exactly those lengths every slot is put once: the
-/// ⌊w/2⌋ column pairs fill `odd` and the first ⌊w/2⌋ of `even`, an odd width's last column
-/// the last of `even`.
+/// The 8×8 block with rows and columns swapped.
 #[inline(always)]
-pub(super) fn split_columns(
-    row: &[f32],
-    even: &mut [f32],
-    odd: &mut [f32],
-    put: impl Fn(&mut f32, f32),
-) {
-    let pairs = row.chunks_exact(2);
-    if let (Some(&last), Some(e_last)) = (pairs.remainder().first(), even.get_mut(odd.len())) {
-        put(e_last, last);
+fn transpose(b: &[[f32; LANES]; LANES]) -> [[f32; LANES]; LANES] {
+    std::array::from_fn(|j| std::array::from_fn(|l| b[l][j]))
+}
+
+/// A half's m lane-major vectors (`lanes`, 8m values) in column order (`nat`, 8m values: the
+/// columns, then the padding), eight vectors at a time through an 8×8 transpose.
+#[inline(always)]
+pub(super) fn from_lanes(m: usize, lanes: &[f32], nat: &mut [f32]) {
+    let (Some(lanes), Some(nat)) = (lanes.get(..m * LANES), nat.get_mut(..m * LANES)) else {
+        return;
+    };
+    let vectors = lanes.as_chunks::<LANES>().0;
+    let whole = m / LANES * LANES;
+    for k0 in (0..whole).step_by(LANES) {
+        let block: [[f32; LANES]; LANES] = std::array::from_fn(|j| vectors[k0 + j]);
+        for (l, run) in transpose(&block).iter().enumerate() {
+            nat[l * m + k0..l * m + k0 + LANES].copy_from_slice(run);
+        }
     }
-    for ((pair, e), o) in pairs.zip(even.iter_mut()).zip(odd.iter_mut()) {
-        put(e, pair[0]);
-        put(o, pair[1]);
+    for k in whole..m {
+        for l in 0..LANES {
+            nat[l * m + k] = vectors[k][l];
+        }
     }
 }
 
@@ -241,17 +298,15 @@ impl Kernel {
 /// contiguous block (one stream per half-row instead of one per coefficient).
 pub(super) const LANES: usize = 8;
 
-/// Where the coefficients of one half-row live. Column `i` takes slot `(i − first) mod n`,
-/// `first` being the half's first core column (1 in the even half, whose column 0 has no left
-/// neighbour; 0 in the odd half), so the kernel's core runs over whole blocks from slot 0 and
-/// the even half's column 0 takes the last slot. Slot `j` keeps coefficient `k` at
-/// `(j / 8)·8·C + 8·k + j mod 8`; the last block is padded with zeros.
+/// Where the coefficients of one half-row live: block k holds the `c` coefficients of vector
+/// k's lanes (columns `l·m + k`, see [`Layout`]), coefficient j at `k·8·c + 8·j + l`; padding
+/// slots hold zeros.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct CoefRow {
     /// Columns in the half.
     pub(super) n: usize,
-    /// First core column (slot 0).
-    pub(super) first: usize,
+    /// Vectors per half-row.
+    pub(super) m: usize,
     /// Coefficients per column.
     pub(super) c: usize,
 }
@@ -262,7 +317,7 @@ impl CoefRow {
     pub(super) fn new(lay: &Layout, hp: usize, c: usize) -> Self {
         Self {
             n: lay.half(hp),
-            first: usize::from(hp == 0),
+            m: lay.m,
             c,
         }
     }
@@ -270,60 +325,37 @@ impl CoefRow {
     /// Values per half-row, padding included.
     #[inline]
     pub(super) fn len(self) -> usize {
-        self.n.div_ceil(LANES) * LANES * self.c
+        self.m * LANES * self.c
     }
 
-    /// Index of coefficient `k` of slot `j`.
-    #[inline(always)]
-    pub(super) fn at_slot(self, j: usize, k: usize) -> usize {
-        (j / LANES) * LANES * self.c + k * LANES + j % LANES
+    /// Index of coefficient `j` of column `i`.
+    #[cfg(test)]
+    pub(super) fn at(self, i: usize, j: usize) -> usize {
+        (i % self.m) * LANES * self.c + j * LANES + i / self.m
     }
 
     /// Writes this half-row's blocks into `dst` (a half-row of [`CoefRow::len`] values) from
-    /// `cols[k]`, coefficient k over the half's n columns: slot j holds column
-    /// (j + first) mod n; the padding holds 0. Block by block, so each cache line is written
-    /// whole at once.
+    /// `rows[j]`, coefficient j of every column of the image row in column order (the half's
+    /// column i is image column 2i + `hp`); the padding gets zeros, so every value of `dst`
+    /// is written.
     pub(super) fn scatter<const C: usize>(
         self,
-        cols: &[Vec<f32>; C],
+        hp: usize,
+        rows: &[Vec<f32>; C],
         dst: &mut [MaybeUninit<f32>],
     ) {
-        // Slots below `plain` hold columns j + first.
-        let plain = self.n - self.first;
-        for (b, block) in dst.chunks_exact_mut(LANES * C).enumerate() {
-            let j0 = b * LANES;
-            let start = j0 + self.first;
-            for (out, col) in block.chunks_exact_mut(LANES).zip(cols) {
-                match col.get(start..start + LANES) {
-                    Some(src) if j0 + LANES <= plain => {
-                        for (d, &x) in out.iter_mut().zip(src) {
-                            d.write(x);
-                        }
-                    }
-                    _ => {
-                        for (l, d) in out.iter_mut().enumerate() {
-                            let j = j0 + l;
-                            let column = if j < plain {
-                                Some(j + self.first)
-                            } else {
-                                (j < self.n).then(|| j - plain)
-                            };
-                            d.write(column.and_then(|i| col.get(i)).copied().unwrap_or(0.0));
-                        }
-                    }
+        for (k, block) in dst.chunks_exact_mut(LANES * C).enumerate() {
+            for (out, row) in block.chunks_exact_mut(LANES).zip(rows) {
+                for (lane, d) in out.iter_mut().enumerate() {
+                    let i = lane * self.m + k;
+                    let x = if i < self.n {
+                        row.get(2 * i + hp)
+                    } else {
+                        None
+                    };
+                    d.write(x.copied().unwrap_or(0.0));
                 }
             }
         }
-    }
-
-    /// Index of coefficient `k` of column `i` (< n).
-    #[inline(always)]
-    pub(super) fn at(self, i: usize, k: usize) -> usize {
-        let j = if i >= self.first {
-            i - self.first
-        } else {
-            self.n - self.first + i
-        };
-        self.at_slot(j, k)
     }
 }

@@ -35,23 +35,15 @@ impl Problem {
                     .zip(co.par_chunks_mut(lo))
                     .enumerate()
                     .for_each_init(
-                        // The image row's C coefficients, then their even and odd columns.
-                        || [w, lay.ne, lay.no].map(|n| std::array::from_fn(|_| vec![0.0_f32; n])),
-                        |[rows, even, odd]: &mut [[Vec<f32>; C]; 3], (y, (re, ro))| {
+                        // The image row's C coefficients.
+                        || std::array::from_fn(|_| vec![0.0_f32; w]),
+                        |rows: &mut [Vec<f32>; C], (y, (re, ro))| {
                             f(y, rows);
-                            for ((full, e), o) in
-                                rows.iter_mut().zip(even.iter_mut()).zip(odd.iter_mut())
-                            {
-                                // `f` may not change the length: every column is split below.
-                                full.resize(w, 0.0);
-                                split_columns(full, e, o, |d, x| *d = x);
-                            }
                             // Every chunk is one half-row of `CoefRow::len` values, and
-                            // `CoefRow::scatter` writes every coefficient of every slot and the
-                            // padding: each of its blocks' C runs of 8. So the chunks, which
+                            // `CoefRow::scatter` writes every one of them. So the chunks, which
                             // cover both arrays, fill them whole (the builders' contract).
-                            halves[0].scatter(even, re);
-                            halves[1].scatter(odd, ro);
+                            halves[0].scatter(0, rows, re);
+                            halves[1].scatter(1, rows, ro);
                         },
                     );
             }));
@@ -397,16 +389,16 @@ impl Problem {
         let dn = if dn_own { y - 1 } else { y + 1 };
         let (r, r_up, r_dn) = (y - ch.y0, up - ch.y0, dn - ch.y0);
         let mut delta = 0.0;
+        let stride = lay.stride();
         if ch.bufs.len() == 1 {
             // Red–black: colour lvl % 2; red = (x + y) even, i.e. half (y + colour) % 2.
             let hp = (y + lvl) % 2;
-            let (n_same, n_other) = (lay.half(hp), lay.half(1 - hp));
             let Some((e, o)) = ch.bufs.first_mut() else {
                 return 0.0;
             };
             let (same, other): (&mut [f32], &[f32]) = if hp == 0 { (e, o) } else { (o, e) };
-            let lr = &other[r * 2 * n_other..(r + 1) * 2 * n_other];
-            let (up_row, mid, dn_row) = rows3(same, 2 * n_same, r, r_up, r_dn);
+            let lr = &other[r * stride..(r + 1) * stride];
+            let (up_row, mid, dn_row) = rows3(same, stride, r, r_up, r_dn);
             let keep_old = measure || up_own || dn_own;
             if keep_old {
                 scratch.clear();
@@ -416,7 +408,7 @@ impl Problem {
             let dn_row = if dn_own { &scratch[..] } else { dn_row };
             self.run_row(simd, hp, y, omega, lr, up_row, dn_row, mid);
             if measure {
-                delta += abs_diff_sum(mid, scratch);
+                delta += abs_diff_sum(lay, lay.half(hp), mid, scratch);
             }
         } else {
             // Jacobi: read state lvl % 2, write the other, both halves.
@@ -430,29 +422,20 @@ impl Problem {
                 (s1, s0)
             };
             for hp in 0..2 {
-                let (n_same, n_other) = (lay.half(hp), lay.half(1 - hp));
                 let (src_same, src_other, dst_same): (&[f32], &[f32], &mut [f32]) = if hp == 0 {
                     (&*src.0, &*src.1, &mut *dst.0)
                 } else {
                     (&*src.1, &*src.0, &mut *dst.1)
                 };
-                let row = |rr: usize, n: usize| rr * 2 * n..(rr + 1) * 2 * n;
-                let lr = &src_other[row(r, n_other)];
-                let old = &src_same[row(r, n_same)];
-                let up_row = if up_own {
-                    old
-                } else {
-                    &src_same[row(r_up, n_same)]
-                };
-                let dn_row = if dn_own {
-                    old
-                } else {
-                    &src_same[row(r_dn, n_same)]
-                };
-                let mid = &mut dst_same[row(r, n_same)];
+                let row = |rr: usize| rr * stride..(rr + 1) * stride;
+                let lr = &src_other[row(r)];
+                let old = &src_same[row(r)];
+                let up_row = if up_own { old } else { &src_same[row(r_up)] };
+                let dn_row = if dn_own { old } else { &src_same[row(r_dn)] };
+                let mid = &mut dst_same[row(r)];
                 self.run_row(simd, hp, y, omega, lr, up_row, dn_row, mid);
                 if measure {
-                    delta += abs_diff_sum(mid, old);
+                    delta += abs_diff_sum(lay, lay.half(hp), mid, old);
                 }
             }
         }
@@ -475,7 +458,7 @@ impl Problem {
         let len = CoefRow::new(&self.lay, hp, self.kernel.coefs()).len();
         let coef_all = if hp == 0 { &self.coef_e } else { &self.coef_o };
         let coef = &coef_all[y * len..(y + 1) * len];
-        let odd = hp == 1;
+        let edges = Edges::new(&self.lay, hp);
         let relax = omega != 1.0;
         let k = Consts {
             q: match self.kernel {
@@ -485,10 +468,12 @@ impl Problem {
             omega,
         };
         match self.kernel {
-            Kernel::Plain if relax => simd.row::<false, true>(k, odd, lr, up, dn, coef, dst),
-            Kernel::Plain => simd.row::<false, false>(k, odd, lr, up, dn, coef, dst),
-            Kernel::Groove { .. } if relax => simd.row::<true, true>(k, odd, lr, up, dn, coef, dst),
-            Kernel::Groove { .. } => simd.row::<true, false>(k, odd, lr, up, dn, coef, dst),
+            Kernel::Plain if relax => simd.row::<false, true>(k, edges, lr, up, dn, coef, dst),
+            Kernel::Plain => simd.row::<false, false>(k, edges, lr, up, dn, coef, dst),
+            Kernel::Groove { .. } if relax => {
+                simd.row::<true, true>(k, edges, lr, up, dn, coef, dst)
+            }
+            Kernel::Groove { .. } => simd.row::<true, false>(k, edges, lr, up, dn, coef, dst),
         }
     }
 }
@@ -569,8 +554,8 @@ pub(super) fn split_chunks<'a>(
         .collect();
     for st in states.iter_mut() {
         let st: &'a mut SplitState = st;
-        let es = split_rows(&mut st.e, 2 * lay.ne, bounds);
-        let os = split_rows(&mut st.o, 2 * lay.no, bounds);
+        let es = split_rows(&mut st.e, lay.stride(), bounds);
+        let os = split_rows(&mut st.o, lay.stride(), bounds);
         for ((ch, e), o) in chunks.iter_mut().zip(es).zip(os) {
             ch.bufs.push((e, o));
         }
@@ -624,25 +609,35 @@ pub(super) fn rows3(
     (pick(up), m, pick(dn))
 }
 
-/// Σ|a − b| with lane accumulators so the loop vectorises.
+/// Σ|a − b| over the first `n` columns of a half-row's u and v parts (`a`, `b` lane-major, as
+/// [`Layout`] says), taken in column order, u then v, with 16 lane accumulators: the order
+/// and the bits of the sum over the natural `[u(n) | v(n)]` half-row.
 #[inline]
-pub(super) fn abs_diff_sum(a: &[f32], b: &[f32]) -> f64 {
-    pub(super) const LANES: usize = 16;
-    let n = a.len().min(b.len());
-    let (a, b) = (&a[..n], &b[..n]);
-    let mut acc = [0.0_f32; LANES];
-    let mut ca = a.chunks_exact(LANES);
-    let mut cb = b.chunks_exact(LANES);
-    for (x, y) in (&mut ca).zip(&mut cb) {
-        for k in 0..LANES {
-            acc[k] += (x[k] - y[k]).abs();
-        }
+pub(super) fn abs_diff_sum(lay: &Layout, n: usize, a: &[f32], b: &[f32]) -> f64 {
+    const ACC: usize = 16;
+    let slots = lay.slots();
+    let total = 2 * n;
+    let whole = total / ACC * ACC;
+    let mut acc = [0.0_f32; ACC];
+    // The last total mod 16 values, summed in order after the lanes.
+    let mut tail = [0.0_f32; ACC];
+    for part in 0..2 {
+        let (Some(pa), Some(pb)) = (
+            a.get(part * slots..(part + 1) * slots),
+            b.get(part * slots..(part + 1) * slots),
+        ) else {
+            return 0.0;
+        };
+        lay.each_slot(n, |i, at| {
+            let j = part * n + i;
+            let d = (pa[at] - pb[at]).abs();
+            if j < whole {
+                acc[j % ACC] += d;
+            } else {
+                tail[j - whole] = d;
+            }
+        });
     }
-    let tail: f32 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(x, y)| (x - y).abs())
-        .sum();
+    let tail: f32 = tail[..total - whole].iter().sum();
     f64::from(acc.iter().sum::<f32>()) + f64::from(tail)
 }

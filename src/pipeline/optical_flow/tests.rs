@@ -677,7 +677,15 @@ fn naive_plain_gs(d: &Derivatives, lambda: f32, iterations: usize) -> (Vec<f32>,
 
 #[test]
 fn fast_solver_matches_naive_gauss_seidel() {
-    for (w, h) in [(31, 29), (40, 64), (2, 2), (3, 5)] {
+    for (w, h) in [
+        (31, 29),
+        (40, 64),
+        (2, 2),
+        (3, 5),
+        (17, 9),
+        (64, 6),
+        (33, 4),
+    ] {
         let frames = translating(w, h, 7, 0.4, -0.2, 9);
         let d = middle(&frames, 0.0, &no_prewarp());
         let p = FlowParams {
@@ -713,14 +721,20 @@ fn coefficient_slots_cover_each_half_row_once() {
                     assert!(!seen[at], "w {w} half {hp}: column {i} coefficient {k}");
                     seen[at] = true;
                 }
+                // Column i is lane i div m of vector i mod m, in the state as here.
+                assert_eq!(cr.at(i, 0), (i % lay.m) * LANES * cr.c + i / lay.m);
+                assert_eq!(lay.slot(i), (i % lay.m) * LANES + i / lay.m);
             }
-            // The core starts at slot 0 and runs on in slot order.
-            for i in cr.first..cr.n {
-                assert_eq!(cr.at(i, 1), cr.at_slot(i - cr.first, 1));
-            }
-            // What is left is the padding of the last block.
+            // What is left is the padding.
             let unseen = seen.iter().filter(|s| !**s).count();
-            assert_eq!(unseen, (cr.n.div_ceil(LANES) * LANES - cr.n) * cr.c);
+            assert_eq!(unseen, (lay.slots() - cr.n) * cr.c);
+            // `each_slot` visits the columns in order, at their slots.
+            let mut next = 0;
+            lay.each_slot(cr.n, |i, at| {
+                assert_eq!((i, at), (next, lay.slot(next)), "w {w} half {hp}");
+                next += 1;
+            });
+            assert_eq!(next, cr.n);
         }
     }
 }
