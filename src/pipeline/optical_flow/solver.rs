@@ -9,21 +9,32 @@ pub(super) struct Problem {
     pub(super) kernel: Kernel,
     pub(super) coef_e: Aligned,
     pub(super) coef_o: Aligned,
+    /// Each half's [`Edges`], and its coefficient values per half-row.
+    pub(super) edges: [Edges; 2],
+    pub(super) coef_len: usize,
 }
 
 impl Problem {
     /// Fills the coefficient arrays a row at a time: `f(y, rows)` writes coefficient k of every
     /// column of image row `y` into `rows[k]` (natural column order, so the caller's loop can
-    /// vectorise); the rows are then split into their even and odd halves, in blocks.
+    /// vectorise); the rows are then scattered into their halves' lane-major blocks. With
+    /// `confidence` given, the same pass over the rows also returns the flow's confidence map
+    /// ([`confidence_row`]), reading Ix and Iy while the row is in cache.
     pub(super) fn build_rows<const C: usize>(
         lay: &Layout,
         kernel: Kernel,
+        confidence: Option<(&Derivatives, f32)>,
         f: impl Fn(usize, &mut [Vec<f32>; C]) + Sync,
-    ) -> Self {
-        let w = lay.width;
+    ) -> (Self, Option<Image>) {
+        let (w, h) = (lay.width, lay.height);
         let halves = [CoefRow::new(lay, 0, C), CoefRow::new(lay, 1, C)];
-        let (len_e, len_o) = (halves[0].len() * lay.height, halves[1].len() * lay.height);
+        let (len_e, len_o) = (halves[0].len() * h, halves[1].len() * h);
         let (le, lo) = (halves[0].len().max(1), halves[1].len().max(1));
+        let mut conf: Option<Vec<f32>> = confidence.map(|_| Vec::with_capacity(w * h));
+        let conf_rows = match conf.as_mut() {
+            Some(c) => Either::Left(c.spare_capacity_mut()[..w * h].par_chunks_mut(w).map(Some)),
+            None => Either::Right((0..h).into_par_iter().map(|_| None)),
+        };
         // Both arrays are filled at once, row by row: the outer builder's closure runs the
         // whole parallel loop inside the inner one's.
         let mut coef_o = None;
@@ -33,33 +44,69 @@ impl Problem {
                 // only keeps the chunk size valid.
                 ce.par_chunks_mut(le)
                     .zip(co.par_chunks_mut(lo))
+                    .zip(conf_rows)
                     .enumerate()
                     .for_each_init(
                         // The image row's C coefficients.
                         || std::array::from_fn(|_| vec![0.0_f32; w]),
-                        |rows: &mut [Vec<f32>; C], (y, (re, ro))| {
+                        |rows: &mut [Vec<f32>; C], (y, ((re, ro), out))| {
                             f(y, rows);
                             // Every chunk is one half-row of `CoefRow::len` values, and
                             // `CoefRow::scatter` writes every one of them. So the chunks, which
                             // cover both arrays, fill them whole (the builders' contract).
                             halves[0].scatter(0, rows, re);
                             halves[1].scatter(1, rows, ro);
+                            if let (Some(out), Some((d, threshold))) = (out, confidence) {
+                                let span = y * w..(y + 1) * w;
+                                confidence_row(
+                                    &d.ix.data[span.clone()],
+                                    &d.iy.data[span],
+                                    threshold,
+                                    out,
+                                );
+                            }
                         },
                     );
             }));
         });
         let coef_o = coef_o.unwrap_or_default();
-        Self {
+        let conf = conf.map(|mut data| {
+            // SAFETY: the capacity is w·h, and the loop wrote every element: its h row chunks
+            // of w values each went through `confidence_row`, which writes its whole output
+            // (the derivatives are w×h, checked by the callers).
+            unsafe { data.set_len(w * h) };
+            Image {
+                width: w,
+                height: h,
+                data,
+            }
+        });
+        let problem = Self {
             lay: *lay,
             kernel,
             coef_e,
             coef_o,
-        }
+            edges: [Edges::new(lay, 0), Edges::new(lay, 1)],
+            coef_len: halves[0].len(),
+        };
+        (problem, conf)
     }
 
+    /// The plain system.
     pub(super) fn plain(lay: &Layout, d: &Derivatives, lambda: f32) -> Self {
+        Self::plain_with(lay, d, lambda, None).0
+    }
+
+    /// The plain system and, with a gradient threshold given, the confidence map.
+    pub(super) fn plain_with(
+        lay: &Layout,
+        d: &Derivatives,
+        lambda: f32,
+        threshold: Option<f32>,
+    ) -> (Self, Option<Image>) {
         let w = lay.width;
-        Self::build_rows::<PLAIN_COEFS>(lay, Kernel::Plain, |y, [gx, gy, gt]| {
+        let confidence = threshold.map(|t| (d, t));
+        Self::build_rows::<PLAIN_COEFS>(lay, Kernel::Plain, confidence, |y, [gx, gy, gt]| {
             let span = y * w..(y + 1) * w;
             let (Some(ix), Some(iy), Some(it)) = (
                 d.ix.data.get(span.clone()),
@@ -77,6 +124,7 @@ impl Problem {
     }
 
     /// The groove system, its coefficient rows built with `simd`.
+    #[cfg(test)]
     pub(super) fn groove(
         lay: &Layout,
         d: &Derivatives,
@@ -85,6 +133,20 @@ impl Problem {
         params: &FlowParams,
         simd: Simd,
     ) -> Self {
+        Self::groove_with(lay, d, walls, focal_px, params, simd, false).0
+    }
+
+    /// [`Problem::groove`] and, if `confidence`, the confidence map (at the parameters'
+    /// gradient threshold).
+    pub(super) fn groove_with(
+        lay: &Layout,
+        d: &Derivatives,
+        walls: &WallSideMap,
+        focal_px: f64,
+        params: &FlowParams,
+        simd: Simd,
+        confidence: bool,
+    ) -> (Self, Option<Image>) {
         let (w, h) = (lay.width, lay.height);
         let lambda = f64::from(params.lambda);
         let gamma = f64::from(params.groove_weight) * lambda;
@@ -94,6 +156,7 @@ impl Problem {
             Kernel::Groove {
                 q: 0.25 * params.lambda,
             },
+            confidence.then_some((d, params.gradient_threshold)),
             |y, rows| {
                 let span = y * w..(y + 1) * w;
                 let (Some(ix), Some(iy), Some(it), Some(sides)) = (
@@ -455,10 +518,10 @@ impl Problem {
         dn: &[f32],
         dst: &mut [f32],
     ) {
-        let len = CoefRow::new(&self.lay, hp, self.kernel.coefs()).len();
+        let len = self.coef_len;
         let coef_all = if hp == 0 { &self.coef_e } else { &self.coef_o };
         let coef = &coef_all[y * len..(y + 1) * len];
-        let edges = Edges::new(&self.lay, hp);
+        let edges = self.edges[hp & 1];
         let relax = omega != 1.0;
         let k = Consts {
             q: match self.kernel {
