@@ -112,10 +112,10 @@ impl Edges {
     }
 }
 
-/// Updates one half-row `dst = [u | v]` from the other half of the same row `lr = [u | v]`,
-/// the same half of the rows above and below (`up`, `dn`, mirrored at the image edges) and
-/// the half-row's coefficient blocks `coef` ([`CoefRow`]), all lane-major ([`Layout`]): m
-/// vectors in each u and v part, m = `dst.len() / 16`.
+/// Updates one stored half-row `dst` from the other half of the same row `lr`, the same half
+/// of the rows above and below (`up`, `dn`, mirrored at the image edges) and the half-row's
+/// coefficient blocks `coef` ([`CoefRow`]), all lane-major ([`Layout`]): m pairs of u and v
+/// vectors in each row, m = `dst.len() / 16`.
 ///
 /// Even half: column i's left and right neighbours are the other half's columns i − 1 and i,
 /// for vector k its vectors k − 1 and k; for k = 0 the left ones are vector m − 1 moved up a
@@ -135,8 +135,8 @@ pub(super) fn row_impl<const GROOVE: bool, const RELAX: bool, const AVX2: bool>(
     dst: &mut [f32],
 ) {
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
-    let m = dst.len() / (2 * LANES);
-    let len = 2 * m * LANES;
+    let m = dst.len() / PAIR;
+    let len = m * PAIR;
     if m == 0
         || lr.len() < len
         || up.len() < len
@@ -232,48 +232,49 @@ pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
     dst: &mut [f32],
 ) {
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
-    let slots = m * LANES;
-    // Part `part` (0 = u, 1 = v) of a lane-major row, as its m vectors.
-    fn part_vectors(s: &[f32], part: usize, slots: usize) -> &[[f32; LANES]] {
-        s.get(part * slots..(part + 1) * slots)
-            .map_or(&[][..], |p| p.as_chunks::<LANES>().0)
+    // A stored row as its m (u, v) vector pairs.
+    fn pairs(s: &[f32], m: usize) -> &[[f32; PAIR]] {
+        s.get(..m * PAIR)
+            .map_or(&[][..], |p| p.as_chunks::<PAIR>().0)
     }
-    let vectors = |s, part| part_vectors(s, part, slots);
-    let (lu, lv) = (vectors(lr, 0), vectors(lr, 1));
-    let at = |s: &[[f32; LANES]], i: usize| L8(s.get(i).copied().unwrap_or_default());
+    // The u (`part` 0) or v (1) vector of a pair.
+    fn half(p: &[f32; PAIR], part: usize) -> L8 {
+        L8(std::array::from_fn(|l| p[part * LANES + l]))
+    }
+    let lr = pairs(lr, m);
+    let at = |i: usize| {
+        lr.get(i).map_or((L8::splat(0.0), L8::splat(0.0)), |p| {
+            (half(p, 0), half(p, 1))
+        })
+    };
     let (last_k, last_lane) = edges.last;
-    let (dst_u, dst_v) = dst.split_at_mut(slots);
-    let outs = dst_u
-        .as_chunks_mut::<LANES>()
-        .0
-        .iter_mut()
-        .zip(dst_v.as_chunks_mut::<LANES>().0.iter_mut());
-    let ins = vectors(up, 0)
+    let outs = dst
+        .get_mut(..m * PAIR)
+        .map_or(&mut [][..], |d| d.as_chunks_mut::<PAIR>().0);
+    let ins = pairs(up, m)
         .iter()
-        .zip(vectors(up, 1))
-        .zip(vectors(dn, 0).iter().zip(vectors(dn, 1)))
+        .zip(pairs(dn, m))
         .zip(coef.chunks_exact(LANES * ncoef));
-    for (kk, ((ou, ov), (((uu, uv), (du, dv)), c))) in outs.zip(ins).enumerate() {
+    for (kk, (out, ((up, dn), c))) in outs.iter_mut().zip(ins).enumerate() {
         let (left, mut right) = if edges.odd {
-            let left = (at(lu, kk), at(lv, kk));
+            let left = at(kk);
             let right = if kk + 1 < m {
-                (at(lu, kk + 1), at(lv, kk + 1))
+                at(kk + 1)
             } else {
+                let first = at(0);
                 (
-                    at(lu, 0).down_lane(left.0.0[LANES - 1]),
-                    at(lv, 0).down_lane(left.1.0[LANES - 1]),
+                    first.0.down_lane(left.0.0[LANES - 1]),
+                    first.1.down_lane(left.1.0[LANES - 1]),
                 )
             };
             (left, right)
         } else {
-            let right = (at(lu, kk), at(lv, kk));
+            let right = at(kk);
             let left = if kk > 0 {
-                (at(lu, kk - 1), at(lv, kk - 1))
+                at(kk - 1)
             } else {
-                (
-                    at(lu, m - 1).up_lane(right.0.0[0]),
-                    at(lv, m - 1).up_lane(right.1.0[0]),
-                )
+                let wrap = at(m - 1);
+                (wrap.0.up_lane(right.0.0[0]), wrap.1.up_lane(right.1.0[0]))
             };
             (left, right)
         };
@@ -284,18 +285,20 @@ pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
         let inputs = BlockInputs {
             lu: left.0,
             ru: right.0,
-            uu: L8(*uu),
-            du: L8(*du),
+            uu: half(up, 0),
+            du: half(dn, 0),
             lv: left.1,
             rv: right.1,
-            uv: L8(*uv),
-            dv: L8(*dv),
-            old: (L8(*ou), L8(*ov)),
+            uv: half(up, 1),
+            dv: half(dn, 1),
+            old: (half(out, 0), half(out, 1)),
         };
         let (a, b) = portable_block::<GROOVE, RELAX>(k, &inputs, |j| {
             L8::load(c.get(j * LANES..).unwrap_or_default())
         });
-        (*ou, *ov) = (a.0, b.0);
+        let (ou, ov) = out.split_at_mut(LANES);
+        ou.copy_from_slice(&a.0);
+        ov.copy_from_slice(&b.0);
     }
 }
 
@@ -369,14 +372,14 @@ pub(super) fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
         _mm256_setr_epi32,
     };
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
-    let slots = m * LANES;
-    // Everything the loop reads and writes: two parts of m vectors in each row, m blocks of
+    // Everything the loop reads and writes: m vector pairs in each row, m blocks of
     // coefficients.
+    let len = m * PAIR;
     let (Some(l), Some(up), Some(dn), Some(out), Some(c)) = (
-        lr.get(..2 * slots),
-        up.get(..2 * slots),
-        dn.get(..2 * slots),
-        dst.get_mut(..2 * slots),
+        lr.get(..len),
+        up.get(..len),
+        dn.get(..len),
+        dst.get_mut(..len),
         coef.get(..m * LANES * ncoef),
     ) else {
         return;
@@ -393,12 +396,12 @@ pub(super) fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
         _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
     ));
     let lp = l.as_ptr();
-    // Vector `i` (< m) of the other half's u and v parts.
+    // Vector pair `i` (< m) of the other half: its u and v.
     // SAFETY (every call): i < m, so both loads lie inside `l`, checked above.
     let pair = |i: usize| unsafe {
         (
-            _mm256_loadu_ps(lp.add(i * LANES)),
-            _mm256_loadu_ps(lp.add(slots + i * LANES)),
+            _mm256_loadu_ps(lp.add(i * PAIR)),
+            _mm256_loadu_ps(lp.add(i * PAIR + LANES)),
         )
     };
     let mut p = BlockPtrs {
@@ -406,7 +409,7 @@ pub(super) fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
         dn: dn.as_ptr(),
         c: c.as_ptr(),
         o: out.as_mut_ptr(),
-        dv: slots as isize,
+        dv: LANES as isize,
     };
     // One block at `p`, its right neighbours mirrored into the last column's lane there.
     let mut step = |kk: usize, left: (__m256, __m256), mut right: (__m256, __m256)| {
@@ -466,7 +469,7 @@ pub(super) struct AvxConsts {
 }
 
 /// Where [`blocks_avx2`] is: one pointer per row (up, down, the coefficient block, the
-/// output) and the distance in floats from each row's u part to its v part.
+/// output) and the distance in floats from each u vector to its v vector.
 #[cfg(target_arch = "x86_64")]
 pub(super) struct BlockPtrs {
     pub(super) up: *const f32,
@@ -478,7 +481,7 @@ pub(super) struct BlockPtrs {
 
 #[cfg(target_arch = "x86_64")]
 impl BlockPtrs {
-    /// Moves on by one vector, `ncoef` vectors of coefficients.
+    /// Moves on by one vector pair, `ncoef` vectors of coefficients.
     ///
     /// # Safety
     /// The next block must lie inside the rows, or start one past their end.
@@ -486,10 +489,10 @@ impl BlockPtrs {
     pub(super) unsafe fn advance(&mut self, ncoef: usize) {
         // SAFETY: the caller's.
         unsafe {
-            self.up = self.up.add(LANES);
-            self.dn = self.dn.add(LANES);
+            self.up = self.up.add(PAIR);
+            self.dn = self.dn.add(PAIR);
             self.c = self.c.add(LANES * ncoef);
-            self.o = self.o.add(LANES);
+            self.o = self.o.add(PAIR);
         }
     }
 }

@@ -7,6 +7,7 @@ use super::*;
 /// and vector k holds column k of every run, lane l being column `l·m + k` of the half. The
 /// left and right neighbours of vector k's columns in the other half are then whole vectors
 /// too (k − 1 and k, or k and k + 1), so the kernel never loads across a vector boundary.
+/// The u and v vectors alternate (`[u₀ v₀ u₁ v₁ …]`), so a row is one memory stream.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Layout {
     pub(super) width: usize,
@@ -38,25 +39,27 @@ impl Layout {
         if hp == 0 { self.ne } else { self.no }
     }
 
-    /// Slots of one of a half-row's u or v parts (columns and padding).
+    /// Slots of each of a half-row's u and v (columns and padding).
     #[inline]
     pub(super) fn slots(&self) -> usize {
         self.m * LANES
     }
 
-    /// Floats per stored half-row: `[u | v]`, [`Layout::slots`] each.
+    /// Floats per stored half-row: m pairs of u and v vectors.
     #[inline]
     pub(super) fn stride(&self) -> usize {
         2 * self.slots()
     }
 
-    /// Where column `i` of a half sits in a u or v part: vector `i mod m`, lane `i div m`.
+    /// Where column `i`'s u sits in a stored half-row (its v is [`LANES`] on): vector pair
+    /// `i mod m`, lane `i div m`.
     #[cfg(test)]
     pub(super) fn slot(&self, i: usize) -> usize {
-        (i % self.m) * LANES + i / self.m
+        (i % self.m) * PAIR + i / self.m
     }
 
-    /// Calls `f(i, slot)` for the half's first `n` columns in column order, without division.
+    /// Calls `f(i, slot)` for the half's first `n` columns in column order, `slot` being
+    /// [`Layout::slot`], without division.
     #[inline(always)]
     pub(super) fn each_slot(&self, n: usize, mut f: impl FnMut(usize, usize)) {
         for lane in 0..LANES {
@@ -65,7 +68,7 @@ impl Layout {
                 if i >= n {
                     return;
                 }
-                f(i, k * LANES + lane);
+                f(i, k * PAIR + lane);
             }
         }
     }
@@ -153,7 +156,7 @@ impl PartialEq for Aligned {
     }
 }
 
-/// Flow state in split layout: per row, `[u | v]` for each half, lane-major as [`Layout`]
+/// Flow state in split layout: per row, each half's u and v vectors, lane-major as [`Layout`]
 /// says (padding slots hold values no column reads). Rows start cache lines when
 /// [`Layout::stride`] allows (a multiple of 16 floats, as at any width that is a multiple
 /// of 32).
@@ -176,19 +179,18 @@ impl SplitState {
     /// non-finite values start at 0.
     pub(super) fn from_images(lay: &Layout, u: &Image, v: &Image, base: f32) -> Self {
         let mut st = Self::zeros(lay);
-        let (w, stride, slots) = (lay.width, lay.stride(), lay.slots());
+        let (w, stride) = (lay.width, lay.stride());
         st.e.par_chunks_mut(stride)
             .zip(st.o.par_chunks_mut(stride))
             .zip(u.data.par_chunks(w))
             .zip(v.data.par_chunks(w))
             .for_each(|(((er, or), ur), vr)| {
                 for (hp, dst) in [(0, er), (1, or)] {
-                    let (du, dv) = dst.split_at_mut(slots);
                     lay.each_slot(lay.half(hp), |i, at| {
                         let x = 2 * i + hp;
                         let ux = ur[x] - base;
-                        du[at] = if ux.is_finite() { ux } else { 0.0 };
-                        dv[at] = if vr[x].is_finite() { vr[x] } else { 0.0 };
+                        dst[at] = if ux.is_finite() { ux } else { 0.0 };
+                        dst[at + LANES] = if vr[x].is_finite() { vr[x] } else { 0.0 };
                     });
                 }
             });
@@ -208,8 +210,8 @@ impl SplitState {
                     // Each half's values in column order (padding slots last).
                     || [vec![0.0_f32; slots], vec![0.0_f32; slots]],
                     |[even, odd], ((row, er), or)| {
-                        from_lanes(m, &er[part * slots..(part + 1) * slots], even);
-                        from_lanes(m, &or[part * slots..(part + 1) * slots], odd);
+                        from_lanes(m, er, part, even);
+                        from_lanes(m, or, part, odd);
                         // Interleaves the halves; adding −0 leaves every value, −0 included,
                         // as it is.
                         let mut pairs = row.chunks_exact_mut(2);
@@ -248,24 +250,27 @@ fn transpose(b: &[[f32; LANES]; LANES]) -> [[f32; LANES]; LANES] {
     std::array::from_fn(|j| std::array::from_fn(|l| b[l][j]))
 }
 
-/// A half's m lane-major vectors (`lanes`, 8m values) in column order (`nat`, 8m values: the
-/// columns, then the padding), eight vectors at a time through an 8×8 transpose.
+/// Part `part` (0 = u, 1 = v) of a stored half-row (`row`, m vector pairs) in column order
+/// (`nat`, 8m values: the columns, then the padding), eight vectors at a time through an 8×8
+/// transpose.
 #[inline(always)]
-pub(super) fn from_lanes(m: usize, lanes: &[f32], nat: &mut [f32]) {
-    let (Some(lanes), Some(nat)) = (lanes.get(..m * LANES), nat.get_mut(..m * LANES)) else {
+pub(super) fn from_lanes(m: usize, row: &[f32], part: usize, nat: &mut [f32]) {
+    let (Some(row), Some(nat)) = (row.get(..m * PAIR), nat.get_mut(..m * LANES)) else {
         return;
     };
-    let vectors = lanes.as_chunks::<LANES>().0;
+    let pairs = row.as_chunks::<PAIR>().0;
+    let vector = |k: usize| -> [f32; LANES] { std::array::from_fn(|l| pairs[k][part * LANES + l]) };
     let whole = m / LANES * LANES;
     for k0 in (0..whole).step_by(LANES) {
-        let block: [[f32; LANES]; LANES] = std::array::from_fn(|j| vectors[k0 + j]);
+        let block: [[f32; LANES]; LANES] = std::array::from_fn(|j| vector(k0 + j));
         for (l, run) in transpose(&block).iter().enumerate() {
             nat[l * m + k0..l * m + k0 + LANES].copy_from_slice(run);
         }
     }
     for k in whole..m {
-        for l in 0..LANES {
-            nat[l * m + k] = vectors[k][l];
+        let v = vector(k);
+        for (l, &x) in v.iter().enumerate() {
+            nat[l * m + k] = x;
         }
     }
 }
@@ -293,6 +298,9 @@ impl Kernel {
         }
     }
 }
+
+/// Floats per stored vector pair (u, then v).
+pub(super) const PAIR: usize = 2 * LANES;
 
 /// Columns per coefficient block: a row kernel reads every coefficient of 8 columns from one
 /// contiguous block (one stream per half-row instead of one per coefficient).

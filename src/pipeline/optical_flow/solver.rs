@@ -672,28 +672,25 @@ pub(super) fn rows3(
     (pick(up), m, pick(dn))
 }
 
-/// Σ|a − b| over the first `n` columns of a half-row's u and v parts (`a`, `b` lane-major, as
-/// [`Layout`] says), taken in column order, u then v, with 16 lane accumulators: the order
+/// Σ|a − b| over the first `n` columns of a stored half-row's u and v (`a`, `b`, as [`Layout`]
+/// says), taken in column order, u then v, with 16 lane accumulators: the order
 /// and the bits of the sum over the natural `[u(n) | v(n)]` half-row.
 #[inline]
 pub(super) fn abs_diff_sum(lay: &Layout, n: usize, a: &[f32], b: &[f32]) -> f64 {
     const ACC: usize = 16;
-    let slots = lay.slots();
     let total = 2 * n;
     let whole = total / ACC * ACC;
     let mut acc = [0.0_f32; ACC];
     // The last total mod 16 values, summed in order after the lanes.
     let mut tail = [0.0_f32; ACC];
+    let (Some(a), Some(b)) = (a.get(..lay.stride()), b.get(..lay.stride())) else {
+        return 0.0;
+    };
     for part in 0..2 {
-        let (Some(pa), Some(pb)) = (
-            a.get(part * slots..(part + 1) * slots),
-            b.get(part * slots..(part + 1) * slots),
-        ) else {
-            return 0.0;
-        };
         lay.each_slot(n, |i, at| {
             let j = part * n + i;
-            let d = (pa[at] - pb[at]).abs();
+            let at = at + part * LANES;
+            let d = (a[at] - b[at]).abs();
             if j < whole {
                 acc[j % ACC] += d;
             } else {

@@ -723,7 +723,7 @@ fn coefficient_slots_cover_each_half_row_once() {
                 }
                 // Column i is lane i div m of vector i mod m, in the state as here.
                 assert_eq!(cr.at(i, 0), (i % lay.m) * LANES * cr.c + i / lay.m);
-                assert_eq!(lay.slot(i), (i % lay.m) * LANES + i / lay.m);
+                assert_eq!(lay.slot(i), (i % lay.m) * PAIR + i / lay.m);
             }
             // What is left is the padding.
             let unseen = seen.iter().filter(|s| !**s).count();
