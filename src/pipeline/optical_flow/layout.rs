@@ -202,18 +202,23 @@ impl SplitState {
         let (w, h) = (lay.width, lay.height);
         let (stride, slots) = (lay.stride(), lay.slots());
         let (m, ne, no) = (lay.m, lay.ne, lay.no);
-        let fill = |out: &mut [MaybeUninit<f32>], part: usize, base: f32| {
-            out.par_chunks_mut(w)
-                .zip(self.e.par_chunks(stride))
-                .zip(self.o.par_chunks(stride))
-                .for_each_init(
-                    // Each half's values in column order (padding slots last).
-                    || [vec![0.0_f32; slots], vec![0.0_f32; slots]],
-                    |[even, odd], ((row, er), or)| {
+        let mut u: Vec<f32> = Vec::with_capacity(w * h);
+        let mut v: Vec<f32> = Vec::with_capacity(w * h);
+        // One pass over the state writes both images, row by row.
+        u.spare_capacity_mut()[..w * h]
+            .par_chunks_mut(w)
+            .zip(v.spare_capacity_mut()[..w * h].par_chunks_mut(w))
+            .zip(self.e.par_chunks(stride))
+            .zip(self.o.par_chunks(stride))
+            .for_each_init(
+                // Each half's values in column order (padding slots last).
+                || [vec![0.0_f32; slots], vec![0.0_f32; slots]],
+                |[even, odd], (((ur, vr), er), or)| {
+                    // Adding −0 leaves every value, −0 included, as it is.
+                    for (part, row, base) in [(0, ur, base), (1, vr, -0.0)] {
                         from_lanes(m, er, part, even);
                         from_lanes(m, or, part, odd);
-                        // Interleaves the halves; adding −0 leaves every value, −0 included,
-                        // as it is.
+                        // Interleaves the halves.
                         let mut pairs = row.chunks_exact_mut(2);
                         for ((pair, &e), &o) in (&mut pairs).zip(&even[..no]).zip(&odd[..no]) {
                             pair[0].write(e + base);
@@ -224,23 +229,22 @@ impl SplitState {
                         {
                             last.write(e + base);
                         }
-                    },
-                );
+                    }
+                },
+            );
+        // SAFETY: both capacities are at least w·h, and the loop wrote every element: each
+        // row chunk of w values gets ⌊w/2⌋ pairs (no = ⌊w/2⌋ ≤ ne ≤ 8m values in each half's
+        // array) and, for an odd width, the last even column in the remainder.
+        unsafe {
+            u.set_len(w * h);
+            v.set_len(w * h);
+        }
+        let image = |data| Image {
+            width: w,
+            height: h,
+            data,
         };
-        let image = |part: usize, base: f32| {
-            let mut data: Vec<f32> = Vec::with_capacity(w * h);
-            fill(&mut data.spare_capacity_mut()[..w * h], part, base);
-            // SAFETY: the capacity is at least w·h, and `fill` wrote every element: each row
-            // chunk of w values gets ⌊w/2⌋ pairs (no = ⌊w/2⌋ ≤ ne ≤ 8m values in each half's
-            // array) and, for an odd width, the last even column in the remainder.
-            unsafe { data.set_len(w * h) };
-            Image {
-                width: w,
-                height: h,
-                data,
-            }
-        };
-        (image(0, base), image(1, -0.0))
+        (image(u), image(v))
     }
 }
 
