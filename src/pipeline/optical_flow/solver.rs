@@ -471,7 +471,7 @@ impl Problem {
             let dn_row = if dn_own { &scratch[..] } else { dn_row };
             self.run_row(simd, hp, y, omega, lr, up_row, dn_row, mid);
             if measure {
-                delta += abs_diff_sum(lay, lay.half(hp), mid, scratch);
+                delta += abs_diff_sum(lay, lay.half(hp), mid, &scratch);
             }
         } else {
             // Jacobi: read state lvl % 2, write the other, both halves.
@@ -673,31 +673,32 @@ pub(super) fn rows3(
 }
 
 /// Σ|a − b| over the first `n` columns of a stored half-row's u and v (`a`, `b`, as [`Layout`]
-/// says), taken in column order, u then v, with 16 lane accumulators: the order
-/// and the bits of the sum over the natural `[u(n) | v(n)]` half-row.
+/// says): 16 f32 accumulators, one per lane of the u and of the v vectors, filled vector by
+/// vector in stored order (padding lanes left out) and then added in lane order. The order
+/// depends only on the layout, so the sum is the same whatever the bands.
 #[inline]
 pub(super) fn abs_diff_sum(lay: &Layout, n: usize, a: &[f32], b: &[f32]) -> f64 {
-    const ACC: usize = 16;
-    let total = 2 * n;
-    let whole = total / ACC * ACC;
-    let mut acc = [0.0_f32; ACC];
-    // The last total mod 16 values, summed in order after the lanes.
-    let mut tail = [0.0_f32; ACC];
-    let (Some(a), Some(b)) = (a.get(..lay.stride()), b.get(..lay.stride())) else {
+    let m = lay.m;
+    let (Some(a), Some(b)) = (a.get(..m * PAIR), b.get(..m * PAIR)) else {
         return 0.0;
     };
-    for part in 0..2 {
-        lay.each_slot(n, |i, at| {
-            let j = part * n + i;
-            let at = at + part * LANES;
-            let d = (a[at] - b[at]).abs();
-            if j < whole {
-                acc[j % ACC] += d;
-            } else {
-                tail[j - whole] = d;
-            }
-        });
+    let mut acc = [0.0_f32; PAIR];
+    // Vectors below `full` have a column in every lane; after it lane l holds one only while
+    // l·m + k < n.
+    let full = (0..LANES)
+        .map(|l| n.saturating_sub(l * m).min(m))
+        .min()
+        .unwrap_or(0);
+    let (pa, pb) = (a.as_chunks::<PAIR>().0, b.as_chunks::<PAIR>().0);
+    for (x, y) in pa[..full].iter().zip(&pb[..full]) {
+        for q in 0..PAIR {
+            acc[q] += (x[q] - y[q]).abs();
+        }
     }
-    let tail: f32 = tail[..total - whole].iter().sum();
-    f64::from(acc.iter().sum::<f32>()) + f64::from(tail)
+    for (k, (x, y)) in pa.iter().zip(pb).enumerate().skip(full) {
+        for q in (0..PAIR).filter(|q| (q % LANES) * m + k < n) {
+            acc[q] += (x[q] - y[q]).abs();
+        }
+    }
+    f64::from(acc.iter().sum::<f32>())
 }
