@@ -471,7 +471,7 @@ impl Problem {
             let dn_row = if dn_own { &scratch[..] } else { dn_row };
             self.run_row(simd, hp, y, omega, lr, up_row, dn_row, mid);
             if measure {
-                delta += abs_diff_sum(lay, lay.half(hp), mid, &scratch);
+                delta += abs_diff_sum(lay, lay.half(hp), mid, scratch);
             }
         } else {
             // Jacobi: read state lvl % 2, write the other, both halves.
