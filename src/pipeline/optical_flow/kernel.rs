@@ -187,6 +187,14 @@ impl L8 {
         Self(out)
     }
 
+    /// Lane by lane, `self` where `mask` is set, else `other`.
+    #[inline(always)]
+    pub(super) fn select(self, other: Self, mask: [bool; LANES]) -> Self {
+        Self(std::array::from_fn(|l| {
+            if mask[l] { self.0[l] } else { other.0[l] }
+        }))
+    }
+
     #[inline(always)]
     pub(super) fn splat(x: f32) -> Self {
         Self([x; LANES])
@@ -237,9 +245,12 @@ pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
         s.get(..m * PAIR)
             .map_or(&[][..], |p| p.as_chunks::<PAIR>().0)
     }
-    // The u (`part` 0) or v (1) vector of a pair.
+    // The u (`part` 0) or v (1) vector of a pair, copied as one fixed run (which stays in
+    // vector registers; a lane-by-lane copy did not, and doubled the time).
+    #[inline(always)]
     fn half(p: &[f32; PAIR], part: usize) -> L8 {
-        L8(std::array::from_fn(|l| p[part * LANES + l]))
+        let (u, v) = p.split_at(LANES);
+        L8::load(if part == 0 { u } else { v })
     }
     let lr = pairs(lr, m);
     let at = |i: usize| {
@@ -248,6 +259,9 @@ pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
         })
     };
     let (last_k, last_lane) = edges.last;
+    // The mirrored lane as a mask: a lane written through a run-time index would push the
+    // whole vector out of registers.
+    let mirror: [bool; LANES] = std::array::from_fn(|l| l == last_lane);
     let outs = dst
         .get_mut(..m * PAIR)
         .map_or(&mut [][..], |d| d.as_chunks_mut::<PAIR>().0);
@@ -279,8 +293,10 @@ pub(super) fn blocks_portable<const GROOVE: bool, const RELAX: bool>(
             (left, right)
         };
         if kk == last_k {
-            right.0.0[last_lane] = left.0.0[last_lane];
-            right.1.0[last_lane] = left.1.0[last_lane];
+            right = (
+                left.0.select(right.0, mirror),
+                left.1.select(right.1, mirror),
+            );
         }
         let inputs = BlockInputs {
             lu: left.0,
