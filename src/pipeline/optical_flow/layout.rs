@@ -77,27 +77,25 @@ impl Layout {
 /// Floats per 64-byte cache line.
 const LINE_FLOATS: usize = 16;
 
-/// A float array placed so that element `lead` starts a 64-byte cache line: the row kernels'
-/// 8-float loads and stores from there on then never straddle two lines (a straddling load
-/// costs two cache accesses; on this machine's sweeps, about a tenth of the time).
+/// A float array that starts a 64-byte cache line: with rows a whole number of lines long, the
+/// row kernels' 8-float loads and stores never straddle two lines (a straddling load costs two
+/// cache accesses; on this machine's sweeps, about a tenth of the time).
 #[derive(Debug, Default)]
 pub(super) struct Aligned {
     buf: Vec<f32>,
     off: usize,
     len: usize,
-    lead: usize,
 }
 
 impl Aligned {
-    /// `len` values written by `fill`, which must initialise every one of them.
-    pub(super) fn build(
-        len: usize,
-        lead: usize,
-        fill: impl FnOnce(&mut [MaybeUninit<f32>]),
-    ) -> Self {
+    /// `len` values written by `fill`.
+    ///
+    /// # Safety
+    /// `fill` must initialise every element of the slice it is given.
+    pub(super) unsafe fn build(len: usize, fill: impl FnOnce(&mut [MaybeUninit<f32>])) -> Self {
         let mut buf: Vec<f32> = Vec::with_capacity(len + LINE_FLOATS);
         // f32 storage is 4-byte aligned, so whole floats reach the next line boundary.
-        let at = (buf.as_ptr() as usize / std::mem::size_of::<f32>() + lead) % LINE_FLOATS;
+        let at = (buf.as_ptr() as usize / std::mem::size_of::<f32>()) % LINE_FLOATS;
         let off = (LINE_FLOATS - at) % LINE_FLOATS;
         let spare = buf.spare_capacity_mut();
         for x in &mut spare[..off] {
@@ -105,22 +103,20 @@ impl Aligned {
         }
         fill(&mut spare[off..off + len]);
         // SAFETY: the capacity is at least `off + len`; the loop above initialised the first
-        // `off` elements and `fill`, by its contract, the next `len`.
+        // `off` elements and `fill`, by the caller's contract, the next `len`.
         unsafe { buf.set_len(off + len) };
-        Self {
-            buf,
-            off,
-            len,
-            lead,
-        }
+        Self { buf, off, len }
     }
 
     /// `len` zeros, filled in parallel.
-    pub(super) fn zeros(len: usize, lead: usize) -> Self {
-        Self::build(len, lead, |s| {
-            s.par_chunks_mut(1 << 16)
-                .for_each(|c| c.fill(MaybeUninit::new(0.0)));
-        })
+    pub(super) fn zeros(len: usize) -> Self {
+        // SAFETY: the chunks cover the slice, and each is filled whole.
+        unsafe {
+            Self::build(len, |s| {
+                s.par_chunks_mut(1 << 16)
+                    .for_each(|c| c.fill(MaybeUninit::new(0.0)));
+            })
+        }
     }
 }
 
@@ -140,13 +136,16 @@ impl std::ops::DerefMut for Aligned {
 }
 
 impl Clone for Aligned {
-    /// A copy placed anew (a plain copy of the vector could land on another phase).
+    /// A copy placed anew (a plain copy of the vector could start mid-line).
     fn clone(&self) -> Self {
-        Self::build(self.len, self.lead, |s| {
-            for (d, &x) in s.iter_mut().zip(self.iter()) {
-                d.write(x);
-            }
-        })
+        // SAFETY: `self` holds `len` values, so the zip writes every element.
+        unsafe {
+            Self::build(self.len, |s| {
+                for (d, &x) in s.iter_mut().zip(self.iter()) {
+                    d.write(x);
+                }
+            })
+        }
     }
 }
 
@@ -157,9 +156,8 @@ impl PartialEq for Aligned {
 }
 
 /// Flow state in split layout: per row, each half's u and v vectors, lane-major as [`Layout`]
-/// says (padding slots hold values no column reads). Rows start cache lines when
-/// [`Layout::stride`] allows (a multiple of 16 floats, as at any width that is a multiple
-/// of 32).
+/// says (padding slots hold values no column reads). Every row starts a cache line: the
+/// arrays do, and a row is m pairs of vectors, 16m floats.
 #[derive(Clone, Debug, Default)]
 pub(super) struct SplitState {
     pub(super) e: Aligned,
@@ -170,8 +168,8 @@ impl SplitState {
     pub(super) fn zeros(lay: &Layout) -> Self {
         let len = lay.stride() * lay.height;
         Self {
-            e: Aligned::zeros(len, 0),
-            o: Aligned::zeros(len, 0),
+            e: Aligned::zeros(len),
+            o: Aligned::zeros(len),
         }
     }
 

@@ -38,42 +38,43 @@ impl Problem {
         // Both arrays are filled at once, row by row: the outer builder's closure runs the
         // whole parallel loop inside the inner one's.
         let mut coef_o = None;
-        let coef_e = Aligned::build(len_e, 0, |ce| {
-            coef_o = Some(Aligned::build(len_o, 0, |co| {
-                // Width ≥ 2 (checked by the caller), so both halves have columns; `max(1)`
-                // only keeps the chunk size valid.
-                ce.par_chunks_mut(le)
-                    .zip(co.par_chunks_mut(lo))
-                    .zip(conf_rows)
-                    .enumerate()
-                    .for_each_init(
-                        // The image row's C coefficients.
-                        || std::array::from_fn(|_| vec![0.0_f32; w]),
-                        |rows: &mut [Vec<f32>; C], (y, ((re, ro), out))| {
-                            f(y, rows);
-                            // Every chunk is one half-row of `CoefRow::len` values, and
-                            // `CoefRow::scatter` writes every one of them. So the chunks, which
-                            // cover both arrays, fill them whole (the builders' contract).
-                            halves[0].scatter(0, rows, re);
-                            halves[1].scatter(1, rows, ro);
-                            if let (Some(out), Some((d, threshold))) = (out, confidence) {
-                                let span = y * w..(y + 1) * w;
-                                confidence_row(
-                                    &d.ix.data[span.clone()],
-                                    &d.iy.data[span],
-                                    threshold,
-                                    out,
-                                );
-                            }
-                        },
-                    );
-            }));
-        });
+        // SAFETY (both builders): each array is h chunks of one half-row's `CoefRow::len`
+        // values (both halves have the same length), zipped with h confidence rows, so the
+        // loop visits every chunk of both; `CoefRow::scatter` writes every value of its chunk.
+        let coef_e = unsafe {
+            Aligned::build(len_e, |ce| {
+                coef_o = Some(Aligned::build(len_o, |co| {
+                    // Width ≥ 2 (checked by the caller), so both halves have columns; `max(1)`
+                    // only keeps the chunk size valid.
+                    ce.par_chunks_mut(le)
+                        .zip(co.par_chunks_mut(lo))
+                        .zip(conf_rows)
+                        .enumerate()
+                        .for_each_init(
+                            // The image row's C coefficients.
+                            || std::array::from_fn(|_| vec![0.0_f32; w]),
+                            |rows: &mut [Vec<f32>; C], (y, ((re, ro), out))| {
+                                f(y, rows);
+                                halves[0].scatter(0, rows, re);
+                                halves[1].scatter(1, rows, ro);
+                                if let (Some(out), Some((d, threshold))) = (out, confidence) {
+                                    let span = y * w..(y + 1) * w;
+                                    confidence_row(
+                                        d.ix.data.get(span.clone()).unwrap_or_default(),
+                                        d.iy.data.get(span).unwrap_or_default(),
+                                        threshold,
+                                        out,
+                                    );
+                                }
+                            },
+                        );
+                }));
+            })
+        };
         let coef_o = coef_o.unwrap_or_default();
         let conf = conf.map(|mut data| {
             // SAFETY: the capacity is w·h, and the loop wrote every element: its h row chunks
-            // of w values each went through `confidence_row`, which writes its whole output
-            // (the derivatives are w×h, checked by the callers).
+            // of w values each went through `confidence_row`, which writes its whole output.
             unsafe { data.set_len(w * h) };
             Image {
                 width: w,
