@@ -269,20 +269,7 @@ fn irls_pass(
         {
             let r = z - a * x - b * y - c;
             let w = 1.0 / (1.0 + r * r * k);
-            let terms = [
-                w,
-                w * x,
-                w * y,
-                w * z,
-                w * x * x,
-                w * x * y,
-                w * y * y,
-                w * x * z,
-                w * y * z,
-                wo * r.abs(),
-                wo,
-            ];
-            for (s, t) in acc.iter_mut().zip(terms) {
+            for (s, t) in acc.iter_mut().zip(point_terms([x, y, z, wo], r, w)) {
                 s[0] += t;
             }
             if let Some(wn) = w_new.get_mut(i) {
@@ -325,21 +312,34 @@ fn irls_chunks(
         let w: [f64; LANES] = std::array::from_fn(|l| 1.0 / (1.0 + r[l] * r[l] * k));
         *wnc = w;
         for l in 0..LANES {
-            let (x, y, z, wo, wl) = (xc[l], yc[l], zc[l], woc[l], w[l]);
-            let (wx, wy) = (wl * x, wl * y);
-            acc[0][l] += wl;
-            acc[1][l] += wx;
-            acc[2][l] += wy;
-            acc[3][l] += wl * z;
-            acc[4][l] += wx * x;
-            acc[5][l] += wx * y;
-            acc[6][l] += wy * y;
-            acc[7][l] += wx * z;
-            acc[8][l] += wy * z;
-            acc[9][l] += wo * r[l].abs();
-            acc[10][l] += wo;
+            let terms = point_terms([xc[l], yc[l], zc[l], woc[l]], r[l], w[l]);
+            for (s, t) in acc.iter_mut().zip(terms) {
+                s[l] += t;
+            }
         }
     }
+}
+
+/// The sums one point adds for the next weighted fit: `w, w·x, w·y, w·z, w·x·x, w·x·y,
+/// w·y·y, w·x·z, w·y·z` under its new weight `w`, then `wo·|r|, wo` under its old one (point
+/// `[x, y, z, wo]`, residual `r`). [`irls_chunks_avx2`] computes the same products in the same
+/// order.
+#[inline(always)]
+fn point_terms([x, y, z, wo]: [f64; 4], r: f64, w: f64) -> [f64; N_SUMS] {
+    let (wx, wy) = (w * x, w * y);
+    [
+        w,
+        wx,
+        wy,
+        w * z,
+        wx * x,
+        wx * y,
+        wy * y,
+        wx * z,
+        wy * z,
+        wo * r.abs(),
+        wo,
+    ]
 }
 
 /// [`irls_chunks`] on AVX2 registers: lane l of each 4-wide vector is lane l of its

@@ -313,6 +313,8 @@ pub(super) const LANES: usize = 8;
 /// slots hold zeros.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct CoefRow {
+    /// The half (0 = even, 1 = odd).
+    pub(super) hp: usize,
     /// Columns in the half.
     pub(super) n: usize,
     /// Vectors per half-row.
@@ -326,6 +328,7 @@ impl CoefRow {
     #[inline]
     pub(super) fn new(lay: &Layout, hp: usize, c: usize) -> Self {
         Self {
+            hp,
             n: lay.half(hp),
             m: lay.m,
             c,
@@ -347,10 +350,9 @@ impl CoefRow {
     /// Writes this half-row's blocks into `dst` (a half-row of [`CoefRow::len`] values) from
     /// `rows[j]`, coefficient j of every column of the image row in column order (the half's
     /// column i is image column 2i + `hp`); the padding gets zeros, so every value of `dst`
-    /// is written.
+    /// is written. `C` is the coefficient count, `c`.
     pub(super) fn scatter<const C: usize>(
         self,
-        hp: usize,
         rows: &[Vec<f32>; C],
         dst: &mut [MaybeUninit<f32>],
     ) {
@@ -359,7 +361,7 @@ impl CoefRow {
                 for (lane, d) in out.iter_mut().enumerate() {
                     let i = lane * self.m + k;
                     let x = if i < self.n {
-                        row.get(2 * i + hp)
+                        row.get(2 * i + self.hp)
                     } else {
                         None
                     };

@@ -95,14 +95,13 @@
 //! iterations a geometric fit of those two changes predicts are still needed, so a solve
 //! stops close to where τ is reached rather than up to a whole block past it.
 
-use rayon::iter::Either;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::mem::MaybeUninit;
 
 use super::StageError;
 use super::derivatives::Derivatives;
-use crate::image::Image;
+use crate::image::{Image, zeros_par};
 
 mod groove;
 mod kernel;
@@ -335,7 +334,7 @@ pub fn compute_flow_from(
         None => SplitState::zeros(&lay),
     };
     let plain = || Problem::plain(&lay, d, params.lambda);
-    let (state, iterations, converged, confidence) = if groove {
+    let (state, iterations, converged) = if groove {
         if !(focal_px.is_finite() && focal_px > 0.0) {
             return Err(StageError::InvalidParam {
                 name: "focal_px".to_string(),
@@ -378,21 +377,19 @@ pub fn compute_flow_from(
                 &estimated
             }
         };
-        let (problem, conf) = Problem::groove_with(&lay, d, walls, focal_px, params, simd, true);
+        let problem = Problem::groove(&lay, d, walls, focal_px, params, simd);
         let (it, conv) = problem.solve(&mut st, params, simd);
-        (st, first_iterations.saturating_add(it), conv, conf)
+        (st, first_iterations.saturating_add(it), conv)
     } else {
         let mut st = start();
-        let (problem, conf) =
-            Problem::plain_with(&lay, d, params.lambda, Some(params.gradient_threshold));
-        let (it, conv) = problem.solve(&mut st, params, simd);
-        (st, it, conv, conf)
+        let (it, conv) = plain().solve(&mut st, params, simd);
+        (st, it, conv)
     };
     let (u, v) = state.to_images(&lay, d.base_flow_px);
     Ok(FlowField {
         u,
         v,
-        confidence: confidence.unwrap_or_else(|| gradient_confidence(d, params.gradient_threshold)),
+        confidence: gradient_confidence(d, params.gradient_threshold),
         iterations,
         converged,
         frame_index: d.frame_index,
@@ -501,40 +498,23 @@ fn validate(p: &FlowParams) -> Result<(), StageError> {
 /// `sqrt(Ix² + Iy²)`, zeroed below `threshold` (a row at a time, so the loop vectorises).
 fn gradient_confidence(d: &Derivatives, threshold: f32) -> Image {
     let w = d.ix.width.max(1);
-    let n = d.ix.data.len();
-    let mut data: Vec<f32> = Vec::with_capacity(n);
-    data.spare_capacity_mut()[..n]
-        .par_chunks_mut(w)
+    let mut data = zeros_par(d.ix.data.len());
+    data.par_chunks_mut(w)
         .zip(d.ix.data.par_chunks(w))
         .zip(d.iy.data.par_chunks(w))
-        .for_each(|((out, ix), iy)| confidence_row(ix, iy, threshold, out));
-    // SAFETY: the capacity is n, and every chunk of the first n elements went through
-    // `confidence_row`, which writes its whole output: Ix, Iy and the output hold the same n
-    // values in the same chunks (the callers checked the derivatives' sizes).
-    unsafe { data.set_len(n) };
+        .for_each(|((out, ix), iy)| {
+            for ((o, &gx), &gy) in out.iter_mut().zip(ix).zip(iy) {
+                let g = (gx * gx + gy * gy).sqrt();
+                *o = if g >= threshold && g.is_finite() {
+                    g
+                } else {
+                    0.0
+                };
+            }
+        });
     Image {
         width: d.ix.width,
         height: d.ix.height,
         data,
-    }
-}
-
-/// One row of the Horn–Schunck confidence: the gradient magnitude √(Ix² + Iy²) where it is
-/// finite and at least `threshold`, else 0. Writes every element of `out` (zeros beyond the
-/// shorter of `ix` and `iy`).
-#[inline]
-pub(super) fn confidence_row(ix: &[f32], iy: &[f32], threshold: f32, out: &mut [MaybeUninit<f32>]) {
-    let n = out.len().min(ix.len()).min(iy.len());
-    let (head, rest) = out.split_at_mut(n);
-    for ((o, &gx), &gy) in head.iter_mut().zip(ix).zip(iy) {
-        let g = (gx * gx + gy * gy).sqrt();
-        o.write(if g >= threshold && g.is_finite() {
-            g
-        } else {
-            0.0
-        });
-    }
-    for o in rest {
-        o.write(0.0);
     }
 }

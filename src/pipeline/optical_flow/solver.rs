@@ -2,112 +2,72 @@
 
 use super::*;
 
-/// A Horn–Schunck system ready to iterate: per half-row blocks of coefficients laid out as
-/// [`CoefRow`] says.
+/// A Horn–Schunck system ready to iterate: the coefficient blocks ([`CoefRow`]) of every
+/// image row's even half, then those of every odd half (so a wavefront step, whose levels all
+/// update one half, reads consecutive rows of one run).
 pub(super) struct Problem {
     pub(super) lay: Layout,
     pub(super) kernel: Kernel,
-    pub(super) coef_e: Aligned,
-    pub(super) coef_o: Aligned,
-    /// Each half's [`Edges`], and its coefficient values per half-row.
+    pub(super) coef: Aligned,
+    /// Each half's [`Edges`] (worked out once: a row update would otherwise divide twice).
     pub(super) edges: [Edges; 2],
-    pub(super) coef_len: usize,
 }
 
 impl Problem {
-    /// Fills the coefficient arrays a row at a time: `f(y, rows)` writes coefficient k of every
+    /// Fills the coefficients a row at a time: `f(y, rows)` writes coefficient k of every
     /// column of image row `y` into `rows[k]` (natural column order, so the caller's loop can
-    /// vectorise); the rows are then scattered into their halves' lane-major blocks. With
-    /// `confidence` given, the same pass over the rows also returns the flow's confidence map
-    /// ([`confidence_row`]), reading Ix and Iy while the row is in cache.
+    /// vectorise); the rows are then scattered into their halves' lane-major blocks.
     pub(super) fn build_rows<const C: usize>(
         lay: &Layout,
         kernel: Kernel,
-        confidence: Option<(&Derivatives, f32)>,
         f: impl Fn(usize, &mut [Vec<f32>; C]) + Sync,
-    ) -> (Self, Option<Image>) {
+    ) -> Self {
         let (w, h) = (lay.width, lay.height);
         let halves = [CoefRow::new(lay, 0, C), CoefRow::new(lay, 1, C)];
-        let (len_e, len_o) = (halves[0].len() * h, halves[1].len() * h);
-        let (le, lo) = (halves[0].len().max(1), halves[1].len().max(1));
-        let mut conf: Option<Vec<f32>> = confidence.map(|_| Vec::with_capacity(w * h));
-        let conf_rows = match conf.as_mut() {
-            Some(c) => Either::Left(c.spare_capacity_mut()[..w * h].par_chunks_mut(w).map(Some)),
-            None => Either::Right((0..h).into_par_iter().map(|_| None)),
-        };
-        // Both arrays are filled at once, row by row: the outer builder's closure runs the
-        // whole parallel loop inside the inner one's.
-        let mut coef_o = None;
-        // SAFETY (both builders): each array is h chunks of one half-row's `CoefRow::len`
-        // values (both halves have the same length), zipped with h confidence rows, so the
-        // loop visits every chunk of both; `CoefRow::scatter` writes every value of its chunk.
-        let coef_e = unsafe {
-            Aligned::build(len_e, |ce| {
-                coef_o = Some(Aligned::build(len_o, |co| {
-                    // Width ≥ 2 (checked by the caller), so both halves have columns; `max(1)`
-                    // only keeps the chunk size valid.
-                    ce.par_chunks_mut(le)
-                        .zip(co.par_chunks_mut(lo))
-                        .zip(conf_rows)
-                        .enumerate()
-                        .for_each_init(
-                            // The image row's C coefficients.
-                            || std::array::from_fn(|_| vec![0.0_f32; w]),
-                            |rows: &mut [Vec<f32>; C], (y, ((re, ro), out))| {
-                                f(y, rows);
-                                halves[0].scatter(0, rows, re);
-                                halves[1].scatter(1, rows, ro);
-                                if let (Some(out), Some((d, threshold))) = (out, confidence) {
-                                    let span = y * w..(y + 1) * w;
-                                    confidence_row(
-                                        d.ix.data.get(span.clone()).unwrap_or_default(),
-                                        d.iy.data.get(span).unwrap_or_default(),
-                                        threshold,
-                                        out,
-                                    );
-                                }
-                            },
-                        );
-                }));
+        // Both halves have m blocks; width ≥ 2 (checked by the caller), so m ≥ 1 and `max(1)`
+        // only keeps the chunk size valid.
+        let len = halves[0].len().max(1);
+        // SAFETY: the even halves' h rows of len values come first, then the odd halves'; the
+        // two runs of row chunks cover the array exactly, and `CoefRow::scatter` writes every
+        // value of each chunk.
+        let coef = unsafe {
+            Aligned::build(2 * len * h, |all| {
+                let (evens, odds) = all.split_at_mut(len * h);
+                evens
+                    .par_chunks_mut(len)
+                    .zip(odds.par_chunks_mut(len))
+                    .enumerate()
+                    .for_each_init(
+                        // The image row's C coefficients.
+                        || std::array::from_fn(|_| vec![0.0_f32; w]),
+                        |rows: &mut [Vec<f32>; C], (y, (even, odd))| {
+                            f(y, rows);
+                            halves[0].scatter(rows, even);
+                            halves[1].scatter(rows, odd);
+                        },
+                    );
             })
         };
-        let coef_o = coef_o.unwrap_or_default();
-        let conf = conf.map(|mut data| {
-            // SAFETY: the capacity is w·h, and the loop wrote every element: its h row chunks
-            // of w values each went through `confidence_row`, which writes its whole output.
-            unsafe { data.set_len(w * h) };
-            Image {
-                width: w,
-                height: h,
-                data,
-            }
-        });
-        let problem = Self {
+        Self {
             lay: *lay,
             kernel,
-            coef_e,
-            coef_o,
+            coef,
             edges: [Edges::new(lay, 0), Edges::new(lay, 1)],
-            coef_len: halves[0].len(),
-        };
-        (problem, conf)
+        }
+    }
+
+    /// Image row `y`'s coefficient blocks of half `hp`.
+    #[inline]
+    pub(super) fn coef_row(&self, y: usize, hp: usize) -> &[f32] {
+        let len = CoefRow::new(&self.lay, hp, self.kernel.coefs()).len();
+        let at = (hp * self.lay.height + y) * len;
+        self.coef.get(at..at + len).unwrap_or_default()
     }
 
     /// The plain system.
     pub(super) fn plain(lay: &Layout, d: &Derivatives, lambda: f32) -> Self {
-        Self::plain_with(lay, d, lambda, None).0
-    }
-
-    /// The plain system and, with a gradient threshold given, the confidence map.
-    pub(super) fn plain_with(
-        lay: &Layout,
-        d: &Derivatives,
-        lambda: f32,
-        threshold: Option<f32>,
-    ) -> (Self, Option<Image>) {
         let w = lay.width;
-        let confidence = threshold.map(|t| (d, t));
-        Self::build_rows::<PLAIN_COEFS>(lay, Kernel::Plain, confidence, |y, [gx, gy, gt]| {
+        Self::build_rows::<PLAIN_COEFS>(lay, Kernel::Plain, |y, [gx, gy, gt]| {
             let span = y * w..(y + 1) * w;
             let (Some(ix), Some(iy), Some(it)) = (
                 d.ix.data.get(span.clone()),
@@ -125,7 +85,6 @@ impl Problem {
     }
 
     /// The groove system, its coefficient rows built with `simd`.
-    #[cfg(test)]
     pub(super) fn groove(
         lay: &Layout,
         d: &Derivatives,
@@ -134,20 +93,6 @@ impl Problem {
         params: &FlowParams,
         simd: Simd,
     ) -> Self {
-        Self::groove_with(lay, d, walls, focal_px, params, simd, false).0
-    }
-
-    /// [`Problem::groove`] and, if `confidence`, the confidence map (at the parameters'
-    /// gradient threshold).
-    pub(super) fn groove_with(
-        lay: &Layout,
-        d: &Derivatives,
-        walls: &WallSideMap,
-        focal_px: f64,
-        params: &FlowParams,
-        simd: Simd,
-        confidence: bool,
-    ) -> (Self, Option<Image>) {
         let (w, h) = (lay.width, lay.height);
         let lambda = f64::from(params.lambda);
         let gamma = f64::from(params.groove_weight) * lambda;
@@ -157,7 +102,6 @@ impl Problem {
             Kernel::Groove {
                 q: 0.25 * params.lambda,
             },
-            confidence.then_some((d, params.gradient_threshold)),
             |y, rows| {
                 let span = y * w..(y + 1) * w;
                 let (Some(ix), Some(iy), Some(it), Some(sides)) = (
@@ -299,32 +243,25 @@ impl Problem {
             let mid_here =
                 (measure && mid >= 1 && mid < k && mid > start && mid <= end).then(|| mid - start);
             let last_here = measure && end == k;
-            let (m, l) = match other.as_deref_mut() {
-                None => self.pass(
-                    simd,
-                    &mut [&mut *st],
-                    levels,
-                    bands,
-                    omega,
-                    mid_here,
-                    last_here,
-                ),
+            // One state (red–black, relaxed by ω) or two (Jacobi, never relaxed).
+            let (mut one, mut two);
+            let (states, w): (&mut [&mut SplitState], f32) = match other.as_deref_mut() {
+                None => {
+                    one = [&mut *st];
+                    (&mut one, omega)
+                }
                 Some(b) => {
-                    let sums = self.pass(
-                        simd,
-                        &mut [&mut *st, &mut *b],
-                        levels,
-                        bands,
-                        1.0,
-                        mid_here,
-                        last_here,
-                    );
-                    if !levels.is_multiple_of(2) {
-                        std::mem::swap(st, b);
-                    }
-                    sums
+                    two = [&mut *st, b];
+                    (&mut two, 1.0)
                 }
             };
+            let (m, l) = self.pass(simd, states, levels, bands, w, mid_here, last_here);
+            // A Jacobi pass of odd length leaves its result in the second state.
+            if let Some(b) = other.as_deref_mut()
+                && !levels.is_multiple_of(2)
+            {
+                std::mem::swap(st, b);
+            }
             sums = (sums.0 + m, sums.1 + l);
             start = end;
         }
@@ -519,10 +456,8 @@ impl Problem {
         dn: &[f32],
         dst: &mut [f32],
     ) {
-        let len = self.coef_len;
-        let coef_all = if hp == 0 { &self.coef_e } else { &self.coef_o };
-        let coef = &coef_all[y * len..(y + 1) * len];
-        let edges = self.edges[hp & 1];
+        let coef = self.coef_row(y, hp);
+        let edges = self.edges[hp];
         let relax = omega != 1.0;
         let k = Consts {
             q: match self.kernel {
@@ -684,12 +619,9 @@ pub(super) fn abs_diff_sum(lay: &Layout, n: usize, a: &[f32], b: &[f32]) -> f64 
         return 0.0;
     };
     let mut acc = [0.0_f32; PAIR];
-    // Vectors below `full` have a column in every lane; after it lane l holds one only while
-    // l·m + k < n.
-    let full = (0..LANES)
-        .map(|l| n.saturating_sub(l * m).min(m))
-        .min()
-        .unwrap_or(0);
+    // Vectors below `full` have a column in every lane (the last lane's run is the shortest);
+    // after it lane l holds one only while l·m + k < n.
+    let full = n.saturating_sub((LANES - 1) * m).min(m);
     let (pa, pb) = (a.as_chunks::<PAIR>().0, b.as_chunks::<PAIR>().0);
     for (x, y) in pa[..full].iter().zip(&pb[..full]) {
         for q in 0..PAIR {
