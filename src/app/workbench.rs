@@ -49,6 +49,9 @@ pub struct WorkbenchOptions {
     pub screenshot: Option<PathBuf>,
     /// Reconstruct the clip as soon as the scan is open.
     pub reconstruct_on_open: bool,
+    /// Show a fixed "– ms" instead of each stage's measured time, so that nothing on screen
+    /// depends on the machine or its load (snapshot tests).
+    pub hide_timings: bool,
 }
 
 /// A question waiting for the operator.
@@ -147,6 +150,8 @@ pub struct Workbench {
     pub(super) pending_capture: Option<(PathBuf, egui::Rect, bool)>,
     pub(super) view_rect: egui::Rect,
     pub(super) reconstruct_on_open: bool,
+    /// See [`WorkbenchOptions::hide_timings`].
+    pub(super) hide_timings: bool,
     pub(super) max_busy_frame: Duration,
     /// The "Import video" window and its running import.
     #[cfg(feature = "video")]
@@ -214,6 +219,7 @@ impl Workbench {
             pending_capture: None,
             view_rect: egui::Rect::NOTHING,
             reconstruct_on_open: opts.reconstruct_on_open,
+            hide_timings: opts.hide_timings,
             max_busy_frame: Duration::ZERO,
             #[cfg(feature = "video")]
             video_import: super::import_video::VideoImport::default(),
