@@ -11,12 +11,12 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use gui_common::*;
 use groovescope::app::Workbench;
 use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::{Scan, load_group};
 use groovescope::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
 use groovescope::playback::DeviceChoice;
+use gui_common::*;
 
 /// Every stage output of a cache, as text: `{:?}` prints each float so that it reads back to
 /// the same bits, so equal texts mean bit-identical outputs (NaN gaps included).
@@ -25,12 +25,12 @@ fn stage_outputs(c: &StageCache) -> Vec<(Stage, String)> {
         .into_iter()
         .map(|s| {
             let text = match s {
-                Stage::Derivatives => format!("{:?}", c.derivatives),
-                Stage::Flow => format!("{:?}", c.flows),
-                Stage::Depth => format!("{:?}", c.depth),
-                Stage::Stripes => format!("{:?}", c.stripes),
-                Stage::Orientation => format!("{:?}", c.orientation),
-                Stage::Sound => format!("{:?}", c.signal),
+                Stage::Derivatives => format!("{:?}", c.derivatives()),
+                Stage::Flow => format!("{:?}", c.flows()),
+                Stage::Depth => format!("{:?}", c.depth()),
+                Stage::Stripes => format!("{:?}", c.stripes()),
+                Stage::Orientation => format!("{:?}", c.orientation()),
+                Stage::Sound => format!("{:?}", c.signal()),
             };
             (s, text)
         })
@@ -46,7 +46,7 @@ fn workbench_outputs(wb: &Workbench) -> Vec<(Stage, String)> {
             s.name()
         );
     }
-    assert!(wb.cache().signal.is_some(), "the group has sound");
+    assert!(wb.cache().signal().is_some(), "the group has sound");
     stage_outputs(wb.cache())
 }
 
@@ -69,6 +69,11 @@ fn assert_same(what: &str, a: &[(Stage, String)], b: &[(Stage, String)]) {
 
 /// Group 0 run straight through a fresh cache on a rayon pool of `threads` threads.
 fn cache_on_threads(scan: &Path, threads: usize) -> Vec<(Stage, String)> {
+    cache_with(scan, threads, &PipelineParams::default())
+}
+
+/// Group 0 with `params` run straight through a fresh cache on `threads` threads.
+fn cache_with(scan: &Path, threads: usize, params: &PipelineParams) -> Vec<(Stage, String)> {
     let scan = Scan::open(scan).unwrap();
     let input = GroupInput {
         group: 0,
@@ -82,13 +87,8 @@ fn cache_on_threads(scan: &Path, threads: usize) -> Vec<(Stage, String)> {
         .unwrap();
     pool.install(|| {
         let mut c = StageCache::default();
-        c.run_from(
-            Stage::Derivatives,
-            &input,
-            &PipelineParams::default(),
-            &mut |_, _| true,
-        )
-        .unwrap();
+        c.run_from(Stage::Derivatives, &input, params, &mut |_, _| true)
+            .unwrap();
         stage_outputs(&c)
     })
 }
@@ -162,6 +162,19 @@ fn check_scan(scan: &Path) {
     assert_same(
         "after cancelled reruns",
         &straight,
+        &workbench_outputs(wb(&h)),
+    );
+
+    // A knob of a later table that an earlier stage reads (the output rate places the
+    // orientation stage's sample columns): changed in the workbench, the group must equal a
+    // fresh run with the new params.
+    let mut p = params.clone();
+    p.sound.output_rate_hz = 48_000;
+    wb_mut(&mut h).set_params(p.clone());
+    settle(&mut h);
+    assert_same(
+        "after an output-rate change",
+        &cache_with(scan, 2, &p),
         &workbench_outputs(wb(&h)),
     );
 

@@ -9,7 +9,6 @@ mod gui_common;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use gui_common::*;
 use egui_kittest::SnapshotOptions;
 use egui_kittest::kittest::Queryable;
 use groovescope::app::View;
@@ -17,6 +16,7 @@ use groovescope::io::wav::WavBits;
 use groovescope::pipeline::Stage;
 use groovescope::playback::{AudioStatus, DeviceChoice};
 use groovescope::synth::SynthConfig;
+use gui_common::*;
 
 #[test]
 fn opens_the_demo_scan_and_steps_through_groups() {
@@ -95,8 +95,8 @@ fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
     for s in [Stage::Derivatives, Stage::Flow] {
         assert_eq!(wb(&h).stage_status(s).word(), "fresh", "{s:?}");
     }
-    let derivs = wb(&h).cache().derivatives.clone().unwrap();
-    let flows = wb(&h).cache().flows.clone().unwrap();
+    let derivs = wb(&h).cache().derivatives().cloned().unwrap();
+    let flows = wb(&h).cache().flows().cloned().unwrap();
     let runs = Stage::ALL.map(|s| wb(&h).stage_runs(s));
     let lambda = wb(&h).params().flow.lambda;
     h.get_by_label("λ (smoothness)")
@@ -108,13 +108,10 @@ fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
     settle(&mut h);
     let c = wb(&h).cache();
     assert!(
-        Arc::ptr_eq(&derivs, c.derivatives.as_ref().unwrap()),
+        Arc::ptr_eq(&derivs, c.derivatives().unwrap()),
         "derivatives kept"
     );
-    assert!(
-        !Arc::ptr_eq(&flows, c.flows.as_ref().unwrap()),
-        "flow recomputed"
-    );
+    assert!(!Arc::ptr_eq(&flows, c.flows().unwrap()), "flow recomputed");
     assert_eq!(wb(&h).stage_runs(Stage::Derivatives), runs[0]);
     assert_eq!(wb(&h).stage_runs(Stage::Flow), runs[1] + 1);
     assert_eq!(wb(&h).stage_status(Stage::Flow).word(), "fresh");
@@ -133,7 +130,7 @@ fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
     let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
     settle(&mut h);
     let runs = Stage::ALL.map(|s| wb(&h).stage_runs(s));
-    let flows = wb(&h).cache().flows.clone().unwrap();
+    let flows = wb(&h).cache().flows().cloned().unwrap();
     let mut p = wb(&h).params().clone();
     p.hough.theta_min_deg += 5.0;
     wb_mut(&mut h).set_params(p);
@@ -142,7 +139,10 @@ fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
         Some(Stage::Stripes)
     );
     settle(&mut h);
-    assert!(wb(&h).cache().stripes.is_some(), "the dual-focus path ran");
+    assert!(
+        wb(&h).cache().stripes().is_some(),
+        "the dual-focus path ran"
+    );
     let after = Stage::ALL.map(|s| wb(&h).stage_runs(s));
     assert_eq!(
         &after[..3],
@@ -153,7 +153,7 @@ fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
         after[Stage::Stripes.index()],
         runs[Stage::Stripes.index()] + 1
     );
-    assert!(Arc::ptr_eq(&flows, wb(&h).cache().flows.as_ref().unwrap()));
+    assert!(Arc::ptr_eq(&flows, wb(&h).cache().flows().unwrap()));
 }
 
 #[test]
