@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use super::recon::Clip;
+use super::tuning::ParamState;
 use crate::engine::GroupReport;
 use crate::io::wav::{Audio, WavBits, write_wav};
 use crate::io::write_atomic;
@@ -27,9 +28,12 @@ pub struct Sidecar {
     pub sample_rate_hz: u32,
     /// Sample encoding.
     pub bits: WavBits,
-    /// Preset file the params came from, if one was loaded.
+    /// Where the params came from when the clip was reconstructed: `defaults` or a preset file,
+    /// and whether they had been changed since (then `preset` below, not the file, is what ran).
+    pub params_state: ParamState,
+    /// Preset file the params came from, if any.
     pub preset_file: Option<PathBuf>,
-    /// The full preset (`PipelineParams` TOML).
+    /// The params the clip was made with, in full (`PipelineParams` TOML).
     pub preset: String,
     /// Scores against the reference, if any.
     pub scores: Option<Scores>,
@@ -66,7 +70,8 @@ pub fn selection_samples(clip: &Clip, selection_secs: Option<(f64, f64)>) -> (us
     }
 }
 
-/// Writes the clip (or the selection) as WAV plus its sidecar report.
+/// Writes the clip (or the selection) as WAV plus its sidecar report, which records the params
+/// the clip was made with and where they came from.
 ///
 /// # Errors
 /// A message naming the file when it exists and `overwrite` is false, the selection is empty,
@@ -76,7 +81,6 @@ pub fn export_wav(
     path: &Path,
     bits: WavBits,
     selection_secs: Option<(f64, f64)>,
-    preset_file: Option<&Path>,
     overwrite: bool,
 ) -> Result<(), String> {
     if !overwrite && would_overwrite(path) {
@@ -108,7 +112,8 @@ pub fn export_wav(
         selection_secs: [s as f64 / rate, e as f64 / rate],
         sample_rate_hz: clip.rate_hz(),
         bits,
-        preset_file: preset_file.map(Path::to_path_buf),
+        params_state: clip.param_state.clone(),
+        preset_file: clip.param_state.preset_file().map(Path::to_path_buf),
         preset,
         scores: clip.recon.scores,
         group_reports: clip.recon.groups.clone(),

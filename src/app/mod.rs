@@ -7,16 +7,25 @@
 //! `groovescope-dialog` shows file dialogs; `groovescope-import` imports a video clip (feature
 //! `video`); the cpal callback reads a prepared buffer.
 
+pub mod clip_state;
 pub mod dialogs;
 pub mod export;
+pub mod files;
 pub mod history;
 #[cfg(feature = "video")]
 pub mod import_video;
+pub mod jobs;
+pub mod messages;
+pub mod nav;
+pub mod panels;
 pub mod recent;
 pub mod recon;
 pub mod render;
+pub mod screenshot;
 pub mod shell;
+pub mod stages;
 pub mod textures;
+pub mod tuning;
 pub mod views;
 pub mod workbench;
 pub mod worker;
@@ -113,4 +122,189 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
         anyhow::ensure!(p.is_file(), "no screenshot was written to {}", p.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    //! The app's modules import each other without a circle: each concern's state sits in its
+    //! own module, and only the window (`shell`, `panels`) and `workbench` tie them together.
+
+    use std::collections::{BTreeMap, BTreeSet};
+    use std::path::Path;
+
+    /// Module path (`app::views::flow_ui`) → source text, for every file under `src/app`.
+    fn app_modules() -> BTreeMap<String, String> {
+        fn walk(dir: &Path, module: &str, out: &mut BTreeMap<String, String>) {
+            for entry in std::fs::read_dir(dir).unwrap() {
+                let p = entry.unwrap().path();
+                let name = p.file_stem().unwrap().to_string_lossy().into_owned();
+                if p.is_dir() {
+                    walk(&p, &format!("{module}::{name}"), out);
+                } else if p.extension().is_some_and(|e| e == "rs") {
+                    let m = if name == "mod" {
+                        module.to_string()
+                    } else {
+                        format!("{module}::{name}")
+                    };
+                    out.insert(m, std::fs::read_to_string(&p).unwrap());
+                }
+            }
+        }
+        let mut out = BTreeMap::new();
+        walk(
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("src/app"),
+            "app",
+            &mut out,
+        );
+        out
+    }
+
+    /// The paths a source text names (`crate::app::x::Y`, `super::x`, `self::x`, and in a
+    /// `mod.rs` its children by name), with one level of `{a, b::c}` groups expanded; comments
+    /// and the unit tests at the bottom (their own module) are skipped.
+    fn named_paths(text: &str, children: &[String]) -> Vec<String> {
+        let text = text.split("#[cfg(test)]").next().unwrap_or("");
+        let code: String = text
+            .lines()
+            .map(|l| l.split("//").next().unwrap_or(""))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let ident = |c: char| c.is_ascii_alphanumeric() || c == '_';
+        let mut out = Vec::new();
+        let bytes: Vec<char> = code.chars().collect();
+        let mut i = 0;
+        while i < bytes.len() {
+            let at_start = i == 0 || !ident(bytes[i - 1]) && bytes[i - 1] != ':';
+            if at_start && ident(bytes[i]) {
+                let mut j = i;
+                while j < bytes.len() && (ident(bytes[j]) || bytes[j] == ':') {
+                    j += 1;
+                }
+                let mut path: String = bytes[i..j].iter().collect();
+                let path_trim = path.trim_end_matches(':').to_string();
+                let rooted = path_trim.starts_with("crate::app")
+                    || path_trim.starts_with("super")
+                    || path_trim.starts_with("self::")
+                    || children
+                        .iter()
+                        .any(|c| path_trim.starts_with(&format!("{c}::")));
+                if rooted {
+                    if path.ends_with("::") && bytes.get(j) == Some(&'{') {
+                        let close = bytes[j..].iter().position(|&c| c == '}').unwrap_or(0) + j;
+                        let inner: String = bytes[j + 1..close].iter().collect();
+                        for item in inner.split(',') {
+                            let item = item.trim();
+                            if !item.is_empty() {
+                                out.push(format!("{path}{item}"));
+                            }
+                        }
+                        j = close;
+                    } else {
+                        path = path_trim;
+                        out.push(path);
+                    }
+                }
+                i = j.max(i + 1);
+            } else {
+                i += 1;
+            }
+        }
+        out
+    }
+
+    /// The module of `modules` a path names from `module` (the longest known prefix).
+    fn target(module: &str, path: &str, modules: &BTreeSet<String>) -> Option<String> {
+        let parts: Vec<&str> = path.split("::").filter(|s| !s.is_empty()).collect();
+        let mut base: Vec<String> = module.split("::").map(String::from).collect();
+        let mut rest = &parts[..];
+        match rest.first() {
+            Some(&"crate") => {
+                base = vec![];
+                rest = &rest[1..];
+            }
+            Some(&"self") => rest = &rest[1..],
+            _ => {}
+        }
+        while rest.first() == Some(&"super") {
+            base.pop();
+            rest = &rest[1..];
+        }
+        let mut best = None;
+        let mut cur = base.clone();
+        if modules.contains(&cur.join("::")) {
+            best = Some(cur.join("::"));
+        }
+        for p in rest {
+            cur.push((*p).to_string());
+            let m = cur.join("::");
+            if modules.contains(&m) {
+                best = Some(m);
+            }
+        }
+        best.filter(|b| b != module)
+    }
+
+    #[test]
+    fn the_app_modules_import_each_other_without_a_circle() {
+        let modules = app_modules();
+        let names: BTreeSet<String> = modules.keys().cloned().collect();
+        let mut edges: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+        for (m, text) in &modules {
+            let children: Vec<String> = names
+                .iter()
+                .filter_map(|n| n.strip_prefix(&format!("{m}::")))
+                .filter(|rest| !rest.contains("::"))
+                .map(String::from)
+                .collect();
+            for p in named_paths(text, &children) {
+                if let Some(t) = target(m, &p, &names) {
+                    edges.entry(m.clone()).or_default().insert(t);
+                }
+            }
+        }
+        assert!(
+            edges
+                .get("app::shell")
+                .is_some_and(|e| e.contains("app::workbench")),
+            "the parser sees shell's imports: {edges:?}"
+        );
+        // Depth-first search for a back edge.
+        fn visit(
+            m: &str,
+            edges: &BTreeMap<String, BTreeSet<String>>,
+            state: &mut BTreeMap<String, u8>,
+            stack: &mut Vec<String>,
+        ) -> Option<Vec<String>> {
+            state.insert(m.to_string(), 1);
+            stack.push(m.to_string());
+            for t in edges.get(m).into_iter().flatten() {
+                match state.get(t.as_str()).copied().unwrap_or(0) {
+                    1 => {
+                        let from = stack.iter().position(|s| s == t).unwrap_or(0);
+                        let mut circle = stack[from..].to_vec();
+                        circle.push(t.clone());
+                        return Some(circle);
+                    }
+                    0 => {
+                        if let Some(c) = visit(t, edges, state, stack) {
+                            return Some(c);
+                        }
+                    }
+                    _ => {}
+                }
+            }
+            stack.pop();
+            state.insert(m.to_string(), 2);
+            None
+        }
+        let mut state = BTreeMap::new();
+        for m in &names {
+            if state.get(m.as_str()).copied().unwrap_or(0) == 0
+                && let Some(circle) = visit(m, &edges, &mut state, &mut Vec::new())
+            {
+                panic!("import circle: {}", circle.join(" → "));
+            }
+        }
+    }
 }

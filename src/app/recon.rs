@@ -9,6 +9,7 @@ use std::sync::mpsc::{self, Receiver};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use super::tuning::ParamState;
 use crate::engine::{Progress, ReconstructOptions, Reconstruction, aligned_reference, reconstruct};
 use crate::io::Scan;
 use crate::pipeline::PipelineParams;
@@ -52,6 +53,8 @@ pub struct Clip {
     pub reference_spectrum: Option<Spectrum>,
     /// Params the clip was made with (recorded in exports).
     pub params: PipelineParams,
+    /// Where those params came from when the reconstruction started (recorded in exports).
+    pub param_state: ParamState,
     /// Groups it covers.
     pub groups: Range<usize>,
     /// Scan folder.
@@ -102,6 +105,7 @@ pub fn make_clip(
     scan: &Scan,
     recon: Reconstruction,
     params: PipelineParams,
+    param_state: ParamState,
     groups: Range<usize>,
 ) -> Clip {
     let rate = recon.audio.sample_rate_hz;
@@ -134,6 +138,7 @@ pub fn make_clip(
         envelope_block: block,
         recon,
         params,
+        param_state,
         groups,
         scan_dir: scan.dir.clone(),
         reference_problem,
@@ -164,13 +169,15 @@ pub struct ReconRun {
 }
 
 impl ReconRun {
-    /// Starts reconstructing `scan` with `opts` on a named thread; `repaint` wakes the UI.
+    /// Starts reconstructing `scan` with `opts` (whose params are in `param_state`) on a named
+    /// thread; `repaint` wakes the UI.
     ///
     /// # Errors
     /// When the thread cannot be started.
     pub fn start(
         scan: Scan,
         opts: ReconstructOptions,
+        param_state: ParamState,
         repaint: Box<dyn Fn() + Send + Sync>,
     ) -> std::io::Result<Self> {
         let cancel = Arc::new(AtomicBool::new(false));
@@ -201,6 +208,7 @@ impl ReconRun {
                         &scan,
                         recon,
                         opts.params.clone(),
+                        param_state,
                         groups,
                     ))),
                     Ok(Err(e)) => Err(e.to_string()),
