@@ -11,7 +11,44 @@ use crate::engine::GroupReport;
 use crate::io::wav::{Audio, WavBits, write_wav};
 use crate::io::write_atomic;
 use crate::pipeline::PipelineParams;
+use crate::pipeline::audio_signal::resample;
 use crate::pipeline::eval::Scores;
+
+/// A way to write the clip, as the export menu offers it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ExportFormat {
+    /// Name in the menu.
+    pub name: &'static str,
+    /// Sample encoding.
+    pub bits: WavBits,
+    /// Sample rate written (None: the clip's own).
+    pub rate_hz: Option<u32>,
+    /// What it is for, in one line.
+    pub reason: &'static str,
+}
+
+/// The export formats offered, the first the default.
+pub const EXPORT_FORMATS: [ExportFormat; 3] = [
+    ExportFormat {
+        name: "archive (24-bit)",
+        bits: WavBits::Int24,
+        rate_hz: None,
+        reason: "24-bit at the reconstruction's rate: keeps all the detail the clip holds",
+    },
+    ExportFormat {
+        name: "plain 16-bit 44.1 kHz",
+        bits: WavBits::Int16,
+        rate_hz: Some(44_100),
+        reason: "16-bit at 44.1 kHz, as on a CD: plays in any software or player (resampled \
+                 when the clip has another rate)",
+    },
+    ExportFormat {
+        name: "32-bit float",
+        bits: WavBits::Float32,
+        rate_hz: None,
+        reason: "32-bit float at the reconstruction's rate: for further processing, no rounding",
+    },
+];
 
 /// The sidecar report written beside an exported WAV (`NAME.wav` → `NAME.json`).
 #[derive(Debug, Serialize)]
@@ -24,8 +61,10 @@ pub struct Sidecar {
     pub groups: [usize; 2],
     /// Exported stretch (seconds from the clip start).
     pub selection_secs: [f64; 2],
-    /// Sample rate (Hz).
+    /// Sample rate written (Hz).
     pub sample_rate_hz: u32,
+    /// The clip's own rate when the export was resampled to another (Hz).
+    pub resampled_from_hz: Option<u32>,
     /// Sample encoding.
     pub bits: WavBits,
     /// Where the params came from when the clip was reconstructed: `defaults` or a preset file,
@@ -70,8 +109,8 @@ pub fn selection_samples(clip: &Clip, selection_secs: Option<(f64, f64)>) -> (us
     }
 }
 
-/// Writes the clip (or the selection) as WAV plus its sidecar report, which records the params
-/// the clip was made with and where they came from.
+/// Writes the clip (or the selection) as WAV, at `rate_hz` when given (resampled), plus its
+/// sidecar report, which records the params the clip was made with and where they came from.
 ///
 /// # Errors
 /// A message naming the file when it exists and `overwrite` is false, the selection is empty,
@@ -80,6 +119,7 @@ pub fn export_wav(
     clip: &Clip,
     path: &Path,
     bits: WavBits,
+    rate_hz: Option<u32>,
     selection_secs: Option<(f64, f64)>,
     overwrite: bool,
 ) -> Result<(), String> {
@@ -93,15 +133,29 @@ pub fn export_wav(
     if e <= s {
         return Err(format!("the selection is empty: {}", path.display()));
     }
+    let rate_out = rate_hz.unwrap_or(clip.rate_hz());
+    let channels = clip
+        .recon
+        .audio
+        .channels
+        .iter()
+        .map(|c| {
+            let part = c.get(s..e).unwrap_or(&[]);
+            if rate_out == clip.rate_hz() {
+                Ok(part.to_vec())
+            } else {
+                resample(part, f64::from(clip.rate_hz()), rate_out).map_err(|err| {
+                    format!(
+                        "cannot resample to {rate_out} Hz: {err}: {}",
+                        path.display()
+                    )
+                })
+            }
+        })
+        .collect::<Result<Vec<_>, String>>()?;
     let audio = Audio {
-        sample_rate_hz: clip.rate_hz(),
-        channels: clip
-            .recon
-            .audio
-            .channels
-            .iter()
-            .map(|c| c[s..e].to_vec())
-            .collect(),
+        sample_rate_hz: rate_out,
+        channels,
     };
     let preset = clip.params.to_toml_string().map_err(|e| e.to_string())?;
     let rate = f64::from(clip.rate_hz());
@@ -110,7 +164,8 @@ pub fn export_wav(
         scan: clip.scan_dir.clone(),
         groups: [clip.groups.start, clip.groups.end],
         selection_secs: [s as f64 / rate, e as f64 / rate],
-        sample_rate_hz: clip.rate_hz(),
+        sample_rate_hz: rate_out,
+        resampled_from_hz: (rate_out != clip.rate_hz()).then_some(clip.rate_hz()),
         bits,
         params_state: clip.param_state.clone(),
         preset_file: clip.param_state.preset_file().map(Path::to_path_buf),

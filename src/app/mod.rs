@@ -11,6 +11,7 @@ pub mod clip_state;
 pub mod dialogs;
 pub mod export;
 pub mod files;
+pub mod health;
 pub mod history;
 #[cfg(feature = "video")]
 pub mod import_video;
@@ -24,6 +25,7 @@ pub mod render;
 pub mod screenshot;
 pub mod shell;
 pub mod stages;
+pub mod symptoms;
 pub mod textures;
 pub mod tuning;
 pub mod views;

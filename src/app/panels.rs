@@ -7,9 +7,12 @@ use egui::{Color32, Ui};
 use super::dialogs::DialogKind;
 use super::files::{Confirm, typed_path};
 use super::stages::STAGES;
+use super::symptoms::symptom_presets;
 use super::views::depth_ui::depth_ui;
 use super::views::flow_ui::flow_ui;
 use super::views::frame_ui::{StageData, frame_ui};
+use super::views::guidance::guidance_ui;
+use super::views::health_ui::health_strip_ui;
 use super::views::hough_ui::hough_ui;
 use super::views::meta_ui::{MetaAction, MetaForm, meta_ui};
 use super::views::nav_ui::{NavAction, nav_ui, stages_ui};
@@ -17,7 +20,8 @@ use super::views::orientation_ui::orientation_ui;
 use super::views::overview_ui::overview_ui;
 use super::views::params_ui::{params_ui, toml_ui};
 use super::views::stripes_ui::stripes_ui;
-use super::views::waveform_ui::{WaveAction, waveform_ui};
+use super::views::transport_ui::WaveAction;
+use super::views::waveform_ui::waveform_ui;
 use super::views::{StageStatus, View, empty_note};
 use super::workbench::Workbench;
 
@@ -25,6 +29,11 @@ use super::workbench::Workbench;
 const ERROR_COLOUR: Color32 = Color32::from_rgb(235, 90, 80);
 /// Colour of warnings.
 const WARN_COLOUR: Color32 = Color32::from_rgb(220, 170, 60);
+/// What the health strip's colours mean.
+const HEALTH_KEY: &str = "One cell per group. Green: sound. Amber to red: part of the group is \
+     missing (gaps, a failed group), wall fits were rejected, or its fits hold far more outliers \
+     than the clip's other groups. Grey: not reconstructed yet. The white outline is the group \
+     shown.";
 
 impl Workbench {
     pub(super) fn menu_bar(&mut self, ui: &mut Ui) {
@@ -107,6 +116,16 @@ impl Workbench {
                 self.nav.frame,
                 &mut self.views.nav,
             );
+            if !self.clip.health.is_empty() {
+                ui.horizontal(|ui| {
+                    ui.label("clip health");
+                    ui.weak("(per group; hover, click to go)")
+                        .on_hover_text(HEALTH_KEY);
+                });
+                if let Some(g) = health_strip_ui(ui, &self.clip.health, self.nav.group) {
+                    actions.push(NavAction::Group(g));
+                }
+            }
             ui.separator();
             ui.heading("stages");
             actions.extend(stages_ui(
@@ -155,6 +174,7 @@ impl Workbench {
                 egui::RichText::new(" ")
             };
             ui.add(egui::Label::new(note).truncate());
+            self.symptom_buttons(ui);
             let mut draft = self.tuning.params().clone();
             params_ui(ui, &mut draft, statuses);
             if let Some(p) = toml_ui(ui, self.tuning.params(), &mut self.views.toml) {
@@ -163,6 +183,40 @@ impl Workbench {
                 self.set_params(draft);
             }
         });
+    }
+
+    /// One button per symptom preset ("flaked wall", "dusty", "noisy"), its reason on hover.
+    fn symptom_buttons(&mut self, ui: &mut Ui) {
+        let presets = match symptom_presets() {
+            Ok(p) => p,
+            Err(e) => {
+                ui.colored_label(ERROR_COLOUR, e);
+                return;
+            }
+        };
+        let mut chosen = None;
+        ui.horizontal_wrapped(|ui| {
+            ui.label("symptom:");
+            for p in &presets {
+                let hover = format!("{}\n\nsets {}", p.reason, p.settings().join(", "));
+                if ui.small_button(&p.name).on_hover_text(hover).clicked() {
+                    chosen = Some(p.clone());
+                }
+            }
+        });
+        if let Some(p) = chosen {
+            match p.apply(self.tuning.params()) {
+                Ok(params) => {
+                    self.replace_params(params);
+                    self.info(format!(
+                        "symptom preset \"{}\": {} (undo to go back)",
+                        p.name,
+                        p.settings().join(", ")
+                    ));
+                }
+                Err(e) => self.error(e),
+            }
+        }
     }
 
     pub(super) fn status_bar(&mut self, ui: &mut Ui) {
@@ -216,6 +270,7 @@ impl Workbench {
         ui.separator();
         let frames = self.nav.frames().cloned();
         let params = self.tuning.params().clone();
+        guidance_ui(ui, self.view, self.nav.uses_dual(&params));
         let data = StageData {
             cache: &self.stages.cache,
             frames: frames.as_ref(),
@@ -268,9 +323,9 @@ impl Workbench {
                 View::Waveform => {
                     wave_actions = waveform_ui(
                         ui,
-                        self.clip.clip.as_deref(),
-                        self.clip.run.as_ref(),
+                        &self.clip,
                         self.nav.groups(),
+                        self.nav.group,
                         &mut self.player,
                         &mut v.wave,
                         height,
@@ -297,6 +352,8 @@ impl Workbench {
         for a in wave_actions {
             match a {
                 WaveAction::Reconstruct(r) => self.reconstruct(r),
+                WaveAction::ReconstructAround(n) => self.reconstruct_around(n),
+                WaveAction::Group(g) => self.set_group(g),
                 WaveAction::Cancel => self.cancel_reconstruction(),
                 WaveAction::ExportWav(sel) => self.show_dialog(DialogKind::ExportWav(sel)),
                 WaveAction::Message(m) => self.error(m),

@@ -9,6 +9,7 @@ use std::sync::mpsc::{self, Receiver};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use super::health::GroupTrack;
 use super::tuning::ParamState;
 use crate::engine::{Progress, ReconstructOptions, Reconstruction, aligned_reference, reconstruct};
 use crate::io::Scan;
@@ -57,6 +58,8 @@ pub struct Clip {
     pub param_state: ParamState,
     /// Groups it covers.
     pub groups: Range<usize>,
+    /// Where each of them lies on the groove and how much of it is gaps, in group order.
+    pub tracks: Vec<GroupTrack>,
     /// Scan folder.
     pub scan_dir: PathBuf,
     /// Why the reference is missing, when `scan.reference` exists but could not be read.
@@ -68,6 +71,73 @@ impl Clip {
     #[must_use]
     pub fn rate_hz(&self) -> u32 {
         self.recon.audio.sample_rate_hz
+    }
+
+    /// Seconds into the clip of the groove position `pos_um` (sample 0 of the stitched signal
+    /// is the clip's start; its native rate is Vt over its spacing).
+    #[must_use]
+    pub fn secs_at_um(&self, pos_um: f64) -> f64 {
+        let s = &self.recon.stitched;
+        let um_per_sec = s.spacing_um * s.native_rate_hz;
+        if um_per_sec > 0.0 {
+            (pos_um - s.start_um) / um_per_sec
+        } else {
+            f64::NAN
+        }
+    }
+
+    /// Where group `g` lies in the clip (seconds), when it produced sound.
+    #[must_use]
+    pub fn group_span_secs(&self, g: usize) -> Option<(f64, f64)> {
+        let t = self.tracks.iter().find(|t| t.group == g)?;
+        let (a, b) = (self.secs_at_um(t.span_um.0), self.secs_at_um(t.span_um.1));
+        (a.is_finite() && b.is_finite()).then_some((a, b))
+    }
+
+    /// The group heard at `secs` into the clip: the one whose span holds it, else the nearest.
+    #[must_use]
+    pub fn group_at_secs(&self, secs: f64) -> Option<usize> {
+        self.tracks
+            .iter()
+            .filter_map(|t| Some((t.group, self.group_span_secs(t.group)?)))
+            .min_by(|(_, a), (_, b)| {
+                let d = |(s, e): (f64, f64)| {
+                    if secs < s {
+                        s - secs
+                    } else if secs > e {
+                        secs - e
+                    } else {
+                        0.0
+                    }
+                };
+                d(*a).total_cmp(&d(*b))
+            })
+            .map(|(g, _)| g)
+    }
+
+    /// `other`'s recovered sound (mono) laid on this clip's time axis by groove position, as
+    /// long as this clip: silence where `other` has none. None when the rates differ.
+    #[must_use]
+    pub fn lay_on(&self, other: &Clip) -> Option<Vec<f32>> {
+        if other.rate_hz() != self.rate_hz() {
+            return None;
+        }
+        let offset_secs = self.secs_at_um(other.recon.stitched.start_um);
+        if !offset_secs.is_finite() {
+            return None;
+        }
+        let offset = (offset_secs * f64::from(self.rate_hz())).round() as i64;
+        Some(
+            (0..self.recovered.len())
+                .map(|i| {
+                    usize::try_from(i as i64 - offset)
+                        .ok()
+                        .and_then(|k| other.recovered.get(k))
+                        .copied()
+                        .unwrap_or(0.0)
+                })
+                .collect(),
+        )
     }
 }
 
@@ -107,6 +177,7 @@ pub fn make_clip(
     params: PipelineParams,
     param_state: ParamState,
     groups: Range<usize>,
+    tracks: Vec<GroupTrack>,
 ) -> Clip {
     let rate = recon.audio.sample_rate_hz;
     let recovered = recon.audio.mono();
@@ -140,6 +211,7 @@ pub fn make_clip(
         params,
         param_state,
         groups,
+        tracks,
         scan_dir: scan.dir.clone(),
         reference_problem,
     }
@@ -166,6 +238,15 @@ pub struct ReconRun {
     pub total: usize,
     /// Signals of the groups finished so far (for the live waveform).
     pub partial: Vec<Arc<GroupSignal>>,
+    /// Tracks of the groups finished so far (for the live health strip).
+    pub tracks: Vec<GroupTrack>,
+    /// First group of the run.
+    pub first_group: usize,
+}
+
+/// The group a progress report is about: groups run in order from `first`.
+fn reported_group(first: usize, p: &Progress) -> usize {
+    first + p.done.saturating_sub(1)
 }
 
 impl ReconRun {
@@ -188,15 +269,19 @@ impl ReconRun {
             .end
             .min(scan.groups.len())
             .saturating_sub(groups.start);
+        let first_group = groups.start;
         let thread = std::thread::Builder::new()
             .name("groovescope-reconstruct".into())
             .spawn(move || {
                 let ptx = tx.clone();
+                let mut tracks = Vec::new();
                 let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                     reconstruct(
                         &scan,
                         &opts,
                         &mut |p| {
+                            let g = reported_group(first_group, p);
+                            tracks.push(GroupTrack::new(g, p.signal.as_deref()));
                             let _ = ptx.send(ReconEvent::Progress(p.clone()));
                             repaint();
                         },
@@ -210,6 +295,7 @@ impl ReconRun {
                         opts.params.clone(),
                         param_state,
                         groups,
+                        tracks,
                     ))),
                     Ok(Err(e)) => Err(e.to_string()),
                     Err(_) => Err("the reconstruction panicked (see the log)".into()),
@@ -225,6 +311,8 @@ impl ReconRun {
             done: 0,
             total,
             partial: Vec::new(),
+            tracks: Vec::new(),
+            first_group,
         })
     }
 
@@ -246,6 +334,8 @@ impl ReconRun {
                 ReconEvent::Progress(p) => {
                     self.done = p.done;
                     self.total = p.total;
+                    let g = reported_group(self.first_group, &p);
+                    self.tracks.push(GroupTrack::new(g, p.signal.as_deref()));
                     if let Some(s) = p.signal {
                         self.partial.push(s);
                     }

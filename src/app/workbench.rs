@@ -240,6 +240,12 @@ impl Workbench {
         self.files.prompt.as_ref()
     }
 
+    /// Where the Hough view drew each peak's window last frame (screen points).
+    #[must_use]
+    pub fn hough_window_rects(&self) -> &[egui::Rect] {
+        &self.views.hough.windows_on_screen
+    }
+
     /// The recent scans.
     #[must_use]
     pub fn recent(&self) -> &[PathBuf] {
@@ -378,10 +384,11 @@ impl Workbench {
                 ""
             }
         ));
+        let groups = scan.groups.len();
         self.nav = Navigation::opened(scan, frames);
         self.stages = StageState::default();
         self.tuning = tuning;
-        self.clip = ClipState::default();
+        self.clip = ClipState::for_scan(groups);
         self.player.load(PlayBuffers::default());
         self.views = ViewStates::default();
         self.files.confirm = None;
@@ -722,7 +729,10 @@ impl Workbench {
             self.tuning.state(),
             repaint_fn(&self.ctx),
         ) {
-            Ok(run) => self.clip.run = Some(run),
+            Ok(run) => {
+                self.clip.run = Some(run);
+                self.clip.refresh_health();
+            }
             Err(e) => self.error(format!("cannot start the reconstruction: {e}")),
         }
     }
@@ -732,21 +742,30 @@ impl Workbench {
         self.clip.cancel();
     }
 
-    /// Shows and loads a finished clip for playback.
+    /// Shows and loads a finished clip for playback; the clip before it stays beside it for
+    /// A/B listening.
     pub fn set_clip(&mut self, clip: Clip) {
-        let reference = clip.reference.as_ref().map(|r| vec![r.to_vec()]);
-        self.player.load(PlayBuffers {
-            rate_hz: clip.rate_hz(),
-            a: clip.recon.audio.channels.clone(),
-            b: reference,
-        });
         self.info(format!(
             "clip ready: {:.1} ms from {} groups",
             clip.recon.audio.duration_secs() * 1000.0,
             clip.groups.len()
         ));
+        self.clip.finish(clip);
+        self.player.load(self.clip.play_buffers());
         self.views.wave.selection = None;
-        self.clip.clip = Some(Arc::new(clip));
+    }
+
+    /// Reconstructs the groups within `radius` of the current one.
+    pub fn reconstruct_around(&mut self, radius: usize) {
+        let g = self.nav.group;
+        let end = (g + radius + 1).min(self.nav.groups());
+        self.reconstruct(Some(g.saturating_sub(radius)..end));
+    }
+
+    /// The health of every group of the open scan.
+    #[must_use]
+    pub fn health(&self) -> &super::health::ClipHealth {
+        &self.clip.health
     }
 
     /// Exports the clip (or the selection) as WAV plus sidecar.
@@ -770,7 +789,8 @@ impl Workbench {
         } else {
             None
         };
-        match export::export_wav(&clip, path, bits, sel, overwrite) {
+        let rate = self.views.wave.export_rate_hz;
+        match export::export_wav(&clip, path, bits, rate, sel, overwrite) {
             Ok(()) => {
                 self.info(format!("exported {}", path.display()));
                 Ok(())
@@ -797,9 +817,16 @@ impl Workbench {
         self.views.wave.selection = selection;
     }
 
-    /// Sets the export encoding.
+    /// Sets the export encoding (at the clip's own rate).
     pub fn set_export_bits(&mut self, bits: WavBits) {
         self.views.wave.bits = bits;
+        self.views.wave.export_rate_hz = None;
+    }
+
+    /// Sets the export format (encoding and rate).
+    pub fn set_export_format(&mut self, format: &export::ExportFormat) {
+        self.views.wave.bits = format.bits;
+        self.views.wave.export_rate_hz = format.rate_hz;
     }
 
     // ----- files -----

@@ -32,6 +32,8 @@ pub struct HoughViewState {
     pub dragging: Option<Edge>,
     /// Last read-out.
     pub readout: Option<String>,
+    /// Where each peak's window was drawn last frame (screen points).
+    pub windows_on_screen: Vec<egui::Rect>,
 }
 
 /// The window edge of one of `peaks` (θ°, ρ px) with half-sizes `(±θ°, ±ρ px)` within
@@ -218,6 +220,15 @@ pub fn hough_ui(
         .response
         .hover_pos()
         .or(resp.response.interact_pointer_pos());
+    state.windows_on_screen = peaks
+        .iter()
+        .map(|&(t, r)| {
+            egui::Rect::from_two_pos(
+                tr.position_from_point(&PlotPoint::new(t - wt, r - wr)),
+                tr.position_from_point(&PlotPoint::new(t + wt, r + wr)),
+            )
+        })
+        .collect();
     let edge_at = |p: egui::Pos2| edge_near(&peaks, (wt, wr), p, |pt| tr.position_from_point(&pt));
     let near = pointer.and_then(edge_at);
     if resp.response.drag_started() {

@@ -3,6 +3,8 @@
 pub mod depth_ui;
 pub mod flow_ui;
 pub mod frame_ui;
+pub mod guidance;
+pub mod health_ui;
 pub mod hough_ui;
 pub mod meta_ui;
 pub mod nav_ui;
@@ -10,6 +12,7 @@ pub mod orientation_ui;
 pub mod overview_ui;
 pub mod params_ui;
 pub mod stripes_ui;
+pub mod transport_ui;
 pub mod waveform_ui;
 
 use egui::{Color32, TextureHandle, Ui};
@@ -35,7 +38,7 @@ pub struct ViewStates {
     /// Orientation view.
     pub orientation: orientation_ui::OrientationViewState,
     /// Waveform view.
-    pub wave: waveform_ui::WaveViewState,
+    pub wave: transport_ui::WaveViewState,
     /// Navigation panel.
     pub nav: nav_ui::NavState,
     /// The all-knobs TOML editor.
