@@ -50,6 +50,20 @@ impl DialogKind {
         }
     }
 
+    /// The dialog named `name` (`open-scan`, `export-wav`, `load-preset`, `save-preset`,
+    /// `export-png` of the view shown first), as `GROOVESCOPE_DIALOG` names it.
+    #[must_use]
+    pub fn from_name(name: &str, view: View) -> Option<DialogKind> {
+        match name.trim() {
+            "open-scan" => Some(DialogKind::OpenScan),
+            "export-wav" => Some(DialogKind::ExportWav(false)),
+            "load-preset" => Some(DialogKind::LoadPreset),
+            "save-preset" => Some(DialogKind::SavePreset),
+            "export-png" => Some(DialogKind::ExportPng(view)),
+            _ => None,
+        }
+    }
+
     /// True for dialogs that choose a new file (the rest pick an existing file or folder).
     #[must_use]
     pub fn saves(&self) -> bool {

@@ -45,6 +45,10 @@ pub const SCREENSHOT_ENV: &str = "GROOVESCOPE_SCREENSHOT";
 pub const VIEW_ENV: &str = "GROOVESCOPE_VIEW";
 /// Env var: set to `1` to reconstruct the clip as soon as the scan opens.
 pub const RECONSTRUCT_ENV: &str = "GROOVESCOPE_RECONSTRUCT";
+/// Env var: open this file dialog once the work settled, as its menu item does (`open-scan`,
+/// `export-wav`, `load-preset`, `save-preset`, `export-png`); with `GROOVESCOPE_SCREENSHOT`
+/// the picture shows what came up.
+pub const DIALOG_ENV: &str = "GROOVESCOPE_DIALOG";
 /// Window size (points): also the size of screenshots.
 pub const WINDOW_SIZE: [f32; 2] = [1600.0, 1000.0];
 
@@ -90,8 +94,22 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
         })?),
         Err(_) => None,
     };
+    let open_dialog = match std::env::var(DIALOG_ENV) {
+        Ok(name) => Some(
+            dialogs::DialogKind::from_name(&name, view.unwrap_or(View::Overview)).with_context(
+                || {
+                    format!(
+                        "unknown dialog {name:?} in {DIALOG_ENV} (one of: open-scan, export-wav, \
+                         load-preset, save-preset, export-png)"
+                    )
+                },
+            )?,
+        ),
+        Err(_) => None,
+    };
     let reconstruct_on_open = std::env::var(RECONSTRUCT_ENV).is_ok_and(|v| v == "1")
-        || (screenshot.is_some() && view == Some(View::Waveform));
+        || (screenshot.is_some() && view == Some(View::Waveform))
+        || matches!(open_dialog, Some(dialogs::DialogKind::ExportWav(_)));
     let opts = WorkbenchOptions {
         scan: scan.or_else(|| default_scan(config_dir.as_deref())),
         config_dir,
@@ -100,6 +118,7 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
         screenshot: screenshot.clone(),
         reconstruct_on_open,
         hide_timings: false,
+        open_dialog,
     };
     if let Some(p) = &screenshot
         && p.exists()
@@ -305,7 +324,7 @@ mod tests {
             if state.get(m.as_str()).copied().unwrap_or(0) == 0
                 && let Some(circle) = visit(m, &edges, &mut state, &mut Vec::new())
             {
-                panic!("import circle: {}", circle.join(" → "));
+                panic!("import circle: {}", circle.join(" -> "));
             }
         }
     }

@@ -162,6 +162,14 @@ impl Workbench {
 
     fn screenshot_step(&mut self, ctx: &egui::Context) {
         let ready = self.is_idle() && !self.is_reconstructing() && self.nav.scan.is_some();
+        if ready && let Some(kind) = self.open_dialog.take() {
+            self.show_dialog(kind);
+            if let Some(plan) = &mut self.capture.plan {
+                plan.settled = 0;
+            }
+            ctx.request_repaint();
+            return;
+        }
         let Some(plan) = &mut self.capture.plan else {
             return;
         };

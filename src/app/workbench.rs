@@ -51,6 +51,8 @@ pub struct WorkbenchOptions {
     /// Show a fixed "– ms" instead of each stage's measured time, so that nothing on screen
     /// depends on the machine or its load (snapshot tests).
     pub hide_timings: bool,
+    /// Open this file dialog once the work settled (scripts: see [`super::DIALOG_ENV`]).
+    pub open_dialog: Option<DialogKind>,
 }
 
 /// Settings that hold for the whole session.
@@ -90,6 +92,8 @@ pub struct Workbench {
     pub(super) capture: Capture,
     /// Longest UI frame while the worker was busy.
     pub(super) max_busy_frame: Duration,
+    /// A dialog to open once the work settled ([`WorkbenchOptions::open_dialog`]).
+    pub(super) open_dialog: Option<DialogKind>,
     /// The "Import video" window and its running import.
     #[cfg(feature = "video")]
     pub(super) video_import: super::import_video::VideoImport,
@@ -140,6 +144,7 @@ impl Workbench {
             views: ViewStates::default(),
             capture: Capture::new(opts.screenshot),
             max_busy_frame: Duration::ZERO,
+            open_dialog: opts.open_dialog,
             #[cfg(feature = "video")]
             video_import: super::import_video::VideoImport::default(),
         };

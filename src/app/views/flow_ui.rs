@@ -77,7 +77,8 @@ pub fn flow_legend(ui: &mut Ui, hi_px: f32) {
             ("+y (down)", 0.0, 1.0),
             ("−y", 0.0, -1.0),
         ] {
-            ui.colored_label(swatch(u, v), format!("■ {name}"));
+            super::guidance::swatch(ui, swatch(u, v));
+            ui.weak(name);
         }
         ui.weak(format!(
             "· full colour at {hi_px:.3} px/frame, white = moves with the record surface"

@@ -19,21 +19,21 @@ pub fn guidance(view: View, dual: bool) -> &'static str {
         }
         View::Frame => {
             "The group's frames as the microscope filmed them. Good: a sharp, evenly lit groove, \
-             arrows all along it. Specks of dust → the \"dusty\" preset."
+             arrows all along it. Specks of dust: try the \"dusty\" preset."
         }
         View::Flow => {
             "How each point moves from frame to frame, beyond the record's own motion. Good: \
-             smooth colour along the walls. A noisy, blotchy field → raise λ (smoothness) or the \
+             smooth colour along the walls. A noisy, blotchy field: raise λ (smoothness) or the \
              \"noisy\" preset."
         }
         View::Hough => {
             "Finds the sharp (in-focus) stripes on the walls as bright peaks; each box is one \
-             stripe's window. Good: one clear peak per wall inside its box. A stripe missed → \
+             stripe's window. Good: one clear peak per wall inside its box. A stripe missed: \
              drag a box edge wider."
         }
         View::Stripes => {
             "The in-focus stripes found and their centre lines, which carry the sound. Good: \
-             unbroken lines along both walls. Magenta gaps on a flaked wall → the \"flaked \
+             unbroken lines along both walls. Magenta gaps on a flaked wall: the \"flaked \
              wall\" preset."
         }
         View::Depth if dual => {
@@ -42,17 +42,17 @@ pub fn guidance(view: View, dual: bool) -> &'static str {
         }
         View::Depth => {
             "The groove's depth, from how much slower deeper points move, with the walls found in \
-             it. Good: two clean walls and a smooth bottom. Speckles → raise the median (px) or \
+             it. Good: two clean walls and a smooth bottom. Speckles: raise the median (px) or \
              the \"dusty\" preset."
         }
         View::Orientation => {
             "The tilt of each wall along the groove: this tilt is the sound. Good: smooth curves \
-             and bright (trusted) wall bands. Chunks missing from a wall → the \"flaked wall\" \
+             and bright (trusted) wall bands. Chunks missing from a wall: the \"flaked wall\" \
              preset."
         }
         View::Waveform => {
             "The sound of the whole clip, beside the reference when the scan has one. Good: the \
-             envelopes agree; red cells in the health strip mark damaged groups. Hiss → lower \
+             envelopes agree; red cells in the health strip mark damaged groups. Hiss: lower \
              the low-pass cutoff or the \"noisy\" preset."
         }
         View::Metadata => {
@@ -60,6 +60,12 @@ pub fn guidance(view: View, dual: bool) -> &'static str {
              Good: they match the capture notes; every stage depends on them."
         }
     }
+}
+
+/// A small colour key square (drawn, so it needs no glyph from the font).
+pub fn swatch(ui: &mut Ui, colour: Color32) {
+    let (rect, _) = ui.allocate_exact_size(egui::vec2(10.0, 10.0), egui::Sense::hover());
+    ui.painter().rect_filled(rect, 1.0, colour);
 }
 
 /// Draws the guidance line of `view` (one line; the whole text on hover).

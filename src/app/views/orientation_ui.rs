@@ -107,8 +107,8 @@ pub fn orientation_ui(
     };
     ui.horizontal(|ui| {
         ui.weak("robust-fit weight per pixel: bright = trusted, dark = outlier,");
-        ui.colored_label(NO_FIT_COLOUR, "■ blue-grey");
-        ui.weak("= not in any fit; lines: walls");
+        super::guidance::swatch(ui, NO_FIT_COLOUR);
+        ui.weak("not in any fit; lines: walls");
     });
     let handle = tex.handle.clone();
     let dim = status.dim();
