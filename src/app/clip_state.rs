@@ -15,6 +15,10 @@ pub const SOURCE_PREVIOUS: usize = 1;
 /// The scan's reference recording.
 pub const SOURCE_REFERENCE: usize = 2;
 
+/// A clip kept for comparison, and its sound laid on the current clip's time axis (None when
+/// the two have different rates).
+pub type PreviousClip = (Arc<Clip>, Option<Arc<Vec<f32>>>);
+
 /// The open scan's clip and its reconstruction.
 #[derive(Debug, Default)]
 pub struct ClipState {
@@ -22,9 +26,8 @@ pub struct ClipState {
     pub run: Option<ReconRun>,
     /// The finished clip.
     pub clip: Option<Arc<Clip>>,
-    /// The clip before it, and its sound laid on `clip`'s time axis (None when the two have
-    /// different rates).
-    pub previous: Option<(Arc<Clip>, Option<Arc<Vec<f32>>>)>,
+    /// The clip before it, for A/B.
+    pub previous: Option<PreviousClip>,
     /// Health of each of the scan's groups.
     pub health: ClipHealth,
     groups: usize,

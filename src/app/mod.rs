@@ -49,6 +49,9 @@ pub const RECONSTRUCT_ENV: &str = "GROOVESCOPE_RECONSTRUCT";
 /// `export-wav`, `load-preset`, `save-preset`, `export-png`); with `GROOVESCOPE_SCREENSHOT`
 /// the picture shows what came up.
 pub const DIALOG_ENV: &str = "GROOVESCOPE_DIALOG";
+/// Env var: once the clip is reconstructed, apply this symptom preset (`flaked wall`, `dusty`,
+/// `noisy`) and reconstruct again, so the waveform shows the two clips for A/B.
+pub const COMPARE_ENV: &str = "GROOVESCOPE_COMPARE";
 /// Window size (points): also the size of screenshots.
 pub const WINDOW_SIZE: [f32; 2] = [1600.0, 1000.0];
 
@@ -107,7 +110,26 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
         ),
         Err(_) => None,
     };
+    let compare = match std::env::var(COMPARE_ENV) {
+        Ok(name) => {
+            let presets = symptoms::symptom_presets().map_err(anyhow::Error::msg)?;
+            let names: Vec<String> = presets.iter().map(|p| p.name.clone()).collect();
+            Some(
+                presets
+                    .into_iter()
+                    .find(|p| p.name == name.trim())
+                    .with_context(|| {
+                        format!(
+                            "unknown symptom preset {name:?} in {COMPARE_ENV} (one of: {})",
+                            names.join(", ")
+                        )
+                    })?,
+            )
+        }
+        Err(_) => None,
+    };
     let reconstruct_on_open = std::env::var(RECONSTRUCT_ENV).is_ok_and(|v| v == "1")
+        || compare.is_some()
         || (screenshot.is_some() && view == Some(View::Waveform))
         || matches!(open_dialog, Some(dialogs::DialogKind::ExportWav(_)));
     let opts = WorkbenchOptions {
@@ -119,6 +141,7 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
         reconstruct_on_open,
         hide_timings: false,
         open_dialog,
+        compare,
     };
     if let Some(p) = &screenshot
         && p.exists()

@@ -205,17 +205,7 @@ impl Workbench {
             }
         });
         if let Some(p) = chosen {
-            match p.apply(self.tuning.params()) {
-                Ok(params) => {
-                    self.replace_params(params);
-                    self.info(format!(
-                        "symptom preset \"{}\": {} (undo to go back)",
-                        p.name,
-                        p.settings().join(", ")
-                    ));
-                }
-                Err(e) => self.error(e),
-            }
+            self.apply_symptom(&p);
         }
     }
 

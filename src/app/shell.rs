@@ -162,6 +162,15 @@ impl Workbench {
 
     fn screenshot_step(&mut self, ctx: &egui::Context) {
         let ready = self.is_idle() && !self.is_reconstructing() && self.nav.scan.is_some();
+        if ready
+            && self.clip.clip.is_some()
+            && let Some(preset) = self.compare.take()
+        {
+            self.apply_symptom(&preset);
+            self.reconstruct(None);
+            ctx.request_repaint();
+            return;
+        }
         if ready && let Some(kind) = self.open_dialog.take() {
             self.show_dialog(kind);
             if let Some(plan) = &mut self.capture.plan {

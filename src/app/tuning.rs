@@ -86,7 +86,6 @@ impl Tuning {
     /// The tuning a scan in `dir` opens with: its `preset.toml` when there is one, else the
     /// defaults; plus a message saying which (an error when the preset cannot be used, in
     /// which case the defaults are used).
-    #[must_use]
     pub fn for_scan(dir: &Path) -> (Self, Result<String, String>) {
         let preset = dir.join(SCAN_PRESET_FILE);
         if !preset.is_file() {

@@ -53,6 +53,9 @@ pub struct WorkbenchOptions {
     pub hide_timings: bool,
     /// Open this file dialog once the work settled (scripts: see [`super::DIALOG_ENV`]).
     pub open_dialog: Option<DialogKind>,
+    /// Once the clip is made, apply this symptom preset and reconstruct again (scripts: see
+    /// [`super::COMPARE_ENV`]).
+    pub compare: Option<super::symptoms::SymptomPreset>,
 }
 
 /// Settings that hold for the whole session.
@@ -94,6 +97,8 @@ pub struct Workbench {
     pub(super) max_busy_frame: Duration,
     /// A dialog to open once the work settled ([`WorkbenchOptions::open_dialog`]).
     pub(super) open_dialog: Option<DialogKind>,
+    /// A second reconstruction to make for A/B ([`WorkbenchOptions::compare`]).
+    pub(super) compare: Option<super::symptoms::SymptomPreset>,
     /// The "Import video" window and its running import.
     #[cfg(feature = "video")]
     pub(super) video_import: super::import_video::VideoImport,
@@ -145,6 +150,7 @@ impl Workbench {
             capture: Capture::new(opts.screenshot),
             max_busy_frame: Duration::ZERO,
             open_dialog: opts.open_dialog,
+            compare: opts.compare,
             #[cfg(feature = "video")]
             video_import: super::import_video::VideoImport::default(),
         };
@@ -758,6 +764,21 @@ impl Workbench {
         self.clip.finish(clip);
         self.player.load(self.clip.play_buffers());
         self.views.wave.selection = None;
+    }
+
+    /// Applies a symptom preset on top of the knobs in force (one undoable step).
+    pub fn apply_symptom(&mut self, preset: &super::symptoms::SymptomPreset) {
+        match preset.apply(self.tuning.params()) {
+            Ok(params) => {
+                self.replace_params(params);
+                self.info(format!(
+                    "symptom preset \"{}\": {} (undo to go back)",
+                    preset.name,
+                    preset.settings().join(", ")
+                ));
+            }
+            Err(e) => self.error(e),
+        }
     }
 
     /// Reconstructs the groups within `radius` of the current one.
