@@ -673,3 +673,19 @@ fn the_previous_clip_stays_for_ab_and_a_range_around_the_group_reconstructs() {
     assert!(sidecar.contains("\"params_state\""), "{sidecar}");
     assert!(sidecar.contains("\"modified\": true"), "{sidecar}");
 }
+
+/// Issue 20: the arrow keys step through the group's frames.
+#[test]
+fn arrow_keys_step_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(tmp.path(), Some(lateral_scan()), DeviceChoice::Off));
+    settle(&mut h);
+    let f = wb(&h).frame();
+    h.key_press(egui::Key::ArrowRight);
+    h.run_ok();
+    assert_eq!(wb(&h).frame(), f + 1);
+    h.key_press(egui::Key::ArrowLeft);
+    h.key_press(egui::Key::ArrowLeft);
+    h.run_ok();
+    assert_eq!(wb(&h).frame(), f - 1);
+}

@@ -1,5 +1,6 @@
 //! Exports from the workbench: the clip (or a selection) as WAV with a JSON sidecar that records
-//! the preset, presets as TOML, and views as PNG. Nothing is overwritten unless the caller says so.
+//! the params it was made with, and views as PNG. Nothing is overwritten unless the caller says
+//! so. (Presets are saved and loaded by [`super::tuning`].)
 
 use std::path::{Path, PathBuf};
 
@@ -10,7 +11,6 @@ use super::tuning::ParamState;
 use crate::engine::GroupReport;
 use crate::io::wav::{Audio, WavBits, write_wav};
 use crate::io::write_atomic;
-use crate::pipeline::PipelineParams;
 use crate::pipeline::audio_signal::resample;
 use crate::pipeline::eval::Scores;
 
@@ -179,30 +179,6 @@ pub fn export_wav(
     write_atomic(&sidecar_path(path), json.as_bytes(), overwrite).map_err(|e| e.to_string())
 }
 
-/// Saves `params` as a TOML preset.
-///
-/// # Errors
-/// A message naming the file when it exists and `overwrite` is false, or the write fails.
-pub fn save_preset(params: &PipelineParams, path: &Path, overwrite: bool) -> Result<(), String> {
-    let text = params.to_toml_string().map_err(|e| e.to_string())?;
-    write_atomic(path, text.as_bytes(), overwrite).map_err(|e| e.to_string())
-}
-
-/// Reads and validates a TOML preset.
-///
-/// # Errors
-/// A message naming the file and the bad key or value.
-pub fn load_preset(path: &Path) -> Result<PipelineParams, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("cannot read preset: {e}: {}", path.display()))?;
-    let params = PipelineParams::from_toml_str(&text)
-        .map_err(|e| format!("invalid preset: {e}: {}", path.display()))?;
-    params
-        .validate()
-        .map_err(|e| format!("invalid preset: {e}: {}", path.display()))?;
-    Ok(params)
-}
-
 /// Saves a screen capture as PNG.
 ///
 /// # Errors
@@ -231,27 +207,6 @@ pub fn save_color_image(
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
-
-    #[test]
-    fn preset_round_trips_and_bad_presets_name_the_key() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("disc.toml");
-        let mut params = PipelineParams::default();
-        params.flow.lambda = 0.25;
-        params.hough.theta_min_deg = -30.0;
-        save_preset(&params, &p, false).unwrap();
-        assert!(
-            save_preset(&params, &p, false).is_err(),
-            "no silent overwrite"
-        );
-        assert_eq!(load_preset(&p).unwrap(), params);
-        std::fs::write(&p, "[flow]\nlamda = 3\n").unwrap();
-        let err = load_preset(&p).unwrap_err();
-        assert!(err.contains("lamda") && err.contains("disc.toml"), "{err}");
-        std::fs::write(&p, "[flow]\nlambda = -3.0\n").unwrap();
-        let err = load_preset(&p).unwrap_err();
-        assert!(err.contains("flow.lambda"), "{err}");
-    }
 
     #[test]
     fn png_capture_is_written_once() {

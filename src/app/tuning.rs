@@ -10,12 +10,36 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::export;
 use super::history::History;
+use crate::io::write_atomic;
 use crate::pipeline::PipelineParams;
 
 /// Name of the per-disc preset loaded automatically from a scan folder.
 pub const SCAN_PRESET_FILE: &str = "preset.toml";
+
+/// Saves `params` as a TOML preset.
+///
+/// # Errors
+/// A message naming the file when it exists and `overwrite` is false, or the write fails.
+pub fn save_preset(params: &PipelineParams, path: &Path, overwrite: bool) -> Result<(), String> {
+    let text = params.to_toml_string().map_err(|e| e.to_string())?;
+    write_atomic(path, text.as_bytes(), overwrite).map_err(|e| e.to_string())
+}
+
+/// Reads and validates a TOML preset.
+///
+/// # Errors
+/// A message naming the file and the bad key or value.
+pub fn load_preset(path: &Path) -> Result<PipelineParams, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read preset: {e}: {}", path.display()))?;
+    let params = PipelineParams::from_toml_str(&text)
+        .map_err(|e| format!("invalid preset: {e}: {}", path.display()))?;
+    params
+        .validate()
+        .map_err(|e| format!("invalid preset: {e}: {}", path.display()))?;
+    Ok(params)
+}
 
 /// Where the params of a scan started from.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize)]
@@ -96,7 +120,7 @@ impl Tuning {
                 )),
             );
         }
-        match export::load_preset(&preset) {
+        match load_preset(&preset) {
             Ok(params) => {
                 let msg = format!("loaded the scan's preset {}", preset.display());
                 (
@@ -209,6 +233,27 @@ impl Tuning {
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
+
+    #[test]
+    fn preset_round_trips_and_bad_presets_name_the_key() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("disc.toml");
+        let mut params = PipelineParams::default();
+        params.flow.lambda = 0.25;
+        params.hough.theta_min_deg = -30.0;
+        save_preset(&params, &p, false).unwrap();
+        assert!(
+            save_preset(&params, &p, false).is_err(),
+            "no silent overwrite"
+        );
+        assert_eq!(load_preset(&p).unwrap(), params);
+        std::fs::write(&p, "[flow]\nlamda = 3\n").unwrap();
+        let err = load_preset(&p).unwrap_err();
+        assert!(err.contains("lamda") && err.contains("disc.toml"), "{err}");
+        std::fs::write(&p, "[flow]\nlambda = -3.0\n").unwrap();
+        let err = load_preset(&p).unwrap_err();
+        assert!(err.contains("flow.lambda"), "{err}");
+    }
 
     #[test]
     fn a_scan_opens_on_its_preset_or_on_the_defaults_and_says_which() {

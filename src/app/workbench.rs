@@ -22,7 +22,8 @@ use super::recon::{Clip, ReconRun};
 use super::screenshot::Capture;
 use super::stages::StageState;
 use super::tuning::{ParamState, Tuning};
-use super::views::{StageStatus, View, ViewStates};
+use super::views::states::ViewStates;
+use super::views::{StageStatus, View};
 use super::worker::{Job, JobInput, Outcome, StageDone, WorkerEvent};
 use crate::engine::ReconstructOptions;
 use crate::image::Image;
@@ -483,7 +484,7 @@ impl Workbench {
     /// # Errors
     /// The message shown.
     pub fn load_preset_from(&mut self, path: &Path) -> Result<(), String> {
-        match export::load_preset(path) {
+        match super::tuning::load_preset(path) {
             Ok(p) => {
                 if self.tuning.load_preset(path, p, Instant::now()) {
                     self.schedule();
@@ -503,7 +504,7 @@ impl Workbench {
     /// # Errors
     /// The message shown (an existing file without `overwrite`, a failed write).
     pub fn save_preset_to(&mut self, path: &Path, overwrite: bool) -> Result<(), String> {
-        match export::save_preset(self.tuning.params(), path, overwrite) {
+        match super::tuning::save_preset(self.tuning.params(), path, overwrite) {
             Ok(()) => {
                 self.tuning.saved_as(path);
                 self.info(format!("saved preset {}", path.display()));

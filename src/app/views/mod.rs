@@ -11,6 +11,7 @@ pub mod nav_ui;
 pub mod orientation_ui;
 pub mod overview_ui;
 pub mod params_ui;
+pub mod states;
 pub mod stripes_ui;
 pub mod transport_ui;
 pub mod waveform_ui;
@@ -20,44 +21,6 @@ use egui_plot::{Line, Plot, PlotImage, PlotPoint, PlotPoints, PlotResponse, Plot
 
 use crate::pipeline::Stage;
 use crate::pipeline::walls::WallLine;
-
-/// The per-view state of the open scan (read-outs, choices, the selection, the metadata form);
-/// a new scan starts from a fresh one, so nothing of the previous disc shows.
-#[derive(Debug, Default)]
-pub struct ViewStates {
-    /// Frame view.
-    pub frame: frame_ui::FrameViewState,
-    /// Flow view.
-    pub flow: flow_ui::FlowViewState,
-    /// Hough view.
-    pub hough: hough_ui::HoughViewState,
-    /// Stripes view.
-    pub stripes: stripes_ui::StripesViewState,
-    /// Depth view.
-    pub depth: depth_ui::DepthViewState,
-    /// Orientation view.
-    pub orientation: orientation_ui::OrientationViewState,
-    /// Waveform view.
-    pub wave: transport_ui::WaveViewState,
-    /// Navigation panel.
-    pub nav: nav_ui::NavState,
-    /// The all-knobs TOML editor.
-    pub toml: params_ui::TomlEditor,
-    /// The metadata form, while edited.
-    pub meta_form: Option<meta_ui::MetaForm>,
-}
-
-impl ViewStates {
-    /// Forgets the hover read-outs (they describe another group).
-    pub fn clear_readouts(&mut self) {
-        self.frame.readout = None;
-        self.flow.readout = None;
-        self.hough.readout = None;
-        self.stripes.readout = None;
-        self.depth.readout = None;
-        self.orientation.readout = None;
-    }
-}
 
 /// The views the central area can show.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
