@@ -431,7 +431,6 @@ fn a_second_scan_without_a_preset_runs_on_the_defaults_and_says_so() {
         0.2,
         "scan A runs on its preset"
     );
-    h.get_by_label_contains("parameters: preset");
     wb_mut(&mut h).open_scan(&b).unwrap();
     settle(&mut h);
     assert_eq!(wb(&h).scan().unwrap().dir, b);
@@ -458,6 +457,11 @@ fn a_second_scan_without_a_preset_runs_on_the_defaults_and_says_so() {
         switched == group_outputs(&fresh),
         "scan B after scan A differs from a fresh launch on B"
     );
+    // And back to A: its preset again, said so.
+    wb_mut(&mut h).open_scan(&a).unwrap();
+    settle(&mut h);
+    assert_eq!(wb(&h).params().flow.lambda, 0.2);
+    h.get_by_label_contains("parameters: preset");
 }
 
 /// Issue 20: with changed knobs, opening another scan asks once; "Cancel" keeps everything.
@@ -595,8 +599,8 @@ fn the_parameter_list_does_not_move_when_a_preset_is_saved() {
     std::fs::create_dir_all(preset.parent().unwrap()).unwrap();
     wb_mut(&mut h).save_preset_to(&preset, false).unwrap();
     h.run_ok();
-    h.get_by_label_contains("parameters: preset");
     assert_eq!(place(&h), before, "saving moved the list");
+    h.get_by_label_contains("parameters: preset");
     let mut p = wb(&h).params().clone();
     p.hough.window_rho_px += 1.0;
     wb_mut(&mut h).set_params(p);
