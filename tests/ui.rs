@@ -693,3 +693,31 @@ fn arrow_keys_step_frames() {
     h.run_ok();
     assert_eq!(wb(&h).frame(), f - 1);
 }
+
+/// Issue 20: while a reconstruction runs, "play so far" hands the player the groups finished
+/// so far; the whole clip replaces them when it is done.
+#[test]
+fn the_groups_finished_so_far_can_be_played_while_reconstructing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
+    settle(&mut h);
+    wb_mut(&mut h).reconstruct(None);
+    wb_mut(&mut h).play_so_far();
+    let mut partial_len = None;
+    let t0 = Instant::now();
+    while wb(&h).is_reconstructing() || !wb(&h).is_idle() {
+        h.step();
+        if wb(&h).clip().is_none()
+            && let Some(b) = wb(&h).player().buffers().filter(|b| !b.is_empty())
+        {
+            partial_len = partial_len.or(Some(b.len()));
+        }
+        assert!(t0.elapsed() < TIMEOUT);
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    h.run_ok();
+    let full = wb(&h).clip().unwrap().recon.audio.len();
+    let partial = partial_len.expect("the groups so far reached the player");
+    assert!(partial > 0 && partial < full, "{partial} of {full}");
+    assert_eq!(wb(&h).player().buffers().unwrap().len(), full);
+}

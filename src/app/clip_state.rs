@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use super::health::ClipHealth;
-use super::recon::{Clip, ReconRun};
+use super::recon::{Clip, PartialClip, ReconRun};
 use crate::playback::PlayBuffers;
 
 /// The player's sources, in [`ClipState::play_buffers`] order.
@@ -30,6 +30,9 @@ pub struct ClipState {
     pub previous: Option<PreviousClip>,
     /// Health of each of the scan's groups.
     pub health: ClipHealth,
+    /// The sound of the groups finished so far, arrived from the running reconstruction and
+    /// not yet handed to the player.
+    pub partial_arrived: Option<Result<PartialClip, String>>,
     groups: usize,
 }
 
@@ -63,6 +66,10 @@ impl ClipState {
         let run = self.run.as_mut()?;
         let before = run.tracks.len();
         let outcome = run.poll();
+        // A partial sound that comes with the end is dropped: the whole clip is there.
+        if let Some(p) = run.take_partial().filter(|_| outcome.is_none()) {
+            self.partial_arrived = Some(p);
+        }
         let grew = run.tracks.len() != before;
         if outcome.is_some() {
             self.run = None;
@@ -71,6 +78,13 @@ impl ClipState {
             self.refresh_health();
         }
         outcome
+    }
+
+    /// Asks the running reconstruction for the sound of the groups finished so far.
+    pub fn request_partial(&self) {
+        if let Some(r) = &self.run {
+            r.request_partial();
+        }
     }
 
     /// Makes `clip` the clip; the one before becomes the previous clip.

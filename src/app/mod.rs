@@ -19,6 +19,7 @@ pub mod jobs;
 pub mod messages;
 pub mod nav;
 pub mod panels;
+pub mod partial;
 pub mod recent;
 pub mod recon;
 pub mod render;

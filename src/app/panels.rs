@@ -343,6 +343,7 @@ impl Workbench {
             match a {
                 WaveAction::Reconstruct(r) => self.reconstruct(r),
                 WaveAction::ReconstructAround(n) => self.reconstruct_around(n),
+                WaveAction::PlaySoFar => self.play_so_far(),
                 WaveAction::Group(g) => self.set_group(g),
                 WaveAction::Cancel => self.cancel_reconstruction(),
                 WaveAction::ExportWav(sel) => self.show_dialog(DialogKind::ExportWav(sel)),

@@ -10,6 +10,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use super::health::GroupTrack;
+use super::partial::partial_sound;
 use super::tuning::ParamState;
 use crate::engine::{Progress, ReconstructOptions, Reconstruction, aligned_reference, reconstruct};
 use crate::io::Scan;
@@ -221,13 +222,25 @@ pub fn make_clip(
 #[derive(Debug)]
 enum ReconEvent {
     Progress(Progress),
+    /// The sound of the groups finished so far (asked for with [`ReconRun::request_partial`]).
+    Partial(Result<PartialClip, String>),
     Finished(Result<Box<Clip>, String>),
+}
+
+/// The sound of the groups a running reconstruction finished so far.
+#[derive(Clone, Debug)]
+pub struct PartialClip {
+    /// Groups it holds.
+    pub groups: usize,
+    /// The sound.
+    pub audio: crate::io::wav::Audio,
 }
 
 /// A reconstruction running in the background.
 #[derive(Debug)]
 pub struct ReconRun {
     cancel: Arc<AtomicBool>,
+    partial_wanted: Arc<AtomicBool>,
     rx: Receiver<ReconEvent>,
     thread: Option<JoinHandle<()>>,
     /// When it started.
@@ -242,6 +255,8 @@ pub struct ReconRun {
     pub tracks: Vec<GroupTrack>,
     /// First group of the run.
     pub first_group: usize,
+    /// The latest partial sound that arrived (taken by [`ReconRun::take_partial`]).
+    partial_sound: Option<Result<PartialClip, String>>,
 }
 
 /// The group a progress report is about: groups run in order from `first`.
@@ -262,8 +277,10 @@ impl ReconRun {
         repaint: Box<dyn Fn() + Send + Sync>,
     ) -> std::io::Result<Self> {
         let cancel = Arc::new(AtomicBool::new(false));
+        let partial_wanted = Arc::new(AtomicBool::new(false));
         let (tx, rx) = mpsc::channel();
         let flag = cancel.clone();
+        let wanted = partial_wanted.clone();
         let groups = opts.groups.clone().unwrap_or(0..scan.groups.len());
         let total = groups
             .end
@@ -275,6 +292,7 @@ impl ReconRun {
             .spawn(move || {
                 let ptx = tx.clone();
                 let mut tracks = Vec::new();
+                let mut signals = Vec::new();
                 let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                     reconstruct(
                         &scan,
@@ -282,7 +300,17 @@ impl ReconRun {
                         &mut |p| {
                             let g = reported_group(first_group, p);
                             tracks.push(GroupTrack::new(g, p.signal.as_deref()));
+                            signals.extend(p.signal.clone());
                             let _ = ptx.send(ReconEvent::Progress(p.clone()));
+                            if wanted.swap(false, Ordering::AcqRel) {
+                                let sound = partial_sound(&signals, &scan.meta, &opts.params).map(
+                                    |audio| PartialClip {
+                                        groups: signals.len(),
+                                        audio,
+                                    },
+                                );
+                                let _ = ptx.send(ReconEvent::Partial(sound));
+                            }
                             repaint();
                         },
                         &flag,
@@ -305,6 +333,7 @@ impl ReconRun {
             })?;
         Ok(Self {
             cancel,
+            partial_wanted,
             rx,
             thread: Some(thread),
             started: Instant::now(),
@@ -313,12 +342,30 @@ impl ReconRun {
             partial: Vec::new(),
             tracks: Vec::new(),
             first_group,
+            partial_sound: None,
         })
     }
 
     /// Asks the run to stop after the current group.
     pub fn cancel(&self) {
         self.cancel.store(true, Ordering::Relaxed);
+    }
+
+    /// Asks for the sound of the groups finished so far; it arrives after the group running
+    /// now ([`ReconRun::take_partial`]).
+    pub fn request_partial(&self) {
+        self.partial_wanted.store(true, Ordering::Release);
+    }
+
+    /// True while a requested partial sound has not arrived yet.
+    #[must_use]
+    pub fn partial_pending(&self) -> bool {
+        self.partial_wanted.load(Ordering::Acquire)
+    }
+
+    /// The partial sound that arrived, if any.
+    pub fn take_partial(&mut self) -> Option<Result<PartialClip, String>> {
+        self.partial_sound.take()
     }
 
     /// True once cancel was asked for.
@@ -340,6 +387,7 @@ impl ReconRun {
                         self.partial.push(s);
                     }
                 }
+                ReconEvent::Partial(sound) => self.partial_sound = Some(sound),
                 ReconEvent::Finished(outcome) => {
                     if let Some(t) = self.thread.take() {
                         let _ = t.join();

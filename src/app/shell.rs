@@ -88,7 +88,7 @@ impl Workbench {
                 i.key_pressed(Key::ArrowRight),
             )
         });
-        if space && self.clip.clip.is_some() {
+        if space && self.player.buffers().is_some_and(|b| !b.is_empty()) {
             if self.player.is_playing() {
                 self.player.pause();
             } else if let Err(e) = self.player.play() {

@@ -661,6 +661,24 @@ impl Workbench {
             Some(Err(e)) => self.error(format!("reconstruction: {e}")),
             None => {}
         }
+        match self.clip.partial_arrived.take() {
+            Some(Ok(p)) => {
+                self.player.load(PlayBuffers {
+                    rate_hz: p.audio.sample_rate_hz,
+                    sources: vec![p.audio.channels],
+                });
+                match self.player.play() {
+                    Ok(()) => self.info(format!(
+                        "playing the {} groups finished so far (the whole clip follows when \
+                         the reconstruction ends)",
+                        p.groups
+                    )),
+                    Err(e) => self.error(e),
+                }
+            }
+            Some(Err(e)) => self.error(format!("cannot play the groups so far: {e}")),
+            None => {}
+        }
     }
 
     fn on_loaded(
@@ -779,6 +797,16 @@ impl Workbench {
                 ));
             }
             Err(e) => self.error(e),
+        }
+    }
+
+    /// Plays the groups the running reconstruction has finished so far (they arrive after the
+    /// group running now).
+    pub fn play_so_far(&mut self) {
+        if self.clip.is_running() {
+            self.clip.request_partial();
+        } else {
+            self.error("no reconstruction is running");
         }
     }
 

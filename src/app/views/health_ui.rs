@@ -113,11 +113,13 @@ pub fn health_strip_ui(ui: &mut Ui, health: &ClipHealth, current: usize) -> Opti
         }
     }
     if let Some(r) = current_rect {
+        // Drawn inside the cell (at least 4 points wide), so the strip's clip keeps all of it.
+        let mark = Rect::from_center_size(r.center(), vec2(r.width().max(4.0), r.height()));
         painter.rect_stroke(
-            r.expand(1.0),
+            mark,
             1.0,
-            Stroke::new(1.5, Color32::WHITE),
-            egui::StrokeKind::Outside,
+            Stroke::new(2.0, Color32::WHITE),
+            egui::StrokeKind::Inside,
         );
     }
     clicked

@@ -19,6 +19,8 @@ pub enum WaveAction {
     Reconstruct(Option<std::ops::Range<usize>>),
     /// Reconstruct the groups within this many of the current one.
     ReconstructAround(usize),
+    /// Play the groups the running reconstruction has finished so far.
+    PlaySoFar,
     /// Show this group (clicked in the waveform).
     Group(usize),
     /// Cancel the running reconstruction.
@@ -91,7 +93,7 @@ pub fn transport_ui(
             return;
         }
         let clip = clips.clip.as_deref();
-        let ready = clip.is_some();
+        let ready = player.buffers().is_some_and(|b| !b.is_empty());
         if player.is_playing() {
             if ui.button("Pause").clicked() {
                 player.pause();
@@ -184,6 +186,17 @@ pub fn clip_controls_ui(
                 .clicked()
             {
                 actions.push(WaveAction::Cancel);
+            }
+            let asked = r.partial_pending();
+            if ui
+                .add_enabled(
+                    !asked && r.done > 0,
+                    egui::Button::new(if asked { "preparing…" } else { "Play so far" }),
+                )
+                .on_hover_text("the groups finished so far, as the whole clip will sound")
+                .clicked()
+            {
+                actions.push(WaveAction::PlaySoFar);
             }
         } else {
             if ui.button("Reconstruct clip").clicked() {
