@@ -7,6 +7,7 @@ pub mod derivatives;
 pub mod dsp;
 pub mod edges;
 pub mod eval;
+pub mod fusion;
 pub mod hough;
 pub mod knobs;
 pub mod optical_flow;
