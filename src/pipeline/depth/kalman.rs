@@ -19,6 +19,8 @@ pub(super) struct Filter {
     pub(super) q: [f64; 3],
     /// Prior covariance diagonal.
     pub(super) p0: [f64; 3],
+    /// Instruction set the row bands are compiled for.
+    pub(super) isa: Isa,
 }
 
 /// Rows per parallel work item of the filter (the vertical window sums slide down a band).
@@ -218,27 +220,7 @@ impl Filter {
         out: (&mut [f32], &mut [f32]),
         sc: &mut SweepScratch,
     ) -> usize {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU reported AVX2, all that `band_avx2` requires.
-                return unsafe { self.band_avx2(y0, frames, out, sc) };
-            }
-        }
-        self.band_impl(y0, frames, out, sc)
-    }
-
-    /// [`Filter::band_impl`] compiled for AVX2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    pub(super) fn band_avx2(
-        &self,
-        y0: usize,
-        frames: &[FrameInput],
-        out: (&mut [f32], &mut [f32]),
-        sc: &mut SweepScratch,
-    ) -> usize {
-        self.band_impl(y0, frames, out, sc)
+        self.isa.compiled(|| self.band_impl(y0, frames, out, sc))
     }
 
     /// See [`Filter::band`].

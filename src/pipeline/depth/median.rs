@@ -2,8 +2,7 @@
 
 use super::*;
 
-/// Pixels filtered together by the median network (one SIMD-friendly block).
-pub(super) const MEDIAN_LANES: usize = 8;
+pub(super) use crate::pipeline::simd::median::{MEDIAN_LANES, compare_exchange};
 /// Largest window (m²) handled by the network; larger ones use selection per pixel.
 pub(super) const MAX_NETWORK_INPUTS: usize = 49;
 
@@ -95,67 +94,16 @@ impl MedianNetwork {
     }
 
     /// Medians of `MEDIAN_LANES` pixels whose windows were loaded into `v[..n]` (finite values
-    /// only); None when `v` is shorter. Runs on AVX2 where the CPU has it (same results).
-    pub(super) fn run(&self, v: &mut [[f32; MEDIAN_LANES]]) -> Option<[f32; MEDIAN_LANES]> {
-        let v = v.get_mut(..self.n)?;
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU reported AVX2, all that `run_avx2` requires.
-                unsafe { self.run_avx2(v) };
-                return v.get(self.target).copied();
-            }
-        }
-        self.run_portable(v)
-    }
-
-    /// The comparators in plain code (the compiler vectorises the lanes).
-    pub(super) fn run_portable(
+    /// only), the comparators run for `isa` (the same results on every instruction set); None
+    /// when `v` is shorter.
+    pub(super) fn run(
         &self,
+        isa: Isa,
         v: &mut [[f32; MEDIAN_LANES]],
     ) -> Option<[f32; MEDIAN_LANES]> {
-        for &(a, b) in &self.pairs {
-            let (Some(&va), Some(&vb)) = (v.get(a), v.get(b)) else {
-                return None;
-            };
-            // Finite inputs only, so the plain comparisons are exact min/max.
-            let lo: [f32; MEDIAN_LANES] =
-                std::array::from_fn(|l| if va[l] < vb[l] { va[l] } else { vb[l] });
-            let hi: [f32; MEDIAN_LANES] =
-                std::array::from_fn(|l| if va[l] < vb[l] { vb[l] } else { va[l] });
-            if let Some(s) = v.get_mut(a) {
-                *s = lo;
-            }
-            if let Some(s) = v.get_mut(b) {
-                *s = hi;
-            }
-        }
+        let v = v.get_mut(..self.n)?;
+        compare_exchange(isa, &self.pairs, v);
         v.get(self.target).copied()
-    }
-
-    /// The comparators on AVX2 registers, the same choices as
-    /// [`MedianNetwork::run_portable`] (min keeps the second value on a tie, max the first).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    pub(super) fn run_avx2(&self, v: &mut [[f32; MEDIAN_LANES]]) {
-        use std::arch::x86_64::{_mm256_loadu_ps, _mm256_max_ps, _mm256_min_ps, _mm256_storeu_ps};
-        const { assert!(MEDIAN_LANES == 8) };
-
-        for &(a, b) in &self.pairs {
-            let (Some(va), Some(vb)) = (v.get(a), v.get(b)) else {
-                return;
-            };
-            // SAFETY: `va` and `vb` are 8 f32 each, as the unaligned loads read.
-            let (x, y) = unsafe { (_mm256_loadu_ps(va.as_ptr()), _mm256_loadu_ps(vb.as_ptr())) };
-            if let Some(d) = v.get_mut(a) {
-                // SAFETY: 8 f32, as the unaligned store writes.
-                unsafe { _mm256_storeu_ps(d.as_mut_ptr(), _mm256_min_ps(x, y)) };
-            }
-            if let Some(d) = v.get_mut(b) {
-                // SAFETY: as above.
-                unsafe { _mm256_storeu_ps(d.as_mut_ptr(), _mm256_max_ps(y, x)) };
-            }
-        }
     }
 }
 
@@ -188,7 +136,14 @@ pub(super) fn median_select(
 /// value. Near the borders the window shrinks symmetrically about the pixel, so a linear ramp
 /// is left unbiased. Interior blocks of finite values go through a sorting network, eight
 /// pixels at a time; the rest use selection.
-pub(super) fn median_filter(v: &[f32], width: usize, height: usize, m: usize, out: &mut [f32]) {
+pub(super) fn median_filter(
+    v: &[f32],
+    width: usize,
+    height: usize,
+    m: usize,
+    out: &mut [f32],
+    isa: Isa,
+) {
     let r = m / 2;
     if r == 0 {
         out.copy_from_slice(v);
@@ -234,7 +189,7 @@ pub(super) fn median_filter(v: &[f32], width: usize, height: usize, m: usize, ou
                             }
                         }
                     }
-                    if let Some(med) = net.run(lanes) {
+                    if let Some(med) = net.run(isa, lanes) {
                         if let Some(o) = row.get_mut(x..x + MEDIAN_LANES) {
                             o.copy_from_slice(&med);
                         }

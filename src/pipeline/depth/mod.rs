@@ -40,6 +40,7 @@ use super::optical_flow::FlowField;
 use super::{StageError, check_range};
 use crate::image::{Image, zeros_par};
 use crate::io::Geometry;
+use crate::pipeline::simd::Isa;
 
 mod average;
 mod kalman;
@@ -73,6 +74,10 @@ pub struct DepthParams {
     pub min_confidence: f32,
     /// Side of the square neighbourhood whose flows measure each pixel's plane (odd, px).
     pub neighbourhood_px: usize,
+    /// Instruction set of the filter's row bands and the median network (not a knob: never in
+    /// the TOML; by default the CPU's best, detected once).
+    #[serde(skip)]
+    pub isa: Isa,
 }
 
 impl Default for DepthParams {
@@ -84,6 +89,7 @@ impl Default for DepthParams {
             median_px: 5,
             min_confidence: 1e-3,
             neighbourhood_px: 5,
+            isa: Isa::detect(),
         }
     }
 }
@@ -256,6 +262,7 @@ pub fn estimate_depth(
                 INITIAL_VARIANCE / r2,
                 INITIAL_VARIANCE,
             ],
+            isa: params.isa,
         };
         kalman(flows, &filter, params.min_confidence, u_land, &mut warnings)
     } else {
@@ -269,7 +276,14 @@ pub fn estimate_depth(
         ));
     }
     let mut smooth = zeros_par(width * height);
-    median_filter(&iota, width, height, params.median_px, &mut smooth);
+    median_filter(
+        &iota,
+        width,
+        height,
+        params.median_px,
+        &mut smooth,
+        params.isa,
+    );
     let mut z = zeros_par(width * height);
     let mut zvar = zeros_par(width * height);
     let nonpositive: usize = z

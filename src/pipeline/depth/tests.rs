@@ -125,12 +125,11 @@ fn plane_tilted_along_the_motion_is_tracked_into_the_last_frame() {
     assert!(max_first > 5e-4, "{max_first}");
 }
 
-#[cfg(target_arch = "x86_64")]
 #[test]
 fn avx2_bands_give_the_same_bits() {
-    if !std::arch::is_x86_feature_detected!("avx2") {
+    let Some(avx2) = Isa::avx2() else {
         return;
-    }
+    };
     let g = paper_geometry();
     let (w, h) = (53, 40);
     let flows = plane_flows(w, h, 3, &g, [4000.0, 0.3, -0.5], 0.05, 4);
@@ -147,6 +146,11 @@ fn avx2_bands_give_the_same_bits() {
             INITIAL_VARIANCE / 4.0,
             INITIAL_VARIANCE,
         ],
+        isa: Isa::Portable,
+    };
+    let fast = Filter {
+        isa: avx2,
+        ..filter
     };
     let frames: Vec<FrameInput> = flows
         .iter()
@@ -163,9 +167,8 @@ fn avx2_bands_give_the_same_bits() {
     let (mut plain, mut plain_var) = (vec![0.0; w * h], vec![0.0; w * h]);
     let (mut simd, mut simd_var) = (plain.clone(), plain_var.clone());
     let mut sc = SweepScratch::default();
-    let a = filter.band_impl(0, &frames, (&mut plain, &mut plain_var), &mut sc);
-    // SAFETY: AVX2 was detected above.
-    let b = unsafe { filter.band_avx2(0, &frames, (&mut simd, &mut simd_var), &mut sc) };
+    let a = filter.band(0, &frames, (&mut plain, &mut plain_var), &mut sc);
+    let b = fast.band(0, &frames, (&mut simd, &mut simd_var), &mut sc);
     assert_eq!(a, b);
     let bits = |s: &[f32]| -> Vec<u32> { s.iter().map(|v| v.to_bits()).collect() };
     assert!(plain.iter().any(|&v| v != 1.0 && v.is_finite()));
@@ -195,6 +198,7 @@ fn direct_and_prefix_window_sums_agree() {
             noise_var: 1e-4 / (land * land),
             q: [0.0; 3],
             p0: [1.0; 3],
+            isa: Isa::detect(),
         };
         for y in [0, r, h / 2, h - 1] {
             let mut vs = vec![[0.0; 5]; w];
@@ -346,10 +350,14 @@ fn median_network_matches_selection() {
         v[i] = f32::NAN;
     }
     let mut buf = Vec::new();
-    for m in [3, 5, 7] {
+    for (m, isa) in [3, 5, 7]
+        .into_iter()
+        .flat_map(|m| [Some(Isa::Portable), Isa::avx2()].map(|isa| isa.map(|i| (m, i))))
+        .flatten()
+    {
         let r = m / 2;
         let mut out = vec![0.0; w * h];
-        median_filter(&v, w, h, m, &mut out);
+        median_filter(&v, w, h, m, &mut out, isa);
         for y in 0..h {
             for x in 0..w {
                 let (rx, ry) = (r.min(x).min(w - 1 - x), r.min(y).min(h - 1 - y));
@@ -357,7 +365,7 @@ fn median_network_matches_selection() {
                 assert_eq!(
                     out[y * w + x].to_bits(),
                     want.to_bits(),
-                    "m {m} at ({x}, {y})"
+                    "m {m} at ({x}, {y}), {isa:?}"
                 );
             }
         }
@@ -380,12 +388,13 @@ fn median_network_paths_agree_with_sorting_including_ties() {
                 col.sort_by(f32::total_cmp);
                 col[n / 2]
             });
-            let mut a = input.clone();
-            assert_eq!(net.run_portable(&mut a), Some(want), "n {n}");
-            let mut b = input.clone();
-            assert_eq!(net.run(&mut b), Some(want), "n {n}");
+            for isa in [Some(Isa::Portable), Isa::avx2()].into_iter().flatten() {
+                let mut a = input.clone();
+                assert_eq!(net.run(isa, &mut a), Some(want), "n {n}, {isa:?}");
+            }
         }
-        assert_eq!(net.run(&mut vec![[0.0; MEDIAN_LANES]; n - 1]), None);
+        let short = &mut vec![[0.0; MEDIAN_LANES]; n - 1];
+        assert_eq!(net.run(Isa::detect(), short), None);
     }
 }
 

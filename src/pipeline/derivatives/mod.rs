@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::StageError;
 use crate::image::Image;
+use crate::pipeline::simd::Isa;
 
 mod shift;
 mod simoncelli;
@@ -50,6 +51,10 @@ pub struct DerivativeParams {
     /// Shift every frame back by the known land motion before filtering, so the flow stage
     /// only measures the small residual (keeps the linearisation valid for steps > 1 px).
     pub prewarp: bool,
+    /// Instruction set of the filter bands (not a knob: never in the TOML; by default the
+    /// CPU's best, detected once).
+    #[serde(skip)]
+    pub isa: Isa,
 }
 
 impl Default for DerivativeParams {
@@ -57,6 +62,7 @@ impl Default for DerivativeParams {
         Self {
             mode: DerivativeMode::Simoncelli,
             prewarp: true,
+            isa: Isa::detect(),
         }
     }
 }
@@ -195,7 +201,14 @@ pub fn compute_derivatives(
     let base_flow_px = if params.prewarp { land_flow_px } else { 0.0 };
     Ok(match params.mode {
         DerivativeMode::Simoncelli => (HALF_WINDOW..frames.len() - HALF_WINDOW)
-            .map(|c| simoncelli_window(&frames[c - HALF_WINDOW..=c + HALF_WINDOW], c, base_flow_px))
+            .map(|c| {
+                simoncelli_window(
+                    &frames[c - HALF_WINDOW..=c + HALF_WINDOW],
+                    c,
+                    base_flow_px,
+                    params.isa,
+                )
+            })
             .collect(),
         DerivativeMode::TwoFrame => (0..frames.len() - 1)
             .map(|k| two_frame(&frames[k], &frames[k + 1], k, base_flow_px))

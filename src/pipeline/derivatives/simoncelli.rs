@@ -132,18 +132,6 @@ pub(super) struct BandCtx<'a> {
     pub(super) margin: usize,
 }
 
-/// [`simoncelli_band`] compiled for AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-pub(super) fn simoncelli_band_avx2(
-    ctx: &BandCtx,
-    s: &mut BandScratch,
-    y0: usize,
-    outs: [&mut [f32]; 4],
-) {
-    simoncelli_band(ctx, s, y0, outs);
-}
-
 /// Rows `y0..` of one window: temporal 7-tap filters (with pre-warp) into `s.p`/`s.d`, then
 /// the vertical and horizontal 5-tap passes into `outs = [ix, iy, it, image]` (whole rows).
 #[inline(always)]
@@ -198,8 +186,14 @@ pub(super) fn simoncelli_band(
     }
 }
 
-/// One Simoncelli derivative set from a 7-frame window centred on group frame `centre`.
-pub(super) fn simoncelli_window(window: &[Image], centre: usize, base_flow_px: f64) -> Derivatives {
+/// One Simoncelli derivative set from a 7-frame window centred on group frame `centre`, the
+/// bands compiled for `isa`.
+pub(super) fn simoncelli_window(
+    window: &[Image],
+    centre: usize,
+    base_flow_px: f64,
+    isa: Isa,
+) -> Derivatives {
     let (width, height) = (window[0].width, window[0].height);
     let p7 = fold_preblur(&P5);
     let d7 = fold_preblur(&D5);
@@ -208,8 +202,6 @@ pub(super) fn simoncelli_window(window: &[Image], centre: usize, base_flow_px: f
         .collect();
 
     let margin = prewarp_margin(&shifts, RADIUS);
-    #[cfg(target_arch = "x86_64")]
-    let avx2 = std::arch::is_x86_feature_detected!("avx2");
     let n = width * height;
     let (mut ix, mut iy, mut it, mut image) =
         (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
@@ -230,13 +222,7 @@ pub(super) fn simoncelli_window(window: &[Image], centre: usize, base_flow_px: f
                     margin,
                 };
                 let outs = [ix_b, iy_b, it_b, im_b];
-                #[cfg(target_arch = "x86_64")]
-                if avx2 {
-                    // SAFETY: `avx2` is true only when the CPU reported AVX2.
-                    unsafe { simoncelli_band_avx2(&ctx, s, band * BAND_ROWS, outs) };
-                    return;
-                }
-                simoncelli_band(&ctx, s, band * BAND_ROWS, outs);
+                isa.compiled(|| simoncelli_band(&ctx, s, band * BAND_ROWS, outs));
             },
         );
     let wrap = |data| Image {

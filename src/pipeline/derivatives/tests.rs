@@ -7,6 +7,7 @@ fn simoncelli(prewarp: bool) -> DerivativeParams {
     DerivativeParams {
         mode: DerivativeMode::Simoncelli,
         prewarp,
+        ..DerivativeParams::default()
     }
 }
 
@@ -43,6 +44,7 @@ fn ramps_give_positive_unit_derivatives() {
         let p = DerivativeParams {
             mode,
             prewarp: false,
+            ..DerivativeParams::default()
         };
         let sets = compute_derivatives(&frames, -2.0, &p).unwrap();
         let expected = if mode == DerivativeMode::Simoncelli {
@@ -182,6 +184,7 @@ fn bad_input_is_rejected() {
     let two_frame = DerivativeParams {
         mode: DerivativeMode::TwoFrame,
         prewarp: true,
+        ..DerivativeParams::default()
     };
     assert!(compute_derivatives(&one, 0.0, &two_frame).is_err());
     assert_eq!(compute_derivatives(&six, 0.0, &two_frame).unwrap().len(), 5);
@@ -222,6 +225,7 @@ proptest! {
         let p = DerivativeParams {
             mode: if two { DerivativeMode::TwoFrame } else { DerivativeMode::Simoncelli },
             prewarp,
+            ..DerivativeParams::default()
         };
         let sets = compute_derivatives(&frames, land, &p).unwrap();
         prop_assert_eq!(sets.len(), if two { n - 1 } else { n - 6 });

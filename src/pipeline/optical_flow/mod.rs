@@ -97,14 +97,13 @@
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::mem::MaybeUninit;
 
 use super::StageError;
 use super::derivatives::Derivatives;
 use crate::image::{Image, zeros_par};
+use crate::pipeline::simd::Isa;
 
 mod groove;
-mod kernel;
 mod layout;
 mod lucas_kanade;
 mod solver;
@@ -114,7 +113,6 @@ mod tests;
 mod wall_sides;
 
 use groove::*;
-use kernel::*;
 use layout::*;
 use lucas_kanade::*;
 use solver::*;
@@ -173,6 +171,10 @@ pub struct FlowParams {
     /// Gauss–Seidel, 1 < ω < 2 is SOR (the same solution, reached in fewer iterations).
     /// Jacobi ignores it.
     pub sor_omega: f32,
+    /// Instruction set of the solver's kernels (not a knob: never in the TOML; by default the
+    /// CPU's best, detected once).
+    #[serde(skip)]
+    pub isa: Isa,
 }
 
 impl Default for FlowParams {
@@ -187,6 +189,7 @@ impl Default for FlowParams {
             lk_window_px: 7,
             groove_weight: 1.0,
             sor_omega: 1.7,
+            isa: Isa::detect(),
         }
     }
 }
@@ -318,7 +321,7 @@ pub fn compute_flow_from(
         )));
     }
     let lay = Layout::new(width, height);
-    let simd = Simd::detect();
+    let isa = params.isa;
     if let Some(f) = init {
         for (name, im) in [("u", &f.u), ("v", &f.v)] {
             if im.width != width || im.height != height || im.data.len() != n {
@@ -362,7 +365,7 @@ pub fn compute_flow_from(
                     max_iterations: params.max_iterations.max(WALL_PRESOLVE_MAX_ITERATIONS),
                     ..params.clone()
                 };
-                let (it, _) = plain().solve(&mut st, &presolve, simd);
+                let (it, _) = plain().solve(&mut st, &presolve, isa);
                 first_iterations = it;
                 let (u, v) = st.to_images(&lay, d.base_flow_px);
                 let interim = FlowField {
@@ -377,12 +380,12 @@ pub fn compute_flow_from(
                 &estimated
             }
         };
-        let problem = Problem::groove(&lay, d, walls, focal_px, params, simd);
-        let (it, conv) = problem.solve(&mut st, params, simd);
+        let problem = Problem::groove(&lay, d, walls, focal_px, params, isa);
+        let (it, conv) = problem.solve(&mut st, params, isa);
         (st, first_iterations.saturating_add(it), conv)
     } else {
         let mut st = start();
-        let (it, conv) = plain().solve(&mut st, params, simd);
+        let (it, conv) = plain().solve(&mut st, params, isa);
         (st, it, conv)
     };
     let (u, v) = state.to_images(&lay, d.base_flow_px);

@@ -9,8 +9,8 @@ pub(super) struct Problem {
     pub(super) lay: Layout,
     pub(super) kernel: Kernel,
     pub(super) coef: Aligned,
-    /// Each half's [`Edges`] (worked out once: a row update would otherwise divide twice).
-    pub(super) edges: [Edges; 2],
+    /// Each half's [`HalfEdges`] (worked out once: a row update would otherwise divide twice).
+    pub(super) edges: [HalfEdges; 2],
 }
 
 impl Problem {
@@ -24,35 +24,24 @@ impl Problem {
     ) -> Self {
         let (w, h) = (lay.width, lay.height);
         let halves = [CoefRow::new(lay, 0, C), CoefRow::new(lay, 1, C)];
-        // Both halves have m blocks; width ≥ 2 (checked by the caller), so m ≥ 1 and `max(1)`
-        // only keeps the chunk size valid.
-        let len = halves[0].len().max(1);
-        // SAFETY: the even halves' h rows of len values come first, then the odd halves'; the
-        // two runs of row chunks cover the array exactly, and `CoefRow::scatter` writes every
-        // value of each chunk.
-        let coef = unsafe {
-            Aligned::build(2 * len * h, |all| {
-                let (evens, odds) = all.split_at_mut(len * h);
-                evens
-                    .par_chunks_mut(len)
-                    .zip(odds.par_chunks_mut(len))
-                    .enumerate()
-                    .for_each_init(
-                        // The image row's C coefficients.
-                        || std::array::from_fn(|_| vec![0.0_f32; w]),
-                        |rows: &mut [Vec<f32>; C], (y, (even, odd))| {
-                            f(y, rows);
-                            halves[0].scatter(rows, even);
-                            halves[1].scatter(rows, odd);
-                        },
-                    );
-            })
-        };
+        // The even halves' h rows come first, then the odd halves'; both halves have m
+        // blocks, so rows of the same length.
+        let coef = Aligned::from_row_pairs(
+            halves[0].len(),
+            h,
+            // The image row's C coefficients.
+            || std::array::from_fn(|_| vec![0.0_f32; w]),
+            |rows: &mut [Vec<f32>; C], y, even, odd| {
+                f(y, rows);
+                halves[0].scatter(rows, even);
+                halves[1].scatter(rows, odd);
+            },
+        );
         Self {
             lay: *lay,
             kernel,
             coef,
-            edges: [Edges::new(lay, 0), Edges::new(lay, 1)],
+            edges: [lay.half_edges(0), lay.half_edges(1)],
         }
     }
 
@@ -84,14 +73,14 @@ impl Problem {
         })
     }
 
-    /// The groove system, its coefficient rows built with `simd`.
+    /// The groove system, its coefficient rows built for `isa`.
     pub(super) fn groove(
         lay: &Layout,
         d: &Derivatives,
         walls: &WallSideMap,
         focal_px: f64,
         params: &FlowParams,
-        simd: Simd,
+        isa: Isa,
     ) -> Self {
         let (w, h) = (lay.width, lay.height);
         let lambda = f64::from(params.lambda);
@@ -134,19 +123,14 @@ impl Problem {
                     has_above,
                     has_below,
                 };
-                simd.groove_row(&row, rows);
+                isa.compiled(|| row.fill(rows));
             },
         )
     }
 
     /// Iterates from the state in `st`; returns (iterations, converged).
-    pub(super) fn solve(
-        &self,
-        st: &mut SplitState,
-        params: &FlowParams,
-        simd: Simd,
-    ) -> (u32, bool) {
-        self.solve_with(st, params, simd, rayon::current_num_threads(), None)
+    pub(super) fn solve(&self, st: &mut SplitState, params: &FlowParams, isa: Isa) -> (u32, bool) {
+        self.solve_with(st, params, isa, rayon::current_num_threads(), None)
     }
 
     /// [`Problem::solve`] with at most `max_bands` row bands and, if given, a fixed block length.
@@ -154,7 +138,7 @@ impl Problem {
         &self,
         st: &mut SplitState,
         params: &FlowParams,
-        simd: Simd,
+        isa: Isa,
         max_bands: usize,
         block_override: Option<usize>,
     ) -> (u32, bool) {
@@ -181,7 +165,7 @@ impl Problem {
         while done < max {
             let k = next.min(max - done);
             let (mid, delta) = self.block(
-                simd,
+                isa,
                 st,
                 other.as_mut(),
                 k,
@@ -217,7 +201,7 @@ impl Problem {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn block(
         &self,
-        simd: Simd,
+        isa: Isa,
         st: &mut SplitState,
         mut other: Option<&mut SplitState>,
         k: usize,
@@ -255,7 +239,7 @@ impl Problem {
                     (&mut two, 1.0)
                 }
             };
-            let (m, l) = self.pass(simd, states, levels, bands, w, mid_here, last_here);
+            let (m, l) = self.pass(isa, states, levels, bands, w, mid_here, last_here);
             // A Jacobi pass of odd length leaves its result in the second state.
             if let Some(b) = other.as_deref_mut()
                 && !levels.is_multiple_of(2)
@@ -278,7 +262,7 @@ impl Problem {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn pass(
         &self,
-        simd: Simd,
+        isa: Isa,
         states: &mut [&mut SplitState],
         levels: usize,
         bands: usize,
@@ -312,7 +296,7 @@ impl Problem {
         let mut per_row = vec![(0.0_f64, 0.0_f64); if measure { h } else { 0 }];
         split_chunks(&self.lay, states, &mut per_row, &bounds)
             .into_par_iter()
-            .for_each(|mut ch| self.phase_one(simd, &mut ch, &sched));
+            .for_each(|mut ch| self.phase_one(isa, &mut ch, &sched));
         if bands > 1 {
             let reach = levels + 1;
             let zones: Vec<(usize, usize)> = bounds[1..]
@@ -321,7 +305,7 @@ impl Problem {
                 .collect();
             split_chunks(&self.lay, states, &mut per_row, &zones)
                 .into_par_iter()
-                .for_each(|mut ch| self.phase_two(simd, &mut ch, &sched));
+                .for_each(|mut ch| self.phase_two(isa, &mut ch, &sched));
         }
         per_row
             .iter()
@@ -330,7 +314,7 @@ impl Problem {
 
     /// The band's own trapezoid: level h covers rows `[a + h + 1, b − h − 1)` (no shrink at
     /// the image top and bottom), visited as a wavefront (row s − h at step s).
-    pub(super) fn phase_one(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) {
+    pub(super) fn phase_one(&self, isa: Isa, ch: &mut Chunk, s: &Schedule) {
         let (a, b, h_img) = (ch.y0, ch.y0 + ch.rows, self.lay.height);
         // Taken out so that a row's sum and the chunk's state can be borrowed at once.
         let sums = std::mem::take(&mut ch.sums);
@@ -348,7 +332,7 @@ impl Problem {
                 let y = step - lvl;
                 if y >= lo(lvl) && y < hi(lvl) {
                     s.add(lvl, sums.get_mut(y - a), |measure| {
-                        self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
+                        self.update_row(isa, ch, y, lvl, measure, s.omega, &mut scratch)
                     });
                 }
             }
@@ -356,14 +340,14 @@ impl Problem {
     }
 
     /// The seam's inverted triangles: level h covers rows `[seam − h − 1, seam + h + 1)`.
-    pub(super) fn phase_two(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) {
+    pub(super) fn phase_two(&self, isa: Isa, ch: &mut Chunk, s: &Schedule) {
         let seam = ch.y0 + s.levels + 1;
         let sums = std::mem::take(&mut ch.sums);
         let mut scratch = Vec::new();
         for lvl in 0..s.levels {
             for y in seam - lvl - 1..seam + lvl + 1 {
                 s.add(lvl, sums.get_mut(y - ch.y0), |measure| {
-                    self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
+                    self.update_row(isa, ch, y, lvl, measure, s.omega, &mut scratch)
                 });
             }
         }
@@ -373,7 +357,7 @@ impl Problem {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn update_row(
         &self,
-        simd: Simd,
+        isa: Isa,
         ch: &mut Chunk,
         y: usize,
         lvl: usize,
@@ -407,7 +391,7 @@ impl Problem {
             }
             let up_row = if up_own { &scratch[..] } else { up_row };
             let dn_row = if dn_own { &scratch[..] } else { dn_row };
-            self.run_row(simd, hp, y, omega, lr, up_row, dn_row, mid);
+            self.run_row(isa, hp, y, omega, lr, up_row, dn_row, mid);
             if measure {
                 delta += abs_diff_sum(lay, lay.half(hp), mid, scratch);
             }
@@ -434,7 +418,7 @@ impl Problem {
                 let up_row = if up_own { old } else { &src_same[row(r_up)] };
                 let dn_row = if dn_own { old } else { &src_same[row(r_dn)] };
                 let mid = &mut dst_same[row(r)];
-                self.run_row(simd, hp, y, omega, lr, up_row, dn_row, mid);
+                self.run_row(isa, hp, y, omega, lr, up_row, dn_row, mid);
                 if measure {
                     delta += abs_diff_sum(lay, lay.half(hp), mid, old);
                 }
@@ -447,7 +431,7 @@ impl Problem {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn run_row(
         &self,
-        simd: Simd,
+        isa: Isa,
         hp: usize,
         y: usize,
         omega: f32,
@@ -459,20 +443,25 @@ impl Problem {
         let coef = self.coef_row(y, hp);
         let edges = self.edges[hp];
         let relax = omega != 1.0;
-        let k = Consts {
-            q: match self.kernel {
+        let k = SolveScalars {
+            quarter_lambda: match self.kernel {
                 Kernel::Plain => 0.0,
                 Kernel::Groove { q } => q,
             },
             omega,
         };
+        let (i, a) = (isa, lr);
         match self.kernel {
-            Kernel::Plain if relax => simd.row::<false, true>(k, edges, lr, up, dn, coef, dst),
-            Kernel::Plain => simd.row::<false, false>(k, edges, lr, up, dn, coef, dst),
-            Kernel::Groove { .. } if relax => {
-                simd.row::<true, true>(k, edges, lr, up, dn, coef, dst)
+            Kernel::Plain if relax => {
+                update_half_row::<false, true>(i, k, edges, a, up, dn, coef, dst)
             }
-            Kernel::Groove { .. } => simd.row::<true, false>(k, edges, lr, up, dn, coef, dst),
+            Kernel::Plain => update_half_row::<false, false>(i, k, edges, a, up, dn, coef, dst),
+            Kernel::Groove { .. } if relax => {
+                update_half_row::<true, true>(i, k, edges, a, up, dn, coef, dst)
+            }
+            Kernel::Groove { .. } => {
+                update_half_row::<true, false>(i, k, edges, a, up, dn, coef, dst)
+            }
         }
     }
 }

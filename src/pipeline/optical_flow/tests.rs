@@ -112,6 +112,7 @@ fn no_prewarp() -> DerivativeParams {
     DerivativeParams {
         mode: DerivativeMode::Simoncelli,
         prewarp: false,
+        ..DerivativeParams::default()
     }
 }
 

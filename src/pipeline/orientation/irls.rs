@@ -8,11 +8,9 @@ pub(super) const SINGULAR_REL: f64 = 1e-12;
 /// Once σ sits at its floor, the fit stops (converged) when the weighted mean residual changes
 /// by less than this share between rounds: later rounds would repeat the same weights.
 pub(super) const STALL_RATIO: f64 = 1e-4;
-/// Independent partial sums per accumulator in the IRLS pass (lets the compiler vectorise).
-pub(super) const LANES: usize = 4;
-/// Accumulators of one pass: Σw, Σwx, Σwy, Σwz, Σwx², Σwxy, Σwy², Σwxz, Σwyz, then the
-/// residual of the current plane under the previous weights: Σw′|r|, Σw′.
-pub(super) const N_SUMS: usize = 11;
+pub(super) use crate::pipeline::simd::irls::{
+    IRLS_LANES as LANES, IRLS_SUMS as N_SUMS, Points, accumulate_chunks, point_terms,
+};
 /// 3-D points in structure-of-arrays form; [`PointSet::centre`] moves them to their mean.
 #[derive(Default)]
 pub(super) struct PointSet {
@@ -95,32 +93,26 @@ pub(super) fn read_write(bufs: &mut [Vec<f64>; 3], r: usize, w: usize) -> (&[f64
 /// One IRLS pass over centred points: residuals of `plane` = (a, b, c), new Lorentzian weights
 /// w = 1/(1 + r²·k) (k = 1/(2σ²); k = 0 gives unit weights) into `w_new`, and the sums for the
 /// next weighted fit plus the weighted residual of `plane` under `w_old`. The whole chunks of
-/// [`LANES`] points run on AVX2 when `allow_avx2` and the CPU has it (the same bits either way).
+/// [`LANES`] points run on `isa` (the same bits on every instruction set).
 pub(super) fn irls_pass(
     set: &PointSet,
     plane: [f64; 3],
     k: f64,
     w_old: &[f64],
     w_new: &mut [f64],
-    allow_avx2: bool,
+    isa: Isa,
 ) -> [f64; N_SUMS] {
     let [a, b, c] = plane;
     let mut acc = [[0.0_f64; LANES]; N_SUMS];
     let n = set.len().min(w_old.len()).min(w_new.len());
     let full = n - n % LANES;
     let (chunk_old, chunk_new) = (&w_old[..full], &mut w_new[..full]);
-    #[cfg(target_arch = "x86_64")]
-    if allow_avx2 && std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU reported AVX2, all that `irls_chunks_avx2` requires.
-        unsafe { irls_chunks_avx2(set, plane, k, chunk_old, chunk_new, &mut acc) };
-    } else {
-        irls_chunks(set, plane, k, chunk_old, chunk_new, &mut acc);
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        let _ = allow_avx2;
-        irls_chunks(set, plane, k, chunk_old, chunk_new, &mut acc);
-    }
+    let points = Points {
+        x: &set.x,
+        y: &set.y,
+        z: &set.z,
+    };
+    accumulate_chunks(isa, points, plane, k, chunk_old, chunk_new, &mut acc);
     // The points after the whole chunks, into lane 0.
     for i in full..n {
         if let (Some(&x), Some(&y), Some(&z), Some(&wo)) =
@@ -137,154 +129,6 @@ pub(super) fn irls_pass(
         }
     }
     acc.map(|lanes| lanes.iter().sum())
-}
-
-/// The whole-chunk part of [`irls_pass`]: the first `w_old.len()` points (a multiple of
-/// [`LANES`]), point l of each chunk into lane l of `acc`.
-pub(super) fn irls_chunks(
-    set: &PointSet,
-    [a, b, c]: [f64; 3],
-    k: f64,
-    w_old: &[f64],
-    w_new: &mut [f64],
-    acc: &mut [[f64; LANES]; N_SUMS],
-) {
-    let chunks = set
-        .x
-        .chunks_exact(LANES)
-        .zip(set.y.chunks_exact(LANES))
-        .zip(set.z.chunks_exact(LANES))
-        .zip(w_old.chunks_exact(LANES))
-        .zip(w_new.chunks_exact_mut(LANES));
-    for ((((xc, yc), zc), woc), wnc) in chunks {
-        let (Ok(xc), Ok(yc), Ok(zc), Ok(woc), Ok(wnc)) = (
-            <&[f64; LANES]>::try_from(xc),
-            <&[f64; LANES]>::try_from(yc),
-            <&[f64; LANES]>::try_from(zc),
-            <&[f64; LANES]>::try_from(woc),
-            <&mut [f64; LANES]>::try_from(wnc),
-        ) else {
-            continue;
-        };
-        // Lane-wise arithmetic on fixed-size arrays (the compiler maps it onto SIMD registers).
-        let r: [f64; LANES] = std::array::from_fn(|l| zc[l] - a * xc[l] - b * yc[l] - c);
-        let w: [f64; LANES] = std::array::from_fn(|l| 1.0 / (1.0 + r[l] * r[l] * k));
-        *wnc = w;
-        for l in 0..LANES {
-            let terms = point_terms([xc[l], yc[l], zc[l], woc[l]], r[l], w[l]);
-            for (s, t) in acc.iter_mut().zip(terms) {
-                s[l] += t;
-            }
-        }
-    }
-}
-
-/// The sums one point adds for the next weighted fit: `w, w·x, w·y, w·z, w·x·x, w·x·y,
-/// w·y·y, w·x·z, w·y·z` under its new weight `w`, then `wo·|r|, wo` under its old one (point
-/// `[x, y, z, wo]`, residual `r`). [`irls_chunks_avx2`] computes the same products in the same
-/// order.
-#[inline(always)]
-pub(super) fn point_terms([x, y, z, wo]: [f64; 4], r: f64, w: f64) -> [f64; N_SUMS] {
-    let (wx, wy) = (w * x, w * y);
-    [
-        w,
-        wx,
-        wy,
-        w * z,
-        wx * x,
-        wx * y,
-        wy * y,
-        wx * z,
-        wy * z,
-        wo * r.abs(),
-        wo,
-    ]
-}
-
-/// [`irls_chunks`] on AVX2 registers: lane l of each 4-wide vector is lane l of its
-/// accumulators, with the same operations in the same order (no FMA), so the sums are bit for
-/// bit the same.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-pub(super) fn irls_chunks_avx2(
-    set: &PointSet,
-    [a, b, c]: [f64; 3],
-    k: f64,
-    w_old: &[f64],
-    w_new: &mut [f64],
-    acc: &mut [[f64; LANES]; N_SUMS],
-) {
-    use std::arch::x86_64::{
-        __m256d, _mm256_add_pd, _mm256_andnot_pd, _mm256_div_pd, _mm256_loadu_pd, _mm256_mul_pd,
-        _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd, _mm256_sub_pd,
-    };
-    const { assert!(LANES == 4) };
-    let full = w_old.len().min(w_new.len()) / LANES * LANES;
-    let (Some(xs), Some(ys), Some(zs)) = (set.x.get(..full), set.y.get(..full), set.z.get(..full))
-    else {
-        return;
-    };
-    let (va, vb, vc, vk) = (
-        _mm256_set1_pd(a),
-        _mm256_set1_pd(b),
-        _mm256_set1_pd(c),
-        _mm256_set1_pd(k),
-    );
-    let (one, sign) = (_mm256_set1_pd(1.0), _mm256_set1_pd(-0.0));
-    let mut s: [__m256d; N_SUMS] = [_mm256_setzero_pd(); N_SUMS];
-    let chunks = xs
-        .chunks_exact(LANES)
-        .zip(ys.chunks_exact(LANES))
-        .zip(zs.chunks_exact(LANES))
-        .zip(w_old.chunks_exact(LANES))
-        .zip(w_new.chunks_exact_mut(LANES));
-    for ((((xc, yc), zc), woc), wnc) in chunks {
-        // SAFETY: every chunk holds 4 f64, as the unaligned loads and the store access.
-        let (x, y, z, wo) = unsafe {
-            (
-                _mm256_loadu_pd(xc.as_ptr()),
-                _mm256_loadu_pd(yc.as_ptr()),
-                _mm256_loadu_pd(zc.as_ptr()),
-                _mm256_loadu_pd(woc.as_ptr()),
-            )
-        };
-        // r = ((z − a·x) − b·y) − c; w = 1/(1 + (r·r)·k), as in the portable lanes.
-        let r = _mm256_sub_pd(
-            _mm256_sub_pd(_mm256_sub_pd(z, _mm256_mul_pd(va, x)), _mm256_mul_pd(vb, y)),
-            vc,
-        );
-        let w = _mm256_div_pd(
-            one,
-            _mm256_add_pd(one, _mm256_mul_pd(_mm256_mul_pd(r, r), vk)),
-        );
-        // SAFETY: as above.
-        unsafe { _mm256_storeu_pd(wnc.as_mut_ptr(), w) };
-        let (wx, wy) = (_mm256_mul_pd(w, x), _mm256_mul_pd(w, y));
-        let terms = [
-            w,
-            wx,
-            wy,
-            _mm256_mul_pd(w, z),
-            _mm256_mul_pd(wx, x),
-            _mm256_mul_pd(wx, y),
-            _mm256_mul_pd(wy, y),
-            _mm256_mul_pd(wx, z),
-            _mm256_mul_pd(wy, z),
-            _mm256_mul_pd(wo, _mm256_andnot_pd(sign, r)),
-            wo,
-        ];
-        for (sum, t) in s.iter_mut().zip(terms) {
-            *sum = _mm256_add_pd(*sum, t);
-        }
-    }
-    for (lanes, sum) in acc.iter_mut().zip(s) {
-        let mut v = [0.0_f64; LANES];
-        // SAFETY: `v` holds 4 f64.
-        unsafe { _mm256_storeu_pd(v.as_mut_ptr(), sum) };
-        for (l, x) in lanes.iter_mut().zip(v) {
-            *l += x;
-        }
-    }
 }
 
 /// Solves the weighted normal equations of Z = aX + bY + c from the sums of [`irls_pass`].
@@ -387,7 +231,7 @@ pub(super) fn fit_set(
     // Round 1: plain least squares (k = 0 writes unit weights into buffer `ic`).
     let sums = {
         let (wo, wn) = read_write(&mut sc.w, ip, ic);
-        irls_pass(set, [0.0; 3], 0.0, wo, wn, true)
+        irls_pass(set, [0.0; 3], 0.0, wo, wn, params.isa)
     };
     let Some(mut plane) = solve_plane(&sums) else {
         return Err(StageError::BadInput {
@@ -414,7 +258,7 @@ pub(super) fn fit_set(
         let k = 0.5 / (sigma_next * sigma_next);
         let sums = {
             let (wo, wn) = read_write(&mut sc.w, ic, inx);
-            irls_pass(set, plane, k, wo, wn, true)
+            irls_pass(set, plane, k, wo, wn, params.isa)
         };
         let res = sums[9] / sums[10];
         let at_floor = |s: Option<f64>| s.is_some_and(|s| s <= params.sigma_min_um);

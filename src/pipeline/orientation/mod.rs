@@ -8,6 +8,7 @@ use super::walls::{WallLine, WallSide};
 use super::{StageError, check_range};
 use crate::image::Image;
 use crate::io::Geometry;
+use crate::pipeline::simd::Isa;
 
 mod irls;
 mod samples;
@@ -49,6 +50,10 @@ pub struct OrientationParams {
     /// angle across the groove (modulation changes it by about 1 − cos θ, 2% at tan θ = 0.2),
     /// so a wall that seems to turn steeper or flatter is a fit locked onto damage. 0 = off.
     pub max_wall_slope_change: f64,
+    /// Instruction set of the IRLS pass (not a knob: never in the TOML; by default the CPU's
+    /// best, detected once).
+    #[serde(skip)]
+    pub isa: Isa,
 }
 
 impl Default for OrientationParams {
@@ -64,6 +69,7 @@ impl Default for OrientationParams {
             max_iterations: 30,
             outlier_sigmas: 3.0,
             max_wall_slope_change: 0.25,
+            isa: Isa::detect(),
         }
     }
 }

@@ -56,8 +56,8 @@ fn irls_pass_gives_the_same_bits_on_avx2() {
     let w_old: Vec<f64> = (0..103).map(|_| next() + 0.5).collect();
     let (mut a, mut b) = (vec![0.0; 103], vec![0.0; 103]);
     let plane = [0.25, -0.15, 0.05];
-    let sa = irls_pass(&set, plane, 0.7, &w_old, &mut a, false);
-    let sb = irls_pass(&set, plane, 0.7, &w_old, &mut b, true);
+    let sa = irls_pass(&set, plane, 0.7, &w_old, &mut a, Isa::Portable);
+    let sb = irls_pass(&set, plane, 0.7, &w_old, &mut b, Isa::detect());
     assert_eq!(sa.map(f64::to_bits), sb.map(f64::to_bits));
     assert_eq!(
         a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),

@@ -23,8 +23,8 @@ fn banded_problem() -> (Layout, Derivatives, WallSideMap) {
 fn blocking_bands_and_simd_do_not_change_the_result() {
     let (lay, d, walls) = banded_problem();
     let p = FlowParams::default();
-    let built = Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::Baseline);
-    let fast = Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect());
+    let built = Problem::groove(&lay, &d, &walls, 100.0, &p, Isa::Portable);
+    let fast = Problem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect());
     // Both halves' coefficients of every row, in one array.
     assert!(built.coef == fast.coef);
     assert!(built.coef.iter().all(|c| c.is_finite()));
@@ -39,14 +39,14 @@ fn blocking_bands_and_simd_do_not_change_the_result() {
             };
             for problem in [
                 Problem::plain(&lay, &d, p.lambda),
-                Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect()),
+                Problem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect()),
             ] {
                 let mut reference = SplitState::zeros(&lay);
-                let (it, _) = problem.solve_with(&mut reference, &p, Simd::Baseline, 1, Some(1));
+                let (it, _) = problem.solve_with(&mut reference, &p, Isa::Portable, 1, Some(1));
                 assert_eq!(it, 37);
                 for (bands, block) in [(1, None), (2, Some(5)), (3, Some(4)), (4, Some(16))] {
                     let mut st = SplitState::zeros(&lay);
-                    problem.solve_with(&mut st, &p, Simd::detect(), bands, block);
+                    problem.solve_with(&mut st, &p, Isa::detect(), bands, block);
                     assert!(
                         st.e == reference.e && st.o == reference.o,
                         "{solver:?} ω {omega} bands {bands} block {block:?}"
@@ -68,30 +68,22 @@ fn measured_stops_do_not_depend_on_the_bands() {
     };
     for problem in [
         Problem::plain(&lay, &d, p.lambda),
-        Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect()),
+        Problem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect()),
     ] {
         // One measured block of 5 iterations: the same sums, to the bit.
         let sums: Vec<(f64, f64)> = (1..=4)
             .map(|bands| {
                 let mut st = SplitState::zeros(&lay);
-                problem.pass(
-                    Simd::detect(),
-                    &mut [&mut st],
-                    10,
-                    bands,
-                    1.0,
-                    Some(2),
-                    true,
-                )
+                problem.pass(Isa::detect(), &mut [&mut st], 10, bands, 1.0, Some(2), true)
             })
             .collect();
         assert!(sums[0].0 > 0.0 && sums[0].1 > 0.0);
         assert!(sums.iter().all(|s| s == &sums[0]), "{sums:?}");
         let mut reference = SplitState::zeros(&lay);
-        let stop = problem.solve_with(&mut reference, &p, Simd::detect(), 1, None);
+        let stop = problem.solve_with(&mut reference, &p, Isa::detect(), 1, None);
         for bands in [2, 3, 4] {
             let mut st = SplitState::zeros(&lay);
-            let got = problem.solve_with(&mut st, &p, Simd::detect(), bands, None);
+            let got = problem.solve_with(&mut st, &p, Isa::detect(), bands, None);
             assert_eq!(got, stop, "bands {bands}");
             assert!(st.e == reference.e && st.o == reference.o, "bands {bands}");
         }
@@ -110,13 +102,13 @@ fn passes_do_not_change_the_result() {
         };
         for problem in [
             Problem::plain(&lay, &d, p.lambda),
-            Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect()),
+            Problem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect()),
         ] {
             let run = |pass_levels| {
                 let mut st = SplitState::zeros(&lay);
                 let mut other = (solver == Solver::Jacobi).then(|| st.clone());
                 let sums = problem.block(
-                    Simd::detect(),
+                    Isa::detect(),
                     &mut st,
                     other.as_mut(),
                     13,
@@ -282,26 +274,13 @@ fn adaptive_blocks_stop_close_to_where_every_iteration_is_checked() {
     };
     let problem = Problem::plain(&lay, &d, p.lambda);
     let mut st = SplitState::zeros(&lay);
-    let (exact, ok) = problem.solve_with(&mut st, &p, Simd::detect(), 1, Some(1));
+    let (exact, ok) = problem.solve_with(&mut st, &p, Isa::detect(), 1, Some(1));
     assert!(ok && exact > 2 * MAX_BLOCK_ITERATIONS as u32, "{exact}");
     let mut st = SplitState::zeros(&lay);
-    let (adaptive, ok) = problem.solve(&mut st, &p, Simd::detect());
+    let (adaptive, ok) = problem.solve(&mut st, &p, Isa::detect());
     assert!(ok);
     assert!(
         adaptive >= exact && adaptive <= exact + 3,
         "checked every iteration: {exact}, adaptive blocks: {adaptive}"
     );
-}
-#[test]
-fn aligned_buffers_start_cache_lines() {
-    for len in [1, 100, 1000] {
-        let a = Aligned::zeros(len);
-        let b = a.clone();
-        for x in [&a, &b] {
-            assert_eq!(x.len(), len);
-            assert!(x.iter().all(|&v| v == 0.0));
-            assert_eq!(x.as_ptr() as usize % 64, 0, "len {len}");
-        }
-        assert!(a == b);
-    }
 }
