@@ -17,30 +17,34 @@ pub(super) struct Layout {
     pub(super) width: usize,
     pub(super) height: usize,
     /// Even-column count, ⌈w/2⌉.
-    pub(super) ne: usize,
+    pub(super) even_cols: usize,
     /// Odd-column count, ⌊w/2⌋.
-    pub(super) no: usize,
-    /// Vectors per half-row (both halves): ⌈ne/8⌉.
+    pub(super) odd_cols: usize,
+    /// Vectors per half-row (both halves): ⌈even_cols/8⌉.
     pub(super) m: usize,
 }
 
 impl Layout {
     #[inline]
     pub(super) fn new(width: usize, height: usize) -> Self {
-        let ne = width.div_ceil(2);
+        let even_cols = width.div_ceil(2);
         Self {
             width,
             height,
-            ne,
-            no: width / 2,
-            m: ne.div_ceil(LANES),
+            even_cols,
+            odd_cols: width / 2,
+            m: even_cols.div_ceil(LANES),
         }
     }
 
-    /// Columns in half `hp` (0 = even, 1 = odd).
+    /// Columns in half `half` (0 = even, 1 = odd).
     #[inline]
-    pub(super) fn half(&self, hp: usize) -> usize {
-        if hp == 0 { self.ne } else { self.no }
+    pub(super) fn columns_in(&self, half: usize) -> usize {
+        if half == 0 {
+            self.even_cols
+        } else {
+            self.odd_cols
+        }
     }
 
     /// Slots of each of a half-row's u and v (columns and padding).
@@ -62,14 +66,14 @@ impl Layout {
         (i % self.m) * PAIR + i / self.m
     }
 
-    /// Where half `hp`'s neighbours in the other half stop being whole vectors.
+    /// Where half `half`'s neighbours in the other half stop being whole vectors.
     #[inline]
-    pub(super) fn half_edges(&self, hp: usize) -> HalfEdges {
+    pub(super) fn half_edges(&self, half: usize) -> HalfEdges {
         // The last image column is even (half 0) when the width is odd.
-        let holds_last = (self.width % 2 == 1) == (hp == 0);
-        let i = self.half(hp).saturating_sub(1);
+        let holds_last = (self.width % 2 == 1) == (half == 0);
+        let i = self.columns_in(half).saturating_sub(1);
         HalfEdges {
-            odd: hp == 1,
+            odd: half == 1,
             last: if holds_last && self.m > 0 {
                 (i % self.m, i / self.m)
             } else {
@@ -122,9 +126,9 @@ impl SplitState {
             .zip(u.data.par_chunks(w))
             .zip(v.data.par_chunks(w))
             .for_each(|(((er, or), ur), vr)| {
-                for (hp, dst) in [(0, er), (1, or)] {
-                    lay.each_slot(lay.half(hp), |i, at| {
-                        let x = 2 * i + hp;
+                for (half, dst) in [(0, er), (1, or)] {
+                    lay.each_slot(lay.columns_in(half), |i, at| {
+                        let x = 2 * i + half;
                         let ux = ur[x] - base;
                         dst[at] = if ux.is_finite() { ux } else { 0.0 };
                         dst[at + LANES] = if vr[x].is_finite() { vr[x] } else { 0.0 };
@@ -138,7 +142,7 @@ impl SplitState {
     pub(super) fn to_images(&self, lay: &Layout, base: f32) -> (Image, Image) {
         let (w, h) = (lay.width, lay.height);
         let (stride, slots) = (lay.stride(), lay.slots());
-        let (m, ne, no) = (lay.m, lay.ne, lay.no);
+        let (m, even_cols, odd_cols) = (lay.m, lay.even_cols, lay.odd_cols);
         // One pass over the state writes both images, row by row.
         let (u, v) = vec_pair_from_rows(
             w,
@@ -158,12 +162,12 @@ impl SplitState {
                     from_lanes(m, or, part, odd);
                     // Interleaves the halves: ⌊w/2⌋ pairs, then for an odd width the last even
                     // column.
-                    for (&e, &o) in even[..no].iter().zip(&odd[..no]) {
+                    for (&e, &o) in even[..odd_cols].iter().zip(&odd[..odd_cols]) {
                         row.push(e + base);
                         row.push(o + base);
                     }
-                    if ne > no
-                        && let Some(&e) = even.get(ne - 1)
+                    if even_cols > odd_cols
+                        && let Some(&e) = even.get(even_cols - 1)
                     {
                         row.push(e + base);
                     }
@@ -212,19 +216,19 @@ pub(super) fn from_lanes(m: usize, row: &[f32], part: usize, nat: &mut [f32]) {
 
 /// Which stencil the solver runs.
 #[derive(Clone, Copy, Debug)]
-pub(super) enum Kernel {
+pub(super) enum Stencil {
     /// `u = ū − gx·t, v = v̄ − gy·t, t = gx·ū + gy·v̄ + gt`.
     Plain,
-    /// The general 2×2 update; `q` = λ/4.
-    Groove { q: f32 },
+    /// The general 2×2 update with `quarter_lambda` = λ/4.
+    Groove { quarter_lambda: f32 },
 }
 
-impl Kernel {
+impl Stencil {
     #[inline]
     pub(super) fn coefs(self) -> usize {
         match self {
-            Kernel::Plain => PLAIN_COEFS,
-            Kernel::Groove { .. } => GROOVE_COEFS,
+            Stencil::Plain => PLAIN_COEFS,
+            Stencil::Groove { .. } => GROOVE_COEFS,
         }
     }
 }
@@ -235,7 +239,7 @@ impl Kernel {
 #[derive(Clone, Copy, Debug)]
 pub(super) struct CoefRow {
     /// The half (0 = even, 1 = odd).
-    pub(super) hp: usize,
+    pub(super) half: usize,
     /// Columns in the half.
     pub(super) n: usize,
     /// Vectors per half-row.
@@ -245,12 +249,12 @@ pub(super) struct CoefRow {
 }
 
 impl CoefRow {
-    /// Half `hp` (0 = even, 1 = odd) of `lay` with `c` coefficients per column.
+    /// Half `half` (0 = even, 1 = odd) of `lay` with `c` coefficients per column.
     #[inline]
-    pub(super) fn new(lay: &Layout, hp: usize, c: usize) -> Self {
+    pub(super) fn new(lay: &Layout, half: usize, c: usize) -> Self {
         Self {
-            hp,
-            n: lay.half(hp),
+            half,
+            n: lay.columns_in(half),
             m: lay.m,
             c,
         }
@@ -270,7 +274,7 @@ impl CoefRow {
 
     /// Writes this half-row's blocks into `dst` (a half-row of [`CoefRow::len`] values, in
     /// order) from `rows[j]`, coefficient j of every column of the image row in column order
-    /// (the half's column i is image column 2i + `hp`); the padding gets zeros. `C` is the
+    /// (the half's column i is image column 2i + `half`); the padding gets zeros. `C` is the
     /// coefficient count, `c`.
     pub(super) fn scatter<const C: usize>(self, rows: &[Vec<f32>; C], dst: &mut RowWriter) {
         for k in 0..self.m {
@@ -278,7 +282,7 @@ impl CoefRow {
                 for lane in 0..LANES {
                     let i = lane * self.m + k;
                     let x = if i < self.n {
-                        row.get(2 * i + self.hp)
+                        row.get(2 * i + self.half)
                     } else {
                         None
                     };

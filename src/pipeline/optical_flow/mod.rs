@@ -86,8 +86,7 @@
 //! so one colour of a row is a dense, vectorisable stencil over the other colour. A
 //! half-row's per-pixel factors are interleaved in blocks of 8 columns (all factors of 8
 //! columns in one run), so the kernel reads them as one stream and keeps every pointer in a
-//! register (9–14 % faster than one array per factor). Several
-//! iterations are run per pass over the image (temporal blocking): a wavefront keeps a band
+//! register. Several iterations are run per pass over the image (temporal blocking): a wavefront keeps a band
 //! of rows in cache while they are updated `2K` times (trapezoids per thread, then the small
 //! inverted triangles at the band seams). Red–black Gauss–Seidel and Jacobi (ping-pong
 //! buffers) share this machinery. Convergence (`mean |Δu| + |Δv| < τ`) is measured on the
@@ -245,10 +244,9 @@ const BLOCK_CACHE_BYTES: usize = 896 * 1024;
 /// Longest block of iterations between convergence checks.
 const MAX_BLOCK_ITERATIONS: usize = 16;
 /// Most levels (red–black half-sweeps, or Jacobi sweeps) one wavefront pass runs; a longer
-/// block runs as several passes, with the same bits. On 1280×1024 plain Horn–Schunck, passes
-/// of 8 iterations took 7 % less time than 16 (12: 4 % less; 6: the same as 8; with the
-/// lane-major layout 6 and 12 iterations measure the same as 8); the groove method's blocks of
-/// 8 iterations fit in one pass as before.
+/// block runs as several passes, with the same bits, whose rows stay in the level-2 cache (the
+/// measured pass lengths: docs/PERFORMANCE.md). The groove method's blocks of 8 iterations fit
+/// in one pass.
 const PASS_LEVELS: usize = 16;
 /// Convergence threshold of the plain pass whose flow [`estimate_wall_sides`] reads when the
 /// groove method estimates its own walls (the user's τ when that is tighter). Wall sides come
@@ -336,7 +334,7 @@ pub fn compute_flow_from(
         Some(f) => SplitState::from_images(&lay, &f.u, &f.v, d.base_flow_px),
         None => SplitState::zeros(&lay),
     };
-    let plain = || Problem::plain(&lay, d, params.lambda);
+    let plain = || HsSystem::plain(&lay, d, params.lambda);
     let (state, iterations, converged) = if groove {
         if !(focal_px.is_finite() && focal_px > 0.0) {
             return Err(StageError::InvalidParam {
@@ -380,7 +378,7 @@ pub fn compute_flow_from(
                 &estimated
             }
         };
-        let problem = Problem::groove(&lay, d, walls, focal_px, params, isa);
+        let problem = HsSystem::groove(&lay, d, walls, focal_px, params, isa);
         let (it, conv) = problem.solve(&mut st, params, isa);
         (st, first_iterations.saturating_add(it), conv)
     } else {

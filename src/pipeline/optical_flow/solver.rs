@@ -5,21 +5,21 @@ use super::*;
 /// A Horn–Schunck system ready to iterate: the coefficient blocks ([`CoefRow`]) of every
 /// image row's even half, then those of every odd half (so a wavefront step, whose levels all
 /// update one half, reads consecutive rows of one run).
-pub(super) struct Problem {
+pub(super) struct HsSystem {
     pub(super) lay: Layout,
-    pub(super) kernel: Kernel,
+    pub(super) stencil: Stencil,
     pub(super) coef: Aligned,
     /// Each half's [`HalfEdges`] (worked out once: a row update would otherwise divide twice).
     pub(super) edges: [HalfEdges; 2],
 }
 
-impl Problem {
+impl HsSystem {
     /// Fills the coefficients a row at a time: `f(y, rows)` writes coefficient k of every
     /// column of image row `y` into `rows[k]` (natural column order, so the caller's loop can
     /// vectorise); the rows are then scattered into their halves' lane-major blocks.
     pub(super) fn build_rows<const C: usize>(
         lay: &Layout,
-        kernel: Kernel,
+        stencil: Stencil,
         f: impl Fn(usize, &mut [Vec<f32>; C]) + Sync,
     ) -> Self {
         let (w, h) = (lay.width, lay.height);
@@ -39,24 +39,24 @@ impl Problem {
         );
         Self {
             lay: *lay,
-            kernel,
+            stencil,
             coef,
             edges: [lay.half_edges(0), lay.half_edges(1)],
         }
     }
 
-    /// Image row `y`'s coefficient blocks of half `hp`.
+    /// Image row `y`'s coefficient blocks of half `half`.
     #[inline]
-    pub(super) fn coef_row(&self, y: usize, hp: usize) -> &[f32] {
-        let len = CoefRow::new(&self.lay, hp, self.kernel.coefs()).len();
-        let at = (hp * self.lay.height + y) * len;
+    pub(super) fn coef_row(&self, y: usize, half: usize) -> &[f32] {
+        let len = CoefRow::new(&self.lay, half, self.stencil.coefs()).len();
+        let at = (half * self.lay.height + y) * len;
         self.coef.get(at..at + len).unwrap_or_default()
     }
 
     /// The plain system.
     pub(super) fn plain(lay: &Layout, d: &Derivatives, lambda: f32) -> Self {
         let w = lay.width;
-        Self::build_rows::<PLAIN_COEFS>(lay, Kernel::Plain, |y, [gx, gy, gt]| {
+        Self::build_rows::<PLAIN_COEFS>(lay, Stencil::Plain, |y, [gx, gy, gt]| {
             let span = y * w..(y + 1) * w;
             let (Some(ix), Some(iy), Some(it)) = (
                 d.ix.data.get(span.clone()),
@@ -88,8 +88,8 @@ impl Problem {
         let base = f64::from(d.base_flow_px);
         Self::build_rows::<GROOVE_COEFS>(
             lay,
-            Kernel::Groove {
-                q: 0.25 * params.lambda,
+            Stencil::Groove {
+                quarter_lambda: 0.25 * params.lambda,
             },
             |y, rows| {
                 let span = y * w..(y + 1) * w;
@@ -133,7 +133,7 @@ impl Problem {
         self.solve_with(st, params, isa, rayon::current_num_threads(), None)
     }
 
-    /// [`Problem::solve`] with at most `max_bands` row bands and, if given, a fixed block length.
+    /// [`HsSystem::solve`] with at most `max_bands` row bands and, if given, a fixed block length.
     pub(super) fn solve_with(
         &self,
         st: &mut SplitState,
@@ -144,7 +144,7 @@ impl Problem {
     ) -> (u32, bool) {
         let lay = &self.lay;
         let jacobi = params.solver == Solver::Jacobi;
-        let floats_per_px = self.kernel.coefs() + if jacobi { 4 } else { 2 };
+        let floats_per_px = self.stencil.coefs() + if jacobi { 4 } else { 2 };
         let row_bytes = lay.width * floats_per_px * std::mem::size_of::<f32>();
         let rows_fit = (BLOCK_CACHE_BYTES / row_bytes.max(1)).max(4);
         // Levels (half-sweeps for red–black, sweeps for Jacobi) per block.
@@ -294,7 +294,7 @@ impl Problem {
         // Each row's measured changes, summed level by level in increasing order and then
         // row by row, so the totals do not depend on the bands (or the threads).
         let mut per_row = vec![(0.0_f64, 0.0_f64); if measure { h } else { 0 }];
-        split_chunks(&self.lay, states, &mut per_row, &bounds)
+        split_bands(&self.lay, states, &mut per_row, &bounds)
             .into_par_iter()
             .for_each(|mut ch| self.phase_one(isa, &mut ch, &sched));
         if bands > 1 {
@@ -303,7 +303,7 @@ impl Problem {
                 .iter()
                 .map(|&(seam, _)| (seam - reach, seam + reach))
                 .collect();
-            split_chunks(&self.lay, states, &mut per_row, &zones)
+            split_bands(&self.lay, states, &mut per_row, &zones)
                 .into_par_iter()
                 .for_each(|mut ch| self.phase_two(isa, &mut ch, &sched));
         }
@@ -314,7 +314,7 @@ impl Problem {
 
     /// The band's own trapezoid: level h covers rows `[a + h + 1, b − h − 1)` (no shrink at
     /// the image top and bottom), visited as a wavefront (row s − h at step s).
-    pub(super) fn phase_one(&self, isa: Isa, ch: &mut Chunk, s: &Schedule) {
+    pub(super) fn phase_one(&self, isa: Isa, ch: &mut RowBand, s: &Schedule) {
         let (a, b, h_img) = (ch.y0, ch.y0 + ch.rows, self.lay.height);
         // Taken out so that a row's sum and the chunk's state can be borrowed at once.
         let sums = std::mem::take(&mut ch.sums);
@@ -340,7 +340,7 @@ impl Problem {
     }
 
     /// The seam's inverted triangles: level h covers rows `[seam − h − 1, seam + h + 1)`.
-    pub(super) fn phase_two(&self, isa: Isa, ch: &mut Chunk, s: &Schedule) {
+    pub(super) fn phase_two(&self, isa: Isa, ch: &mut RowBand, s: &Schedule) {
         let seam = ch.y0 + s.levels + 1;
         let sums = std::mem::take(&mut ch.sums);
         let mut scratch = Vec::new();
@@ -358,7 +358,7 @@ impl Problem {
     pub(super) fn update_row(
         &self,
         isa: Isa,
-        ch: &mut Chunk,
+        ch: &mut RowBand,
         y: usize,
         lvl: usize,
         measure: bool,
@@ -377,12 +377,12 @@ impl Problem {
         let stride = lay.stride();
         if ch.bufs.len() == 1 {
             // Red–black: colour lvl % 2; red = (x + y) even, i.e. half (y + colour) % 2.
-            let hp = (y + lvl) % 2;
+            let half = (y + lvl) % 2;
             let Some((e, o)) = ch.bufs.first_mut() else {
                 return 0.0;
             };
-            let (same, other): (&mut [f32], &[f32]) = if hp == 0 { (e, o) } else { (o, e) };
-            let lr = &other[r * stride..(r + 1) * stride];
+            let (same, other): (&mut [f32], &[f32]) = if half == 0 { (e, o) } else { (o, e) };
+            let across = &other[r * stride..(r + 1) * stride];
             let (up_row, mid, dn_row) = rows3(same, stride, r, r_up, r_dn);
             let keep_old = measure || up_own || dn_own;
             if keep_old {
@@ -391,9 +391,9 @@ impl Problem {
             }
             let up_row = if up_own { &scratch[..] } else { up_row };
             let dn_row = if dn_own { &scratch[..] } else { dn_row };
-            self.run_row(isa, hp, y, omega, lr, up_row, dn_row, mid);
+            self.run_row(isa, half, y, omega, across, up_row, dn_row, mid);
             if measure {
-                delta += abs_diff_sum(lay, lay.half(hp), mid, scratch);
+                delta += abs_diff_sum(lay, lay.columns_in(half), mid, scratch);
             }
         } else {
             // Jacobi: read state lvl % 2, write the other, both halves.
@@ -406,21 +406,21 @@ impl Problem {
             } else {
                 (s1, s0)
             };
-            for hp in 0..2 {
-                let (src_same, src_other, dst_same): (&[f32], &[f32], &mut [f32]) = if hp == 0 {
+            for half in 0..2 {
+                let (src_same, src_other, dst_same): (&[f32], &[f32], &mut [f32]) = if half == 0 {
                     (&*src.0, &*src.1, &mut *dst.0)
                 } else {
                     (&*src.1, &*src.0, &mut *dst.1)
                 };
                 let row = |rr: usize| rr * stride..(rr + 1) * stride;
-                let lr = &src_other[row(r)];
+                let across = &src_other[row(r)];
                 let old = &src_same[row(r)];
                 let up_row = if up_own { old } else { &src_same[row(r_up)] };
                 let dn_row = if dn_own { old } else { &src_same[row(r_dn)] };
                 let mid = &mut dst_same[row(r)];
-                self.run_row(isa, hp, y, omega, lr, up_row, dn_row, mid);
+                self.run_row(isa, half, y, omega, across, up_row, dn_row, mid);
                 if measure {
-                    delta += abs_diff_sum(lay, lay.half(hp), mid, old);
+                    delta += abs_diff_sum(lay, lay.columns_in(half), mid, old);
                 }
             }
         }
@@ -432,34 +432,34 @@ impl Problem {
     pub(super) fn run_row(
         &self,
         isa: Isa,
-        hp: usize,
+        half: usize,
         y: usize,
         omega: f32,
-        lr: &[f32],
+        across: &[f32],
         up: &[f32],
         dn: &[f32],
         dst: &mut [f32],
     ) {
-        let coef = self.coef_row(y, hp);
-        let edges = self.edges[hp];
+        let coef = self.coef_row(y, half);
+        let edges = self.edges[half];
         let relax = omega != 1.0;
         let k = SolveScalars {
-            quarter_lambda: match self.kernel {
-                Kernel::Plain => 0.0,
-                Kernel::Groove { q } => q,
+            quarter_lambda: match self.stencil {
+                Stencil::Plain => 0.0,
+                Stencil::Groove { quarter_lambda } => quarter_lambda,
             },
             omega,
         };
-        let (i, a) = (isa, lr);
-        match self.kernel {
-            Kernel::Plain if relax => {
+        let (i, a) = (isa, across);
+        match self.stencil {
+            Stencil::Plain if relax => {
                 update_half_row::<false, true>(i, k, edges, a, up, dn, coef, dst)
             }
-            Kernel::Plain => update_half_row::<false, false>(i, k, edges, a, up, dn, coef, dst),
-            Kernel::Groove { .. } if relax => {
+            Stencil::Plain => update_half_row::<false, false>(i, k, edges, a, up, dn, coef, dst),
+            Stencil::Groove { .. } if relax => {
                 update_half_row::<true, true>(i, k, edges, a, up, dn, coef, dst)
             }
-            Kernel::Groove { .. } => {
+            Stencil::Groove { .. } => {
                 update_half_row::<true, false>(i, k, edges, a, up, dn, coef, dst)
             }
         }
@@ -516,7 +516,7 @@ impl Schedule {
 
 /// Mutable rows `[y0, y0 + rows)` of one (red–black) or two (Jacobi) states: `(e, o)` each,
 /// and of the per-row sums of measured changes (empty when the block measures nothing).
-pub(super) struct Chunk<'a> {
+pub(super) struct RowBand<'a> {
     pub(super) y0: usize,
     pub(super) rows: usize,
     pub(super) bufs: Vec<(&'a mut [f32], &'a mut [f32])>,
@@ -524,16 +524,16 @@ pub(super) struct Chunk<'a> {
 }
 
 /// Cuts every state, and the per-row sums, into the disjoint, sorted row ranges `bounds`.
-pub(super) fn split_chunks<'a>(
+pub(super) fn split_bands<'a>(
     lay: &Layout,
     states: &'a mut [&mut SplitState],
     sums: &'a mut [(f64, f64)],
     bounds: &[(usize, usize)],
-) -> Vec<Chunk<'a>> {
-    let mut chunks: Vec<Chunk<'a>> = bounds
+) -> Vec<RowBand<'a>> {
+    let mut chunks: Vec<RowBand<'a>> = bounds
         .iter()
         .zip(split_rows(sums, 1, bounds))
-        .map(|(&(lo, hi), sums)| Chunk {
+        .map(|(&(lo, hi), sums)| RowBand {
             y0: lo,
             rows: hi - lo,
             bufs: Vec::with_capacity(states.len()),

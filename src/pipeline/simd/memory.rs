@@ -110,7 +110,7 @@ pub fn vec_pair_from_rows<S>(
 
 /// A float array that starts a 64-byte cache line: with rows a whole number of lines long, the
 /// row kernels' 8-float loads and stores never straddle two lines (a straddling load costs two
-/// cache accesses; on this machine's sweeps, about a tenth of the time).
+/// cache accesses).
 #[derive(Debug, Default)]
 pub struct Aligned {
     buf: Vec<f32>,

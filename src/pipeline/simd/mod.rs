@@ -38,8 +38,8 @@ pub struct Avx2Proof(());
 pub enum Isa {
     /// Whatever the build target allows (SSE2 on plain x86-64; any other architecture).
     Portable,
-    /// 256-bit AVX2, on a CPU that reported it. AVX-512 measured no faster here: the sweeps
-    /// are bound by cache bandwidth.
+    /// 256-bit AVX2, on a CPU that reported it (AVX-512 is not used: the sweeps are bound by
+    /// cache bandwidth, docs/PERFORMANCE.md).
     Avx2(Avx2Proof),
 }
 

@@ -23,8 +23,8 @@ fn banded_problem() -> (Layout, Derivatives, WallSideMap) {
 fn blocking_bands_and_simd_do_not_change_the_result() {
     let (lay, d, walls) = banded_problem();
     let p = FlowParams::default();
-    let built = Problem::groove(&lay, &d, &walls, 100.0, &p, Isa::Portable);
-    let fast = Problem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect());
+    let built = HsSystem::groove(&lay, &d, &walls, 100.0, &p, Isa::Portable);
+    let fast = HsSystem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect());
     // Both halves' coefficients of every row, in one array.
     assert!(built.coef == fast.coef);
     assert!(built.coef.iter().all(|c| c.is_finite()));
@@ -38,8 +38,8 @@ fn blocking_bands_and_simd_do_not_change_the_result() {
                 ..FlowParams::default()
             };
             for problem in [
-                Problem::plain(&lay, &d, p.lambda),
-                Problem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect()),
+                HsSystem::plain(&lay, &d, p.lambda),
+                HsSystem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect()),
             ] {
                 let mut reference = SplitState::zeros(&lay);
                 let (it, _) = problem.solve_with(&mut reference, &p, Isa::Portable, 1, Some(1));
@@ -67,8 +67,8 @@ fn measured_stops_do_not_depend_on_the_bands() {
         ..FlowParams::default()
     };
     for problem in [
-        Problem::plain(&lay, &d, p.lambda),
-        Problem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect()),
+        HsSystem::plain(&lay, &d, p.lambda),
+        HsSystem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect()),
     ] {
         // One measured block of 5 iterations: the same sums, to the bit.
         let sums: Vec<(f64, f64)> = (1..=4)
@@ -101,8 +101,8 @@ fn passes_do_not_change_the_result() {
             ..FlowParams::default()
         };
         for problem in [
-            Problem::plain(&lay, &d, p.lambda),
-            Problem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect()),
+            HsSystem::plain(&lay, &d, p.lambda),
+            HsSystem::groove(&lay, &d, &walls, 100.0, &p, Isa::detect()),
         ] {
             let run = |pass_levels| {
                 let mut st = SplitState::zeros(&lay);
@@ -214,13 +214,13 @@ fn fast_solver_matches_naive_gauss_seidel() {
 fn coefficient_slots_cover_each_half_row_once() {
     for w in [2, 3, 16, 17, 31, 40, 1280] {
         let lay = Layout::new(w, 1);
-        for hp in 0..2 {
-            let cr = CoefRow::new(&lay, hp, GROOVE_COEFS);
+        for half in 0..2 {
+            let cr = CoefRow::new(&lay, half, GROOVE_COEFS);
             let mut seen = vec![false; cr.len()];
             for i in 0..cr.n {
                 for k in 0..cr.c {
                     let at = cr.at(i, k);
-                    assert!(!seen[at], "w {w} half {hp}: column {i} coefficient {k}");
+                    assert!(!seen[at], "w {w} half {half}: column {i} coefficient {k}");
                     seen[at] = true;
                 }
                 // Column i is lane i div m of vector i mod m, in the state as here.
@@ -233,7 +233,7 @@ fn coefficient_slots_cover_each_half_row_once() {
             // `each_slot` visits the columns in order, at their slots.
             let mut next = 0;
             lay.each_slot(cr.n, |i, at| {
-                assert_eq!((i, at), (next, lay.slot(next)), "w {w} half {hp}");
+                assert_eq!((i, at), (next, lay.slot(next)), "w {w} half {half}");
                 next += 1;
             });
             assert_eq!(next, cr.n);
@@ -272,7 +272,7 @@ fn adaptive_blocks_stop_close_to_where_every_iteration_is_checked() {
         sor_omega: 1.0,
         ..params(FlowMethod::HornSchunck)
     };
-    let problem = Problem::plain(&lay, &d, p.lambda);
+    let problem = HsSystem::plain(&lay, &d, p.lambda);
     let mut st = SplitState::zeros(&lay);
     let (exact, ok) = problem.solve_with(&mut st, &p, Isa::detect(), 1, Some(1));
     assert!(ok && exact > 2 * MAX_BLOCK_ITERATIONS as u32, "{exact}");

@@ -94,7 +94,7 @@ pub(in crate::pipeline::simd) fn blocks<const GROOVE: bool, const RELAX: bool>(
             .map_or(&[][..], |p| p.as_chunks::<PAIR>().0)
     }
     // The u (`part` 0) or v (1) vector of a pair, copied as one fixed run (which stays in
-    // vector registers; a lane-by-lane copy did not, and doubled the time).
+    // vector registers; a lane-by-lane copy did not).
     #[inline(always)]
     fn half(p: &[f32; PAIR], part: usize) -> F32x8 {
         let (u, v) = p.split_at(LANES);
