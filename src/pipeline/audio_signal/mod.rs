@@ -41,13 +41,13 @@ const SAME_COLUMN_TOL_PX: f64 = 1e-3;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SoundParams {
-    /// Output sample rate (44 100 or 48 000 Hz).
+    #[doc = knob!("sound.output_rate_hz")]
     pub output_rate_hz: u32,
-    /// Spacing of the native (pre-resampling) samples along the groove; 0 = one output sample.
+    #[doc = knob!("sound.native_spacing_um")]
     pub native_spacing_um: f64,
-    /// Peak level after normalisation (0 < p ≤ 1); 0 keeps velocity scaled by `full_scale_mm_s`.
+    #[doc = knob!("sound.normalize_peak")]
     pub normalize_peak: f32,
-    /// Velocity mapped to full scale when not normalising (mm/s).
+    #[doc = knob!("sound.full_scale_mm_s")]
     pub full_scale_mm_s: f64,
 }
 
@@ -63,62 +63,53 @@ impl Default for SoundParams {
 }
 
 impl SoundParams {
-    /// The native grid spacing to stitch on (µm): `native_spacing_um`, or when that is 0 the
-    /// groove length of one output sample, Vt·1000/`output_rate_hz` (then no resampling is needed).
+    /// Checks every sound knob.
     ///
     /// # Errors
-    /// [`StageError::InvalidParam`] for a negative/NaN spacing, a zero rate or a non-positive Vt.
-    pub fn spacing_um(&self, groove_speed_mm_s: f64) -> Result<f64, StageError> {
-        check_range(
-            "sound.native_spacing_um",
-            self.native_spacing_um,
-            0.0,
-            f64::MAX,
-        )?;
-        if self.native_spacing_um > 0.0 {
-            return Ok(self.native_spacing_um);
-        }
-        check_range(
-            "groove_speed_mm_s",
-            groove_speed_mm_s,
-            f64::MIN_POSITIVE,
-            f64::MAX,
-        )?;
-        if self.output_rate_hz == 0 {
+    /// [`StageError::InvalidParam`] naming the first bad key.
+    pub fn validate(&self) -> Result<(), StageError> {
+        if !matches!(self.output_rate_hz, 8_000..=192_000) {
             return Err(StageError::InvalidParam {
-                name: "sound.output_rate_hz".to_string(),
-                problem: "0 Hz".to_string(),
+                name: "sound.output_rate_hz".into(),
+                problem: format!(
+                    "{} Hz is not a usable rate (8000..192000)",
+                    self.output_rate_hz
+                ),
             });
         }
-        Ok(groove_speed_mm_s * 1000.0 / f64::from(self.output_rate_hz))
-    }
-
-    /// Scales velocity channels (mm/s) to output level in place and returns the gain applied:
-    /// with `normalize_peak` > 0 the largest |sample| over all channels becomes it (silence is
-    /// left alone, gain 1); with 0 `full_scale_mm_s` maps to 1.0. Non-finite samples become 0.
-    ///
-    /// # Errors
-    /// [`StageError::InvalidParam`] when `normalize_peak` is outside [0, 1] or NaN, or
-    /// `full_scale_mm_s` is not positive while not normalising.
-    pub fn scale_to_output(&self, channels: &mut [Vec<f32>]) -> Result<f32, StageError> {
+        check_range("sound.native_spacing_um", self.native_spacing_um, 0.0, 1e6)?;
         check_range(
             "sound.normalize_peak",
             f64::from(self.normalize_peak),
             0.0,
             1.0,
         )?;
-        for v in channels.iter_mut().flatten() {
-            if !v.is_finite() {
-                *v = 0.0;
-            }
-        }
-        let gain = if self.normalize_peak > 0.0 {
-            let peak = channels
-                .iter()
-                .flatten()
-                .fold(0.0f32, |m, v| m.max(v.abs()));
+        check_range("sound.full_scale_mm_s", self.full_scale_mm_s, 1e-9, 1e9)
+    }
+
+    /// Scales velocity channels (mm/s) to output level in place and returns the gain applied
+    /// (per mm/s): with `normalize_peak` > 0 the largest finite |sample| over all channels
+    /// becomes it (silence is left alone, gain 1); with 0 `full_scale_mm_s` maps to 1.0. Each
+    /// sample is scaled in f64 and rounded once; non-finite samples become 0.
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] when `normalize_peak` is outside [0, 1] or NaN, or
+    /// `full_scale_mm_s` is not positive while not normalising.
+    pub fn scale_to_output(&self, channels: &mut [Vec<f32>]) -> Result<f64, StageError> {
+        check_range(
+            "sound.normalize_peak",
+            f64::from(self.normalize_peak),
+            0.0,
+            1.0,
+        )?;
+        let peak =
+            channels.iter().flatten().fold(
+                0.0_f32,
+                |m, v| if v.is_finite() { m.max(v.abs()) } else { m },
+            );
+        let gain_per_mm_s = if self.normalize_peak > 0.0 {
             if peak > 0.0 {
-                self.normalize_peak / peak
+                f64::from(self.normalize_peak / peak)
             } else {
                 1.0
             }
@@ -129,14 +120,16 @@ impl SoundParams {
                 f64::MIN_POSITIVE,
                 f64::MAX,
             )?;
-            #[allow(clippy::cast_possible_truncation)] // a gain
-            let g = (1.0 / self.full_scale_mm_s) as f32;
-            g
+            1.0 / self.full_scale_mm_s
         };
         for v in channels.iter_mut().flatten() {
-            *v *= gain;
+            *v = if v.is_finite() {
+                (f64::from(*v) * gain_per_mm_s) as f32
+            } else {
+                0.0
+            };
         }
-        Ok(gain)
+        Ok(gain_per_mm_s)
     }
 }
 

@@ -468,24 +468,29 @@ fn orientation_to_output_rate_end_to_end() {
 }
 
 #[test]
-fn spacing_and_output_level() {
+fn output_level_and_checks() {
     let p = SoundParams::default();
-    assert!((p.spacing_um(VT_MM_S).unwrap() - VT_MM_S * 1000.0 / 44_100.0).abs() < 1e-12);
-    let fixed = SoundParams {
-        native_spacing_um: 5.0,
-        ..SoundParams::default()
-    };
-    assert_eq!(fixed.spacing_um(f64::NAN).unwrap(), 5.0);
-    assert!(p.spacing_um(0.0).is_err());
-    let bad = SoundParams {
-        native_spacing_um: -1.0,
-        ..SoundParams::default()
-    };
-    assert!(bad.spacing_um(VT_MM_S).is_err());
+    assert!(p.validate().is_ok());
+    for bad in [
+        SoundParams {
+            native_spacing_um: -1.0,
+            ..SoundParams::default()
+        },
+        SoundParams {
+            output_rate_hz: 0,
+            ..SoundParams::default()
+        },
+        SoundParams {
+            full_scale_mm_s: f64::NAN,
+            ..SoundParams::default()
+        },
+    ] {
+        assert!(bad.validate().is_err(), "{bad:?}");
+    }
 
     let mut ch = vec![vec![10.0f32, -40.0], vec![f32::NAN, 20.0]];
     let g = p.scale_to_output(&mut ch).unwrap();
-    assert!((g - 0.89 / 40.0).abs() < 1e-7);
+    assert_eq!(g, f64::from(0.89_f32 / 40.0));
     assert!((ch[0][1] + 0.89).abs() < 1e-6 && ch[1][0] == 0.0);
     let raw = SoundParams {
         normalize_peak: 0.0,

@@ -124,12 +124,7 @@ pub(super) fn median_select(
             buf.extend(s.iter().copied().filter(|e| e.is_finite()));
         }
     }
-    if buf.is_empty() {
-        return f32::NAN;
-    }
-    let mid = buf.len() / 2;
-    let (_, med, _) = buf.select_nth_unstable_by(mid, f32::total_cmp);
-    *med
+    median_in_place(buf).unwrap_or(f32::NAN)
 }
 
 /// Median filter (side `m`, NaN-aware) of `v` → `out`; NaN where the window holds no finite

@@ -37,7 +37,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::optical_flow::FlowField;
-use super::{StageError, check_range};
+use super::{StageError, check_range, median_in_place};
 use crate::image::{Image, zeros_par};
 use crate::io::Geometry;
 use crate::pipeline::simd::Isa;
@@ -46,6 +46,8 @@ mod average;
 mod kalman;
 mod measure;
 mod median;
+#[cfg(test)]
+mod reference;
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // Tests fail loudly on purpose.
 mod tests;
@@ -61,18 +63,22 @@ use window_sums::*;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DepthParams {
-    /// Run the Kalman filter; when false, average the per-frame depths.
+    #[doc = knob!("depth.kalman")]
     pub kalman: bool,
-    /// Process noise of the planar-orientation state (per frame): variance added to the
-    /// relative inverse depth Z_ref/Z (and that over r² to its per-pixel slopes).
+    #[doc = knob!("depth.process_noise")]
+    ///
+    /// The variance added per frame to the relative inverse depth Z_ref/Z, and that over r² to its
+    /// per-pixel slopes.
     pub process_noise: f32,
-    /// Measurement noise of one flow value (px²).
+    #[doc = knob!("depth.measurement_noise_px2")]
     pub measurement_noise_px2: f32,
-    /// Side of the median filter on µ (paper: 5; odd, 1 = off).
+    #[doc = knob!("depth.median_px")]
+    ///
+    /// Odd; 1 = off.
     pub median_px: usize,
-    /// Flow values with confidence below this are ignored.
+    #[doc = knob!("depth.min_confidence")]
     pub min_confidence: f32,
-    /// Side of the square neighbourhood whose flows measure each pixel's plane (odd, px).
+    #[doc = knob!("depth.neighbourhood_px")]
     pub neighbourhood_px: usize,
     /// Instruction set of the filter's row bands and the median network (not a knob: never in
     /// the TOML; by default the CPU's best, detected once).
@@ -137,36 +143,47 @@ const IOTA: usize = 2;
 /// Index of Var ι̃ (P22) in the state.
 const VAR_IOTA: usize = 8;
 
-/// Checks the params and the geometry the stage needs.
-fn validate(p: &DepthParams, geom: &Geometry) -> Result<(), StageError> {
-    check_range("depth.process_noise", f64::from(p.process_noise), 0.0, 1e12)?;
-    check_range(
-        "depth.measurement_noise_px2",
-        f64::from(p.measurement_noise_px2),
-        1e-30,
-        1e12,
-    )?;
-    check_range(
-        "depth.min_confidence",
-        f64::from(p.min_confidence),
-        0.0,
-        1e12,
-    )?;
-    for (name, v, max) in [
-        ("depth.median_px", p.median_px, MAX_MEDIAN_PX),
-        (
-            "depth.neighbourhood_px",
-            p.neighbourhood_px,
-            MAX_NEIGHBOURHOOD_PX,
-        ),
-    ] {
-        if v % 2 == 0 || v > max {
-            return Err(StageError::InvalidParam {
-                name: name.into(),
-                problem: format!("{v} is not an odd size in 1..={max}"),
-            });
+impl DepthParams {
+    /// Checks every depth knob.
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the first bad key.
+    pub fn validate(&self) -> Result<(), StageError> {
+        let p = self;
+        check_range("depth.process_noise", f64::from(p.process_noise), 0.0, 1e12)?;
+        check_range(
+            "depth.measurement_noise_px2",
+            f64::from(p.measurement_noise_px2),
+            1e-30,
+            1e12,
+        )?;
+        check_range(
+            "depth.min_confidence",
+            f64::from(p.min_confidence),
+            0.0,
+            1e12,
+        )?;
+        for (name, v, max) in [
+            ("depth.median_px", p.median_px, MAX_MEDIAN_PX),
+            (
+                "depth.neighbourhood_px",
+                p.neighbourhood_px,
+                MAX_NEIGHBOURHOOD_PX,
+            ),
+        ] {
+            if v % 2 == 0 || v > max {
+                return Err(StageError::InvalidParam {
+                    name: name.into(),
+                    problem: format!("{v} is not an odd size in 1..={max}"),
+                });
+            }
         }
+        Ok(())
     }
+}
+
+/// Checks the geometry the stage needs.
+fn check_geometry(geom: &Geometry) -> Result<(), StageError> {
     check_range("geometry.focal_px", geom.focal_px, 1e-9, 1e12)?;
     check_range("geometry.frame_step_um", geom.frame_step_um, 1e-12, 1e12)?;
     check_range(
@@ -174,8 +191,7 @@ fn validate(p: &DepthParams, geom: &Geometry) -> Result<(), StageError> {
         geom.working_distance_um,
         1e-9,
         1e12,
-    )?;
-    Ok(())
+    )
 }
 
 /// Checks that the flow fields agree in size and run forward in time.
@@ -240,7 +256,8 @@ pub fn estimate_depth(
     geom: &Geometry,
     params: &DepthParams,
 ) -> Result<DepthMap, StageError> {
-    validate(params, geom)?;
+    params.validate()?;
+    check_geometry(geom)?;
     let (width, height) = check_flows(flows)?;
     let z_ref = geom.working_distance_um;
     let land_shift_px = geom.focal_px * geom.frame_step_um / z_ref;

@@ -1,7 +1,9 @@
-//! Tests of the depth stage: planes of known depth and tilt, noisy frames, warnings and errors, the AVX2 and median-network paths.
+//! Tests of the depth stage: planes of known depth and tilt, noisy frames, warnings and errors, the AVX2 and median-network paths; the fast filter against the reference in the sub-module.
 
 use super::*;
 use crate::pipeline::walls::test_support::{Rng, paper_geometry};
+
+mod reference;
 
 fn field(u: Image, frame_index: usize) -> FlowField {
     let (w, h) = (u.width, u.height);

@@ -20,6 +20,8 @@ use super::StageError;
 use crate::image::Image;
 use crate::pipeline::simd::Isa;
 
+#[cfg(test)]
+mod reference;
 mod shift;
 mod simoncelli;
 #[cfg(test)]
@@ -46,10 +48,9 @@ pub enum DerivativeMode {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DerivativeParams {
-    /// Filter family.
+    #[doc = knob!("derivatives.mode")]
     pub mode: DerivativeMode,
-    /// Shift every frame back by the known land motion before filtering, so the flow stage
-    /// only measures the small residual (keeps the linearisation valid for steps > 1 px).
+    #[doc = knob!("derivatives.prewarp")]
     pub prewarp: bool,
     /// Instruction set of the filter bands (not a knob: never in the TOML; by default the
     /// CPU's best, detected once).

@@ -3,6 +3,8 @@
 use super::*;
 use proptest::prelude::*;
 
+mod reference;
+
 fn simoncelli(prewarp: bool) -> DerivativeParams {
     DerivativeParams {
         mode: DerivativeMode::Simoncelli,

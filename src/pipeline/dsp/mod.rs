@@ -24,7 +24,7 @@ mod tests;
 use biquad::*;
 pub use biquad::{Biquad, butterworth_lowpass, dc_blocker};
 pub(crate) use spectrum::cross_correlation;
-pub use spectrum::{fft_in_place, magnitude_spectrum};
+pub use spectrum::magnitude_spectrum;
 
 /// Playback equalisation curve.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -44,15 +44,15 @@ pub enum EqCurve {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DspParams {
-    /// Apply the Butterworth low-pass.
+    #[doc = knob!("dsp.lowpass")]
     pub lowpass: bool,
-    /// Its −3 dB cutoff (Hz).
+    #[doc = knob!("dsp.lowpass_hz")]
     pub lowpass_hz: f64,
-    /// EQ curve.
+    #[doc = knob!("dsp.eq")]
     pub eq: EqCurve,
-    /// Apply a first-order DC-blocking high-pass first (per-group tilt bias becomes DC).
+    #[doc = knob!("dsp.dc_block")]
     pub dc_block: bool,
-    /// Its −3 dB corner (Hz).
+    #[doc = knob!("dsp.dc_block_hz")]
     pub dc_block_hz: f64,
 }
 
@@ -65,6 +65,17 @@ impl Default for DspParams {
             dc_block: true,
             dc_block_hz: 10.0,
         }
+    }
+}
+
+impl DspParams {
+    /// Checks the DSP knobs that do not depend on the sample rate ([`dsp_chain`] checks the
+    /// corners against Nyquist).
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the bad key.
+    pub fn validate(&self) -> Result<(), StageError> {
+        check_range("dsp.lowpass_hz", self.lowpass_hz, 1.0, 1e6)
     }
 }
 

@@ -80,12 +80,7 @@ pub(super) fn centroid_line(
         .map(|x| column(x).len())
         .filter(|&c| c > 0)
         .collect();
-    let thickness = if counts.is_empty() {
-        0.0
-    } else {
-        let mid = counts.len() / 2;
-        *counts.select_nth_unstable(mid).1 as f32
-    };
+    let thickness = median_in_place(&mut counts).map_or(0.0, |c| c as f32);
     let gate = 0.5 * thickness + CENTROID_GATE_MARGIN_PX;
 
     // Pass 1: the densest span per column; a running median along x then removes columns where a
@@ -195,11 +190,7 @@ pub(super) fn running_median(values: &[f64], half: usize) -> Vec<f64> {
             let lo = i.saturating_sub(half);
             let hi = (i + half + 1).min(n);
             window.extend(values[lo..hi].iter().copied().filter(|v| v.is_finite()));
-            if window.is_empty() {
-                return f64::NAN;
-            }
-            let mid = window.len() / 2;
-            *window.select_nth_unstable_by(mid, f64::total_cmp).1
+            median_in_place(&mut window).unwrap_or(f64::NAN)
         })
         .collect()
 }

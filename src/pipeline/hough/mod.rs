@@ -37,7 +37,7 @@ use serde::{Deserialize, Serialize};
 use super::derivatives::Derivatives;
 use super::optical_flow::FlowField;
 use super::walls::{WallLine, WallSide};
-use super::{StageError, check_range};
+use super::{StageError, check_range, median_in_place};
 use crate::image::Image;
 use crate::io::scan::{DualFocusMeta, GlassSide};
 
@@ -75,38 +75,44 @@ const UM_PER_MM: f64 = 1000.0;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct HoughParams {
-    /// In-focus pixels have gradient magnitude above this (grey levels per px).
+    #[doc = knob!("hough.gradient_threshold")]
     pub gradient_threshold: f32,
-    /// θ range start (degrees).
+    #[doc = knob!("hough.theta_min_deg")]
     pub theta_min_deg: f32,
-    /// θ range end (degrees).
+    #[doc = knob!("hough.theta_max_deg")]
     pub theta_max_deg: f32,
-    /// θ bin width (degrees); a coarser value trades accuracy for speed.
+    #[doc = knob!("hough.theta_step_deg")]
     pub theta_step_deg: f32,
-    /// ρ bin width (px); ρ runs from 0 to the image height.
+    #[doc = knob!("hough.rho_step_px")]
     pub rho_step_px: f32,
-    /// Peaks searched for (paper: 3). The dual-focus geometry needs exactly 3.
+    #[doc = knob!("hough.peak_count")]
+    ///
+    /// The dual-focus geometry needs exactly 3.
     pub peak_count: usize,
-    /// Half-width of a peak's window in θ (degrees).
+    #[doc = knob!("hough.window_theta_deg")]
     pub window_theta_deg: f32,
-    /// Half-width of a peak's window in ρ (px).
+    #[doc = knob!("hough.window_rho_px")]
     pub window_rho_px: f32,
-    /// Smoothing of centroid lines along x (moving-average half-width, px).
+    #[doc = knob!("hough.line_smoothing_px")]
     pub line_smoothing_px: usize,
-    /// A peak needs at least this many votes per image column (a one-pixel-thick line across the
-    /// whole width gives 1); weaker maxima are not stripes.
+    #[doc = knob!("hough.min_votes_per_column")]
+    ///
+    /// A one-pixel-thick line across the whole width gives 1; weaker maxima are not stripes.
     pub min_votes_per_column: f32,
-    /// A peak also needs at least this fraction of the strongest peak's votes (keeps the
-    /// "butterfly" flanks of a strong stripe and noise from passing for a missing stripe).
+    #[doc = knob!("hough.min_peak_ratio")]
+    ///
+    /// Keeps the "butterfly" flanks of a strong stripe and noise from passing for a missing stripe.
     pub min_peak_ratio: f32,
-    /// Peaks are searched on the votes summed over ±this many px of ρ (0: single bins, the
-    /// paper's plain Hough). A stripe that wiggles by ±A px with the sound spreads its votes over
-    /// about 2A px of ρ; summing over a band of about ±A makes its mean line win over chance
-    /// tangents. The sums also collect more noise: raise `min_votes_per_column` with it.
-    /// Peak votes and the thresholds then refer to the band sums.
+    #[doc = knob!("hough.peak_rho_band_px")]
+    ///
+    /// A stripe that wiggles by ±A px with the sound spreads its votes over about 2A px of ρ;
+    /// summing over a band of about ±A makes its mean line win over chance tangents. The sums also
+    /// collect more noise: raise `min_votes_per_column` with it. Peak votes and the thresholds then
+    /// refer to the band sums.
     pub peak_rho_band_px: f32,
-    /// At most this many in-focus pixels vote (0 = all); above it every k-th pixel (row-major)
-    /// votes, and the vote threshold is scaled by 1/k. Segmentation always uses every pixel.
+    #[doc = knob!("hough.max_vote_points")]
+    ///
+    /// The vote threshold is scaled by 1/k; segmentation always uses every pixel.
     pub max_vote_points: usize,
 }
 
@@ -281,83 +287,94 @@ fn invalid(name: &str, problem: String) -> StageError {
     }
 }
 
-/// Checks every knob of [`HoughParams`].
+impl HoughParams {
+    /// Checks every Hough knob.
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the first bad key.
+    pub fn validate(&self) -> Result<(), StageError> {
+        let p = self;
+        check_range(
+            "hough.gradient_threshold",
+            f64::from(p.gradient_threshold),
+            0.0,
+            f64::MAX,
+        )?;
+        check_range(
+            "hough.theta_min_deg",
+            f64::from(p.theta_min_deg),
+            -90.0,
+            90.0,
+        )?;
+        check_range(
+            "hough.theta_max_deg",
+            f64::from(p.theta_max_deg),
+            -90.0,
+            90.0,
+        )?;
+        if p.theta_max_deg < p.theta_min_deg {
+            return Err(invalid(
+                "hough.theta_max_deg",
+                format!(
+                    "θ range is reversed ({} > {})",
+                    p.theta_min_deg, p.theta_max_deg
+                ),
+            ));
+        }
+        check_range(
+            "hough.theta_step_deg",
+            f64::from(p.theta_step_deg),
+            1e-3,
+            90.0,
+        )?;
+        if p.theta_step_deg <= 0.0 {
+            return Err(invalid("hough.theta_step_deg", "must be positive".into()));
+        }
+        check_range("hough.rho_step_px", f64::from(p.rho_step_px), 1e-2, 1e6)?;
+        if p.peak_count != STRIPE_COUNT {
+            return Err(invalid(
+                "hough.peak_count",
+                format!(
+                    "the dual-focus geometry shows exactly {STRIPE_COUNT} stripes, got {}",
+                    p.peak_count
+                ),
+            ));
+        }
+        // Below 90° so a window's θ interval is shorter than π (see `WindowTest::rho_range`).
+        check_range(
+            "hough.window_theta_deg",
+            f64::from(p.window_theta_deg),
+            0.0,
+            89.0,
+        )?;
+        check_range(
+            "hough.window_rho_px",
+            f64::from(p.window_rho_px),
+            0.0,
+            f64::MAX,
+        )?;
+        check_range(
+            "hough.min_peak_ratio",
+            f64::from(p.min_peak_ratio),
+            0.0,
+            1.0,
+        )?;
+        check_range(
+            "hough.min_votes_per_column",
+            f64::from(p.min_votes_per_column),
+            0.0,
+            f64::MAX,
+        )?;
+        Ok(())
+    }
+}
+
+/// [`HoughParams::validate`] (the path other code used).
 ///
 /// # Errors
-/// [`StageError::InvalidParam`] naming the first bad knob.
+/// As that.
 pub fn validate_params(p: &HoughParams) -> Result<(), StageError> {
-    check_range(
-        "hough.gradient_threshold",
-        f64::from(p.gradient_threshold),
-        0.0,
-        f64::MAX,
-    )?;
-    check_range(
-        "hough.theta_min_deg",
-        f64::from(p.theta_min_deg),
-        -90.0,
-        90.0,
-    )?;
-    check_range(
-        "hough.theta_max_deg",
-        f64::from(p.theta_max_deg),
-        -90.0,
-        90.0,
-    )?;
-    if p.theta_max_deg < p.theta_min_deg {
-        return Err(invalid(
-            "hough.theta_max_deg",
-            format!(
-                "θ range is reversed ({} > {})",
-                p.theta_min_deg, p.theta_max_deg
-            ),
-        ));
-    }
-    check_range(
-        "hough.theta_step_deg",
-        f64::from(p.theta_step_deg),
-        1e-3,
-        90.0,
-    )?;
-    if p.theta_step_deg <= 0.0 {
-        return Err(invalid("hough.theta_step_deg", "must be positive".into()));
-    }
-    check_range("hough.rho_step_px", f64::from(p.rho_step_px), 1e-2, 1e6)?;
-    if p.peak_count != STRIPE_COUNT {
-        return Err(invalid(
-            "hough.peak_count",
-            format!(
-                "the dual-focus geometry shows exactly {STRIPE_COUNT} stripes, got {}",
-                p.peak_count
-            ),
-        ));
-    }
-    // Below 90° so a window's θ interval is shorter than π (see `WindowTest::rho_range`).
-    check_range(
-        "hough.window_theta_deg",
-        f64::from(p.window_theta_deg),
-        0.0,
-        89.0,
-    )?;
-    check_range(
-        "hough.window_rho_px",
-        f64::from(p.window_rho_px),
-        0.0,
-        f64::MAX,
-    )?;
-    check_range(
-        "hough.min_peak_ratio",
-        f64::from(p.min_peak_ratio),
-        0.0,
-        1.0,
-    )?;
-    check_range(
-        "hough.min_votes_per_column",
-        f64::from(p.min_votes_per_column),
-        0.0,
-        f64::MAX,
-    )?;
-    Ok(())
+    p.validate()
 }
 
 fn validate_dual(d: &DualFocusMeta) -> Result<(), StageError> {

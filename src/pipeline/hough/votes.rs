@@ -178,7 +178,7 @@ pub(super) fn votes_and_peaks(
     flow: &FlowField,
     params: &HoughParams,
 ) -> Result<Votes, StageError> {
-    validate_params(params)?;
+    params.validate()?;
     let (w, h) = (derivs.ix.width, derivs.ix.height);
     if w == 0 || h == 0 {
         return Err(bad_input("empty image".into()));

@@ -105,6 +105,8 @@ use crate::pipeline::simd::Isa;
 mod groove;
 mod layout;
 mod lucas_kanade;
+#[cfg(test)]
+mod reference;
 mod solver;
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // tests fail loudly on purpose
@@ -146,29 +148,32 @@ pub enum Solver {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FlowParams {
-    /// Algorithm.
+    #[doc = knob!("flow.method")]
     pub method: FlowMethod,
-    /// Iteration scheme.
+    #[doc = knob!("flow.solver")]
     pub solver: Solver,
-    /// Smoothness weight λ (α in Horn–Schunck).
+    #[doc = knob!("flow.lambda")]
     pub lambda: f32,
-    /// Iteration cap (paper: 100). The groove method's wall-estimating plain pass may run up to
+    #[doc = knob!("flow.max_iterations")]
+    ///
+    /// The groove method's wall-estimating plain pass may run up to
     /// [`WALL_PRESOLVE_MAX_ITERATIONS`] whatever this is.
     pub max_iterations: u32,
-    /// Convergence threshold τ: stop when the mean absolute update falls below it (px). The
-    /// default, 10⁻⁴, is set for the groove method (its wall-estimating plain pass converges to
+    #[doc = knob!("flow.tolerance_px")]
+    ///
+    /// The default, 10⁻⁴, is set for the groove method (its wall-estimating plain pass converges to
     /// [`WALL_PRESOLVE_TOLERANCE_PX`] regardless); a plain Horn–Schunck field meant to be fully
     /// converged (a `.flo` export, the depth scenes) is closer with 10⁻⁵.
     pub tolerance_px: f32,
-    /// Pixels whose gradient magnitude is below this carry no flow (confidence 0).
+    #[doc = knob!("flow.gradient_threshold")]
     pub gradient_threshold: f32,
-    /// Lucas–Kanade window side, px (odd).
+    #[doc = knob!("flow.lk_window_px")]
     pub lk_window_px: usize,
-    /// Weight γ of the groove-orientation penalty, as a multiple of λ (γ = groove_weight·λ).
+    #[doc = knob!("flow.groove_weight")]
     pub groove_weight: f32,
-    /// Over-relaxation factor ω of the Gauss–Seidel sweeps, in (0, 2): 1 is plain
-    /// Gauss–Seidel, 1 < ω < 2 is SOR (the same solution, reached in fewer iterations).
-    /// Jacobi ignores it.
+    #[doc = knob!("flow.sor_omega")]
+    ///
+    /// In (0, 2): the same solution as plain Gauss–Seidel, reached in fewer iterations.
     pub sor_omega: f32,
     /// Instruction set of the solver's kernels (not a knob: never in the TOML; by default the
     /// CPU's best, detected once).
@@ -299,7 +304,7 @@ pub fn compute_flow_from(
     init: Option<&FlowField>,
     params: &FlowParams,
 ) -> Result<FlowField, StageError> {
-    validate(params)?;
+    params.validate()?;
     let (width, height) = check_derivatives(d)?;
     let n = width * height;
     if !d.base_flow_px.is_finite() {
@@ -406,7 +411,7 @@ pub fn compute_flow_from(
 /// # Errors
 /// As [`compute_flow`].
 pub fn flow_confidence_only(d: &Derivatives, params: &FlowParams) -> Result<FlowField, StageError> {
-    validate(params)?;
+    params.validate()?;
     if params.method == FlowMethod::LucasKanade {
         return compute_flow(d, 1.0, None, params);
     }
@@ -447,53 +452,53 @@ fn bad_input(problem: String) -> StageError {
     }
 }
 
-fn validate(p: &FlowParams) -> Result<(), StageError> {
-    super::check_range(
-        "flow.lambda",
-        f64::from(p.lambda),
-        f64::from(f32::MIN_POSITIVE),
-        f64::from(f32::MAX),
-    )?;
-    super::check_range(
-        "flow.tolerance_px",
-        f64::from(p.tolerance_px),
-        0.0,
-        f64::from(f32::MAX),
-    )?;
-    super::check_range(
-        "flow.gradient_threshold",
-        f64::from(p.gradient_threshold),
-        0.0,
-        f64::from(f32::MAX),
-    )?;
-    super::check_range(
-        "flow.groove_weight",
-        f64::from(p.groove_weight),
-        0.0,
-        f64::from(f32::MAX),
-    )?;
-    if !(p.sor_omega > 0.0 && p.sor_omega < 2.0) {
-        return Err(StageError::InvalidParam {
-            name: "flow.sor_omega".to_string(),
-            problem: format!("{} is not in (0, 2)", p.sor_omega),
-        });
+impl FlowParams {
+    /// Checks every flow knob.
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the first bad key.
+    pub fn validate(&self) -> Result<(), StageError> {
+        let p = self;
+        super::check_range("flow.lambda", f64::from(p.lambda), 1e-12, 1e12)?;
+        super::check_range("flow.tolerance_px", f64::from(p.tolerance_px), 0.0, 1e3)?;
+        super::check_range(
+            "flow.gradient_threshold",
+            f64::from(p.gradient_threshold),
+            0.0,
+            1e6,
+        )?;
+        if p.max_iterations == 0 {
+            return Err(StageError::InvalidParam {
+                name: "flow.max_iterations".to_string(),
+                problem: "must be at least 1".to_string(),
+            });
+        }
+        super::check_range(
+            "flow.groove_weight",
+            f64::from(p.groove_weight),
+            0.0,
+            f64::from(f32::MAX),
+        )?;
+        if !(p.sor_omega > 0.0 && p.sor_omega < 2.0) {
+            return Err(StageError::InvalidParam {
+                name: "flow.sor_omega".to_string(),
+                problem: format!("{} is not in (0, 2)", p.sor_omega),
+            });
+        }
+        if p.lk_window_px.is_multiple_of(2)
+            || p.lk_window_px < 3
+            || p.lk_window_px > MAX_LK_WINDOW_PX
+        {
+            return Err(StageError::InvalidParam {
+                name: "flow.lk_window_px".to_string(),
+                problem: format!(
+                    "{} must be odd and in [3, {MAX_LK_WINDOW_PX}]",
+                    p.lk_window_px
+                ),
+            });
+        }
+        Ok(())
     }
-    if p.max_iterations == 0 {
-        return Err(StageError::InvalidParam {
-            name: "flow.max_iterations".to_string(),
-            problem: "must be at least 1".to_string(),
-        });
-    }
-    if p.lk_window_px.is_multiple_of(2) || p.lk_window_px < 3 || p.lk_window_px > MAX_LK_WINDOW_PX {
-        return Err(StageError::InvalidParam {
-            name: "flow.lk_window_px".to_string(),
-            problem: format!(
-                "{} must be odd and in [3, {MAX_LK_WINDOW_PX}]",
-                p.lk_window_px
-            ),
-        });
-    }
-    Ok(())
 }
 
 /// `sqrt(Ix² + Iy²)`, zeroed below `threshold` (a row at a time, so the loop vectorises).

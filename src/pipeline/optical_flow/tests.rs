@@ -1,9 +1,10 @@
-//! Unit tests of the flow stage: known shifts, tilted planes, the groove constraint's Euler–Lagrange equations, and the fast solver against a naive one.
+//! Unit tests of the flow stage: known shifts, tilted planes, the groove constraint's Euler–Lagrange equations; the fast solver against the reference and its blocking in the sub-modules.
 
 use super::*;
 use crate::pipeline::derivatives::{DerivativeMode, DerivativeParams, compute_derivatives};
 use proptest::prelude::*;
 
+mod reference;
 mod solver;
 
 /// splitmix64, for reproducible textures.

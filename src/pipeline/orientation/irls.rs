@@ -319,7 +319,7 @@ pub(super) fn fit_set(
 /// # Errors
 /// [`StageError`] with fewer than 3 points, a degenerate set, or invalid params.
 pub fn fit_plane(points: &[[f64; 3]], params: &OrientationParams) -> Result<PlaneFit, StageError> {
-    validate(params)?;
+    params.validate()?;
     let mut set = PointSet::default();
     for &[x, y, z] in points {
         if !(x.is_finite() && y.is_finite() && z.is_finite()) {

@@ -11,6 +11,8 @@ use crate::io::Geometry;
 use crate::pipeline::simd::Isa;
 
 mod irls;
+#[cfg(test)]
+mod reference;
 mod samples;
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // Tests fail loudly on purpose.
@@ -27,28 +29,29 @@ pub use samples::{median_wall_slope, reject_slopes_against};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OrientationParams {
-    /// Use the Lorentzian M-estimator; when false, plain least squares.
+    #[doc = knob!("orientation.robust")]
     pub robust: bool,
-    /// Side of the square neighbourhood about each sample on a wall line, px (paper: 100).
+    #[doc = knob!("orientation.neighbourhood_px")]
     pub neighbourhood_px: usize,
-    /// Starting Lorentzian scale σ (µm of residual).
+    #[doc = knob!("orientation.sigma_start_um")]
     pub sigma_start_um: f64,
-    /// σ is multiplied by this each round (0 < f < 1).
+    #[doc = knob!("orientation.sigma_decay")]
     pub sigma_decay: f64,
-    /// σ never falls below this (µm).
+    #[doc = knob!("orientation.sigma_min_um")]
     pub sigma_min_um: f64,
-    /// τ1: stop when the weighted mean residual (µm) falls below it.
+    #[doc = knob!("orientation.residual_tolerance_um")]
     pub residual_tolerance_um: f64,
-    /// τ2: stop (diverged) when the residual grows by more than this factor in a round.
+    #[doc = knob!("orientation.divergence_factor")]
     pub divergence_factor: f64,
-    /// Iteration cap.
+    #[doc = knob!("orientation.max_iterations")]
     pub max_iterations: u32,
-    /// Residuals beyond this many σ count as outliers in the reported fraction.
+    #[doc = knob!("orientation.outlier_sigmas")]
     pub outlier_sigmas: f64,
-    /// A fit whose cross-groove wall slope |b| differs from the median |b| of its wall in the
-    /// group by more than this fraction is a failed fit and becomes a gap: a cut wall keeps its
-    /// angle across the groove (modulation changes it by about 1 − cos θ, 2% at tan θ = 0.2),
-    /// so a wall that seems to turn steeper or flatter is a fit locked onto damage. 0 = off.
+    #[doc = knob!("orientation.max_wall_slope_change")]
+    ///
+    /// Such a fit becomes a gap: a cut wall keeps its angle across the groove (modulation changes
+    /// it by about 1 − cos θ, 2% at tan θ = 0.2), so a wall that seems to turn steeper or flatter
+    /// is a fit locked onto damage. 0 = off.
     pub max_wall_slope_change: f64,
     /// Instruction set of the IRLS pass (not a knob: never in the TOML; by default the CPU's
     /// best, detected once).
@@ -114,47 +117,57 @@ const MIN_SAMPLE_POINTS: usize = 10;
 /// Iso-depth lines whose depths differ by less than this (µm) count as one depth.
 const DISTINCT_DEPTH_UM: f64 = 1e-6;
 
-/// Checks the orientation params (same ranges as `PipelineParams::validate`).
-/// Checks every orientation knob (shared by the stage and [`super::PipelineParams::validate`]).
+impl OrientationParams {
+    /// Checks every orientation knob.
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the first bad key.
+    pub fn validate(&self) -> Result<(), StageError> {
+        let p = self;
+        check_range("orientation.sigma_start_um", p.sigma_start_um, 1e-12, 1e9)?;
+        check_range("orientation.sigma_decay", p.sigma_decay, 1e-6, 1.0)?;
+        check_range("orientation.sigma_min_um", p.sigma_min_um, 1e-12, 1e9)?;
+        check_range(
+            "orientation.residual_tolerance_um",
+            p.residual_tolerance_um,
+            0.0,
+            1e9,
+        )?;
+        check_range(
+            "orientation.divergence_factor",
+            p.divergence_factor,
+            1.0,
+            1e12,
+        )?;
+        check_range("orientation.outlier_sigmas", p.outlier_sigmas, 0.0, 1e6)?;
+        check_range(
+            "orientation.max_wall_slope_change",
+            p.max_wall_slope_change,
+            0.0,
+            1e6,
+        )?;
+        if p.neighbourhood_px < 3 {
+            return Err(StageError::InvalidParam {
+                name: "orientation.neighbourhood_px".into(),
+                problem: format!("{} is below the 3-pixel minimum", p.neighbourhood_px),
+            });
+        }
+        if p.max_iterations == 0 {
+            return Err(StageError::InvalidParam {
+                name: "orientation.max_iterations".into(),
+                problem: "must be at least 1".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// [`OrientationParams::validate`] (the path other code used).
 ///
 /// # Errors
-/// [`StageError::InvalidParam`] naming the first bad key.
+/// As that.
 pub fn validate(p: &OrientationParams) -> Result<(), StageError> {
-    check_range("orientation.sigma_start_um", p.sigma_start_um, 1e-12, 1e9)?;
-    check_range("orientation.sigma_decay", p.sigma_decay, 1e-6, 1.0)?;
-    check_range("orientation.sigma_min_um", p.sigma_min_um, 1e-12, 1e9)?;
-    check_range(
-        "orientation.residual_tolerance_um",
-        p.residual_tolerance_um,
-        0.0,
-        1e9,
-    )?;
-    check_range(
-        "orientation.divergence_factor",
-        p.divergence_factor,
-        1.0,
-        1e12,
-    )?;
-    check_range("orientation.outlier_sigmas", p.outlier_sigmas, 0.0, 1e6)?;
-    check_range(
-        "orientation.max_wall_slope_change",
-        p.max_wall_slope_change,
-        0.0,
-        1e6,
-    )?;
-    if p.neighbourhood_px < 3 {
-        return Err(StageError::InvalidParam {
-            name: "orientation.neighbourhood_px".into(),
-            problem: format!("{} is below the 3-pixel minimum", p.neighbourhood_px),
-        });
-    }
-    if p.max_iterations == 0 {
-        return Err(StageError::InvalidParam {
-            name: "orientation.max_iterations".into(),
-            problem: "must be at least 1".into(),
-        });
-    }
-    Ok(())
+    p.validate()
 }
 
 /// Checks the camera geometry the back-projection needs.
@@ -217,7 +230,7 @@ pub fn orient_from_depth(
     geom: &Geometry,
     params: &OrientationParams,
 ) -> Result<Orientation, StageError> {
-    validate(params)?;
+    params.validate()?;
     check_geometry(geom)?;
     let z = &depth.z_um;
     let (width, height) = (z.width, z.height);
@@ -303,7 +316,7 @@ pub fn orient_from_lines(
     geom: &Geometry,
     params: &OrientationParams,
 ) -> Result<Orientation, StageError> {
-    validate(params)?;
+    params.validate()?;
     check_geometry(geom)?;
     if lines.iter().any(|l| l.rows.len() != width) {
         return Err(StageError::BadInput {

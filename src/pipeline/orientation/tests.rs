@@ -2,6 +2,8 @@
 
 use super::*;
 
+mod reference;
+
 #[test]
 fn fits_with_a_wall_slope_far_from_the_median_become_gaps() {
     let sample = |x: f32, a: f64, b: f64| OrientationSample {

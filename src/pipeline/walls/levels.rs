@@ -23,7 +23,7 @@ pub(super) fn depth_noise_um(z: &[f32], width: usize) -> f32 {
             d.is_finite().then_some(d)
         })
         .collect();
-    median(&mut d).map_or(0.0, |m| 1.4826 * m / std::f32::consts::SQRT_2)
+    median_in_place(&mut d).map_or(0.0, |m| 1.4826 * m / std::f32::consts::SQRT_2)
 }
 
 /// The groove in one column of the smoothed depth map by iso-depth levels (land, bottom): the

@@ -2,16 +2,6 @@
 
 use super::*;
 
-/// Median of the finite values (None when there are none); reorders `v`.
-pub(super) fn median(v: &mut [f32]) -> Option<f32> {
-    if v.is_empty() {
-        return None;
-    }
-    let mid = v.len() / 2;
-    let (_, m, _) = v.select_nth_unstable_by(mid, f32::total_cmp);
-    Some(*m)
-}
-
 /// Keeps each column's band only when it agrees with the median band of the nearby columns.
 pub(super) fn reject_spurious(
     tops: &[f32],
@@ -47,7 +37,7 @@ pub(super) fn reject_spurious(
                 if (ts.len() as f32) < MIN_WINDOW_SHARE * (hi + 1 - lo) as f32 {
                     return None;
                 }
-                let (mt, mb) = (median(ts)?, median(bs)?);
+                let (mt, mb) = (median_in_place(ts)?, median_in_place(bs)?);
                 let tol = MIN_TOLERANCE_PX.max(TOLERANCE_SHARE * (mb - mt));
                 ((t - mt).abs() <= tol && (b - mb).abs() <= tol).then_some((t, b))
             },

@@ -4,7 +4,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::depth::DepthMap;
-use super::{StageError, check_range, sampled_quantiles};
+use super::{StageError, check_range, median_in_place, sampled_quantiles};
 use crate::io::Geometry;
 
 mod levels;
@@ -67,17 +67,21 @@ pub enum WallMethod {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct WallParams {
-    /// How the wall bands are found.
+    #[doc = knob!("walls.method")]
     pub method: WallMethod,
-    /// |∂Z/∂Y| above this marks a wall pixel (45° walls give 1); with `depth_levels`, the
-    /// least mean slope of a wall band.
+    #[doc = knob!("walls.min_slope")]
     pub min_slope: f32,
-    /// Rows trimmed from each end of a wall band, px (keeps edge pixels out of fits).
+    #[doc = knob!("walls.trim_px")]
+    ///
+    /// Keeps edge pixels out of the fits.
     pub trim_px: usize,
-    /// Half-side of the box that smooths the depth map before differencing, px; also the
-    /// half-span of the central difference along y.
+    #[doc = knob!("walls.smooth_px")]
+    ///
+    /// Also the half-span of the central difference along y.
     pub smooth_px: usize,
-    /// Columns over which the median band is taken to reject spurious bands (odd, px).
+    #[doc = knob!("walls.column_window_px")]
+    ///
+    /// Rejects spurious bands.
     pub column_window_px: usize,
 }
 
@@ -118,28 +122,34 @@ const LAND_SHARE: f32 = 0.15;
 /// Land and bottom levels closer than this many times the map's noise: no groove.
 const MIN_DEPTH_NOISE_RATIO: f32 = 10.0;
 
-/// Checks the params.
-fn validate(p: &WallParams) -> Result<(), StageError> {
-    check_range("walls.min_slope", f64::from(p.min_slope), 0.0, 1e6)?;
-    let too_big = |name: &str, v: usize, max: usize| {
-        (v > max).then(|| StageError::InvalidParam {
-            name: name.into(),
-            problem: format!("{v} is above {max}"),
-        })
-    };
-    if let Some(e) = too_big("walls.trim_px", p.trim_px, 10_000)
-        .or_else(|| too_big("walls.smooth_px", p.smooth_px, 100))
-        .or_else(|| too_big("walls.column_window_px", p.column_window_px, 10_001))
-    {
-        return Err(e);
+impl WallParams {
+    /// Checks every wall knob.
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the first bad key.
+    pub fn validate(&self) -> Result<(), StageError> {
+        let p = self;
+        check_range("walls.min_slope", f64::from(p.min_slope), 0.0, 1e6)?;
+        let too_big = |name: &str, v: usize, max: usize| {
+            (v > max).then(|| StageError::InvalidParam {
+                name: name.into(),
+                problem: format!("{v} is above {max}"),
+            })
+        };
+        if let Some(e) = too_big("walls.trim_px", p.trim_px, 10_000)
+            .or_else(|| too_big("walls.smooth_px", p.smooth_px, 100))
+            .or_else(|| too_big("walls.column_window_px", p.column_window_px, 10_001))
+        {
+            return Err(e);
+        }
+        if p.column_window_px == 0 {
+            return Err(StageError::InvalidParam {
+                name: "walls.column_window_px".into(),
+                problem: "must be at least 1".into(),
+            });
+        }
+        Ok(())
     }
-    if p.column_window_px == 0 {
-        return Err(StageError::InvalidParam {
-            name: "walls.column_window_px".into(),
-            problem: "must be at least 1".into(),
-        });
-    }
-    Ok(())
 }
 
 /// Finds the left and right walls in a depth map: one [`WallLine`] per wall (centre of the band).
@@ -165,7 +175,7 @@ pub fn find_walls(
     geom: &Geometry,
     params: &WallParams,
 ) -> Result<Vec<WallLine>, StageError> {
-    validate(params)?;
+    params.validate()?;
     check_range("geometry.focal_px", geom.focal_px, 1e-9, 1e12)?;
     let z = &depth.z_um;
     let (width, height) = (z.width, z.height);
