@@ -93,15 +93,9 @@ impl SoundParams {
     /// sample is scaled in f64 and rounded once; non-finite samples become 0.
     ///
     /// # Errors
-    /// [`StageError::InvalidParam`] when `normalize_peak` is outside [0, 1] or NaN, or
-    /// `full_scale_mm_s` is not positive while not normalising.
+    /// [`StageError::InvalidParam`] when the params are invalid ([`SoundParams::validate`]).
     pub fn scale_to_output(&self, channels: &mut [Vec<f32>]) -> Result<f64, StageError> {
-        check_range(
-            "sound.normalize_peak",
-            f64::from(self.normalize_peak),
-            0.0,
-            1.0,
-        )?;
+        self.validate()?;
         let peak =
             channels.iter().flatten().fold(
                 0.0_f32,
@@ -114,12 +108,6 @@ impl SoundParams {
                 1.0
             }
         } else {
-            check_range(
-                "sound.full_scale_mm_s",
-                self.full_scale_mm_s,
-                f64::MIN_POSITIVE,
-                f64::MAX,
-            )?;
             1.0 / self.full_scale_mm_s
         };
         for v in channels.iter_mut().flatten() {

@@ -85,6 +85,30 @@ pub struct Derivatives {
     pub base_flow_px: f32,
 }
 
+impl Derivatives {
+    /// A set from its four `width` × `height` planes `[ix, iy, it, image]`.
+    fn from_planes(
+        (width, height): (usize, usize),
+        planes: [Vec<f32>; 4],
+        frame_index: usize,
+        base_flow_px: f64,
+    ) -> Self {
+        let [ix, iy, it, image] = planes.map(|data| Image {
+            width,
+            height,
+            data,
+        });
+        Self {
+            ix,
+            iy,
+            it,
+            image,
+            frame_index,
+            base_flow_px: base_flow_px as f32,
+        }
+    }
+}
+
 /// Simoncelli's 5-tap prefilter as published (paper §3); [`P5`] is this scaled to unit sum.
 pub const SIMONCELLI_P5: [f32; 5] = [0.036, 0.249, 0.431, 0.249, 0.036];
 /// Simoncelli's 5-tap derivative filter as published, in correlation order (a ramp gives a
@@ -97,36 +121,22 @@ pub const SIMONCELLI_WINDOW_FRAMES: usize = 7;
 
 /// The published taps round to a sum of 1.001 and a ramp gain of 0.998; rescaling makes a
 /// constant image give `image == I` and a unit ramp give a derivative of exactly 1.
-pub const P5: [f32; 5] = scale_to_unit_sum(SIMONCELLI_P5);
+pub const P5: [f32; 5] = scale_taps(SIMONCELLI_P5, 0);
 /// [`SIMONCELLI_D5`] rescaled to unit ramp gain (see [`P5`]).
-pub const D5: [f32; 5] = scale_to_unit_moment(SIMONCELLI_D5);
+pub const D5: [f32; 5] = scale_taps(SIMONCELLI_D5, 1);
 
 /// Half of the Simoncelli window (frames each side of the centre).
 const HALF_WINDOW: usize = SIMONCELLI_WINDOW_FRAMES / 2;
 /// Spatial filter radius (5 taps).
 const RADIUS: usize = 2;
 
-const fn scale_to_unit_sum(taps: [f32; 5]) -> [f32; 5] {
-    let mut sum = 0.0;
-    let mut i = 0;
-    while i < 5 {
-        sum += taps[i];
-        i += 1;
-    }
-    let mut out = taps;
-    let mut j = 0;
-    while j < 5 {
-        out[j] = taps[j] / sum;
-        j += 1;
-    }
-    out
-}
-
-const fn scale_to_unit_moment(taps: [f32; 5]) -> [f32; 5] {
+/// `taps` divided by their moment Σ taps[i]·(i − 2)^`power` (power 0: the sum; 1: the response
+/// to a unit ramp).
+const fn scale_taps(taps: [f32; 5], power: u32) -> [f32; 5] {
     let mut moment = 0.0;
     let mut i = 0;
     while i < 5 {
-        moment += taps[i] * (i as f32 - 2.0);
+        moment += taps[i] * if power == 0 { 1.0 } else { i as f32 - 2.0 };
         i += 1;
     }
     let mut out = taps;

@@ -225,17 +225,5 @@ pub(super) fn simoncelli_window(
                 isa.compiled(|| simoncelli_band(&ctx, s, band * BAND_ROWS, outs));
             },
         );
-    let wrap = |data| Image {
-        width,
-        height,
-        data,
-    };
-    Derivatives {
-        ix: wrap(ix),
-        iy: wrap(iy),
-        it: wrap(it),
-        image: wrap(image),
-        frame_index: centre,
-        base_flow_px: base_flow_px as f32,
-    }
+    Derivatives::from_planes((width, height), [ix, iy, it, image], centre, base_flow_px)
 }

@@ -55,17 +55,5 @@ pub(super) fn two_frame(a: &Image, b: &Image, index: usize, base_flow_px: f64) -
             blank_margins(iy_r, m);
             blank_margins(it_r, m);
         });
-    let wrap = |data| Image {
-        width,
-        height,
-        data,
-    };
-    Derivatives {
-        ix: wrap(ix),
-        iy: wrap(iy),
-        it: wrap(it),
-        image: wrap(image),
-        frame_index: index,
-        base_flow_px: base_flow_px as f32,
-    }
+    Derivatives::from_planes((width, height), [ix, iy, it, image], index, base_flow_px)
 }

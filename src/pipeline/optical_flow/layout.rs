@@ -2,7 +2,7 @@
 
 use super::*;
 pub(super) use crate::pipeline::simd::hs::{
-    GROOVE_COEFS, HalfEdges, LANES, PAIR, PLAIN_COEFS, SolveScalars, update_half_row,
+    GROOVE_COEFS, HalfEdges, HalfRowInputs, LANES, PAIR, PLAIN_COEFS, SolveScalars, update_half_row,
 };
 pub(super) use crate::pipeline::simd::{Aligned, RowWriter, memory::vec_pair_from_rows};
 

@@ -450,18 +450,19 @@ impl HsSystem {
             },
             omega,
         };
-        let (i, a) = (isa, across);
+        let rows = HalfRowInputs {
+            across,
+            up,
+            down: dn,
+            coef,
+        };
         match self.stencil {
-            Stencil::Plain if relax => {
-                update_half_row::<false, true>(i, k, edges, a, up, dn, coef, dst)
-            }
-            Stencil::Plain => update_half_row::<false, false>(i, k, edges, a, up, dn, coef, dst),
+            Stencil::Plain if relax => update_half_row::<false, true>(isa, k, edges, rows, dst),
+            Stencil::Plain => update_half_row::<false, false>(isa, k, edges, rows, dst),
             Stencil::Groove { .. } if relax => {
-                update_half_row::<true, true>(i, k, edges, a, up, dn, coef, dst)
+                update_half_row::<true, true>(isa, k, edges, rows, dst)
             }
-            Stencil::Groove { .. } => {
-                update_half_row::<true, false>(i, k, edges, a, up, dn, coef, dst)
-            }
+            Stencil::Groove { .. } => update_half_row::<true, false>(isa, k, edges, rows, dst),
         }
     }
 }

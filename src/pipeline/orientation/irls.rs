@@ -9,7 +9,7 @@ pub(super) const SINGULAR_REL: f64 = 1e-12;
 /// by less than this share between rounds: later rounds would repeat the same weights.
 pub(super) const STALL_RATIO: f64 = 1e-4;
 pub(super) use crate::pipeline::simd::irls::{
-    IRLS_LANES as LANES, IRLS_SUMS as N_SUMS, Points, accumulate_chunks, point_terms,
+    IRLS_LANES as LANES, IRLS_SUMS as N_SUMS, PassInputs, accumulate_chunks, point_terms,
 };
 /// 3-D points in structure-of-arrays form; [`PointSet::centre`] moves them to their mean.
 #[derive(Default)]
@@ -107,12 +107,15 @@ pub(super) fn irls_pass(
     let n = set.len().min(w_old.len()).min(w_new.len());
     let full = n - n % LANES;
     let (chunk_old, chunk_new) = (&w_old[..full], &mut w_new[..full]);
-    let points = Points {
+    let pass = PassInputs {
         x: &set.x,
         y: &set.y,
         z: &set.z,
+        plane,
+        k,
+        w_old: chunk_old,
     };
-    accumulate_chunks(isa, points, plane, k, chunk_old, chunk_new, &mut acc);
+    accumulate_chunks(isa, pass, chunk_new, &mut acc);
     // The points after the whole chunks, into lane 0.
     for i in full..n {
         if let (Some(&x), Some(&y), Some(&z), Some(&wo)) =

@@ -247,45 +247,36 @@ pub fn orient_from_depth(
     let f = geom.focal_px;
     let cx = (width as f64 - 1.0) / 2.0;
     let cy = (height as f64 - 1.0) / 2.0;
-    let jobs: Vec<(usize, usize)> = (0..walls.len())
-        .flat_map(|w| (0..sample_columns.len()).map(move |s| (w, s)))
-        .collect();
-    let results: Vec<SampleResult> = jobs
-        .par_iter()
-        .map_init(Workspace::default, |ws, &(wi, si)| {
-            let x_s = sample_columns.get(si).copied().unwrap_or(f32::NAN);
-            let Some(line) = walls.get(wi) else {
-                return ws.fit_gathered(wi, x_s, usize::MAX, params);
+    let results = fit_samples(walls.len(), sample_columns, params, |ws, wi, x_s| {
+        let Some(line) = walls.get(wi) else {
+            return usize::MAX;
+        };
+        for x in window_columns(x_s, params.neighbourhood_px, width) {
+            let (Some(&row), Some(&hw)) = (line.rows.get(x), line.half_width_px.get(x)) else {
+                continue;
             };
-            ws.set.clear();
-            ws.pixels.clear();
-            for x in window_columns(x_s, params.neighbourhood_px, width) {
-                let (Some(&row), Some(&hw)) = (line.rows.get(x), line.half_width_px.get(x)) else {
-                    continue;
-                };
-                if !(row.is_finite() && hw >= 0.0) {
-                    continue;
-                }
-                let y_lo = f64::from(row - hw).ceil().max(0.0);
-                let y_hi = f64::from(row + hw).floor().min(height as f64 - 1.0);
-                if y_hi < y_lo {
-                    continue;
-                }
-                let px = (x as f64 - cx) / f;
-                for y in y_lo as usize..=y_hi as usize {
-                    let idx = y * width + x;
-                    let Some(&zv) = z.data.get(idx) else { continue };
-                    if zv.is_finite() && zv > 0.0 {
-                        let zv = f64::from(zv);
-                        ws.set.push(px * zv, (y as f64 - cy) / f * zv, zv);
-                        // Fits in u32: checked against the map size above.
-                        ws.pixels.push(idx as u32);
-                    }
+            if !(row.is_finite() && hw >= 0.0) {
+                continue;
+            }
+            let y_lo = f64::from(row - hw).ceil().max(0.0);
+            let y_hi = f64::from(row + hw).floor().min(height as f64 - 1.0);
+            if y_hi < y_lo {
+                continue;
+            }
+            let px = (x as f64 - cx) / f;
+            for y in y_lo as usize..=y_hi as usize {
+                let idx = y * width + x;
+                let Some(&zv) = z.data.get(idx) else { continue };
+                if zv.is_finite() && zv > 0.0 {
+                    let zv = f64::from(zv);
+                    ws.set.push(px * zv, (y as f64 - cy) / f * zv, zv);
+                    // Fits in u32: checked against the map size above.
+                    ws.pixels.push(idx as u32);
                 }
             }
-            ws.fit_gathered(wi, x_s, MIN_SAMPLE_POINTS, params)
-        })
-        .collect();
+        }
+        MIN_SAMPLE_POINTS
+    });
     let sides: Vec<WallSide> = walls.iter().map(|l| l.side).collect();
     Ok(assemble(
         &sides,
@@ -355,55 +346,45 @@ pub fn orient_from_lines(
             problem: "no wall has two iso-depth lines at distinct depths".into(),
         });
     }
-    let jobs: Vec<(usize, usize)> = (0..sides.len())
-        .flat_map(|w| (0..sample_columns.len()).map(move |s| (w, s)))
-        .collect();
-    let results: Vec<SampleResult> = jobs
-        .par_iter()
-        .map_init(Workspace::default, |ws, &(wi, si)| {
-            let x_s = sample_columns.get(si).copied().unwrap_or(f32::NAN);
-            let (Some(group), Some(true)) = (members.get(wi), usable.get(wi).copied()) else {
-                return ws.fit_gathered(wi, x_s, usize::MAX, params);
-            };
-            ws.set.clear();
-            ws.pixels.clear();
-            let mut depths = Vec::new();
-            for line in group {
-                let Some(z) = depth_of(line) else { continue };
-                let d = line
-                    .projection_depth_um
-                    .filter(|d| d.is_finite() && *d > 0.0)
-                    .unwrap_or(z);
-                let before = ws.set.len();
-                for x in window_columns(x_s, params.neighbourhood_px, width) {
-                    let Some(&row) = line.rows.get(x) else {
-                        continue;
-                    };
-                    if !row.is_finite() {
-                        continue;
-                    }
-                    let row = f64::from(row);
-                    ws.set.push((x as f64 - cx) * d / f, (row - cy) * d / f, z);
-                    let ry = row.round();
-                    if ry >= 0.0 && ry < height as f64 {
-                        // Fits in u32: checked above.
-                        ws.pixels.push((ry as usize * width + x) as u32);
-                    } else {
-                        ws.pixels.push(u32::MAX);
-                    }
+    let results = fit_samples(sides.len(), sample_columns, params, |ws, wi, x_s| {
+        let (Some(group), Some(true)) = (members.get(wi), usable.get(wi).copied()) else {
+            return usize::MAX;
+        };
+        let mut depths = Vec::new();
+        for line in group {
+            let Some(z) = depth_of(line) else { continue };
+            let d = line
+                .projection_depth_um
+                .filter(|d| d.is_finite() && *d > 0.0)
+                .unwrap_or(z);
+            let before = ws.set.len();
+            for x in window_columns(x_s, params.neighbourhood_px, width) {
+                let Some(&row) = line.rows.get(x) else {
+                    continue;
+                };
+                if !row.is_finite() {
+                    continue;
                 }
-                if ws.set.len() > before {
-                    depths.push(z);
+                let row = f64::from(row);
+                ws.set.push((x as f64 - cx) * d / f, (row - cy) * d / f, z);
+                let ry = row.round();
+                if ry >= 0.0 && ry < height as f64 {
+                    // Fits in u32: checked above.
+                    ws.pixels.push((ry as usize * width + x) as u32);
+                } else {
+                    ws.pixels.push(u32::MAX);
                 }
             }
-            let min_points = if distinct_depths(depths) >= 2 {
-                MIN_SAMPLE_POINTS
-            } else {
-                usize::MAX
-            };
-            ws.fit_gathered(wi, x_s, min_points, params)
-        })
-        .collect();
+            if ws.set.len() > before {
+                depths.push(z);
+            }
+        }
+        if distinct_depths(depths) >= 2 {
+            MIN_SAMPLE_POINTS
+        } else {
+            usize::MAX
+        }
+    });
     Ok(assemble(
         &sides,
         sample_columns.len(),

@@ -109,33 +109,31 @@ pub(super) fn fit_plane_reference(
     loop {
         let res = weighted_mean_abs(&residuals(points, plane), &weights);
         let at_floor = |s: Option<f64>| s.is_some_and(|s| s <= params.sigma_min_um);
-        if res < params.residual_tolerance_um {
-            return Some(finish(
-                plane,
-                &weights,
-                sigma,
-                iterations,
-                StopReason::Converged,
-            ));
-        }
-        if let Some((p_plane, p_weights, p_sigma, p_res)) = &previous {
-            if res > params.divergence_factor * p_res || !res.is_finite() {
-                let stop = StopReason::Diverged;
-                return Some(finish(*p_plane, p_weights, *p_sigma, iterations, stop));
-            }
-            if at_floor(sigma) && at_floor(*p_sigma) && (res - p_res).abs() <= STALL_RATIO * p_res {
-                return Some(finish(
-                    plane,
-                    &weights,
-                    sigma,
-                    iterations,
-                    StopReason::Converged,
-                ));
-            }
-        }
-        if iterations >= params.max_iterations {
-            let stop = StopReason::MaxIterations;
-            return Some(finish(plane, &weights, sigma, iterations, stop));
+        let diverged = previous
+            .as_ref()
+            .is_some_and(|p| res > params.divergence_factor * p.3 || !res.is_finite());
+        let stalled = previous.as_ref().is_some_and(|p| {
+            at_floor(sigma) && at_floor(p.2) && (res - p.3).abs() <= STALL_RATIO * p.3
+        });
+        let stop = if res < params.residual_tolerance_um {
+            Some(StopReason::Converged)
+        } else if diverged {
+            Some(StopReason::Diverged)
+        } else if stalled {
+            Some(StopReason::Converged)
+        } else if iterations >= params.max_iterations {
+            Some(StopReason::MaxIterations)
+        } else {
+            None
+        };
+        if let Some(stop) = stop {
+            // A diverged round keeps the previous plane with its weights and σ.
+            return Some(match (&previous, diverged) {
+                (Some((p_plane, p_weights, p_sigma, _)), true) => {
+                    finish(*p_plane, p_weights, *p_sigma, iterations, stop)
+                }
+                _ => finish(plane, &weights, sigma, iterations, stop),
+            });
         }
         let lorentz: Vec<f64> = residuals(points, plane)
             .iter()

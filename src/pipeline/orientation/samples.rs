@@ -83,6 +83,29 @@ impl Workspace {
     }
 }
 
+/// One fit per (wall, sample column), in parallel, in wall-then-column order: `gather(ws,
+/// wall, x_s)` fills the workspace's points and pixels for the sample at column `x_s` and
+/// returns the fewest points its fit needs (`usize::MAX`: a gap).
+pub(super) fn fit_samples(
+    walls: usize,
+    sample_columns: &[f32],
+    params: &OrientationParams,
+    gather: impl Fn(&mut Workspace, usize, f32) -> usize + Sync,
+) -> Vec<SampleResult> {
+    let jobs: Vec<(usize, usize)> = (0..walls)
+        .flat_map(|w| (0..sample_columns.len()).map(move |s| (w, s)))
+        .collect();
+    jobs.par_iter()
+        .map_init(Workspace::default, |ws, &(wi, si)| {
+            let x_s = sample_columns.get(si).copied().unwrap_or(f32::NAN);
+            ws.set.clear();
+            ws.pixels.clear();
+            let min_points = gather(ws, wi, x_s);
+            ws.fit_gathered(wi, x_s, min_points, params)
+        })
+        .collect()
+}
+
 /// Median |b| (cross-groove wall slope) of the fits in `samples`; None with fewer than 3 fits.
 #[must_use]
 pub fn median_wall_slope(samples: &[OrientationSample]) -> Option<f64> {

@@ -38,10 +38,23 @@ pub struct HalfEdges {
     pub last: (usize, usize),
 }
 
-/// Updates one stored half-row `dst` from the other half of the same row `across`, the same
-/// half of the rows above and below (`up`, `down`, mirrored at the image edges) and the
-/// half-row's coefficient blocks `coef`, all lane-major (module docs): m pairs of u and v
-/// vectors in each row, m = `dst.len() / 16`. Rows too short for that are left alone.
+/// What one half-row update reads, all lane-major (module docs): the other half of the same
+/// row, the same half of the rows above and below (mirrored at the image edges: the row itself
+/// stands in) and the half-row's coefficient blocks.
+#[derive(Clone, Copy, Debug)]
+pub struct HalfRowInputs<'a> {
+    /// The other half of the same row.
+    pub across: &'a [f32],
+    /// The same half of the row above.
+    pub up: &'a [f32],
+    /// The same half of the row below.
+    pub down: &'a [f32],
+    /// The half-row's coefficient blocks.
+    pub coef: &'a [f32],
+}
+
+/// Updates one stored half-row `dst` from `rows`: m pairs of u and v vectors in each row,
+/// m = `dst.len() / 16`. Rows too short for that are left alone.
 ///
 /// Even half: column i's left and right neighbours are the other half's columns i − 1 and i,
 /// for vector k its vectors k − 1 and k; for k = 0 the left ones are vector m − 1 moved up a
@@ -53,40 +66,30 @@ pub struct HalfEdges {
 /// `GROOVE`: the general 2×2 update `u = puu·N_u + puv·N_v + pu0` (N_u = (λ/4)·Σ4u + wu·u_up +
 /// wd·u_down, N_v = (λ/4)·Σ4v), else the plain one `u = ū − gx·t, v = v̄ − gy·t,
 /// t = gx·ū + gy·v̄ + gt`. `RELAX`: `u ← u_old + ω·(u − u_old)`. Both builds give the same bits.
-#[allow(clippy::too_many_arguments)]
 #[inline]
 pub fn update_half_row<const GROOVE: bool, const RELAX: bool>(
     isa: Isa,
     k: SolveScalars,
     edges: HalfEdges,
-    across: &[f32],
-    up: &[f32],
-    down: &[f32],
-    coef: &[f32],
+    rows: HalfRowInputs<'_>,
     dst: &mut [f32],
 ) {
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
     let m = dst.len() / PAIR;
     let len = m * PAIR;
     if m == 0
-        || across.len() < len
-        || up.len() < len
-        || down.len() < len
-        || coef.len() < m * LANES * ncoef
+        || rows.across.len() < len
+        || rows.up.len() < len
+        || rows.down.len() < len
+        || rows.coef.len() < m * LANES * ncoef
     {
         return;
     }
     match isa {
-        Isa::Portable => {
-            super::portable::hs::blocks::<GROOVE, RELAX>(k, edges, m, across, up, down, coef, dst)
-        }
+        Isa::Portable => super::portable::hs::blocks::<GROOVE, RELAX>(k, edges, m, rows, dst),
         #[cfg(target_arch = "x86_64")]
-        Isa::Avx2(proof) => super::avx2::hs::blocks::<GROOVE, RELAX>(
-            proof, k, edges, m, across, up, down, coef, dst,
-        ),
+        Isa::Avx2(proof) => super::avx2::hs::blocks::<GROOVE, RELAX>(proof, k, edges, m, rows, dst),
         #[cfg(not(target_arch = "x86_64"))]
-        Isa::Avx2(_) => {
-            super::portable::hs::blocks::<GROOVE, RELAX>(k, edges, m, across, up, down, coef, dst)
-        }
+        Isa::Avx2(_) => super::portable::hs::blocks::<GROOVE, RELAX>(k, edges, m, rows, dst),
     }
 }

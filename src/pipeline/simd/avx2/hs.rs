@@ -3,24 +3,22 @@
 use std::arch::x86_64::__m256;
 
 use crate::pipeline::simd::Avx2Proof;
-use crate::pipeline::simd::hs::{GROOVE_COEFS, HalfEdges, LANES, PAIR, PLAIN_COEFS, SolveScalars};
+use crate::pipeline::simd::hs::{
+    GROOVE_COEFS, HalfEdges, HalfRowInputs, LANES, PAIR, PLAIN_COEFS, SolveScalars,
+};
 
 /// The half-row with AVX2 intrinsics (see [`crate::pipeline::simd::hs::update_half_row`]).
-#[allow(clippy::too_many_arguments)]
 #[inline]
 pub(in crate::pipeline::simd) fn blocks<const GROOVE: bool, const RELAX: bool>(
     _: Avx2Proof,
     k: SolveScalars,
     edges: HalfEdges,
     m: usize,
-    across: &[f32],
-    up: &[f32],
-    down: &[f32],
-    coef: &[f32],
+    rows: HalfRowInputs<'_>,
     dst: &mut [f32],
 ) {
     // SAFETY: an `Avx2Proof` exists only once the CPU reported AVX2, all `blocks_avx2` requires.
-    unsafe { blocks_avx2::<GROOVE, RELAX>(k, edges, m, across, up, down, coef, dst) };
+    unsafe { blocks_avx2::<GROOVE, RELAX>(k, edges, m, rows, dst) };
 }
 
 /// The portable block on 8 columns at once, operation for operation (no fused multiply–add),
@@ -28,15 +26,11 @@ pub(in crate::pipeline::simd) fn blocks<const GROOVE: bool, const RELAX: bool>(
 /// Every load starts a vector of the lane-major layout, so none straddles two cache lines
 /// when the rows start lines; each vector of the other half is loaded once and carried.
 #[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
 fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
     k: SolveScalars,
     edges: HalfEdges,
     m: usize,
-    across: &[f32],
-    up: &[f32],
-    down: &[f32],
-    coef: &[f32],
+    rows: HalfRowInputs<'_>,
     dst: &mut [f32],
 ) {
     use std::arch::x86_64::{
@@ -49,11 +43,11 @@ fn blocks_avx2<const GROOVE: bool, const RELAX: bool>(
     // coefficients.
     let len = m * PAIR;
     let (Some(l), Some(up), Some(down), Some(out), Some(c)) = (
-        across.get(..len),
-        up.get(..len),
-        down.get(..len),
+        rows.across.get(..len),
+        rows.up.get(..len),
+        rows.down.get(..len),
         dst.get_mut(..len),
-        coef.get(..m * LANES * ncoef),
+        rows.coef.get(..m * LANES * ncoef),
     ) else {
         return;
     };

@@ -1,45 +1,34 @@
 //! The IRLS pass of the robust plane fit on whole chunks of 4 points, on AVX2 registers.
 
 use crate::pipeline::simd::Avx2Proof;
-use crate::pipeline::simd::irls::{IRLS_LANES as LANES, IRLS_SUMS as N_SUMS, Points};
+use crate::pipeline::simd::irls::{IRLS_LANES as LANES, IRLS_SUMS as N_SUMS, PassInputs};
 
 /// See [`crate::pipeline::simd::irls::accumulate_chunks`].
 pub(in crate::pipeline::simd) fn chunks(
     _: Avx2Proof,
-    points: Points<'_>,
-    plane: [f64; 3],
-    k: f64,
-    w_old: &[f64],
+    pass: PassInputs<'_>,
     w_new: &mut [f64],
     acc: &mut [[f64; LANES]; N_SUMS],
 ) {
     // SAFETY: an `Avx2Proof` exists only once the CPU reported AVX2, all `chunks_avx2` requires.
-    unsafe { chunks_avx2(points, plane, k, w_old, w_new, acc) }
+    unsafe { chunks_avx2(pass, w_new, acc) }
 }
 
 /// The portable chunks on AVX2 registers: lane l of each 4-wide vector is lane l of its
 /// accumulators, with the same operations in the same order (no FMA), so the sums are bit for
 /// bit the same.
 #[target_feature(enable = "avx2")]
-fn chunks_avx2(
-    points: Points<'_>,
-    [a, b, c]: [f64; 3],
-    k: f64,
-    w_old: &[f64],
-    w_new: &mut [f64],
-    acc: &mut [[f64; LANES]; N_SUMS],
-) {
+fn chunks_avx2(pass: PassInputs<'_>, w_new: &mut [f64], acc: &mut [[f64; LANES]; N_SUMS]) {
     use std::arch::x86_64::{
         __m256d, _mm256_add_pd, _mm256_andnot_pd, _mm256_div_pd, _mm256_loadu_pd, _mm256_mul_pd,
         _mm256_set1_pd, _mm256_setzero_pd, _mm256_storeu_pd, _mm256_sub_pd,
     };
     const { assert!(LANES == 4) };
+    let ([a, b, c], k, w_old) = (pass.plane, pass.k, pass.w_old);
     let full = w_old.len().min(w_new.len()) / LANES * LANES;
-    let (Some(xs), Some(ys), Some(zs)) = (
-        points.x.get(..full),
-        points.y.get(..full),
-        points.z.get(..full),
-    ) else {
+    let (Some(xs), Some(ys), Some(zs)) =
+        (pass.x.get(..full), pass.y.get(..full), pass.z.get(..full))
+    else {
         return;
     };
     let (va, vb, vc, vk) = (

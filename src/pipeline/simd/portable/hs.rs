@@ -1,6 +1,8 @@
 //! The Horn–Schunck half-row kernel in portable code: fixed 8-lane arrays ([`F32x8`]) that the compiler maps onto the target's vector registers, operation for operation the AVX2 build.
 
-use crate::pipeline::simd::hs::{GROOVE_COEFS, HalfEdges, LANES, PAIR, PLAIN_COEFS, SolveScalars};
+use crate::pipeline::simd::hs::{
+    GROOVE_COEFS, HalfEdges, HalfRowInputs, LANES, PAIR, PLAIN_COEFS, SolveScalars,
+};
 
 /// Eight f32 lanes for the portable core: element-wise operations the compiler turns into
 /// vector instructions of whatever the target has.
@@ -75,16 +77,12 @@ impl F32x8 {
 /// The half-row in portable code (see [`crate::pipeline::simd::hs::update_half_row`]): the AVX2
 /// build operation for operation on [`F32x8`] (the lane moves at the edges move values only,
 /// so both give the same bits).
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(in crate::pipeline::simd) fn blocks<const GROOVE: bool, const RELAX: bool>(
     k: SolveScalars,
     edges: HalfEdges,
     m: usize,
-    across: &[f32],
-    up: &[f32],
-    down: &[f32],
-    coef: &[f32],
+    rows: HalfRowInputs<'_>,
     dst: &mut [f32],
 ) {
     let ncoef = if GROOVE { GROOVE_COEFS } else { PLAIN_COEFS };
@@ -100,6 +98,12 @@ pub(in crate::pipeline::simd) fn blocks<const GROOVE: bool, const RELAX: bool>(
         let (u, v) = p.split_at(LANES);
         F32x8::load(if part == 0 { u } else { v })
     }
+    let HalfRowInputs {
+        across,
+        up,
+        down,
+        coef,
+    } = rows;
     let across = pairs(across, m);
     let at = |i: usize| {
         across

@@ -1,22 +1,22 @@
 //! The IRLS pass of the robust plane fit on whole chunks of 4 points, portable (fixed 4-lane arrays the compiler vectorises).
 
-use crate::pipeline::simd::irls::{IRLS_LANES as LANES, IRLS_SUMS as N_SUMS, Points, point_terms};
+use crate::pipeline::simd::irls::{
+    IRLS_LANES as LANES, IRLS_SUMS as N_SUMS, PassInputs, point_terms,
+};
 
 /// See [`crate::pipeline::simd::irls::accumulate_chunks`].
 pub(in crate::pipeline::simd) fn chunks(
-    points: Points<'_>,
-    [a, b, c]: [f64; 3],
-    k: f64,
-    w_old: &[f64],
+    pass: PassInputs<'_>,
     w_new: &mut [f64],
     acc: &mut [[f64; LANES]; N_SUMS],
 ) {
-    let chunks = points
+    let ([a, b, c], k) = (pass.plane, pass.k);
+    let chunks = pass
         .x
         .chunks_exact(LANES)
-        .zip(points.y.chunks_exact(LANES))
-        .zip(points.z.chunks_exact(LANES))
-        .zip(w_old.chunks_exact(LANES))
+        .zip(pass.y.chunks_exact(LANES))
+        .zip(pass.z.chunks_exact(LANES))
+        .zip(pass.w_old.chunks_exact(LANES))
         .zip(w_new.chunks_exact_mut(LANES));
     for ((((xc, yc), zc), woc), wnc) in chunks {
         let (Ok(xc), Ok(yc), Ok(zc), Ok(woc), Ok(wnc)) = (
