@@ -102,6 +102,7 @@ use super::derivatives::Derivatives;
 use crate::image::{Image, zeros_par};
 use crate::pipeline::simd::Isa;
 
+mod bands;
 mod groove;
 mod layout;
 mod lucas_kanade;
@@ -114,6 +115,7 @@ mod tests;
 mod wall_sides;
 mod warm_start;
 
+use bands::*;
 use groove::*;
 use layout::*;
 use lucas_kanade::*;
