@@ -95,6 +95,8 @@ pub enum PathChoice {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]
 pub struct PipelineParams {
+    // The line names the `[dual_focus]` table of scan.toml, not an item.
+    #[allow(rustdoc::broken_intra_doc_links)]
     #[doc = knob!("path")]
     pub path: PathChoice,
     /// Derivative stage.
