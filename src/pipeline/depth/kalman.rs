@@ -220,7 +220,13 @@ impl Filter {
         out: (&mut [f32], &mut [f32]),
         sc: &mut SweepScratch,
     ) -> usize {
-        self.isa.compiled(|| self.band_impl(y0, frames, out, sc))
+        self.isa.compiled(BandRun {
+            filter: self,
+            y0,
+            frames,
+            out,
+            sc,
+        })
     }
 
     /// See [`Filter::band`].
@@ -284,6 +290,24 @@ impl Filter {
         sc.vs = vs;
         sc.row = row;
         diverged
+    }
+}
+
+/// One call of [`Filter::band_impl`], to be compiled for an instruction set.
+pub(super) struct BandRun<'a, 'b> {
+    pub(super) filter: &'a Filter,
+    pub(super) y0: usize,
+    pub(super) frames: &'a [FrameInput],
+    pub(super) out: (&'b mut [f32], &'b mut [f32]),
+    pub(super) sc: &'a mut SweepScratch,
+}
+
+impl Compiled for BandRun<'_, '_> {
+    type Output = usize;
+    #[inline(always)]
+    fn run(self) -> usize {
+        self.filter
+            .band_impl(self.y0, self.frames, self.out, self.sc)
     }
 }
 

@@ -40,7 +40,7 @@ use super::optical_flow::FlowField;
 use super::{StageError, check_range, median_in_place};
 use crate::image::{Image, zeros_par};
 use crate::io::Geometry;
-use crate::pipeline::simd::Isa;
+use crate::pipeline::simd::{Compiled, Isa};
 
 mod average;
 mod kalman;

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::StageError;
 use crate::image::Image;
-use crate::pipeline::simd::Isa;
+use crate::pipeline::simd::{Compiled, Isa};
 
 #[cfg(test)]
 mod reference;

@@ -132,6 +132,22 @@ pub(super) struct BandCtx<'a> {
     pub(super) margin: usize,
 }
 
+/// One band of [`simoncelli_band`], to be compiled for an instruction set.
+pub(super) struct Band<'a, 'b> {
+    pub(super) ctx: &'a BandCtx<'a>,
+    pub(super) scratch: &'a mut BandScratch,
+    pub(super) y0: usize,
+    pub(super) outs: [&'b mut [f32]; 4],
+}
+
+impl Compiled for Band<'_, '_> {
+    type Output = ();
+    #[inline(always)]
+    fn run(self) {
+        simoncelli_band(self.ctx, self.scratch, self.y0, self.outs);
+    }
+}
+
 /// Rows `y0..` of one window: temporal 7-tap filters (with pre-warp) into `s.p`/`s.d`, then
 /// the vertical and horizontal 5-tap passes into `outs = [ix, iy, it, image]` (whole rows).
 #[inline(always)]
@@ -221,8 +237,12 @@ pub(super) fn simoncelli_window(
                     d7: &d7,
                     margin,
                 };
-                let outs = [ix_b, iy_b, it_b, im_b];
-                isa.compiled(|| simoncelli_band(&ctx, s, band * BAND_ROWS, outs));
+                isa.compiled(Band {
+                    ctx: &ctx,
+                    scratch: s,
+                    y0: band * BAND_ROWS,
+                    outs: [ix_b, iy_b, it_b, im_b],
+                });
             },
         );
     Derivatives::from_planes((width, height), [ix, iy, it, image], centre, base_flow_px)

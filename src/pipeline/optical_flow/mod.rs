@@ -100,7 +100,7 @@ use serde::{Deserialize, Serialize};
 use super::StageError;
 use super::derivatives::Derivatives;
 use crate::image::{Image, zeros_par};
-use crate::pipeline::simd::Isa;
+use crate::pipeline::simd::{Compiled, Isa};
 
 mod bands;
 mod groove;

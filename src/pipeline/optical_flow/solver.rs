@@ -123,7 +123,10 @@ impl HsSystem {
                     has_above,
                     has_below,
                 };
-                isa.compiled(|| row.fill(rows));
+                isa.compiled(GrooveFill {
+                    row: &row,
+                    out: rows,
+                });
             },
         )
     }

@@ -66,19 +66,29 @@ impl Isa {
         }
     }
 
-    /// Runs `f` compiled for this instruction set: for [`Isa::Avx2`], `f` is inlined into a
-    /// function built with AVX2 enabled, so the loops it inlines vectorise on 256-bit registers
-    /// (the same arithmetic, so the same bits).
+    /// Does `work` compiled for this instruction set: for [`Isa::Avx2`], its
+    /// [`Compiled::run`] is inlined into a function built with AVX2 enabled, so the loops it
+    /// inlines vectorise on 256-bit registers (the same arithmetic, so the same bits).
     #[inline(always)]
-    pub fn compiled<R>(self, f: impl FnOnce() -> R) -> R {
+    pub fn compiled<W: Compiled>(self, work: W) -> W::Output {
         match self {
-            Isa::Portable => f(),
+            Isa::Portable => work.run(),
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx2(proof) => avx2::compiled(proof, f),
+            Isa::Avx2(proof) => avx2::compiled(proof, work),
             #[cfg(not(target_arch = "x86_64"))]
-            Isa::Avx2(_) => f(),
+            Isa::Avx2(_) => work.run(),
         }
     }
+}
+
+/// Work that [`Isa::compiled`] builds for an instruction set. A closure would not do: the
+/// compiler may keep a closure's body out of line, and then it is built without the
+/// instruction set; `run` is marked `#[inline(always)]` by every implementation instead.
+pub trait Compiled {
+    /// What the work gives back.
+    type Output;
+    /// Does the work (implementations mark it `#[inline(always)]`).
+    fn run(self) -> Self::Output;
 }
 
 impl Default for Isa {
@@ -99,10 +109,17 @@ mod tests {
         if let Some(avx2) = Isa::avx2() {
             assert_eq!(avx2, Isa::detect());
         }
+        struct SumOfSquares<'a>(&'a [f32]);
+        impl Compiled for SumOfSquares<'_> {
+            type Output = f32;
+            #[inline(always)]
+            fn run(self) -> f32 {
+                self.0.iter().map(|x| x * x).sum()
+            }
+        }
+        let v: Vec<f32> = (0..37).map(|i| i as f32 * 0.5).collect();
         for isa in [Some(Isa::Portable), Isa::avx2()].into_iter().flatten() {
-            let v: Vec<f32> = (0..37).map(|i| i as f32 * 0.5).collect();
-            let sum = isa.compiled(|| v.iter().map(|x| x * x).sum::<f32>());
-            assert_eq!(sum, v.iter().map(|x| x * x).sum::<f32>());
+            assert_eq!(isa.compiled(SumOfSquares(&v)), SumOfSquares(&v).run());
         }
     }
 }

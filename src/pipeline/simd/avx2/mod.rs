@@ -4,17 +4,17 @@ pub(super) mod hs;
 pub(super) mod irls;
 pub(super) mod median;
 
-use super::Avx2Proof;
+use super::{Avx2Proof, Compiled};
 
-/// `f` compiled with AVX2 enabled (see [`super::Isa::compiled`]).
+/// `work` compiled with AVX2 enabled (see [`super::Isa::compiled`]).
 #[inline(always)]
-pub(super) fn compiled<R>(_: Avx2Proof, f: impl FnOnce() -> R) -> R {
+pub(super) fn compiled<W: Compiled>(_: Avx2Proof, work: W) -> W::Output {
     // SAFETY: an `Avx2Proof` exists only once the CPU reported AVX2, all `with_avx2` requires.
-    unsafe { with_avx2(f) }
+    unsafe { with_avx2(work) }
 }
 
-/// Calls `f`, which the compiler inlines here and so builds with AVX2.
+/// Does `work`, whose `run` is inlined here and so built with AVX2.
 #[target_feature(enable = "avx2")]
-fn with_avx2<R>(f: impl FnOnce() -> R) -> R {
-    f()
+fn with_avx2<W: Compiled>(work: W) -> W::Output {
+    work.run()
 }
