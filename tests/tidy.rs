@@ -68,7 +68,11 @@ fn unsafe_lives_only_in_the_simd_module_and_the_allocator_setup() {
     let stray: Vec<_> = files
         .iter()
         .filter(|p| {
-            let rel = p.strip_prefix(root).unwrap().to_string_lossy().replace('\\', "/");
+            let rel = p
+                .strip_prefix(root)
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/");
             !allowed.iter().any(|a| rel.starts_with(a))
         })
         .filter(|p| unsafe_lines(&std::fs::read_to_string(p).unwrap()) > 0)
