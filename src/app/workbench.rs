@@ -608,6 +608,8 @@ impl Workbench {
             .validate()
             .and_then(|()| meta.to_toml_string().map_err(|e| e.to_string()))
             .and_then(|text| {
+                let _lock =
+                    crate::io::lock::OutputLock::acquire(&path).map_err(|e| e.to_string())?;
                 crate::io::write_atomic(&path, text.as_bytes(), true).map_err(|e| e.to_string())
             });
         match result {

@@ -46,7 +46,7 @@ const STAGE: &str = "stripes";
 /// The dual-focus geometry shows exactly this many stripes.
 const STRIPE_COUNT: usize = 3;
 /// Largest accumulator the stage agrees to allocate (cells).
-const MAX_ACCUMULATOR_CELLS: usize = 64 << 20;
+pub const MAX_ACCUMULATOR_CELLS: usize = 64 << 20;
 /// Fraction of the peak's votes a ρ bin needs to count in the peak's sub-bin centroid.
 const RHO_REFINE_FRACTION: f32 = 0.5;
 /// Rows beyond half the stripe thickness that still count in a column's centroid (px).
