@@ -18,7 +18,7 @@ pixel_pitch_um = 0.39
 working_distance_mm = 4.0
 [motion]
 frame_step_um = 0.78
-group_step_um = 460.2
+group_step_um = 4.0
 "#;
 
 /// Writes a scan of `groups` groups of `frames` textured frames (`w`×`h`) under `dir`.
