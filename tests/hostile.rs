@@ -245,7 +245,7 @@ fn a_hough_accumulator_past_the_limit_is_refused_before_any_group_runs() {
     let dir = tempfile::tempdir().unwrap();
     let demo = demo_copy(dir.path());
     let params = dir.path().join("fine.toml");
-    std::fs::write(&params, "[hough]\ntheta_step_deg = 0.001\nrho_step_px = 0.01\n").unwrap();
+    std::fs::write(&params, "[hough]\ntheta_step_deg = 0.001\nrho_step_px = 0.02\n").unwrap();
     let out = dir.path().join("x.wav");
     let o = groovescope(&[
         "reconstruct",

@@ -91,7 +91,7 @@ fn an_output_folder_removed_mid_run_ends_with_one_line_and_leaves_nothing() {
     let out_dir = dir.path().join("out");
     std::fs::create_dir(&out_dir).unwrap();
     let wav = out_dir.join("clip.wav");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+    let child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
         .args(["reconstruct", s(&demo), "--out", s(&wav), "--quiet"])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())

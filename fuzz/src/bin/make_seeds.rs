@@ -3,6 +3,9 @@
 //! Run from the repository root: `cargo run --manifest-path fuzz/Cargo.toml --bin make-seeds`.
 //! Crash inputs found by fuzzing are kept beside these seeds under `crash-*` names.
 
+// Linked for the coverage hooks the instrumented libraries call (its `main` is not used).
+use libfuzzer_sys as _;
+
 use std::io::Cursor;
 use std::path::Path;
 
