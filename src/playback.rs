@@ -233,7 +233,9 @@ fn build<T: SizedSample + FromSample<f32>>(
             // Glitches and reroutes leave the stream playing; anything else means it is gone.
             let lost = !matches!(
                 e.kind(),
-                cpal::ErrorKind::Xrun | cpal::ErrorKind::DeviceChanged | cpal::ErrorKind::RealtimeDenied
+                cpal::ErrorKind::Xrun
+                    | cpal::ErrorKind::DeviceChanged
+                    | cpal::ErrorKind::RealtimeDenied
             );
             stream_failed(&err_shared, e.to_string(), lost);
         },
@@ -359,7 +361,9 @@ impl Player {
         self.stream = None;
         self.shared.playing.store(false, Ordering::Release);
         self.status = AudioStatus::Unavailable(format!("the audio device stopped: {why}"));
-        Some(format!("audio unavailable: the audio device stopped: {why}"))
+        Some(format!(
+            "audio unavailable: the audio device stopped: {why}"
+        ))
     }
 
     /// Starts or resumes playback.
@@ -552,7 +556,11 @@ mod tests {
         stream_failed(&p.shared, "buffer underrun".into(), false);
         assert!(p.is_playing() && p.poll_device().is_none());
         // What cpal's error callback reports when the device goes away.
-        stream_failed(&p.shared, "The requested device is no longer available".into(), true);
+        stream_failed(
+            &p.shared,
+            "The requested device is no longer available".into(),
+            true,
+        );
         assert!(!p.is_playing());
         let msg = p.poll_device().unwrap();
         assert!(msg.contains("no longer available"), "{msg}");

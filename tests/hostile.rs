@@ -152,7 +152,10 @@ fn a_50000_by_50000_png_header_is_refused_before_decoding() {
     // Past the pixel limit with both sides inside the side limit.
     std::fs::write(&p, png_claiming(16_000, 16_000)).unwrap();
     let msg = load_frame(&p).unwrap_err().to_string();
-    assert!(msg.contains("256000000 pixels") && msg.contains("67108864"), "{msg}");
+    assert!(
+        msg.contains("256000000 pixels") && msg.contains("67108864"),
+        "{msg}"
+    );
     // Outside a group's decoded window the header check refuses it too.
     let scan = write_scan(&dir.path().join("scan"), 1, 8, 32, 16);
     let frame = scan.join("g00000/f000.png");
@@ -164,7 +167,10 @@ fn a_50000_by_50000_png_header_is_refused_before_decoding() {
             .to_string(),
         Err(e) => e.to_string(),
     };
-    assert!(msg.contains("50000×50000") && msg.contains("f000.png"), "{msg}");
+    assert!(
+        msg.contains("50000×50000") && msg.contains("f000.png"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -245,7 +251,11 @@ fn a_hough_accumulator_past_the_limit_is_refused_before_any_group_runs() {
     let dir = tempfile::tempdir().unwrap();
     let demo = demo_copy(dir.path());
     let params = dir.path().join("fine.toml");
-    std::fs::write(&params, "[hough]\ntheta_step_deg = 0.001\nrho_step_px = 0.02\n").unwrap();
+    std::fs::write(
+        &params,
+        "[hough]\ntheta_step_deg = 0.001\nrho_step_px = 0.02\n",
+    )
+    .unwrap();
     let out = dir.path().join("x.wav");
     let o = groovescope(&[
         "reconstruct",

@@ -9,9 +9,9 @@ use std::time::{Duration, Instant};
 
 use common::stderr;
 use groovescope::engine::{EngineError, ReconstructOptions, reconstruct};
+use groovescope::io::Scan;
 use groovescope::io::lock::{OutputLock, lock_path};
 use groovescope::io::wav::{Audio, WavBits, read_wav, write_wav};
-use groovescope::io::Scan;
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -32,11 +32,18 @@ fn demo_copy(dir: &Path) -> PathBuf {
         }
     }
     let out = dir.join("demo");
-    copy_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo"), &out);
+    copy_dir(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo"),
+        &out,
+    );
     out
 }
 
-fn run(scan: &Scan, groups: std::ops::Range<usize>, keep_going: bool) -> Result<groovescope::engine::Reconstruction, EngineError> {
+fn run(
+    scan: &Scan,
+    groups: std::ops::Range<usize>,
+    keep_going: bool,
+) -> Result<groovescope::engine::Reconstruction, EngineError> {
     let opts = ReconstructOptions {
         groups: Some(groups),
         keep_going,
@@ -107,7 +114,10 @@ fn an_output_folder_removed_mid_run_ends_with_one_line_and_leaves_nothing() {
     let o = child.wait_with_output().unwrap();
     let err = stderr(&o);
     assert!(!o.status.success(), "{err}");
-    assert!(err.contains("clip.wav") && err.contains("No such file"), "{err}");
+    assert!(
+        err.contains("clip.wav") && err.contains("No such file"),
+        "{err}"
+    );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(!out_dir.exists());
     assert_eq!(names(dir.path()), vec!["demo".to_string()]);
@@ -167,7 +177,10 @@ fn a_full_disk_is_one_clear_error_leaves_no_partial_file_and_keeps_the_old_one()
     let msg = write_wav(&fresh, &audio, WavBits::Int24, false)
         .unwrap_err()
         .to_string();
-    assert!(msg.contains("new.wav") && msg.contains("No space left"), "{msg}");
+    assert!(
+        msg.contains("new.wav") && msg.contains("No space left"),
+        "{msg}"
+    );
     assert_eq!(names(disk.dir.path()), vec!["clip.wav".to_string()]);
 }
 
@@ -181,7 +194,10 @@ fn a_second_reconstruct_to_an_output_in_use_is_refused_and_racing_runs_never_tea
     let o = common::groovescope(&["reconstruct", s(&demo), "--out", s(&wav), "--quiet"]);
     let err = stderr(&o);
     assert!(!o.status.success());
-    assert!(err.contains("another groovescope") && err.contains("clip.wav"), "{err}");
+    assert!(
+        err.contains("another groovescope") && err.contains("clip.wav"),
+        "{err}"
+    );
     assert!(!wav.exists());
     drop(held);
 
@@ -196,7 +212,14 @@ fn a_second_reconstruct_to_an_output_in_use_is_refused_and_racing_runs_never_tea
     let report = dir.path().join("clip.json");
     let start = || {
         Command::new(env!("CARGO_BIN_EXE_groovescope"))
-            .args(["reconstruct", s(&demo), "--out", s(&wav), "--report", s(&report)])
+            .args([
+                "reconstruct",
+                s(&demo),
+                "--out",
+                s(&wav),
+                "--report",
+                s(&report),
+            ])
             .args(["--quiet", "--force"])
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
@@ -209,10 +232,13 @@ fn a_second_reconstruct_to_an_output_in_use_is_refused_and_racing_runs_never_tea
     for o in outputs.iter().filter(|o| !o.status.success()) {
         assert!(stderr(o).contains("another groovescope"), "{}", stderr(o));
     }
-    assert_eq!(std::fs::read(&wav).unwrap(), expected, "a torn or mixed WAV");
+    assert_eq!(
+        std::fs::read(&wav).unwrap(),
+        expected,
+        "a torn or mixed WAV"
+    );
     assert!(!read_wav(&wav).unwrap().is_empty());
-    let json: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert!(json.is_object());
     assert_eq!(
         names(dir.path()),
@@ -227,7 +253,10 @@ fn two_windows_saving_one_preset_or_exporting_one_file_do_not_interleave() {
     let params = groovescope::pipeline::PipelineParams::default();
     let held = OutputLock::acquire(&preset).unwrap();
     let msg = groovescope::app::export::save_preset(&params, &preset, true).unwrap_err();
-    assert!(msg.contains("another groovescope") && msg.contains("preset.toml"), "{msg}");
+    assert!(
+        msg.contains("another groovescope") && msg.contains("preset.toml"),
+        "{msg}"
+    );
     assert!(!preset.exists());
     drop(held);
     groovescope::app::export::save_preset(&params, &preset, false).unwrap();

@@ -67,9 +67,13 @@ pub fn scan_toml(data: &[u8]) {
     let Ok(meta) = ScanMeta::from_toml_str(text, path) else {
         return;
     };
-    let written = meta.to_toml_string().expect("validated metadata serialises");
+    let written = meta
+        .to_toml_string()
+        .expect("validated metadata serialises");
     let again = ScanMeta::from_toml_str(&written, path).expect("written metadata reads back");
-    let rewritten = again.to_toml_string().expect("read-back metadata serialises");
+    let rewritten = again
+        .to_toml_string()
+        .expect("read-back metadata serialises");
     assert_eq!(written, rewritten, "scan.toml does not round-trip");
     let geometry = meta.geometry();
     assert!(geometry.focal_px.is_finite() || geometry.focal_px.is_infinite());
@@ -112,7 +116,11 @@ pub fn frame(data: &[u8]) {
         "a decoded frame holds a value outside [0, 1]"
     );
     if let Ok(size) = checked {
-        assert_eq!(size, (img.width, img.height), "header and decoded sizes differ");
+        assert_eq!(
+            size,
+            (img.width, img.height),
+            "header and decoded sizes differ"
+        );
     }
 }
 
@@ -308,7 +316,8 @@ fn wav_bytes(u: &mut Unstructured) -> arbitrary::Result<Vec<u8>> {
         },
     };
     let mut out = Cursor::new(Vec::new());
-    let mut w = hound::WavWriter::new(&mut out, spec).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    let mut w =
+        hound::WavWriter::new(&mut out, spec).map_err(|_| arbitrary::Error::IncorrectFormat)?;
     let n = u.int_in_range(0usize..=64)? * usize::from(spec.channels);
     for i in 0..n {
         let r = if float {
@@ -318,7 +327,8 @@ fn wav_bytes(u: &mut Unstructured) -> arbitrary::Result<Vec<u8>> {
         };
         r.map_err(|_| arbitrary::Error::IncorrectFormat)?;
     }
-    w.finalize().map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    w.finalize()
+        .map_err(|_| arbitrary::Error::IncorrectFormat)?;
     Ok(out.into_inner())
 }
 
