@@ -1,5 +1,7 @@
 //! Hostile input: metadata that contradicts the scan, and files that ask for more than the limits (issue 19).
 
+#![allow(clippy::unwrap_used)] // tests may panic
+
 mod common;
 
 use std::path::{Path, PathBuf};

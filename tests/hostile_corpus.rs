@@ -1,5 +1,7 @@
 //! Replays the fuzz corpus (seeds and every crash found, fixed) through the fuzz targets, plus a short seeded mutation run of each.
 
+#![allow(clippy::unwrap_used)] // tests may panic
+
 use std::path::Path;
 
 #[path = "../fuzz/src/targets.rs"]

@@ -1,5 +1,7 @@
 //! Faults while running and concurrent writers: frames that vanish after the scan opened, an output folder removed mid-run, a full disk, two runs on one output (issue 19).
 
+#![allow(clippy::unwrap_used)] // tests may panic
+
 mod common;
 
 use std::path::{Path, PathBuf};

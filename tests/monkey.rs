@@ -292,7 +292,7 @@ fn check_consistent(h: &H) -> Result<(), String> {
 /// Steps until the worker and any reconstruction are done.
 fn settle(h: &mut H) -> Result<(), String> {
     let t0 = Instant::now();
-    while !(wb(h).is_idle() && !wb(h).is_reconstructing()) {
+    while !wb(h).is_idle() || wb(h).is_reconstructing() {
         h.step();
         if t0.elapsed() > SETTLE_BOUND {
             return Err(format!("did not settle within {SETTLE_BOUND:?}"));
