@@ -50,7 +50,8 @@ for dir in fuzz/corpus/*/; do
     fi
     runs=$(awk '/stat::number_of_executed_units:/{print $2}' "$log")
     cov=$(grep -o 'cov: [0-9]*' "$log" | tail -n 1 | awk '{print $2}')
+    rate=$(awk '/stat::average_exec_per_sec:/{print $2}' "$log")
     secs=$(awk '/stat::slowest_unit_time_sec:/{print $2}' "$log")
-    echo "fuzz $name: ${runs:-?} executions, coverage ${cov:-?} edges, slowest input ${secs:-?} s: $result"
+    echo "fuzz $name: ${runs:-?} executions (${rate:-?}/s), coverage ${cov:-?} edges, slowest input ${secs:-?} s: $result"
 done
 exit "$status"

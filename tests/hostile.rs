@@ -4,10 +4,10 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use common::{SCAN_TOML, groovescope, stderr, write_scan};
+use common::{SCAN_TOML, demo_copy, groovescope, stderr, write_scan};
 use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::limits::{MAX_FRAMES_PER_GROUP, MAX_TOML_BYTES, MAX_WAV_SAMPLES};
 use groovescope::io::{Scan, load_frame, load_group_frames};
@@ -16,25 +16,24 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// A copy of the bundled demo scan (13 dual-focus groups of 7 frames, with `reference.wav`).
-fn demo_copy(dir: &Path) -> PathBuf {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
-    let out = dir.join("demo");
-    copy_dir(&src, &out);
-    out
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for entry in std::fs::read_dir(from).unwrap() {
-        let p = entry.unwrap().path();
-        let dest = to.join(p.file_name().unwrap());
-        if p.is_dir() {
-            copy_dir(&p, &dest);
-        } else {
-            std::fs::copy(&p, &dest).unwrap();
-        }
-    }
+/// Runs `groovescope reconstruct SCAN --params PARAMS` to `x.wav` beside the params; returns
+/// the stderr of the failed run (the output must not exist).
+fn refused_reconstruct(scan: &Path, params: &Path) -> String {
+    let out = params.with_file_name("x.wav");
+    let o = groovescope(&[
+        "reconstruct",
+        s(scan),
+        "--out",
+        s(&out),
+        "--params",
+        s(params),
+        "--quiet",
+    ]);
+    assert!(!o.status.success());
+    assert!(!out.exists());
+    let err = stderr(&o);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    err
 }
 
 fn open_err(dir: &Path) -> String {
@@ -211,24 +210,11 @@ fn a_params_file_past_the_toml_limit_is_refused_naming_it() {
         text += "# padding padding padding padding padding padding padding padding\n";
     }
     std::fs::write(&params, text).unwrap();
-    let out = dir.path().join("x.wav");
-    let o = groovescope(&[
-        "reconstruct",
-        s(&scan),
-        "--out",
-        s(&out),
-        "--params",
-        s(&params),
-        "--quiet",
-    ]);
-    let err = stderr(&o);
-    assert!(!o.status.success());
+    let err = refused_reconstruct(&scan, &params);
     assert!(
         err.contains("big.toml") && err.contains(&MAX_TOML_BYTES.to_string()),
         "{err}"
     );
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(!out.exists());
 }
 
 #[test]
@@ -258,18 +244,7 @@ fn a_hough_accumulator_past_the_limit_is_refused_before_any_group_runs() {
         "[hough]\ntheta_step_deg = 0.001\nrho_step_px = 0.02\n",
     )
     .unwrap();
-    let out = dir.path().join("x.wav");
-    let o = groovescope(&[
-        "reconstruct",
-        s(&demo),
-        "--out",
-        s(&out),
-        "--params",
-        s(&params),
-        "--quiet",
-    ]);
-    let err = stderr(&o);
-    assert!(!o.status.success());
+    let err = refused_reconstruct(&demo, &params);
     assert!(
         err.contains("hough.theta_step_deg = 0.001")
             && err.contains("67108864")
@@ -277,5 +252,4 @@ fn a_hough_accumulator_past_the_limit_is_refused_before_any_group_runs() {
             && err.contains("fine.toml"),
         "{err}"
     );
-    assert!(!out.exists());
 }

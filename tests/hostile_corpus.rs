@@ -4,6 +4,10 @@
 
 use std::path::Path;
 
+mod common;
+
+use common::Rng;
+
 #[path = "../fuzz/src/targets.rs"]
 mod targets;
 
@@ -29,22 +33,6 @@ fn corpus(name: &str) -> Vec<(String, Vec<u8>)> {
             )
         })
         .collect()
-}
-
-/// xorshift64*: a fixed, seedable stream of mutations.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
 }
 
 /// One libFuzzer-style mutation: flip a bit, set a byte to an edge value, cut, insert, or

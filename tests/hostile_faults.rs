@@ -4,12 +4,12 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use common::stderr;
+use common::{demo_copy, stderr};
 use groovescope::engine::{EngineError, ReconstructOptions, reconstruct};
 use groovescope::io::Scan;
 use groovescope::io::lock::{OutputLock, lock_path};
@@ -17,28 +17,6 @@ use groovescope::io::wav::{Audio, WavBits, read_wav, write_wav};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
-}
-
-/// A copy of the bundled demo scan (13 dual-focus groups of 7 frames, with `reference.wav`).
-fn demo_copy(dir: &Path) -> PathBuf {
-    fn copy_dir(from: &Path, to: &Path) {
-        std::fs::create_dir_all(to).unwrap();
-        for entry in std::fs::read_dir(from).unwrap() {
-            let p = entry.unwrap().path();
-            let dest = to.join(p.file_name().unwrap());
-            if p.is_dir() {
-                copy_dir(&p, &dest);
-            } else {
-                std::fs::copy(&p, &dest).unwrap();
-            }
-        }
-    }
-    let out = dir.join("demo");
-    copy_dir(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo"),
-        &out,
-    );
-    out
 }
 
 fn run(

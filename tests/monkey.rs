@@ -9,10 +9,13 @@
 #![cfg(feature = "gui")]
 #![allow(clippy::unwrap_used)] // tests may panic
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 use std::time::{Duration, Instant};
 
+use common::Rng;
 use egui::accesskit::Role;
 use egui::{Key, Modifiers, PointerButton, Pos2};
 use egui_kittest::Harness;
@@ -88,27 +91,12 @@ fn wb_mut(h: &mut H) -> &mut Workbench {
     h.state_mut().wb.as_mut().unwrap()
 }
 
-/// xorshift64*: the sequence's events follow from its seed alone.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-
-    fn pos(&mut self) -> Pos2 {
-        Pos2::new(
-            self.below(SIZE[0] as usize) as f32,
-            self.below(SIZE[1] as usize) as f32,
-        )
-    }
+/// A random point in the window.
+fn random_pos(rng: &mut Rng) -> Pos2 {
+    Pos2::new(
+        rng.below(SIZE[0] as usize) as f32,
+        rng.below(SIZE[1] as usize) as f32,
+    )
 }
 
 /// Clicks the `pick`-th widget of `role`, if there is one; returns its label.
@@ -137,7 +125,7 @@ fn event(h: &mut H, rng: &mut Rng, existing: &Path) -> String {
             }
         }
         2 => {
-            let pos = rng.pos();
+            let pos = random_pos(rng);
             let button = [PointerButton::Primary, PointerButton::Secondary][rng.below(2)];
             for pressed in [true, false] {
                 h.event(egui::Event::PointerButton {
@@ -150,7 +138,7 @@ fn event(h: &mut H, rng: &mut Rng, existing: &Path) -> String {
             format!("{button:?} click at {pos:?}")
         }
         3 => {
-            let (from, to) = (rng.pos(), rng.pos());
+            let (from, to) = (random_pos(rng), random_pos(rng));
             h.drag_at(from);
             h.event(egui::Event::PointerMoved(to));
             h.drop_at(to);
@@ -240,7 +228,8 @@ fn event(h: &mut H, rng: &mut Rng, existing: &Path) -> String {
             wb_mut(h).request_export_wav(existing.to_path_buf(), rng.below(2) == 0);
             h.step();
             let answer = ["Replace", "Cancel"][rng.below(2)];
-            match h.query_by_label(answer) {
+            // The confirmation's button is the last of that name (the clip panel may have one).
+            match h.query_all_by_label(answer).last() {
                 Some(node) => {
                     node.click();
                     format!("export over the existing file, then {answer}")
