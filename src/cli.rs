@@ -352,33 +352,6 @@ pub fn load_params(path: Option<&Path>) -> Result<PipelineParams> {
     Ok(params)
 }
 
-/// Refuses params whose Hough accumulator would pass [`crate::io::limits::MAX_HOUGH_CELLS`]
-/// on this scan's frames, before any group runs (the stage would refuse every group).
-///
-/// # Errors
-/// One line naming the keys, both numbers and the params file.
-pub fn check_hough_size(params: &PipelineParams, scan: &Scan, file: Option<&Path>) -> Result<()> {
-    use crate::io::limits::MAX_HOUGH_CELLS;
-    if !params.uses_dual_focus(&scan.meta) {
-        return Ok(());
-    }
-    let Some(frame) = scan.groups.first().and_then(|g| g.frames.first()) else {
-        return Ok(());
-    };
-    let (_, height) = crate::io::frames::frame_dimensions(frame)?;
-    let cells = crate::pipeline::hough::accumulator_cells(&params.hough, height);
-    if cells > MAX_HOUGH_CELLS {
-        let h = &params.hough;
-        let file = file.map_or_else(|| "the default params".into(), |p| p.display().to_string());
-        bail!(
-            "hough.theta_step_deg = {} and hough.rho_step_px = {} make a Hough accumulator of {cells} cells for {height}-row frames, past the limit of {MAX_HOUGH_CELLS}: {file}",
-            h.theta_step_deg,
-            h.rho_step_px
-        );
-    }
-    Ok(())
-}
-
 /// The JSON report written beside a reconstruction.
 #[derive(Debug, Serialize)]
 pub struct Report<'a> {
@@ -478,7 +451,13 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
     let mut params = load_params(args.params.as_deref())?;
     params.path = path_choice(&args.path, params.path);
     let scan = Scan::open(&args.scan)?;
-    check_hough_size(&params, &scan, args.params.as_deref())?;
+    if let Err(e) = crate::io::limits::check_hough_accumulator(&params, &scan) {
+        let file = args
+            .params
+            .as_deref()
+            .map_or("the default params".into(), |p| p.display().to_string());
+        bail!("{e}: {file}");
+    }
     let first = args.first_group.unwrap_or(0);
     let end = args
         .groups

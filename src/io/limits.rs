@@ -110,6 +110,35 @@ pub fn read_toml_text(path: &Path, what: &str) -> Result<String, LoadError> {
     })
 }
 
+/// Checks that `params` make a Hough accumulator of at most [`MAX_HOUGH_CELLS`] on this
+/// scan's frames (the first frame's height), when the dual-focus path runs: `reconstruct`
+/// refuses such params before any group runs instead of every group failing alike.
+///
+/// # Errors
+/// A sentence naming the keys and both numbers (the caller adds the params file), or why
+/// the first frame's header cannot be read.
+pub fn check_hough_accumulator(
+    params: &crate::pipeline::PipelineParams,
+    scan: &super::Scan,
+) -> Result<(), String> {
+    if !params.uses_dual_focus(&scan.meta) {
+        return Ok(());
+    }
+    let Some(frame) = scan.groups.first().and_then(|g| g.frames.first()) else {
+        return Ok(());
+    };
+    let (_, height) = super::frames::frame_dimensions(frame).map_err(|e| e.to_string())?;
+    let cells = crate::pipeline::hough::accumulator_cells(&params.hough, height);
+    if cells > MAX_HOUGH_CELLS {
+        let h = &params.hough;
+        return Err(format!(
+            "hough.theta_step_deg = {} and hough.rho_step_px = {} make a Hough accumulator of {cells} cells for {height}-row frames, past the limit of {MAX_HOUGH_CELLS}",
+            h.theta_step_deg, h.rho_step_px
+        ));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
