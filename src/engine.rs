@@ -11,10 +11,11 @@ use serde::Serialize;
 use crate::io::wav::{Audio, read_wav};
 use crate::io::{LoadError, Scan, load_group_frames};
 use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample, stitch};
-use crate::pipeline::cache::{frames_read, native_spacing_um};
 use crate::pipeline::dsp::apply_dsp;
 use crate::pipeline::eval::{Scores, evaluate};
-use crate::pipeline::orientation::Orientation;
+use crate::pipeline::frames_read;
+use crate::pipeline::sampling::native_spacing_um;
+use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
 use crate::pipeline::{FlowDetail, GroupInput, PipelineParams, Stage, StageCache, StageError};
 
 /// Longest lag searched when scoring against the reference (seconds).
@@ -113,111 +114,20 @@ pub struct Reconstruction {
     pub warnings: Vec<String>,
 }
 
-/// The clip's recent wall slopes: per wall side, the median |b| of the last groups' fits.
-///
-/// The orientation stage rejects fits whose cross-groove slope strays from their group's
-/// median; a group whose fits are mostly wrong (a flaked chunk longer than half a group) passes
-/// that check. Groups run in order, so the engine also checks each group against the median of
-/// the [`SLOPE_HISTORY`] groups before it, once there are [`SLOPE_REFERENCE_MIN_GROUPS`] and
-/// most of them agree with that median (a clip that starts on damage sets no reference), and
-/// reruns the sound stage when that rejects fits.
-#[derive(Default)]
-struct SlopeReference {
-    medians: Vec<(
-        crate::pipeline::walls::WallSide,
-        std::collections::VecDeque<f64>,
-    )>,
-}
-
-/// Groups needed before their median is used as a reference.
-const SLOPE_REFERENCE_MIN_GROUPS: usize = 8;
-/// Groups the reference looks back over.
-const SLOPE_HISTORY: usize = 64;
-/// Share of those groups that must agree with their median for it to be used.
-const SLOPE_AGREEMENT: f64 = 0.6;
-
-impl SlopeReference {
-    fn check(
-        &mut self,
-        cache: &mut StageCache,
-        input: &GroupInput,
-        params: &PipelineParams,
-    ) -> Result<(), StageError> {
-        let max_change = params.orientation.max_wall_slope_change;
-        let Some(out) = cache.orientation.as_mut() else {
-            return Ok(());
-        };
-        if max_change <= 0.0 {
-            return Ok(());
-        }
-        // The engine's cache holds the only reference, so this does not copy the output.
-        let orientation = &mut Arc::make_mut(out).orientation;
-        let rejected = self.apply(orientation, max_change);
-        if rejected > 0 {
-            orientation.rejected_fits += rejected;
-            cache.run_from(Stage::Sound, input, params, &mut |_, _| true)?;
-        }
-        Ok(())
-    }
-
-    /// Checks one group's walls against the reference (when there is one), turning strays into
-    /// gaps, then adds the group's own median to the history. Returns the fits rejected.
-    fn apply(&mut self, orientation: &mut Orientation, max_change: f64) -> usize {
-        use crate::pipeline::orientation::{median_wall_slope, reject_slopes_against};
-        let mut rejected = 0;
-        for wall in &mut orientation.walls {
-            let own = median_wall_slope(&wall.samples);
-            let idx = match self.medians.iter().position(|(s, _)| *s == wall.side) {
-                Some(i) => i,
-                None => {
-                    self.medians.push((wall.side, Default::default()));
-                    self.medians.len() - 1
-                }
-            };
-            let Some((_, history)) = self.medians.get_mut(idx) else {
-                continue;
-            };
-            if let Some(r) = agreed_median(history, max_change) {
-                rejected += reject_slopes_against(&mut wall.samples, r, max_change);
-            }
-            if let Some(m) = own {
-                if history.len() == SLOPE_HISTORY {
-                    history.pop_front();
-                }
-                history.push_back(m);
-            }
-        }
-        rejected
-    }
-}
-
-/// The median of `history` when it holds enough groups and most lie within `max_change` of it.
-fn agreed_median(history: &std::collections::VecDeque<f64>, max_change: f64) -> Option<f64> {
-    if history.len() < SLOPE_REFERENCE_MIN_GROUPS {
-        return None;
-    }
-    let m = crate::pipeline::median(history.iter().copied().collect())?;
-    let agree = history
-        .iter()
-        .filter(|&&v| (v - m).abs() <= max_change * m)
-        .count();
-    (agree as f64 >= SLOPE_AGREEMENT * history.len() as f64).then_some(m)
-}
-
 /// Runs one group through every stage for its sound (used by the engine and by benchmarks):
 /// on the dual-focus path the flow stage gives only the in-focus map ([`FlowDetail::InFocusMap`]),
-/// which is all the stripes read.
+/// which is all the stripes read. `reference` is the clip's wall-slope reference for this group
+/// (the default: none).
 ///
 /// # Errors
 /// The first stage error.
 pub fn run_group(
     input: &GroupInput,
     params: &PipelineParams,
+    reference: &SlopeReference,
 ) -> Result<(StageCache, Vec<Duration>), StageError> {
-    let mut cache = StageCache {
-        flow_detail: FlowDetail::InFocusMap,
-        ..StageCache::default()
-    };
+    let mut cache = StageCache::new(FlowDetail::InFocusMap);
+    cache.set_slope_reference(reference.clone());
     let mut times = vec![Duration::ZERO; Stage::ALL.len()];
     let mut t0 = Instant::now();
     cache.run_from(Stage::Derivatives, input, params, &mut |stage, _| {
@@ -253,7 +163,8 @@ pub fn reconstruct(
     let mut timings = StageTimings::default();
     let mut stage_secs = vec![0.0; Stage::ALL.len()];
     let mut signals: Vec<GroupSignal> = Vec::with_capacity(total);
-    let mut slope_refs = SlopeReference::default();
+    // Each group's fits are checked against the median wall slope of the groups before it.
+    let mut slopes = SlopeHistory::default();
     let mut reports = Vec::with_capacity(total);
     let mut warnings = Vec::new();
 
@@ -335,23 +246,24 @@ pub fn reconstruct(
                 first_frame,
                 meta: meta.clone(),
             };
-            let signal = match run_group(&input, params).and_then(|(mut cache, times)| {
-                slope_refs.check(&mut cache, &input, params)?;
-                Ok((cache, times))
-            }) {
+            let reference = slopes.reference(params.orientation.max_wall_slope_change);
+            let signal = match run_group(&input, params, &reference) {
                 Ok((cache, times)) => {
+                    if let Some(o) = cache.orientation() {
+                        slopes.push(&o.own_slopes);
+                    }
                     for (acc, t) in stage_secs.iter_mut().zip(&times) {
                         *acc += t.as_secs_f64();
                     }
                     let outlier = cache
-                        .orientation
+                        .orientation()
                         .as_ref()
                         .map(|o| o.orientation.outlier_fraction);
                     let rejected_fits = cache
-                        .orientation
+                        .orientation()
                         .as_ref()
                         .map_or(0, |o| o.orientation.rejected_fits);
-                    match cache.signal {
+                    match cache.signal().cloned() {
                         Some(sig) => {
                             reports.push(GroupReport {
                                 group,
@@ -562,63 +474,5 @@ fn score_against_reference(
             warnings.push(format!("reference not scored: {e}"));
             None
         }
-    }
-}
-
-#[cfg(test)]
-#[allow(clippy::unwrap_used)] // tests may panic
-mod tests {
-    use super::*;
-    use crate::image::Image;
-    use crate::pipeline::orientation::{OrientationSample, WallOrientation, test_fit};
-    use crate::pipeline::walls::WallSide;
-
-    fn group(b: f64) -> Orientation {
-        let fit = test_fit(0.01, b);
-        let samples = (0..10)
-            .map(|i| OrientationSample {
-                x_px: i as f32,
-                tan_theta: 0.01,
-                fit: Some(fit),
-            })
-            .collect();
-        Orientation {
-            walls: vec![WallOrientation {
-                side: WallSide::Right,
-                samples,
-            }],
-            weight_map: Image::zeros(1, 1),
-            outlier_fraction: 0.0,
-            rejected_fits: 0,
-        }
-    }
-
-    #[test]
-    fn a_group_whose_wall_slope_strays_from_the_clip_becomes_gaps() {
-        let mut r = SlopeReference::default();
-        // The first groups set the reference; nothing is rejected before there are eight.
-        for k in 0..SLOPE_REFERENCE_MIN_GROUPS {
-            let b = [-0.38, -0.37, -0.39][k % 3];
-            assert_eq!(r.apply(&mut group(b), 0.25), 0);
-        }
-        // A group locked onto a flaked chunk: its own median agrees with its fits, the clip's
-        // does not.
-        let mut bad = group(-1.0);
-        assert_eq!(r.apply(&mut bad, 0.25), 10);
-        assert!(bad.walls[0].samples.iter().all(|s| s.fit.is_none()));
-        // Good groups still pass.
-        assert_eq!(r.apply(&mut group(-0.4), 0.25), 0);
-    }
-
-    #[test]
-    fn a_clip_that_starts_on_damage_sets_no_reference() {
-        // Half the first groups are wrong in different ways: no median is agreed on, so no
-        // group is judged by it.
-        let mut r = SlopeReference::default();
-        for b in [-1.0, -0.38, -0.6, -0.37, -1.4, -0.39, -0.8, -0.38] {
-            assert_eq!(r.apply(&mut group(b), 0.25), 0);
-        }
-        assert_eq!(r.apply(&mut group(-0.38), 0.25), 0);
-        assert_eq!(r.apply(&mut group(-1.0), 0.25), 0);
     }
 }
