@@ -10,86 +10,30 @@
 #![allow(clippy::unwrap_used)] // tests may panic
 
 mod common;
+mod gui_common;
 
 use std::path::{Path, PathBuf};
-use std::sync::Once;
 use std::time::{Duration, Instant};
 
 use common::Rng;
 use egui::accesskit::Role;
 use egui::{Key, Modifiers, PointerButton, Pos2};
-use egui_kittest::Harness;
 use egui_kittest::kittest::{NodeT, Queryable};
-use groovescope::app::{View, Workbench, WorkbenchOptions};
+use groovescope::app::{View, WorkbenchOptions};
 use groovescope::pipeline::Stage;
 use groovescope::playback::DeviceChoice;
+use gui_common::{H, SIZE, harness, wb, wb_mut};
 
 /// Longest one UI frame may take to answer an event.
 const EVENT_BOUND: Duration = Duration::from_secs(5);
 /// Longest the workbench may take to finish its work after a sequence.
 const SETTLE_BOUND: Duration = Duration::from_secs(300);
-/// Window size (points).
-const SIZE: [f32; 2] = [1280.0, 800.0];
 /// Sequences × events in `cargo test`.
 const SHORT_RUN: (usize, usize) = (3, 60);
 /// Knob values a careless or hostile operator might enter.
 const EXTREMES: [f64; 8] = [0.0, -1.0, -1e9, 1e30, f64::NAN, f64::INFINITY, 1e-30, 7.0];
 /// Text typed into a focused field.
 const TYPED: [&str; 6] = ["NaN", "-0", "1e999", "", "abc", "99999999999999999999"];
-
-static ALSA: Once = Once::new();
-
-/// Points ALSA at a silent null sink (no sound card here).
-fn quiet_audio() {
-    ALSA.call_once(|| {
-        let conf = Path::new(env!("CARGO_TARGET_TMPDIR")).join("alsa-null-monkey.conf");
-        std::fs::write(
-            &conf,
-            "</usr/share/alsa/alsa.conf>\npcm.!default { type null }\n",
-        )
-        .unwrap();
-        // SAFETY: runs once, before any test touches ALSA or reads the environment.
-        unsafe { std::env::set_var("ALSA_CONFIG_PATH", &conf) };
-    });
-}
-
-struct App {
-    wb: Option<Workbench>,
-    frame: eframe::Frame,
-}
-
-type H = Harness<'static, App>;
-
-fn harness(opts: WorkbenchOptions) -> H {
-    quiet_audio();
-    let mut h = Harness::builder()
-        .with_size(egui::vec2(SIZE[0], SIZE[1]))
-        .with_max_steps(40)
-        .build_ui_state(
-            |ui, app: &mut App| {
-                if let Some(wb) = &mut app.wb {
-                    eframe::App::logic(wb, ui.ctx(), &mut app.frame);
-                    eframe::App::ui(wb, ui, &mut app.frame);
-                }
-            },
-            App {
-                wb: None,
-                frame: eframe::Frame::_new_kittest(),
-            },
-        );
-    let ctx = h.ctx.clone();
-    h.state_mut().wb = Some(Workbench::new(&ctx, opts).unwrap());
-    h.step();
-    h
-}
-
-fn wb(h: &H) -> &Workbench {
-    h.state().wb.as_ref().unwrap()
-}
-
-fn wb_mut(h: &mut H) -> &mut Workbench {
-    h.state_mut().wb.as_mut().unwrap()
-}
 
 /// A random point in the window.
 fn random_pos(rng: &mut Rng) -> Pos2 {
@@ -245,34 +189,36 @@ fn event(h: &mut H, rng: &mut Rng, existing: &Path) -> String {
     }
 }
 
-/// No stage shown fresh whose inputs changed: a fresh stage belongs to the shown group and was
-/// made with params whose tables for it and every stage before it (its inputs) are the
-/// current ones. (An earlier stage may meanwhile hold a superseded job's newer output, shown
-/// running or stale; that does not change what the fresh stage was made from.)
+/// No stage shown fresh whose inputs changed: a fresh stage belongs to the shown group, and it
+/// and every stage before it that the path uses hold output of the current knobs.
 fn check_consistent(h: &H) -> Result<(), String> {
     let w = wb(h);
     let statuses = w.statuses();
     let cache = w.cache();
+    let dual = w
+        .scan()
+        .is_some_and(|s| w.params().uses_dual_focus(&s.meta));
+    let unused = if dual { Stage::Depth } else { Stage::Stripes };
     for stage in Stage::ALL {
         if statuses[stage.index()].word() != "fresh" {
             continue;
         }
-        if cache.group != Some(w.group()) {
+        if cache.group() != Some(w.group()) {
             return Err(format!(
                 "{stage:?} shown fresh for group {} but the cache holds group {:?}",
                 w.group(),
-                cache.group
+                cache.group()
             ));
         }
-        let Some(made_with) = &cache.produced_with[stage.index()] else {
-            return Err(format!("{stage:?} shown fresh but never produced"));
-        };
-        if let Some(changed) = made_with.first_changed_stage(w.params())
-            && changed <= stage
-        {
-            return Err(format!(
-                "{stage:?} shown fresh but the {changed:?} knobs changed"
-            ));
+        // What it was made from: every earlier stage the path uses still holds output made
+        // with the current knobs (a superseded job's newer output would make it stale).
+        for input in Stage::ALL.iter().filter(|s| **s <= stage) {
+            let word = statuses[input.index()].word();
+            if *input != unused && !cache.is_fresh(*input, w.params()) {
+                return Err(format!(
+                    "{stage:?} shown fresh while {input:?} ({word}) holds output of other knobs"
+                ));
+            }
         }
     }
     Ok(())
@@ -388,6 +334,9 @@ fn random_operator_sequences_never_panic_hang_or_show_stale_stages_as_fresh() {
             sequence(*seed, events, &scan(), &mut figures)
         }));
         match outcome {
+            Ok(Ok(())) if seeds.len() > SHORT_RUN.0 && seed % 20 == 0 => {
+                eprintln!("monkey: {seed} of {} sequences done", seeds.len());
+            }
             Ok(Ok(())) => {}
             Ok(Err(e)) => panic!("{e}"),
             Err(_) => panic!("seed {seed} panicked (replay: GROOVESCOPE_MONKEY_SEED={seed})"),

@@ -241,7 +241,7 @@ impl ScanMeta {
                 ));
             }
         }
-        let margin_px = crate::pipeline::cache::SAMPLE_MARGIN_PX;
+        let margin_px = crate::pipeline::sampling::SAMPLE_MARGIN_PX;
         let view_um = (width as f64 - 1.0 - 2.0 * margin_px) * self.camera.pixel_pitch_um;
         if groups > 1 && self.motion.group_step_um > view_um {
             return Err(format!(
