@@ -213,8 +213,9 @@ impl ScanMeta {
 
     /// Checks the metadata against what the scan folder holds: `groups` group folders whose
     /// first frame is `frame_size` (width, height) px. A per-group list must have one entry a
-    /// group, the glass edge must lie inside the frame, and consecutive groups must overlap
-    /// by more than the stitcher's sample margins, or the sound would have gaps.
+    /// group, the glass edge must lie inside the frame, and the group step must be at most the
+    /// stretch of groove a group's samples cover (its width less the stitcher's margins), or
+    /// consecutive groups would leave gaps in the sound.
     ///
     /// # Errors
     /// A sentence naming the key and both numbers.
@@ -245,7 +246,7 @@ impl ScanMeta {
         let view_um = (width as f64 - 1.0 - 2.0 * margin_px) * self.camera.pixel_pitch_um;
         if groups > 1 && self.motion.group_step_um > view_um {
             return Err(format!(
-                "motion.group_step_um = {} µm is longer than the {view_um} µm a group's frames are sampled over ({width} px of {} µm less the stitcher's {margin_px} px margin each side), so consecutive groups would not overlap and the sound would have gaps",
+                "motion.group_step_um = {} µm is longer than the {view_um:.2} µm a group's frames are sampled over ({width} px of {} µm less the stitcher's {margin_px} px margin each side), so consecutive groups would not overlap and the sound would have gaps",
                 self.motion.group_step_um, self.camera.pixel_pitch_um
             ));
         }
