@@ -253,3 +253,25 @@ fn a_hough_accumulator_past_the_limit_is_refused_before_any_group_runs() {
         "{err}"
     );
 }
+
+#[test]
+fn a_flow_iteration_cap_past_the_limit_is_refused_naming_the_key() {
+    // Found by the monkey test: 10³⁰ typed into the iterations field became 4,294,967,295
+    // iterations, and with τ = 0 the flow stage never finished.
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let params = dir.path().join("slow.toml");
+    std::fs::write(
+        &params,
+        "[flow]\nmax_iterations = 4294967295\ntolerance_px = 0.0\n",
+    )
+    .unwrap();
+    let err = refused_reconstruct(&scan, &params);
+    assert!(
+        err.contains("flow.max_iterations")
+            && err.contains("4294967295")
+            && err.contains("10000")
+            && err.contains("slow.toml"),
+        "{err}"
+    );
+}
