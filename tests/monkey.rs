@@ -9,13 +9,12 @@
 #![cfg(feature = "gui")]
 #![allow(clippy::unwrap_used)] // tests may panic
 
-mod common;
 mod gui_common;
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use common::Rng;
+use gui_common::common::Rng;
 use egui::accesskit::Role;
 use egui::{Key, Modifiers, PointerButton, Pos2};
 use egui_kittest::kittest::{NodeT, Queryable};
@@ -310,8 +309,9 @@ fn sequence(seed: u64, events: usize, scan: &Path, figures: &mut Figures) -> Res
     Ok(())
 }
 
+/// A copy of the demo scan (the monkey saves metadata, presets and exports beside it).
 fn scan() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo")
+    gui_common::demo_scan()
 }
 
 #[test]
