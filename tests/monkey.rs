@@ -14,13 +14,13 @@ mod gui_common;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use gui_common::common::Rng;
 use egui::accesskit::Role;
 use egui::{Key, Modifiers, PointerButton, Pos2};
 use egui_kittest::kittest::{NodeT, Queryable};
 use groovescope::app::{View, WorkbenchOptions};
 use groovescope::pipeline::Stage;
 use groovescope::playback::DeviceChoice;
+use gui_common::common::Rng;
 use gui_common::{H, SIZE, harness, wb, wb_mut};
 
 /// Longest one UI frame may take to answer an event.
