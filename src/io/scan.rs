@@ -272,6 +272,14 @@ pub struct GroupEntry {
     pub frames: Vec<PathBuf>,
 }
 
+impl GroupEntry {
+    /// Frames in the group.
+    #[must_use]
+    pub fn frame_count(&self) -> usize {
+        self.frames.len()
+    }
+}
+
 /// An opened scan: metadata plus the list of groups. Frames are read on demand.
 #[derive(Clone, Debug)]
 pub struct Scan {
