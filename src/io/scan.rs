@@ -278,6 +278,14 @@ impl GroupEntry {
     pub fn frame_count(&self) -> usize {
         self.frames.len()
     }
+
+    /// The group's name: its folder's name.
+    #[must_use]
+    pub fn name(&self) -> String {
+        self.dir
+            .file_name()
+            .map_or_else(|| self.index.to_string(), |n| n.to_string_lossy().into_owned())
+    }
 }
 
 /// An opened scan: metadata plus the list of groups. Frames are read on demand.
