@@ -102,6 +102,8 @@ pub enum Command {
     Plan(crate::side::cli::PlanArgs),
     /// Merge the parts of every shard of a plan into the side's WAV.
     Merge(crate::side::cli::MergeArgs),
+    /// Convert a scan folder to a Zarr store (one zstd chunk per group) and check it.
+    Pack(crate::pack_cli::PackArgs),
     /// Import a microscope video clip (AVI/MP4) as a scan folder (needs the `video` feature).
     ImportVideo(crate::video_cli::ImportVideoArgs),
     /// Open the workbench (optionally on a scan).
@@ -471,6 +473,7 @@ pub fn run(command: Command) -> Result<()> {
         Command::Reconstruct(args) => crate::side::cli::run_reconstruct_command(&args),
         Command::Plan(args) => crate::side::cli::run_plan(&args),
         Command::Merge(args) => crate::side::cli::run_merge(&args),
+        Command::Pack(args) => crate::pack_cli::run_pack(&args),
         Command::Eval {
             recovered,
             reference,
