@@ -145,7 +145,11 @@ fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() 
         assert_eq!(e.trim().lines().count(), 1, "{e}");
     };
     expect_refusal(&[a0.clone()], "shard 1 of 2 is missing", t);
-    expect_refusal(&[a0.clone(), a1.clone(), a1.clone()], "duplicates shard 1", &a1);
+    expect_refusal(
+        &[a0.clone(), a1.clone(), a1.clone()],
+        "duplicates shard 1",
+        &a1,
+    );
     expect_refusal(&[a0.clone(), b1.clone()], "another plan", &b1);
 
     // Other params: a plan with another λ.
@@ -160,7 +164,11 @@ fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() 
     let other = t.join("other-scan");
     copy_dir(scan, &other);
     let meta = std::fs::read_to_string(other.join("scan.toml")).unwrap();
-    std::fs::write(other.join("scan.toml"), meta.replacen("rpm = 78.0", "rpm = 80.0", 1)).unwrap();
+    std::fs::write(
+        other.join("scan.toml"),
+        meta.replacen("rpm = 78.0", "rpm = 80.0", 1),
+    )
+    .unwrap();
     let po = t.join("po.json");
     plan(&other, 2, &po, &[]);
     let d1 = t.join("d1");
@@ -198,7 +206,14 @@ fn a_plan_for_another_scan_and_a_shard_out_of_range_are_refused() {
     std::fs::remove_dir_all(other.join("g00149")).unwrap();
     let run = |scan: &Path, k: &str| {
         groovescope(&[
-            "reconstruct", s(scan), "--plan", s(&p), "--shard", k, "--out", s(&t.join("part")),
+            "reconstruct",
+            s(scan),
+            "--plan",
+            s(&p),
+            "--shard",
+            k,
+            "--out",
+            s(&t.join("part")),
         ])
     };
     let o = run(&other, "0");
@@ -208,11 +223,18 @@ fn a_plan_for_another_scan_and_a_shard_out_of_range_are_refused() {
     let o = run(scan, "3");
     let e = stderr(&o);
     assert!(!o.status.success());
-    assert!(e.contains("--shard 3 is out of range") && e.contains("3 shards"), "{e}");
+    assert!(
+        e.contains("--shard 3 is out of range") && e.contains("3 shards"),
+        "{e}"
+    );
     assert!(!t.join("part").join("part.gsp").exists());
     // A plan edited by hand is refused too.
     let text = std::fs::read_to_string(&p).unwrap();
-    std::fs::write(&p, text.replacen("\"end_group\": 50", "\"end_group\": 51", 1)).unwrap();
+    std::fs::write(
+        &p,
+        text.replacen("\"end_group\": 50", "\"end_group\": 51", 1),
+    )
+    .unwrap();
     let e = stderr(&run(scan, "0"));
     assert!(e.contains("edited or is damaged"), "{e}");
 }
@@ -263,15 +285,28 @@ fn a_run_killed_at_a_random_group_resumes_to_the_same_bytes() {
     assert!(!out.exists(), "a partial WAV under the output name");
     // Without --resume the journal is not silently discarded.
     let o = groovescope(&["reconstruct", s(scan), "--out", s(&out), "--quiet"]);
-    assert!(!o.status.success() && stderr(&o).contains("--resume"), "{}", stderr(&o));
+    assert!(
+        !o.status.success() && stderr(&o).contains("--resume"),
+        "{}",
+        stderr(&o)
+    );
     // A journal from other params is refused, never mixed.
     let params = tmp.path().join("params.toml");
     std::fs::write(&params, "[flow]\nlambda = 0.3\n").unwrap();
     let o = groovescope(&[
-        "reconstruct", s(scan), "--out", s(&out), "--resume", "--params", s(&params),
+        "reconstruct",
+        s(scan),
+        "--out",
+        s(&out),
+        "--resume",
+        "--params",
+        s(&params),
     ]);
     let e = stderr(&o);
-    assert!(!o.status.success() && e.contains("other params") && e.contains(s(&journal)), "{e}");
+    assert!(
+        !o.status.success() && e.contains("other params") && e.contains(s(&journal)),
+        "{e}"
+    );
     // Resume: the same bytes as the uninterrupted run, and the journal is gone.
     let o = groovescope(&["reconstruct", s(scan), "--out", s(&out), "--resume"]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -286,7 +321,15 @@ fn a_run_killed_at_a_random_group_resumes_to_the_same_bytes() {
     let k = random_group(2, GROUPS / 2 - 10);
     eprintln!("killing shard 1 at its group {k}");
     let shard_args = [
-        "reconstruct", s(scan), "--plan", s(&p), "--shard", "1", "--out", s(&part1), "--resume",
+        "reconstruct",
+        s(scan),
+        "--plan",
+        s(&p),
+        "--shard",
+        "1",
+        "--out",
+        s(&part1),
+        "--resume",
     ];
     assert!(kill_at(&shard_args, k));
     assert!(part1.join("journal").is_file() && !part1.join("part.gsp").exists());
@@ -296,7 +339,10 @@ fn a_run_killed_at_a_random_group_resumes_to_the_same_bytes() {
     run_shard(scan, &p, 0, &part0);
     let merged = tmp.path().join("merged.wav");
     assert!(merge(&[part0, part1], &merged).status.success());
-    assert!(std::fs::read(&merged).unwrap() == *one, "merged WAV after a resumed shard differs");
+    assert!(
+        std::fs::read(&merged).unwrap() == *one,
+        "merged WAV after a resumed shard differs"
+    );
 }
 
 fn copy_dir(from: &Path, to: &Path) {

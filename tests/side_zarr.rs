@@ -63,7 +63,10 @@ fn pack_round_trips_every_frame_bit_for_bit_for_8_bit_16_bit_and_colour_frames()
             for (x, y) in fa.iter().zip(&fb) {
                 assert_eq!((x.width, x.height), (y.width, y.height));
                 assert!(
-                    x.data.iter().zip(&y.data).all(|(p, q)| p.to_bits() == q.to_bits()),
+                    x.data
+                        .iter()
+                        .zip(&y.data)
+                        .all(|(p, q)| p.to_bits() == q.to_bits()),
                     "{kind}-bit group {} differs",
                     ga.index
                 );
@@ -71,7 +74,11 @@ fn pack_round_trips_every_frame_bit_for_bit_for_8_bit_16_bit_and_colour_frames()
         }
         // Packing onto a store that exists is refused; the store is untouched.
         let o = groovescope(&["pack", s(&folder), "--out", s(&store)]);
-        assert!(!o.status.success() && stderr(&o).contains(s(&store)), "{}", stderr(&o));
+        assert!(
+            !o.status.success() && stderr(&o).contains(s(&store)),
+            "{}",
+            stderr(&o)
+        );
         assert!(Scan::open(&store).is_ok());
     }
 }
@@ -81,14 +88,25 @@ fn pack_refuses_groups_of_different_frame_counts_naming_the_group() {
     let tmp = tempfile::tempdir().unwrap();
     let folder = tmp.path().join("scan");
     textured_scan(&folder, 3, "8");
-    std::fs::copy(folder.join("g00000/f000.png"), folder.join("g00001/f999.png")).unwrap();
+    std::fs::copy(
+        folder.join("g00000/f000.png"),
+        folder.join("g00001/f999.png"),
+    )
+    .unwrap();
     let store = tmp.path().join("scan.zarr");
     let o = groovescope(&["pack", s(&folder), "--out", s(&store)]);
     let e = stderr(&o);
-    assert!(!o.status.success() && e.contains("g00001") && e.contains("same number of frames"), "{e}");
+    assert!(
+        !o.status.success() && e.contains("g00001") && e.contains("same number of frames"),
+        "{e}"
+    );
     assert!(!store.exists(), "a failed pack left its store");
     let leftovers: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
-    assert_eq!(leftovers.len(), 1, "a failed pack left its temporary folder");
+    assert_eq!(
+        leftovers.len(),
+        1,
+        "a failed pack left its temporary folder"
+    );
 }
 
 #[test]
@@ -108,7 +126,11 @@ fn a_store_reconstructs_to_the_same_wav_and_a_missing_chunk_is_named_or_a_gap() 
     let sound = tone(1000.0, 0.01, BUILTIN_RATE_HZ);
     render_scan(&sound, &cfg, &folder, &|_, _| {}, &AtomicBool::new(false)).unwrap();
     let store = tmp.path().join("scan.zarr");
-    assert!(groovescope(&["pack", s(&folder), "--out", s(&store), "--quiet"]).status.success());
+    assert!(
+        groovescope(&["pack", s(&folder), "--out", s(&store), "--quiet"])
+            .status
+            .success()
+    );
     let wav = |scan: &Path, name: &str, extra: &[&str]| {
         let out = tmp.path().join(name);
         let mut args = vec!["reconstruct", s(scan), "--out", s(&out), "--quiet"];
@@ -119,13 +141,19 @@ fn a_store_reconstructs_to_the_same_wav_and_a_missing_chunk_is_named_or_a_gap() 
     assert!(o.status.success(), "{}", stderr(&o));
     let (o, b) = wav(&store, "store.wav", &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(), "WAVs differ");
+    assert!(
+        std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
+        "WAVs differ"
+    );
 
     let chunk = store.join("frames/c/2/0/0/0");
     std::fs::remove_file(&chunk).unwrap();
     let (o, _) = wav(&store, "missing.wav", &[]);
     let e = stderr(&o);
-    assert!(!o.status.success() && e.contains("missing") && e.contains(s(&chunk)), "{e}");
+    assert!(
+        !o.status.success() && e.contains("missing") && e.contains(s(&chunk)),
+        "{e}"
+    );
     let report = tmp.path().join("gap.json");
     let (o, out) = wav(&store, "gap.wav", &["--keep-going", "--report", s(&report)]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -133,5 +161,8 @@ fn a_store_reconstructs_to_the_same_wav_and_a_missing_chunk_is_named_or_a_gap() 
     let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     let row = &r["groups"][2];
     assert_eq!(row["group"], 2);
-    assert!(row["warning"].as_str().unwrap().contains("missing"), "{row}");
+    assert!(
+        row["warning"].as_str().unwrap().contains("missing"),
+        "{row}"
+    );
 }

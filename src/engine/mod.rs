@@ -15,8 +15,8 @@ use crate::io::{LoadError, Scan, ScanMeta};
 use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample};
 use crate::pipeline::cache::native_spacing_um;
 use crate::pipeline::eval::{Scores, evaluate};
-pub use crate::pipeline::finish::{BRIDGE_GAP_SAMPLES, bridge_short_gaps};
 use crate::pipeline::finish::finish_clip;
+pub use crate::pipeline::finish::{BRIDGE_GAP_SAMPLES, bridge_short_gaps};
 use crate::pipeline::{FlowDetail, GroupInput, PipelineParams, Stage, StageCache, StageError};
 pub use slope_reference::{SlopeEntry, SlopeReference};
 pub use stream::{GroupOutcome, SlopeMode, run_groups};
@@ -181,7 +181,13 @@ pub fn reconstruct(
             Ok(())
         },
     )?;
-    let mut rec = finish_reconstruction(clip, &scan.meta, scan.reference.as_deref(), params, &scan.dir)?;
+    let mut rec = finish_reconstruction(
+        clip,
+        &scan.meta,
+        scan.reference.as_deref(),
+        params,
+        &scan.dir,
+    )?;
     rec.timings.total_secs = started.elapsed().as_secs_f64();
     Ok(rec)
 }

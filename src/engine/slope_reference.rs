@@ -247,10 +247,7 @@ mod tests {
             recorded.record(&entries);
         }
         assert_eq!(checked, recorded);
-        assert_eq!(
-            SlopeReference::from_history(&recorded.history()),
-            recorded
-        );
+        assert_eq!(SlopeReference::from_history(&recorded.history()), recorded);
         // Only the right wall was measured: the left has no history, so not settled.
         assert!(!recorded.is_settled());
         recorded.record(&vec![(WallSide::Left, Some(0.3)); SLOPE_HISTORY]);

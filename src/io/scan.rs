@@ -285,9 +285,10 @@ impl GroupEntry {
     /// The group's name: its folder's name.
     #[must_use]
     pub fn name(&self) -> String {
-        self.dir
-            .file_name()
-            .map_or_else(|| self.index.to_string(), |n| n.to_string_lossy().into_owned())
+        self.dir.file_name().map_or_else(
+            || self.index.to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        )
     }
 }
 

@@ -159,7 +159,9 @@ mod tests {
         let spacing_um = 939_336.0 / 44_100.0;
         let group = |g: usize, first: usize| GroupSignal {
             group: g,
-            positions_um: (first..first + 300).map(|k| k as f64 * spacing_um).collect(),
+            positions_um: (first..first + 300)
+                .map(|k| k as f64 * spacing_um)
+                .collect(),
             channels: vec![
                 (first..first + 300)
                     .map(|k| (k as f32 * 0.1425).sin() * 20.0)

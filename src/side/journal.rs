@@ -40,7 +40,10 @@ pub fn read_record_file(
     path: &Path,
 ) -> Result<(RunIdentity, Vec<(Record, usize)>, usize), SideError> {
     if !bytes.starts_with(magic) {
-        return Err(SideError::refused(format!("not a groovescope {what}"), path));
+        return Err(SideError::refused(
+            format!("not a groovescope {what}"),
+            path,
+        ));
     }
     let frames = read_frames(bytes, magic.len());
     let Some(((header, header_end), rest)) = frames.split_first() else {
@@ -49,9 +52,8 @@ pub fn read_record_file(
             path,
         ));
     };
-    let identity: RunIdentity = serde_json::from_slice(header).map_err(|e| {
-        SideError::refused(format!("the {what}'s header does not read: {e}"), path)
-    })?;
+    let identity: RunIdentity = serde_json::from_slice(header)
+        .map_err(|e| SideError::refused(format!("the {what}'s header does not read: {e}"), path))?;
     let mut records = Vec::with_capacity(rest.len());
     let mut valid = *header_end;
     for (payload, end) in rest {
@@ -75,8 +77,8 @@ impl Journal {
     pub fn create(path: &Path, identity: &RunIdentity) -> Result<Self, SideError> {
         let header = serde_json::to_vec(identity)
             .map_err(|e| SideError::refused(format!("cannot encode the header: {e}"), path))?;
-        let mut file = File::create(path)
-            .map_err(|e| SideError::io("cannot create the journal", &e, path))?;
+        let mut file =
+            File::create(path).map_err(|e| SideError::io("cannot create the journal", &e, path))?;
         let mut head = JOURNAL_MAGIC.to_vec();
         write_frame(&mut head, &header).map_err(|e| SideError::io("journal", &e, path))?;
         file.write_all(&head)

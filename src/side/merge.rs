@@ -67,7 +67,10 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<Part>, SideError> {
             }
         }
         if shard.index >= shard.count {
-            return Err(SideError::refused("its shard index is past its count", path));
+            return Err(SideError::refused(
+                "its shard index is past its count",
+                path,
+            ));
         }
         parts.push(part);
     }
@@ -92,7 +95,10 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<Part>, SideError> {
     for p in &parts {
         if p.identity.groups.0 != next {
             return Err(SideError::refused(
-                format!("covers groups {}..{} but the parts before end at {next}", p.identity.groups.0, p.identity.groups.1),
+                format!(
+                    "covers groups {}..{} but the parts before end at {next}",
+                    p.identity.groups.0, p.identity.groups.1
+                ),
                 &p.path,
             ));
         }
@@ -102,7 +108,10 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<Part>, SideError> {
         && next != p.identity.scan_groups
     {
         return Err(SideError::refused(
-            format!("the parts end at group {next} of {}", p.identity.scan_groups),
+            format!(
+                "the parts end at group {next} of {}",
+                p.identity.scan_groups
+            ),
             &p.path,
         ));
     }

@@ -161,14 +161,23 @@ impl RunIdentity {
                 other.scan_fingerprint, self.scan_fingerprint
             ));
         }
-        if other.params_fingerprint != self.params_fingerprint || other.keep_going != self.keep_going
+        if other.params_fingerprint != self.params_fingerprint
+            || other.keep_going != self.keep_going
         {
             return Some(format!(
                 "made with other params (fingerprint {}{}, expected {}{})",
                 other.params_fingerprint,
-                if other.keep_going { " with --keep-going" } else { "" },
+                if other.keep_going {
+                    " with --keep-going"
+                } else {
+                    ""
+                },
                 self.params_fingerprint,
-                if self.keep_going { " with --keep-going" } else { "" },
+                if self.keep_going {
+                    " with --keep-going"
+                } else {
+                    ""
+                },
             ));
         }
         let plan = |s: &Option<ShardId>| s.as_ref().map(|s| s.plan_fingerprint.clone());

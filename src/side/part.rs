@@ -45,7 +45,10 @@ pub fn part_file(path: &Path) -> PathBuf {
 /// [`SideError::Refused`] when the header cannot be encoded.
 pub fn part_bytes(identity: &RunIdentity, groups: &[GroupOutcome]) -> Result<Vec<u8>, SideError> {
     let header = serde_json::to_vec(identity).map_err(|e| {
-        SideError::refused(format!("cannot encode the part header: {e}"), &identity.scan)
+        SideError::refused(
+            format!("cannot encode the part header: {e}"),
+            &identity.scan,
+        )
     })?;
     let mut bytes = PART_MAGIC.to_vec();
     let frame_err = |e: std::io::Error| SideError::io("part", &e, &identity.scan);
@@ -89,7 +92,8 @@ pub fn read_part(path: &Path) -> Result<Part, SideError> {
             path,
         ));
     }
-    let bytes = std::fs::read(&file).map_err(|e| SideError::io("cannot read the part", &e, &file))?;
+    let bytes =
+        std::fs::read(&file).map_err(|e| SideError::io("cannot read the part", &e, &file))?;
     let (identity, records, valid) = read_record_file(&bytes, PART_MAGIC, "part", &file)?;
     let (lo, hi) = identity.groups;
     let mut groups = Vec::with_capacity(hi.saturating_sub(lo));
@@ -122,7 +126,9 @@ pub fn read_part(path: &Path) -> Result<Part, SideError> {
             &file,
         )
     };
-    let last = groups.last().map_or_else(|| "no group".to_string(), |g| format!("group {}", g.group));
+    let last = groups
+        .last()
+        .map_or_else(|| "no group".to_string(), |g| format!("group {}", g.group));
     let Some((count, file_crc)) = end else {
         return Err(truncated(format!("no end record after {last}")));
     };

@@ -138,7 +138,8 @@ impl Plan {
     /// [`SideError::Refused`] naming the file when it cannot be read, is not a plan, or was
     /// edited (its fingerprint, ranges or params do not add up).
     pub fn load(path: &Path) -> Result<Self, SideError> {
-        let bytes = std::fs::read(path).map_err(|e| SideError::io("cannot read the plan", &e, path))?;
+        let bytes =
+            std::fs::read(path).map_err(|e| SideError::io("cannot read the plan", &e, path))?;
         let plan: Plan = serde_json::from_slice(&bytes)
             .map_err(|e| SideError::refused(format!("not a groovescope plan ({e})"), path))?;
         if plan.kind != PLAN_KIND || plan.format != PLAN_FORMAT {
@@ -150,9 +151,16 @@ impl Plan {
         let tiles = plan.shards.iter().enumerate().all(|(k, s)| {
             s.index == k
                 && s.first_group < s.end_group
-                && (k == 0 || plan.shards.get(k - 1).is_some_and(|p| p.end_group == s.first_group))
+                && (k == 0
+                    || plan
+                        .shards
+                        .get(k - 1)
+                        .is_some_and(|p| p.end_group == s.first_group))
         }) && plan.shards.first().is_some_and(|s| s.first_group == 0)
-            && plan.shards.last().is_some_and(|s| s.end_group == plan.groups);
+            && plan
+                .shards
+                .last()
+                .is_some_and(|s| s.end_group == plan.groups);
         if !tiles
             || plan.computed_fingerprint() != plan.fingerprint
             || params_fingerprint(&plan.params) != plan.params_fingerprint
@@ -162,7 +170,9 @@ impl Plan {
                 path,
             ));
         }
-        plan.params.validate().map_err(|e| SideError::refused(e.to_string(), path))?;
+        plan.params
+            .validate()
+            .map_err(|e| SideError::refused(e.to_string(), path))?;
         Ok(plan)
     }
 
@@ -171,7 +181,12 @@ impl Plan {
     /// # Errors
     /// [`SideError::Refused`] naming the plan when the index is out of range or the scan is
     /// not the one the plan was made for.
-    pub fn shard(&self, index: usize, scan: &Scan, path: &Path) -> Result<(&PlanShard, ShardId), SideError> {
+    pub fn shard(
+        &self,
+        index: usize,
+        scan: &Scan,
+        path: &Path,
+    ) -> Result<(&PlanShard, ShardId), SideError> {
         let found = scan_fingerprint(scan);
         if found != self.scan_fingerprint || scan.groups.len() != self.groups {
             return Err(SideError::refused(

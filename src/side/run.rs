@@ -137,10 +137,12 @@ pub fn run_range(
         &mut |outcome| {
             journal
                 .append(&Record::Group(outcome.clone()))
-                .map_err(|e| EngineError::Load(crate::io::LoadError::Io {
-                    problem: e.to_string(),
-                    path: run.journal.to_path_buf(),
-                }))?;
+                .map_err(|e| {
+                    EngineError::Load(crate::io::LoadError::Io {
+                        problem: e.to_string(),
+                        path: run.journal.to_path_buf(),
+                    })
+                })?;
             groups.push(outcome);
             if let Some(o) = groups.last() {
                 on_event(RunEvent::Group {

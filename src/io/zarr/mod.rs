@@ -18,9 +18,9 @@ use zarrs::array::{Array, ArrayBuilder, CodecOptions, data_type};
 use zarrs::filesystem::FilesystemStore;
 use zarrs::group::{Group, GroupBuilder};
 
+use super::LoadError;
 use super::frames::{RawFrame, RawSamples, grey_from_raw};
 use super::scan::{GroupEntry, MIN_FRAMES_PER_GROUP, Scan, ScanMeta};
-use super::LoadError;
 use crate::image::Image;
 
 mod pack;
@@ -162,7 +162,9 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
     };
     if groups != attrs.groups.len()
         || *array.data_type() != attrs.sample_type.data_type()
-        || array.chunk_shape(&[0, 0, 0, 0]).map(|c| c.iter().map(|d| d.get()).collect::<Vec<_>>())
+        || array
+            .chunk_shape(&[0, 0, 0, 0])
+            .map(|c| c.iter().map(|d| d.get()).collect::<Vec<_>>())
             .ok()
             != Some(vec![1, shape[1], shape[2], shape[3]])
     {
@@ -226,7 +228,12 @@ pub fn load_group_raw(z: &ZarrGroup) -> Result<Vec<RawFrame>, LoadError> {
     let array = Array::open(store, FRAMES_ARRAY).map_err(|e| bad(e.to_string()))?;
     let idx = [z.group as u64, 0, 0, 0];
     let px = z.width * z.height;
-    let missing = || bad(format!("the chunk of group {} is missing from the store", z.group));
+    let missing = || {
+        bad(format!(
+            "the chunk of group {} is missing from the store",
+            z.group
+        ))
+    };
     let frames: Vec<RawSamples> = match z.sample_type {
         SampleType::U8 => array
             .retrieve_chunk_if_exists::<Vec<u8>>(&idx)
@@ -324,7 +331,8 @@ impl ZarrWriter {
         sample_type: SampleType,
         level: i32,
     ) -> Result<Self, LoadError> {
-        let err = |e: &dyn std::fmt::Display| io_err(format!("cannot create the Zarr store: {e}"), dir);
+        let err =
+            |e: &dyn std::fmt::Display| io_err(format!("cannot create the Zarr store: {e}"), dir);
         std::fs::create_dir_all(dir).map_err(|e| err(&e))?;
         let store = open_store(dir)?;
         let (f, h, w) = (frames as u64, height as u64, width as u64);
@@ -333,11 +341,16 @@ impl ZarrWriter {
             SampleType::U16 => 0u16.into(),
             SampleType::F32 => 0f32.into(),
         };
-        let array = ArrayBuilder::new(vec![0, f, h, w], vec![1, f, h, w], sample_type.data_type(), fill)
-            .bytes_to_bytes_codecs(vec![Arc::new(ZstdCodec::new(level, true))])
-            .dimension_names(["group", "frame", "y", "x"].into())
-            .build(store.clone(), FRAMES_ARRAY)
-            .map_err(|e| err(&e))?;
+        let array = ArrayBuilder::new(
+            vec![0, f, h, w],
+            vec![1, f, h, w],
+            sample_type.data_type(),
+            fill,
+        )
+        .bytes_to_bytes_codecs(vec![Arc::new(ZstdCodec::new(level, true))])
+        .dimension_names(["group", "frame", "y", "x"].into())
+        .build(store.clone(), FRAMES_ARRAY)
+        .map_err(|e| err(&e))?;
         Ok(Self {
             dir: dir.to_path_buf(),
             store,
@@ -354,7 +367,12 @@ impl ZarrWriter {
     ///
     /// # Errors
     /// [`LoadError`] naming the group when its frames do not fit the store, or the write fails.
-    pub fn write_group(&mut self, name: &str, frames: Vec<RawFrame>, source: &Path) -> Result<(), LoadError> {
+    pub fn write_group(
+        &mut self,
+        name: &str,
+        frames: Vec<RawFrame>,
+        source: &Path,
+    ) -> Result<(), LoadError> {
         let g = self.names.len() as u64;
         if frames.len() != self.frames {
             return Err(LoadError::Io {
@@ -396,7 +414,9 @@ impl ZarrWriter {
         }
         let mut shape = self.array.shape().to_vec();
         shape[0] = g + 1;
-        let err = |e: &dyn std::fmt::Display| io_err(format!("cannot write the group's chunk: {e}"), source);
+        let err = |e: &dyn std::fmt::Display| {
+            io_err(format!("cannot write the group's chunk: {e}"), source)
+        };
         self.array.set_shape(shape).map_err(|e| err(&e))?;
         // The array's metadata follows every group, so each chunk reads back as it is written.
         self.array.store_metadata().map_err(|e| err(&e))?;
@@ -418,7 +438,9 @@ impl ZarrWriter {
     /// # Errors
     /// [`LoadError::Io`] naming the store when a write fails.
     pub fn finish(self, scan_toml: &str) -> Result<PathBuf, LoadError> {
-        let err = |e: &dyn std::fmt::Display| io_err(format!("cannot write the Zarr metadata: {e}"), &self.dir);
+        let err = |e: &dyn std::fmt::Display| {
+            io_err(format!("cannot write the Zarr metadata: {e}"), &self.dir)
+        };
         self.array.store_metadata().map_err(|e| err(&e))?;
         let attrs = StoreAttributes {
             store_format: STORE_FORMAT,

@@ -172,10 +172,13 @@ fn pack_into(
             })?;
         }
     }
-    let meta_toml = scan.meta.to_toml_string().map_err(|e| LoadError::Metadata {
-        problem: e.to_string(),
-        path: scan.dir.join("scan.toml"),
-    })?;
+    let meta_toml = scan
+        .meta
+        .to_toml_string()
+        .map_err(|e| LoadError::Metadata {
+            problem: e.to_string(),
+            path: scan.dir.join("scan.toml"),
+        })?;
     writer.finish(&meta_toml)?;
     Ok(PackSummary {
         out: tmp.to_path_buf(),

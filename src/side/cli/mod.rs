@@ -164,7 +164,9 @@ impl ProgressOut {
                 self.resumed = n;
                 self.bar.set_position(n as u64);
                 self.bar.reset_eta();
-                self.note(&format!("resuming after {n} groups read back from the journal"));
+                self.note(&format!(
+                    "resuming after {n} groups read back from the journal"
+                ));
                 if self.json {
                     self.line(&serde_json::json!({"event": "resumed", "groups": n}));
                 }
@@ -213,7 +215,11 @@ impl ProgressOut {
             resumed_groups: self.resumed,
             context_groups: self.context,
             elapsed_secs: elapsed,
-            groups_per_sec: if elapsed > 0.0 { n as f64 / elapsed } else { 0.0 },
+            groups_per_sec: if elapsed > 0.0 {
+                n as f64 / elapsed
+            } else {
+                0.0
+            },
         }
     }
 }
@@ -329,7 +335,11 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
             &rec,
         );
         report.progress = Some(run_progress.clone());
-        write_atomic(report_path, &serde_json::to_vec_pretty(&report)?, args.force)?;
+        write_atomic(
+            report_path,
+            &serde_json::to_vec_pretty(&report)?,
+            args.force,
+        )?;
     }
     result.journal.remove()?;
     finish_message(args, &rec, &run_progress);
@@ -501,4 +511,3 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
     }
     Ok(())
 }
-

@@ -96,7 +96,11 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
             &merged.identity.params,
             &rec,
         );
-        write_atomic(report_path, &serde_json::to_vec_pretty(&report)?, args.force)?;
+        write_atomic(
+            report_path,
+            &serde_json::to_vec_pretty(&report)?,
+            args.force,
+        )?;
     }
     if !args.quiet {
         for w in &rec.warnings {
@@ -115,7 +119,12 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
 }
 
 /// Seconds per group measured on the first `groups` groups of `scan`, decode included.
-fn probe_secs_per_group(scan: &Scan, params: &PipelineParams, keep_going: bool, groups: usize) -> Result<Option<(f64, String)>> {
+fn probe_secs_per_group(
+    scan: &Scan,
+    params: &PipelineParams,
+    keep_going: bool,
+    groups: usize,
+) -> Result<Option<(f64, String)>> {
     let n = groups.min(scan.groups.len());
     if n == 0 {
         return Ok(None);
@@ -124,10 +133,19 @@ fn probe_secs_per_group(scan: &Scan, params: &PipelineParams, keep_going: bool, 
     let cancel = AtomicBool::new(false);
     let mut slopes = SlopeReference::default();
     let mut ran = 0usize;
-    run_groups(scan, 0..n, params, keep_going, &mut slopes, SlopeMode::Check, &cancel, &mut |_: GroupOutcome| {
-        ran += 1;
-        Ok(())
-    })?;
+    run_groups(
+        scan,
+        0..n,
+        params,
+        keep_going,
+        &mut slopes,
+        SlopeMode::Check,
+        &cancel,
+        &mut |_: GroupOutcome| {
+            ran += 1;
+            Ok(())
+        },
+    )?;
     let secs = started.elapsed().as_secs_f64() / ran.max(1) as f64;
     let threads = rayon::current_num_threads();
     Ok(Some((
@@ -159,9 +177,10 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
         println!("{s:.4} s a group ({})", plan.secs_per_group_basis);
     }
     for s in &plan.shards {
-        let eta = s
-            .expected_secs
-            .map_or_else(|| "not estimated".to_string(), |t| format!("about {}", human_secs(t)));
+        let eta = s.expected_secs.map_or_else(
+            || "not estimated".to_string(),
+            |t| format!("about {}", human_secs(t)),
+        );
         println!(
             "  shard {:>3}: groups {}..{} (from {} with context), {eta}",
             s.index, s.first_group, s.end_group, s.context_first_group
@@ -184,7 +203,11 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
 /// `s` as "1 h 05 min", "3 min 20 s" or "4.2 s".
 fn human_secs(s: f64) -> String {
     if s >= 3600.0 {
-        format!("{} h {:02} min", (s / 3600.0) as u64, ((s % 3600.0) / 60.0) as u64)
+        format!(
+            "{} h {:02} min",
+            (s / 3600.0) as u64,
+            ((s % 3600.0) / 60.0) as u64
+        )
     } else if s >= 60.0 {
         format!("{} min {:02} s", (s / 60.0) as u64, (s % 60.0) as u64)
     } else {
