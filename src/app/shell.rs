@@ -284,7 +284,12 @@ impl Workbench {
             );
             ui.separator();
             ui.heading("stages");
-            actions.extend(stages_ui(ui, statuses, &self.stage_times));
+            actions.extend(stages_ui(
+                ui,
+                statuses,
+                &self.stage_times,
+                self.hide_timings,
+            ));
             for a in actions {
                 match a {
                     NavAction::Group(g) => self.set_group(g),

@@ -1,6 +1,5 @@
 //! Whole-scan reconstruction: streams groups through the stage cache, then finishes and scores the clip.
 
-pub mod slope_reference;
 pub mod stream;
 
 use std::path::PathBuf;
@@ -13,13 +12,18 @@ use serde::{Deserialize, Serialize};
 use crate::io::wav::{Audio, read_wav};
 use crate::io::{LoadError, Scan, ScanMeta};
 use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample};
-use crate::pipeline::cache::native_spacing_um;
 use crate::pipeline::eval::{Scores, evaluate};
 use crate::pipeline::finish::finish_clip;
 pub use crate::pipeline::finish::{BRIDGE_GAP_SAMPLES, bridge_short_gaps};
+use crate::pipeline::sampling::native_spacing_um;
+use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
+use crate::pipeline::walls::WallSide;
 use crate::pipeline::{FlowDetail, GroupInput, PipelineParams, Stage, StageCache, StageError};
-pub use slope_reference::{SlopeEntry, SlopeReference};
 pub use stream::{GroupOutcome, SlopeMode, run_groups};
+
+/// What one group adds to the clip's slope history: per wall, its own median |b| from its fits
+/// before the clip check. It depends on that group's frames alone.
+pub type SlopeEntry = (WallSide, f64);
 
 /// Longest lag searched when scoring against the reference (seconds).
 pub const MAX_EVAL_LAG_SECS: f64 = 0.0003;
@@ -117,18 +121,18 @@ pub struct Reconstruction {
 
 /// Runs one group through every stage for its sound (used by the engine and by benchmarks):
 /// on the dual-focus path the flow stage gives only the in-focus map ([`FlowDetail::InFocusMap`]),
-/// which is all the stripes read.
+/// which is all the stripes read. `reference` is the clip's wall-slope reference for this group
+/// (the default: none).
 ///
 /// # Errors
 /// The first stage error.
 pub fn run_group(
     input: &GroupInput,
     params: &PipelineParams,
+    reference: &SlopeReference,
 ) -> Result<(StageCache, Vec<Duration>), StageError> {
-    let mut cache = StageCache {
-        flow_detail: FlowDetail::InFocusMap,
-        ..StageCache::default()
-    };
+    let mut cache = StageCache::new(FlowDetail::InFocusMap);
+    cache.set_slope_reference(reference.clone());
     let mut times = vec![Duration::ZERO; Stage::ALL.len()];
     let mut t0 = Instant::now();
     cache.run_from(Stage::Derivatives, input, params, &mut |stage, _| {
@@ -161,7 +165,8 @@ pub fn reconstruct(
     let range = range.start.min(scan.groups.len())..range.end.min(scan.groups.len());
     let total = range.len();
     let mut clip = ClipGroups::with_capacity(total);
-    let mut slopes = SlopeReference::default();
+    // Each group's fits are checked against the median wall slope of the groups before it.
+    let mut slopes = SlopeHistory::default();
     run_groups(
         scan,
         range,

@@ -6,20 +6,20 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::time::Instant;
 
-use super::slope_reference::{SlopeEntry, SlopeReference};
-use super::{EngineError, GroupReport, run_group};
+use super::{EngineError, GroupReport, SlopeEntry, run_group};
 use crate::image::Image;
 use crate::io::{LoadError, Scan, load_group_frames};
 use crate::pipeline::audio_signal::GroupSignal;
-use crate::pipeline::cache::frames_read;
-use crate::pipeline::{GroupInput, PipelineParams, Stage, StageError};
+use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
+use crate::pipeline::{GroupInput, PipelineParams, Stage, StageError, frames_read};
 
-/// How a group meets the clip's slope reference.
+/// How a group meets the clip's slope history.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SlopeMode {
-    /// Checked against it, then added to it (every group of a reconstruction).
+    /// Checked against its reference, then added to it (every group of a reconstruction).
     Check,
-    /// Only added to it (a group before a shard's range, run for its slopes alone).
+    /// Only added to it (a group before a shard's range, run for its slope entries alone,
+    /// which do not depend on the reference).
     RecordOnly,
 }
 
@@ -74,7 +74,7 @@ pub fn run_groups(
     range: Range<usize>,
     params: &PipelineParams,
     keep_going: bool,
-    slopes: &mut SlopeReference,
+    slopes: &mut SlopeHistory,
     mode: SlopeMode,
     cancel: &AtomicBool,
     on_group: &mut dyn FnMut(GroupOutcome) -> Result<(), EngineError>,
@@ -143,13 +143,10 @@ pub fn run_groups(
             };
             let outcome = match process_group(&input, params, slopes, mode) {
                 Ok(o) => GroupOutcome { load_secs, ..o },
-                Err((e @ StageError::InvalidParam { .. }, _)) => return stop(e.into()),
-                Err((e, entries)) => {
+                Err(e @ StageError::InvalidParam { .. }) => return stop(e.into()),
+                Err(e) => {
                     let w = format!("group {group}: {e} (filled with silence)");
-                    GroupOutcome {
-                        slopes: entries,
-                        ..GroupOutcome::failed(group, w, load_secs)
-                    }
+                    GroupOutcome::failed(group, w, load_secs)
                 }
             };
             if let Err(e) = on_group(outcome) {
@@ -164,27 +161,26 @@ pub fn run_groups(
     Ok(())
 }
 
-/// One decoded group through the stages and the slope reference. A failure comes with what
-/// the group still added to the reference: nothing when a stage failed, its entries when the
-/// sound rerun after the check did.
+/// One decoded group through the stages with the clip's slope reference; its own slope
+/// medians go into the history (a failed group adds none).
 fn process_group(
     input: &GroupInput,
     params: &PipelineParams,
-    slopes: &mut SlopeReference,
+    slopes: &mut SlopeHistory,
     mode: SlopeMode,
-) -> Result<GroupOutcome, (StageError, Vec<SlopeEntry>)> {
-    let (mut cache, times) = run_group(input, params).map_err(|e| (e, Vec::new()))?;
-    let entries = SlopeReference::entries_of(&cache, params);
-    match mode {
-        SlopeMode::Check => {
-            if let Err(e) = slopes.check(&mut cache, input, params) {
-                return Err((e, entries));
-            }
-        }
-        SlopeMode::RecordOnly => slopes.record(&entries),
-    }
-    let orientation = cache.orientation.as_ref().map(|o| &o.orientation);
-    let report = cache.signal.as_ref().map(|sig| GroupReport {
+) -> Result<GroupOutcome, StageError> {
+    let reference = match mode {
+        SlopeMode::Check => slopes.reference(params.orientation.max_wall_slope_change),
+        SlopeMode::RecordOnly => SlopeReference::default(),
+    };
+    let (cache, times) = run_group(input, params, &reference)?;
+    let entries: Vec<SlopeEntry> = cache
+        .orientation()
+        .map(|o| o.own_slopes.clone())
+        .unwrap_or_default();
+    slopes.push(&entries);
+    let orientation = cache.orientation().map(|o| &o.orientation);
+    let report = cache.signal().map(|sig| GroupReport {
         group: input.group,
         outlier_fraction: orientation.map(|o| o.outlier_fraction),
         rejected_fits: orientation.map_or(0, |o| o.rejected_fits),
@@ -194,7 +190,7 @@ fn process_group(
     Ok(GroupOutcome {
         group: input.group,
         report,
-        signal: cache.signal.clone(),
+        signal: cache.signal().cloned(),
         slopes: entries,
         load_secs: 0.0,
         stage_secs: times.iter().map(std::time::Duration::as_secs_f64).collect(),

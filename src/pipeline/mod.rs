@@ -7,10 +7,13 @@ pub mod derivatives;
 pub mod dsp;
 pub mod eval;
 pub mod finish;
+pub mod graph;
 pub mod hough;
 pub mod knobs;
 pub mod optical_flow;
 pub mod orientation;
+pub mod sampling;
+pub mod slope_reference;
 pub mod walls;
 
 /// Why a stage could not produce its output.
@@ -72,56 +75,6 @@ use optical_flow::FlowParams;
 use orientation::OrientationParams;
 use walls::WallParams;
 
-/// The per-group stages, in the order they run. A change to one makes it and every later stage stale.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Stage {
-    /// Ix, Iy, It of every 7-frame window (dual-focus path: the middle window only, the one
-    /// its stripes are read from).
-    Derivatives,
-    /// Optical flow of every derivative set.
-    Flow,
-    /// Kalman depth map and wall lines (depth path).
-    Depth,
-    /// In-focus map, Hough accumulator, stripes and centroid lines (dual-focus path).
-    Stripes,
-    /// Robust wall orientation per sample column.
-    Orientation,
-    /// Velocity samples of the group.
-    Sound,
-}
-
-impl Stage {
-    /// Every stage in run order.
-    pub const ALL: [Stage; 6] = [
-        Stage::Derivatives,
-        Stage::Flow,
-        Stage::Depth,
-        Stage::Stripes,
-        Stage::Orientation,
-        Stage::Sound,
-    ];
-
-    /// Position in [`Stage::ALL`].
-    #[must_use]
-    pub fn index(self) -> usize {
-        self as usize
-    }
-
-    /// Human-readable name.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Stage::Derivatives => "derivatives",
-            Stage::Flow => "flow",
-            Stage::Depth => "depth",
-            Stage::Stripes => "stripes",
-            Stage::Orientation => "orientation",
-            Stage::Sound => "sound",
-        }
-    }
-}
-
 /// Which reconstruction path runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
@@ -176,24 +129,14 @@ impl PipelineParams {
         toml::to_string_pretty(self)
     }
 
-    /// The earliest stage whose params differ between `self` and `other` (None when equal).
+    /// The earliest stage (in [`Stage::ALL`] order) that reads a knob that differs between
+    /// `self` and `other` (None when none does).
     #[must_use]
     pub fn first_changed_stage(&self, other: &Self) -> Option<Stage> {
-        if self.path != other.path || self.derivatives != other.derivatives {
-            Some(Stage::Derivatives)
-        } else if self.flow != other.flow {
-            Some(Stage::Flow)
-        } else if self.depth != other.depth || self.walls != other.walls {
-            Some(Stage::Depth)
-        } else if self.hough != other.hough {
-            Some(Stage::Stripes)
-        } else if self.orientation != other.orientation {
-            Some(Stage::Orientation)
-        } else if self.sound != other.sound {
-            Some(Stage::Sound)
-        } else {
-            None
-        }
+        graph::GRAPH
+            .iter()
+            .find(|spec| (spec.knobs_changed)(self, other))
+            .map(|spec| spec.stage)
     }
 
     /// True when the dual-focus path runs for a scan with this metadata.
@@ -274,7 +217,8 @@ impl PipelineParams {
     }
 }
 
-pub use cache::{FlowDetail, GroupInput, StageCache};
+pub use cache::{GroupInput, StageCache};
+pub use graph::{DepthOutput, FlowDetail, OrientationOutput, Stage, frames_read};
 
 /// The `lo` and `hi` quantiles (0–1) of the finite values, from at most about `samples` of them
 /// taken at an even stride; None when none is finite.

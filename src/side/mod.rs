@@ -5,7 +5,7 @@
 //! *merge* finishes the parts' signals, in group order, with the same
 //! [`crate::pipeline::finish::finish_clip`] a one-process run ends with, so the WAV is the
 //! same byte for byte. What a group gives depends on its own frames and on the clip's slope
-//! reference ([`crate::engine::SlopeReference`]), the medians of the groups before it: a shard
+//! reference ([`crate::pipeline::slope_reference::SlopeReference`]), the medians of the groups before it: a shard
 //! first runs enough groups before its range to rebuild that history exactly
 //! ([`run::seed_before`]). Every run journals its finished groups (`journal`), so a killed run
 //! continues where it stopped.

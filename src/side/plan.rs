@@ -5,9 +5,9 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::{ShardId, SideError, fingerprint, params_fingerprint, scan_fingerprint};
-use crate::engine::slope_reference::SLOPE_HISTORY;
 use crate::io::Scan;
 use crate::pipeline::PipelineParams;
+use crate::pipeline::slope_reference::SLOPE_HISTORY;
 
 /// The plan format this build reads and writes.
 pub const PLAN_FORMAT: u32 = 1;

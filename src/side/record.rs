@@ -138,7 +138,7 @@ pub fn encode(record: &Record) -> Vec<u8> {
             put_u64(&mut b, o.slopes.len() as u64);
             for &(side, m) in &o.slopes {
                 b.push(side_code(side));
-                put_opt_f64(&mut b, m);
+                b.extend_from_slice(&m.to_bits().to_le_bytes());
             }
             b.extend_from_slice(&o.load_secs.to_bits().to_le_bytes());
             put_u64(&mut b, o.stage_secs.len() as u64);
@@ -212,11 +212,11 @@ pub fn decode(payload: &[u8]) -> Result<Record, String> {
                     }))
                 }
             };
-            let n = r.count(2)?;
+            let n = r.count(9)?;
             let mut slopes: Vec<SlopeEntry> = Vec::with_capacity(n);
             for _ in 0..n {
                 let side = r.side()?;
-                slopes.push((side, r.opt_f64()?));
+                slopes.push((side, r.f64()?));
             }
             let load_secs = r.f64()?;
             let n = r.count(8)?;
@@ -362,7 +362,7 @@ mod tests {
                 channels: vec![vec![f32::NAN, -0.1]],
                 groove_speed_mm_s: 939.3,
             })),
-            slopes: vec![(WallSide::Left, Some(0.38)), (WallSide::Right, None)],
+            slopes: vec![(WallSide::Left, 0.38), (WallSide::Right, 0.41)],
             load_secs: 0.01,
             stage_secs: vec![0.5; Stage::ALL.len()],
         }

@@ -7,10 +7,68 @@ use std::sync::atomic::AtomicBool;
 use super::journal::Journal;
 use super::record::Record;
 use super::{RunIdentity, SideError};
-use crate::engine::slope_reference::SLOPE_HISTORY;
-use crate::engine::{EngineError, GroupOutcome, SlopeMode, SlopeReference, run_groups};
+use crate::engine::{EngineError, GroupOutcome, SlopeEntry, SlopeMode, run_groups};
 use crate::io::Scan;
 use crate::pipeline::PipelineParams;
+use crate::pipeline::slope_reference::{SLOPE_HISTORY, SlopeHistory};
+use crate::pipeline::walls::WallSide;
+
+/// Every wall side a slope history is kept for.
+const SIDES: [WallSide; 2] = [WallSide::Left, WallSide::Right];
+
+/// A slope history as a journal keeps it: per wall side, the medians it holds, oldest first.
+pub type SlopeSeed = Vec<(WallSide, Vec<f64>)>;
+
+/// The history that recording `entries` (group by group, oldest first) leaves: per side, its
+/// last [`SLOPE_HISTORY`] medians.
+#[must_use]
+pub fn seed_of<'a>(entries: impl Iterator<Item = &'a [SlopeEntry]>) -> SlopeSeed {
+    let mut seed: SlopeSeed = Vec::new();
+    for group in entries {
+        for &(side, m) in group {
+            let idx = match seed.iter().position(|(s, _)| *s == side) {
+                Some(i) => i,
+                None => {
+                    seed.push((side, Vec::new()));
+                    seed.len() - 1
+                }
+            };
+            if let Some((_, values)) = seed.get_mut(idx) {
+                values.push(m);
+            }
+        }
+    }
+    for (_, values) in &mut seed {
+        let drop = values.len().saturating_sub(SLOPE_HISTORY);
+        values.drain(..drop);
+    }
+    seed
+}
+
+/// The history holding `seed`.
+#[must_use]
+pub fn history_from(seed: &SlopeSeed) -> SlopeHistory {
+    let mut h = SlopeHistory::default();
+    for (side, values) in seed {
+        for &v in values {
+            h.push(&[(*side, v)]);
+        }
+    }
+    h
+}
+
+/// Medians held by the wall side with the fewest.
+fn shortest_side(seed: &SlopeSeed) -> usize {
+    SIDES
+        .iter()
+        .map(|side| {
+            seed.iter()
+                .find(|(s, _)| s == side)
+                .map_or(0, |(_, h)| h.len())
+        })
+        .min()
+        .unwrap_or(0)
+}
 
 /// Fewest groups run in each further step back when the groups before a shard left its slope
 /// history short (failed groups, a wall not found).
@@ -108,21 +166,23 @@ pub fn run_range(
     if resumed > 0 || seed.is_some() {
         on_event(RunEvent::Resumed(resumed));
     }
-    let mut slopes = SlopeReference::default();
     let mut context_groups = 0;
-    if run.shard {
-        slopes = match seed {
-            Some(h) => SlopeReference::from_history(&h),
+    let mut slopes = if run.shard {
+        let seed = match seed {
+            Some(h) => h,
             None => {
                 let (s, n) = seed_before(run, on_event, cancel)?;
                 context_groups = n;
-                journal.append(&Record::Seed(s.history()))?;
+                journal.append(&Record::Seed(s.clone()))?;
                 s
             }
         };
-    }
+        history_from(&seed)
+    } else {
+        SlopeHistory::default()
+    };
     for g in &groups {
-        slopes.record(&g.slopes);
+        slopes.push(&g.slopes);
     }
     let total = run.range.len();
     let next = run.range.start + resumed;
@@ -168,7 +228,7 @@ pub fn run_range(
 /// frames only, so the last [`SLOPE_HISTORY`] medians per wall side are the same whichever
 /// group this starts from: it runs the [`SLOPE_HISTORY`] groups before the range, then steps
 /// further back while a wall side holds fewer (failed groups, a wall not found), down to
-/// group 0 if need be. Returns the reference and how many groups it ran.
+/// group 0 if need be. Returns the history and how many groups it ran.
 ///
 /// # Errors
 /// The engine's error for a group before the range (as the one-process run would fail there).
@@ -176,20 +236,20 @@ pub fn seed_before(
     run: &RangeRun<'_>,
     on_event: &mut dyn FnMut(RunEvent<'_>),
     cancel: &AtomicBool,
-) -> Result<(SlopeReference, usize), SideError> {
+) -> Result<(SlopeSeed, usize), SideError> {
     let start = run.range.start;
     if start == 0 || run.params.orientation.max_wall_slope_change <= 0.0 {
-        return Ok((SlopeReference::default(), 0));
+        return Ok((Vec::new(), 0));
     }
-    // Entries per group, earliest block first once done.
-    let mut blocks: Vec<Vec<GroupOutcome>> = Vec::new();
+    // Entries per group, one block per step back (the latest block first).
+    let mut blocks: Vec<Vec<Vec<SlopeEntry>>> = Vec::new();
     let mut lo = start;
     let mut step = SLOPE_HISTORY;
     loop {
         let block_lo = lo.saturating_sub(step);
         on_event(RunEvent::Context(block_lo..lo));
         let mut block = Vec::with_capacity(lo - block_lo);
-        let mut scratch = SlopeReference::default();
+        let mut scratch = SlopeHistory::default();
         run_groups(
             run.scan,
             block_lo..lo,
@@ -199,38 +259,17 @@ pub fn seed_before(
             SlopeMode::RecordOnly,
             cancel,
             &mut |o| {
-                block.push(o);
+                block.push(o.slopes);
                 Ok(())
             },
         )?;
         blocks.push(block);
         lo = block_lo;
-        let mut reference = SlopeReference::default();
-        for g in blocks.iter().rev().flatten() {
-            reference.record(&g.slopes);
+        let seed = seed_of(blocks.iter().rev().flatten().map(Vec::as_slice));
+        let short = shortest_side(&seed);
+        if lo == 0 || short >= SLOPE_HISTORY {
+            return Ok((seed, start - lo));
         }
-        if lo == 0 || reference.is_settled() {
-            let ran = start - lo;
-            return Ok((reference, ran));
-        }
-        step = CONTEXT_STEP_MIN_GROUPS.max(SLOPE_HISTORY - shortest_side(&reference));
+        step = CONTEXT_STEP_MIN_GROUPS.max(SLOPE_HISTORY - short);
     }
-}
-
-/// Medians held by the wall side with the fewest.
-fn shortest_side(reference: &SlopeReference) -> usize {
-    let history = reference.history();
-    [
-        crate::pipeline::walls::WallSide::Left,
-        crate::pipeline::walls::WallSide::Right,
-    ]
-    .iter()
-    .map(|side| {
-        history
-            .iter()
-            .find(|(s, _)| s == side)
-            .map_or(0, |(_, h)| h.len())
-    })
-    .min()
-    .unwrap_or(0)
 }

@@ -112,6 +112,7 @@ mod solver;
 #[allow(clippy::unwrap_used)] // tests fail loudly on purpose
 mod tests;
 mod wall_sides;
+mod warm_start;
 
 use groove::*;
 use kernel::*;
@@ -120,6 +121,7 @@ use lucas_kanade::*;
 use solver::*;
 pub use wall_sides::estimate_wall_sides;
 use wall_sides::*;
+pub use warm_start::flows_of_group;
 
 /// Which flow algorithm runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]

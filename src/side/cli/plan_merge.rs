@@ -8,10 +8,11 @@ use anyhow::Result;
 
 use super::{make_report, refuse_existing};
 use crate::cli::{load_params, path_choice};
-use crate::engine::{GroupOutcome, SlopeMode, SlopeReference, run_groups};
+use crate::engine::{GroupOutcome, SlopeMode, run_groups};
 use crate::io::wav::{WavBits, write_wav};
 use crate::io::{Scan, ScanMeta, write_atomic};
 use crate::pipeline::PipelineParams;
+use crate::pipeline::slope_reference::SlopeHistory;
 use crate::side::merge::merge_parts;
 use crate::side::plan::Plan;
 
@@ -131,7 +132,7 @@ fn probe_secs_per_group(
     }
     let started = Instant::now();
     let cancel = AtomicBool::new(false);
-    let mut slopes = SlopeReference::default();
+    let mut slopes = SlopeHistory::default();
     let mut ran = 0usize;
     run_groups(
         scan,
