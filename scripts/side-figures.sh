@@ -4,12 +4,16 @@
 #  2. speed: groups/s on one core on the dual-focus and depth paths (1280x1024 frames, decode
 #     included), and the projected wall time of a 3-minute 78 side on 1, 8 and 64 cores;
 #  3. the Zarr store against the PNG folder: bytes on disk and decode seconds per group.
-#   bash scripts/side-figures.sh [WORKDIR]
+#   bash scripts/side-figures.sh [WORKDIR]     (GROOVESCOPE=path: that binary, no release build)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if ! [ -x /usr/bin/time ]; then apt-get install -y -qq time >/dev/null; fi
-cargo build --locked --release --quiet
-gs="$PWD/target/release/groovescope"
+if [ -n "${GROOVESCOPE:-}" ]; then
+    gs=$GROOVESCOPE   # e.g. target/debug/groovescope; say so when quoting the figures
+else
+    cargo build --locked --release --quiet
+    gs="$PWD/target/release/groovescope"
+fi
 work=${1:-$(mktemp -d /tmp/groovescope-figures.XXXXXX)}
 mkdir -p "$work"
 json() { python3 -c "import json,sys; r=json.load(open(sys.argv[1])); print($2)" "$3"; }
