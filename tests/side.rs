@@ -1,5 +1,7 @@
 //! Whole sides: shards merged byte-identical to one process, resume after kill -9, and every refusal.
 
+#![allow(clippy::unwrap_used)] // tests may panic
+
 mod common;
 
 use std::io::{BufRead, BufReader};
@@ -144,7 +146,7 @@ fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() 
         assert!(e.contains(s(named)), "{e}");
         assert_eq!(e.trim().lines().count(), 1, "{e}");
     };
-    expect_refusal(&[a0.clone()], "shard 1 of 2 is missing", t);
+    expect_refusal(std::slice::from_ref(&a0), "shard 1 of 2 is missing", t);
     expect_refusal(
         &[a0.clone(), a1.clone(), a1.clone()],
         "duplicates shard 1",

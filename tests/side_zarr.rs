@@ -1,5 +1,7 @@
 //! The Zarr scan store: pack round trip frame for frame, the same WAV from either form, a missing chunk.
 
+#![allow(clippy::unwrap_used)] // tests may panic
+
 mod common;
 
 use std::path::Path;

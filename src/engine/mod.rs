@@ -19,7 +19,7 @@ use crate::pipeline::sampling::native_spacing_um;
 use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
 use crate::pipeline::walls::WallSide;
 use crate::pipeline::{FlowDetail, GroupInput, PipelineParams, Stage, StageCache, StageError};
-pub use stream::{GroupOutcome, SlopeMode, run_groups};
+pub use stream::{GroupOutcome, GroupStream, SlopeMode, run_groups};
 
 /// What one group adds to the clip's slope history: per wall, its own median |b| from its fits
 /// before the clip check. It depends on that group's frames alone.
@@ -168,12 +168,14 @@ pub fn reconstruct(
     // Each group's fits are checked against the median wall slope of the groups before it.
     let mut slopes = SlopeHistory::default();
     run_groups(
-        scan,
+        &GroupStream {
+            scan,
+            params,
+            keep_going: opts.keep_going,
+            mode: SlopeMode::Check,
+        },
         range,
-        params,
-        opts.keep_going,
         &mut slopes,
-        SlopeMode::Check,
         cancel,
         &mut |outcome| {
             let signal = outcome.signal.clone();

@@ -59,8 +59,21 @@ impl GroupOutcome {
     }
 }
 
-/// Runs the groups `range` of `scan` in order, one group decoded ahead on a named loader
-/// thread, and hands each outcome to `on_group`. Memory stays at about two groups.
+/// What a stream of groups runs on.
+#[derive(Clone, Copy, Debug)]
+pub struct GroupStream<'a> {
+    /// The scan.
+    pub scan: &'a Scan,
+    /// The params.
+    pub params: &'a PipelineParams,
+    /// Unreadable groups become gaps with a warning instead of failing the run.
+    pub keep_going: bool,
+    /// How groups meet the slope history.
+    pub mode: SlopeMode,
+}
+
+/// Runs the groups `range` of `stream.scan` in order, one group decoded ahead on a named
+/// loader thread, and hands each outcome to `on_group`. Memory stays at about two groups.
 ///
 /// A group that cannot be read fails the run, or with `keep_going` becomes a gap with a
 /// warning; a group whose stages fail becomes a gap with a warning; an invalid parameter
@@ -70,15 +83,18 @@ impl GroupOutcome {
 /// [`EngineError`] as above, [`EngineError::Cancelled`] when `cancel` is set, or whatever
 /// `on_group` returns.
 pub fn run_groups(
-    scan: &Scan,
+    stream: &GroupStream<'_>,
     range: Range<usize>,
-    params: &PipelineParams,
-    keep_going: bool,
     slopes: &mut SlopeHistory,
-    mode: SlopeMode,
     cancel: &AtomicBool,
     on_group: &mut dyn FnMut(GroupOutcome) -> Result<(), EngineError>,
 ) -> Result<(), EngineError> {
+    let GroupStream {
+        scan,
+        params,
+        keep_going,
+        mode,
+    } = *stream;
     let range = range.start.min(scan.groups.len())..range.end.min(scan.groups.len());
     let meta = Arc::new(scan.meta.clone());
     // A decoded group: its index, the first frame loaded, the frames, the seconds it took.

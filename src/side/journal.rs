@@ -28,6 +28,10 @@ pub struct Journal {
     last_sync: Instant,
 }
 
+/// A record file read back: its identity, each record with the offset just past it, and the
+/// length of the valid part.
+pub type RecordFile = (RunIdentity, Vec<(Record, usize)>, usize);
+
 /// Reads a file that starts with `magic` and an identity header: the identity, the records
 /// after it (up to a torn or damaged tail), and the byte length of what was valid.
 ///
@@ -38,7 +42,7 @@ pub fn read_record_file(
     magic: &[u8],
     what: &str,
     path: &Path,
-) -> Result<(RunIdentity, Vec<(Record, usize)>, usize), SideError> {
+) -> Result<RecordFile, SideError> {
     if !bytes.starts_with(magic) {
         return Err(SideError::refused(
             format!("not a groovescope {what}"),

@@ -55,14 +55,11 @@ pub fn write_frame(out: &mut impl Write, bytes: &[u8]) -> std::io::Result<()> {
 #[must_use]
 pub fn read_frames(bytes: &[u8], mut offset: usize) -> Vec<(&[u8], usize)> {
     let mut out = Vec::new();
-    loop {
-        let Some(len) = bytes
-            .get(offset..offset + 4)
-            .and_then(|b| <[u8; 4]>::try_from(b).ok())
-            .map(|b| u32::from_le_bytes(b) as usize)
-        else {
-            break;
-        };
+    while let Some(len) = bytes
+        .get(offset..offset + 4)
+        .and_then(|b| <[u8; 4]>::try_from(b).ok())
+        .map(|b| u32::from_le_bytes(b) as usize)
+    {
         if len > MAX_FRAME_BYTES {
             break;
         }

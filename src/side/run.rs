@@ -7,7 +7,7 @@ use std::sync::atomic::AtomicBool;
 use super::journal::Journal;
 use super::record::Record;
 use super::{RunIdentity, SideError};
-use crate::engine::{EngineError, GroupOutcome, SlopeEntry, SlopeMode, run_groups};
+use crate::engine::{EngineError, GroupOutcome, GroupStream, SlopeEntry, SlopeMode, run_groups};
 use crate::io::Scan;
 use crate::pipeline::PipelineParams;
 use crate::pipeline::slope_reference::{SLOPE_HISTORY, SlopeHistory};
@@ -187,12 +187,14 @@ pub fn run_range(
     let total = run.range.len();
     let next = run.range.start + resumed;
     run_groups(
-        run.scan,
+        &GroupStream {
+            scan: run.scan,
+            params: run.params,
+            keep_going: run.keep_going,
+            mode: SlopeMode::Check,
+        },
         next..run.range.end,
-        run.params,
-        run.keep_going,
         &mut slopes,
-        SlopeMode::Check,
         cancel,
         &mut |outcome| {
             journal
@@ -251,12 +253,14 @@ pub fn seed_before(
         let mut block = Vec::with_capacity(lo - block_lo);
         let mut scratch = SlopeHistory::default();
         run_groups(
-            run.scan,
+            &GroupStream {
+                scan: run.scan,
+                params: run.params,
+                keep_going: run.keep_going,
+                mode: SlopeMode::RecordOnly,
+            },
             block_lo..lo,
-            run.params,
-            run.keep_going,
             &mut scratch,
-            SlopeMode::RecordOnly,
             cancel,
             &mut |o| {
                 block.push(o.slopes);

@@ -8,7 +8,7 @@ use anyhow::Result;
 
 use super::{make_report, refuse_existing};
 use crate::cli::{load_params, path_choice};
-use crate::engine::{GroupOutcome, SlopeMode, run_groups};
+use crate::engine::{GroupOutcome, GroupStream, SlopeMode, run_groups};
 use crate::io::wav::{WavBits, write_wav};
 use crate::io::{Scan, ScanMeta, write_atomic};
 use crate::pipeline::PipelineParams;
@@ -135,12 +135,14 @@ fn probe_secs_per_group(
     let mut slopes = SlopeHistory::default();
     let mut ran = 0usize;
     run_groups(
-        scan,
+        &GroupStream {
+            scan,
+            params,
+            keep_going,
+            mode: SlopeMode::Check,
+        },
         0..n,
-        params,
-        keep_going,
         &mut slopes,
-        SlopeMode::Check,
         &cancel,
         &mut |_: GroupOutcome| {
             ran += 1;
