@@ -20,27 +20,19 @@ json() { python3 -c "import json,sys; r=json.load(open(sys.argv[1])); print($2)"
 peak_kb() { sed -n 's/.*Maximum resident set size (kbytes): //p' "$1"; }
 
 # --- 1. memory --------------------------------------------------------------------------------
-cat >"$work/small.toml" <<'EOF'
-width_px = 160
-height_px = 300
-pixel_pitch_um = 1.0
-group_overlap_px = 10
-frames_per_group = 8
-bit_depth = 8
-EOF
 if ! [ -d "$work/small" ]; then
-    "$gs" synth --preset dual-focus --config "$work/small.toml" --tone 1000 --duration 0.01 \
+    "$gs" synth --preset dual-focus --config "scripts/small-side-synth.toml" --tone 1000 --duration 0.01 \
         --max-groups 40 --out "$work/small" --quiet
 fi
 # 2,000 groups: the 40 rendered ones repeated (hard links), so every group is real work.
 if ! [ -d "$work/long" ]; then
     mkdir "$work/long"
     cp "$work/small/scan.toml" "$work/long/"
-    n=$(ls -d "$work/small"/g* | wc -l)
+    rendered=("$work/small"/g*)
     for g in $(seq 0 1999); do
-        src=$(ls -d "$work/small"/g* | sed -n "$((g % n + 1))p")
-        mkdir "$work/long/$(printf 'g%05d' "$g")"
-        ln "$src"/* "$work/long/$(printf 'g%05d' "$g")/"
+        dst="$work/long/$(printf 'g%05d' "$g")"
+        mkdir "$dst"
+        ln "${rendered[$((g % ${#rendered[@]}))]}"/* "$dst/"
     done
 fi
 rm -f "$work"/mem*.wav
@@ -48,6 +40,7 @@ rm -f "$work"/mem*.wav
 /usr/bin/time -v "$gs" reconstruct "$work/long" --out "$work/mem2000.wav" --quiet 2>"$work/mem2000.txt"
 m20=$(peak_kb "$work/mem20.txt")
 m2000=$(peak_kb "$work/mem2000.txt")
+echo "load average while measuring: $(cut -d' ' -f1-3 /proc/loadavg)"
 echo "memory: peak RSS 20 groups ${m20} kB, 2000 groups ${m2000} kB ($(echo "scale=1; 100 * ($m2000 - $m20) / $m20" | bc) %)"
 
 # --- 2. speed on one core ---------------------------------------------------------------------
@@ -60,10 +53,19 @@ fi
 side_groups=$(python3 -c "print(round(180 * 2 * 3.141592653589793 * 78 / 60 * 115 / 0.4602))")
 for path in dual depth; do
     rm -f "$work/$path-1.wav"
-    RAYON_NUM_THREADS=1 "$gs" reconstruct "$work/$path" --out "$work/$path-1.wav" \
-        --report "$work/$path-1.json" --quiet
-    spg=$(json "r['timings']['total_secs'] / len(r['groups'])" "$work/$path-1.json")
-    echo "speed ($path path, 1280x1024, one thread, decode included): $(printf '%.3f' "$spg") s a group, $(python3 -c "print(f'{1/$spg:.2f}')") groups/s per core"
+    # CPU seconds (user + system) of a one-thread run: a per-core figure that other tenants'
+    # load on this machine does not inflate the way it does wall time.
+    RAYON_NUM_THREADS=1 /usr/bin/time -v "$gs" reconstruct "$work/$path" --out "$work/$path-1.wav" \
+        --report "$work/$path-1.json" --quiet 2>"$work/$path-1.time"
+    groups=$(json "len(r['groups'])" "$work/$path-1.json")
+    cpu=$(python3 -c "
+import re,sys
+t=open(sys.argv[1]).read()
+u=float(re.search(r'User time \(seconds\): ([0-9.]+)',t).group(1))
+s=float(re.search(r'System time \(seconds\): ([0-9.]+)',t).group(1))
+print(u+s)" "$work/$path-1.time")
+    spg=$(python3 -c "print($cpu / $groups)")
+    echo "speed ($path path, 1280x1024, one thread, decode included): $(printf '%.3f' "$spg") CPU s a group, $(python3 -c "print(f'{1/$spg:.2f}')") groups/s per core ($groups groups)"
     for cores in 1 8 64; do
         # Ideal shard scaling plus each shard's 64 groups of slope history.
         python3 -c "

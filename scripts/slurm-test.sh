@@ -94,15 +94,7 @@ done
 echo "slurm-test: slurmctld and slurmd up on $node ($(sinfo -h -o '%C' | cut -d/ -f4) CPUs)"
 
 # --- the scan and the one-process reference ------------------------------------------------------
-cat >"$work/synth.toml" <<'EOF'
-width_px = 160
-height_px = 300
-pixel_pitch_um = 1.0
-group_overlap_px = 10
-frames_per_group = 8
-bit_depth = 8
-EOF
-"$GROOVESCOPE" synth --preset dual-focus --config "$work/synth.toml" --tone 1000 \
+"$GROOVESCOPE" synth --preset dual-focus --config "scripts/small-side-synth.toml" --tone 1000 \
     --duration 0.033 --max-groups 200 --out "$work/scan" --quiet
 groups=$(find "$work/scan" -mindepth 1 -maxdepth 1 -type d | wc -l)
 t0=$(date +%s.%N)

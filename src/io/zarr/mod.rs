@@ -235,28 +235,12 @@ pub fn load_group_raw(z: &ZarrGroup) -> Result<Vec<RawFrame>, LoadError> {
         ))
     };
     let frames: Vec<RawSamples> = match z.sample_type {
-        SampleType::U8 => array
-            .retrieve_chunk_if_exists::<Vec<u8>>(&idx)
-            .map_err(|e| bad(e.to_string()))?
-            .ok_or_else(missing)?
-            .chunks(px.max(1))
-            .map(|f| RawSamples::U8(f.to_vec()))
-            .collect(),
-        SampleType::U16 => array
-            .retrieve_chunk_if_exists::<Vec<u16>>(&idx)
-            .map_err(|e| bad(e.to_string()))?
-            .ok_or_else(missing)?
-            .chunks(px.max(1))
-            .map(|f| RawSamples::U16(f.to_vec()))
-            .collect(),
-        SampleType::F32 => array
-            .retrieve_chunk_if_exists::<Vec<f32>>(&idx)
-            .map_err(|e| bad(e.to_string()))?
-            .ok_or_else(missing)?
-            .chunks(px.max(1))
-            .map(|f| RawSamples::F32(f.to_vec()))
-            .collect(),
-    };
+        SampleType::U8 => chunk_frames(&array, &idx, px, RawSamples::U8),
+        SampleType::U16 => chunk_frames(&array, &idx, px, RawSamples::U16),
+        SampleType::F32 => chunk_frames(&array, &idx, px, RawSamples::F32),
+    }
+    .map_err(|e| bad(e.to_string()))?
+    .ok_or_else(missing)?;
     if frames.len() != z.frames {
         return Err(bad(format!(
             "the chunk holds {} frames, the array says {}",
@@ -272,6 +256,18 @@ pub fn load_group_raw(z: &ZarrGroup) -> Result<Vec<RawFrame>, LoadError> {
             samples,
         })
         .collect())
+}
+
+/// A chunk's frames of `px` samples each (None when the chunk is missing).
+fn chunk_frames<T: zarrs::array::ElementOwned + Clone>(
+    array: &Array<FilesystemStore>,
+    idx: &[u64],
+    px: usize,
+    wrap: fn(Vec<T>) -> RawSamples,
+) -> Result<Option<Vec<RawSamples>>, zarrs::array::ArrayError> {
+    Ok(array
+        .retrieve_chunk_if_exists::<Vec<T>>(idx)?
+        .map(|v| v.chunks(px.max(1)).map(|f| wrap(f.to_vec())).collect()))
 }
 
 /// The frames `range` (clamped) of a group as grey `f32`, exactly as the frames of the scan

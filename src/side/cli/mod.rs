@@ -253,6 +253,26 @@ pub(crate) fn refuse_existing(paths: &[&Path], force: bool) -> Result<()> {
     Ok(())
 }
 
+/// Runs `run` with the terminal progress `args` ask for; returns its result and rate.
+fn run_with_progress(
+    run: &RangeRun<'_>,
+    args: &ReconstructArgs,
+) -> Result<(crate::side::run::RangeResult, RunProgress)> {
+    let mut progress = ProgressOut::new(run.range.len(), args);
+    let cancel = AtomicBool::new(false);
+    let result = run_range(run, &mut |e| progress.event(e), &cancel);
+    match result {
+        Ok(r) => {
+            let p = progress.summary(r.groups.len() - r.resumed);
+            Ok((r, p))
+        }
+        Err(e) => {
+            progress.bar.finish_and_clear();
+            Err(e.into())
+        }
+    }
+}
+
 /// Runs `reconstruct`: one shard of a plan with `--plan`/`--shard`, else the whole range.
 ///
 /// # Errors
@@ -300,18 +320,8 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         resume: args.side.resume,
         force: args.force,
     };
-    let mut progress = ProgressOut::new(end - first, args);
     let started = Instant::now();
-    let cancel = AtomicBool::new(false);
-    let result = run_range(&run, &mut |e| progress.event(e), &cancel);
-    let result = match result {
-        Ok(r) => r,
-        Err(e) => {
-            progress.bar.finish_and_clear();
-            return Err(e.into());
-        }
-    };
-    let run_progress = progress.summary(result.groups.len() - result.resumed);
+    let (result, run_progress) = run_with_progress(&run, args)?;
     let mut clip = ClipGroups::with_capacity(result.groups.len());
     for g in result.groups {
         clip.add(g);
@@ -459,17 +469,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
         resume: args.side.resume,
         force: args.force,
     };
-    let mut progress = ProgressOut::new(range.len(), args);
-    let cancel = AtomicBool::new(false);
-    let result = run_range(&run, &mut |e| progress.event(e), &cancel);
-    let result = match result {
-        Ok(r) => r,
-        Err(e) => {
-            progress.bar.finish_and_clear();
-            return Err(e.into());
-        }
-    };
-    let mut run_progress = progress.summary(result.groups.len() - result.resumed);
+    let (result, mut run_progress) = run_with_progress(&run, args)?;
     run_progress.context_groups = result.context_groups;
     let written = write_part(&args.out, &identity, &result.groups, args.force)?;
     let report = ShardReport {
