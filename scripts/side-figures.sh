@@ -16,7 +16,7 @@ else
 fi
 work=${1:-$(mktemp -d /tmp/groovescope-figures.XXXXXX)}
 mkdir -p "$work"
-json() { python3 -c "import json,sys; r=json.load(open(sys.argv[1])); print($2)" "$3"; }
+json() { python3 -c "import json,sys; r=json.load(open(sys.argv[1])); print($1)" "$2"; }
 peak_kb() { sed -n 's/.*Maximum resident set size (kbytes): //p' "$1"; }
 
 # --- 1. memory --------------------------------------------------------------------------------
@@ -56,7 +56,7 @@ for path in dual depth; do
     # CPU seconds (user + system) of a one-thread run: a per-core figure that other tenants'
     # load on this machine does not inflate the way it does wall time.
     RAYON_NUM_THREADS=1 /usr/bin/time -v "$gs" reconstruct "$work/$path" --out "$work/$path-1.wav" \
-        --report "$work/$path-1.json" --quiet 2>"$work/$path-1.time"
+        --report "$work/$path-1.json" --force --quiet 2>"$work/$path-1.time"
     groups=$(json "len(r['groups'])" "$work/$path-1.json")
     cpu=$(python3 -c "
 import re,sys
@@ -83,7 +83,7 @@ for path in dual depth; do
     zarr=$(du -sb "$work/$path.zarr" | cut -f1)
     for form in "$path" "$path.zarr"; do
         rm -f "$work/dec.wav"
-        "$gs" reconstruct "$work/$form" --out "$work/dec.wav" --report "$work/dec.json" --quiet
+        "$gs" reconstruct "$work/$form" --out "$work/dec.wav" --report "$work/dec.json" --force --quiet
         echo "  $form: $(json "f\"{r['timings']['load_secs'] / len(r['groups']):.3f} s decoding a group (loader thread)\"" "$work/dec.json")"
         cp "$work/dec.wav" "$work/$form.wav"
     done
