@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -228,8 +228,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
     };
     let mut cfg = match &args.config {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read synth settings: {}", p.display()))?;
+            let text = crate::io::limits::read_toml_text(p, "synth settings")?;
             let mut table: toml::Table = toml::to_string(&base)
                 .ok()
                 .and_then(|t| toml::from_str(&t).ok())
@@ -314,8 +313,7 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
     };
     let cfg = match config {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read scene settings: {}", p.display()))?;
+            let text = crate::io::limits::read_toml_text(p, "scene settings")?;
             toml::from_str::<SceneConfig>(&text).map_err(|e| {
                 anyhow::anyhow!("invalid scene settings: {}: {}", e.message(), p.display())
             })?
@@ -346,8 +344,7 @@ pub(crate) fn path_choice(arg: &str, default: PathChoice) -> PathChoice {
 pub fn load_params(path: Option<&Path>) -> Result<PipelineParams> {
     let params = match path {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read parameters: {}", p.display()))?;
+            let text = crate::io::limits::read_toml_text(p, "parameters")?;
             PipelineParams::from_toml_str(&text)
                 .map_err(|e| anyhow::anyhow!("invalid parameters: {e}: {}", p.display()))?
         }

@@ -5,6 +5,9 @@ use std::path::Path;
 use image::{DynamicImage, ImageBuffer, Luma};
 use rayon::prelude::*;
 
+use super::limits::{
+    MAX_FRAME_DECODED_BYTES, MAX_FRAME_FILE_BYTES, check_frame_size, read_limited,
+};
 use super::{LoadError, atomic::write_atomic_with, scan::GroupEntry};
 use crate::image::Image;
 
@@ -34,18 +37,42 @@ pub struct RawFrame {
 /// Decodes one frame to its raw samples.
 ///
 /// # Errors
-/// [`LoadError::BadFrame`] naming the file when it is missing or cannot be decoded.
+/// [`LoadError::BadFrame`] naming the file when it is missing, past a limit of
+/// [`super::limits`] or cannot be decoded.
 pub fn load_frame_raw(path: &Path) -> Result<RawFrame, LoadError> {
-    let bad = |e: &dyn std::fmt::Display| LoadError::BadFrame {
-        problem: e.to_string(),
+    let bytes = read_limited(path, MAX_FRAME_FILE_BYTES, "frame").map_err(|e| match e {
+        LoadError::Io { problem, path } => LoadError::BadFrame { problem, path },
+        other => other,
+    })?;
+    decode_frame_raw(&bytes, path)
+}
+
+/// Decodes a frame held in memory to its raw samples; `path` names it in errors. The size in
+/// its header is checked against the limits before any pixel memory is allocated.
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming `path` when the bytes are not a frame within the limits.
+pub fn decode_frame_raw(bytes: &[u8], path: &Path) -> Result<RawFrame, LoadError> {
+    let bad = |problem: String| LoadError::BadFrame {
+        problem,
         path: path.to_path_buf(),
     };
-    let dynimg = image::ImageReader::open(path)
-        .map_err(|e| bad(&e))?
-        .with_guessed_format()
-        .map_err(|e| bad(&e))?
-        .decode()
-        .map_err(|e| bad(&e))?;
+    let reader = || {
+        image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| bad(e.to_string()))
+    };
+    let (w, h) = reader()?
+        .into_dimensions()
+        .map_err(|e| bad(e.to_string()))?;
+    check_frame_size(u64::from(w), u64::from(h)).map_err(bad)?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(w);
+    limits.max_image_height = Some(h);
+    limits.max_alloc = Some(MAX_FRAME_DECODED_BYTES);
+    let mut reader = reader()?;
+    reader.limits(limits);
+    let dynimg = reader.decode().map_err(|e| bad(e.to_string()))?;
     let (width, height) = (dynimg.width() as usize, dynimg.height() as usize);
     let samples = match dynimg {
         DynamicImage::ImageLuma8(b) => RawSamples::U8(b.into_raw()),
@@ -84,9 +111,18 @@ pub fn grey_from_raw(raw: RawFrame) -> Image {
 /// Loads one frame as grey in `[0, 1]` (Rec. 709 luma for colour frames).
 ///
 /// # Errors
-/// [`LoadError::BadFrame`] naming the file when it is missing or cannot be decoded.
+/// [`LoadError::BadFrame`] naming the file when it is missing, past a limit of
+/// [`super::limits`] or cannot be decoded.
 pub fn load_frame(path: &Path) -> Result<Image, LoadError> {
     load_frame_raw(path).map(grey_from_raw)
+}
+
+/// Decodes a frame held in memory; `path` names it in errors (see [`decode_frame_raw`]).
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming `path` when the bytes are not a frame within the limits.
+pub fn decode_frame(bytes: &[u8], path: &Path) -> Result<Image, LoadError> {
+    decode_frame_raw(bytes, path).map(grey_from_raw)
 }
 
 /// Loads every frame of a group in parallel and checks they share one size.
@@ -151,26 +187,57 @@ pub fn load_group_frames(
     Ok(frames)
 }
 
-/// Reads a frame that is not decoded and returns its size: a PNG's chunks must match their
-/// checksums ([`check_png_chunks`]), a TIFF's image data must lie inside the file
-/// ([`check_tiff_extent`]), and any other file's header must read.
+/// Reads a frame that is not decoded and returns its size (see [`check_frame_bytes`]).
 fn check_undecoded_frame(path: &Path) -> Result<(usize, usize), LoadError> {
+    let bytes = read_limited(path, MAX_FRAME_FILE_BYTES, "frame").map_err(|e| match e {
+        LoadError::Io { problem, path } => LoadError::BadFrame { problem, path },
+        other => other,
+    })?;
+    check_frame_bytes(&bytes, path)
+}
+
+/// Checks a frame without decoding it and returns its size: a PNG's chunks must match their
+/// checksums ([`check_png_chunks`]), a TIFF's image data must lie inside the file
+/// ([`check_tiff_extent`]), any other file's header must read, and the size must be within
+/// the limits. `path` names the frame in errors.
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming `path`.
+pub fn check_frame_bytes(bytes: &[u8], path: &Path) -> Result<(usize, usize), LoadError> {
     let bad = |e: &dyn std::fmt::Display| LoadError::BadFrame {
         problem: e.to_string(),
         path: path.to_path_buf(),
     };
-    let bytes = std::fs::read(path).map_err(|e| bad(&e))?;
     let (w, h) = if bytes.starts_with(&PNG_SIGNATURE) {
-        check_png_chunks(&bytes).map_err(|e| bad(&e))?
+        check_png_chunks(bytes).map_err(|e| bad(&e))?
     } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
-        check_tiff_extent(&bytes).map_err(|e| bad(&e))?
+        check_tiff_extent(bytes).map_err(|e| bad(&e))?
     } else {
-        image::ImageReader::new(std::io::Cursor::new(&bytes))
+        image::ImageReader::new(std::io::Cursor::new(bytes))
             .with_guessed_format()
             .map_err(|e| bad(&e))?
             .into_dimensions()
             .map_err(|e| bad(&e))?
     };
+    check_frame_size(u64::from(w), u64::from(h)).map_err(|e| bad(&e))?;
+    Ok((w as usize, h as usize))
+}
+
+/// The width and height in a frame file's header, read without reading the image data.
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming the file when its header cannot be read.
+pub fn frame_dimensions(path: &Path) -> Result<(usize, usize), LoadError> {
+    let bad = |e: &dyn std::fmt::Display| LoadError::BadFrame {
+        problem: e.to_string(),
+        path: path.to_path_buf(),
+    };
+    let (w, h) = image::ImageReader::open(path)
+        .map_err(|e| bad(&e))?
+        .with_guessed_format()
+        .map_err(|e| bad(&e))?
+        .into_dimensions()
+        .map_err(|e| bad(&e))?;
     Ok((w as usize, h as usize))
 }
 

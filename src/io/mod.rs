@@ -3,6 +3,8 @@
 pub mod atomic;
 pub mod flo;
 pub mod frames;
+pub mod limits;
+pub mod lock;
 pub mod scan;
 #[cfg(feature = "video")]
 pub mod video;

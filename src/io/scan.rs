@@ -5,6 +5,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::LoadError;
+use super::frames::frame_dimensions;
+use super::limits::{MAX_FRAMES_PER_GROUP, MAX_GROUPS, read_toml_text};
 
 /// The scan format version this build reads and writes.
 pub const FORMAT_VERSION: u32 = 1;
@@ -146,10 +148,7 @@ impl ScanMeta {
     /// # Errors
     /// [`LoadError`] when the file cannot be read or is invalid.
     pub fn load(path: &Path) -> Result<Self, LoadError> {
-        let text = std::fs::read_to_string(path).map_err(|e| LoadError::Io {
-            problem: format!("cannot read scan metadata: {e}"),
-            path: path.to_path_buf(),
-        })?;
+        let text = read_toml_text(path, "scan metadata")?;
         Self::from_toml_str(&text, path)
     }
 
@@ -208,6 +207,48 @@ impl ScanMeta {
                     df.glass_edge_row
                 ));
             }
+        }
+        Ok(())
+    }
+
+    /// Checks the metadata against what the scan folder holds: `groups` group folders whose
+    /// first frame is `frame_size` (width, height) px. A per-group list must have one entry a
+    /// group, the glass edge must lie inside the frame, and the group step must be at most the
+    /// stretch of groove a group's samples cover (its width less the stitcher's margins), or
+    /// consecutive groups would leave gaps in the sound.
+    ///
+    /// # Errors
+    /// A sentence naming the key and both numbers.
+    pub fn check_against_scan(
+        &self,
+        groups: usize,
+        frame_size: (usize, usize),
+    ) -> Result<(), String> {
+        if let Some(radii) = &self.record.group_radius_mm
+            && radii.len() != groups
+        {
+            return Err(format!(
+                "record.group_radius_mm has {} entries but the scan has {groups} groups",
+                radii.len()
+            ));
+        }
+        let (width, height) = frame_size;
+        if let Some(df) = &self.dual_focus {
+            let last_row = height.saturating_sub(1) as f64;
+            if df.glass_edge_row > last_row {
+                return Err(format!(
+                    "dual_focus.glass_edge_row = {} lies outside the frame, whose last row is {last_row} ({height} rows)",
+                    df.glass_edge_row
+                ));
+            }
+        }
+        let margin_px = crate::pipeline::sampling::SAMPLE_MARGIN_PX;
+        let view_um = (width as f64 - 1.0 - 2.0 * margin_px) * self.camera.pixel_pitch_um;
+        if groups > 1 && self.motion.group_step_um > view_um {
+            return Err(format!(
+                "motion.group_step_um = {} µm is longer than the {view_um:.2} µm a group's frames are sampled over ({width} px of {} µm less the stitcher's {margin_px} px margin each side), so consecutive groups would not overlap and the sound would have gaps",
+                self.motion.group_step_um, self.camera.pixel_pitch_um
+            ));
         }
         Ok(())
     }
@@ -311,18 +352,31 @@ fn is_frame_file(p: &Path) -> bool {
         .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "tif" | "tiff"))
 }
 
-fn sorted_entries(dir: &Path) -> Result<Vec<PathBuf>, LoadError> {
-    let rd = std::fs::read_dir(dir).map_err(|e| LoadError::Io {
+/// The entries of `dir` that pass `keep`, sorted by name; more than `limit` of them is refused.
+fn sorted_entries(
+    dir: &Path,
+    keep: impl Fn(&Path) -> bool,
+    limit: usize,
+    what: &str,
+) -> Result<Vec<PathBuf>, LoadError> {
+    let list_err = |e: std::io::Error| LoadError::Io {
         problem: format!("cannot list folder: {e}"),
         path: dir.to_path_buf(),
-    })?;
+    };
+    let rd = std::fs::read_dir(dir).map_err(list_err)?;
     let mut out = Vec::new();
     for entry in rd {
-        let entry = entry.map_err(|e| LoadError::Io {
-            problem: format!("cannot list folder: {e}"),
-            path: dir.to_path_buf(),
-        })?;
-        out.push(entry.path());
+        let path = entry.map_err(list_err)?.path();
+        if !keep(&path) {
+            continue;
+        }
+        if out.len() == limit {
+            return Err(LoadError::NotAScan {
+                problem: format!("the folder holds more than {limit} {what}, past the limit"),
+                path: dir.to_path_buf(),
+            });
+        }
+        out.push(path);
     }
     out.sort();
     Ok(out)
@@ -354,14 +408,13 @@ impl Scan {
         }
         let meta = ScanMeta::load(&meta_path)?;
         let mut groups = Vec::new();
-        for path in sorted_entries(dir)? {
-            if !path.is_dir() {
-                continue;
-            }
-            let frames: Vec<PathBuf> = sorted_entries(&path)?
-                .into_iter()
-                .filter(|p| p.is_file() && is_frame_file(p))
-                .collect();
+        for path in sorted_entries(dir, Path::is_dir, MAX_GROUPS, "group folders")? {
+            let frames = sorted_entries(
+                &path,
+                |p| p.is_file() && is_frame_file(p),
+                MAX_FRAMES_PER_GROUP,
+                "frames",
+            )?;
             if frames.len() < MIN_FRAMES_PER_GROUP {
                 return Err(LoadError::TooFewFrames {
                     found: frames.len(),
@@ -376,12 +429,18 @@ impl Scan {
                 zarr: None,
             });
         }
-        if groups.is_empty() {
+        let Some(first) = groups.first().and_then(|g| g.frames.first()) else {
             return Err(LoadError::NotAScan {
                 problem: "the scan holds no group folders with frames".into(),
                 path: dir.to_path_buf(),
             });
-        }
+        };
+        let frame_size = frame_dimensions(first)?;
+        meta.check_against_scan(groups.len(), frame_size)
+            .map_err(|problem| LoadError::Metadata {
+                problem,
+                path: meta_path.clone(),
+            })?;
         let reference = Some(dir.join("reference.wav")).filter(|p| p.is_file());
         Ok(Self {
             dir: dir.to_path_buf(),

@@ -167,10 +167,14 @@ impl PipelineParams {
             0.0,
             1e6,
         )?;
-        if self.flow.max_iterations == 0 {
+        let max_iterations = optical_flow::MAX_FLOW_ITERATIONS;
+        if self.flow.max_iterations == 0 || self.flow.max_iterations > max_iterations {
             return Err(StageError::InvalidParam {
                 name: "flow.max_iterations".into(),
-                problem: "must be at least 1".into(),
+                problem: format!(
+                    "{} is not in [1, {max_iterations}]",
+                    self.flow.max_iterations
+                ),
             });
         }
         check_range(

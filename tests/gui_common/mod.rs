@@ -46,7 +46,7 @@ pixel_pitch_um = 0.39
 working_distance_mm = 4.0
 [motion]
 frame_step_um = 0.78
-group_step_um = 40.0
+group_step_um = 10.0
 ";
 
 /// A hand-made scan for bad-input tests: `groups` groups of 7 textured frames.

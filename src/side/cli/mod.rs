@@ -241,6 +241,24 @@ pub fn journal_path(out: &Path) -> PathBuf {
     out.with_file_name(format!("{name}.journal"))
 }
 
+/// Takes the output lock of every path (one writer at a time per output: a second run writing
+/// the same files is refused before any work, instead of mixing its files with the first's).
+pub(crate) fn lock_outputs(paths: &[&Path]) -> Result<Vec<crate::io::lock::OutputLock>> {
+    Ok(paths
+        .iter()
+        .map(|p| crate::io::lock::OutputLock::acquire(p))
+        .collect::<Result<Vec<_>, _>>()?)
+}
+
+/// Refuses params whose Hough accumulator would be too large for `scan`, naming the params file.
+fn check_hough(params: &PipelineParams, scan: &Scan, file: Option<&Path>) -> Result<()> {
+    if let Err(e) = crate::io::limits::check_hough_accumulator(params, scan) {
+        let file = file.map_or("the default params".into(), |p| p.display().to_string());
+        bail!("{e}: {file}");
+    }
+    Ok(())
+}
+
 pub(crate) fn refuse_existing(paths: &[&Path], force: bool) -> Result<()> {
     for out in paths {
         if out.exists() && !force {
@@ -292,10 +310,12 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
         .chain(args.report.as_deref())
         .collect();
+    let _locks = lock_outputs(&outputs)?;
     refuse_existing(&outputs, args.force)?;
     let mut params = load_params(args.params.as_deref())?;
     params.path = path_choice(&args.path, params.path);
     let scan = Scan::open(&args.scan)?;
+    check_hough(&params, &scan, args.params.as_deref())?;
     let first = args.first_group.unwrap_or(0);
     let end = args
         .groups
@@ -436,6 +456,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
         bail!("--first-group/--groups do not go with --plan: the plan gives the shard's groups");
     }
     let scan = Scan::open(&args.scan)?;
+    check_hough(&params, &scan, Some(plan_path))?;
     let (shard, id) = plan.shard(index, &scan, plan_path)?;
     let range = shard.first_group..shard.end_group;
     let identity = RunIdentity::new(&scan, &params, plan.keep_going, range.clone(), Some(id));
@@ -443,6 +464,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
         anyhow::anyhow!("cannot create the part folder: {e}: {}", args.out.display())
     })?;
     let part_path = args.out.join(PART_FILE);
+    let _lock = lock_outputs(&[part_path.as_path()])?;
     if part_path.exists() && !args.force {
         if args.side.resume
             && read_part(&args.out).is_ok_and(|p| identity.difference(&p.identity).is_none())

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 
-use super::{make_report, refuse_existing};
+use super::{lock_outputs, make_report, refuse_existing};
 use crate::cli::{load_params, path_choice};
 use crate::engine::{GroupOutcome, GroupStream, SlopeMode, run_groups};
 use crate::io::wav::{WavBits, write_wav};
@@ -81,6 +81,7 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
         .chain(args.report.as_deref())
         .collect();
+    let _locks = lock_outputs(&outputs)?;
     refuse_existing(&outputs, args.force)?;
     let started = Instant::now();
     let merged = merge_parts(&args.parts)?;
