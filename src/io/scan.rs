@@ -302,15 +302,35 @@ impl Geometry {
     }
 }
 
-/// One group folder: its index, folder and sorted frame files.
+/// One group: its index, folder and sorted frame files, or its chunk in a Zarr store.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GroupEntry {
     /// Position in the scan, from 0.
     pub index: usize,
-    /// The group folder.
+    /// The group folder (in a Zarr store: the store joined with the group's name, which
+    /// names the group in messages).
     pub dir: PathBuf,
-    /// Frame files sorted by name.
+    /// Frame files sorted by name (empty in a Zarr store).
     pub frames: Vec<PathBuf>,
+    /// Where the frames are in a Zarr store (None for a scan folder).
+    pub zarr: Option<super::zarr::ZarrGroup>,
+}
+
+impl GroupEntry {
+    /// Frames in the group.
+    #[must_use]
+    pub fn frame_count(&self) -> usize {
+        self.zarr.as_ref().map_or(self.frames.len(), |z| z.frames)
+    }
+
+    /// The group's name: its folder's name.
+    #[must_use]
+    pub fn name(&self) -> String {
+        self.dir.file_name().map_or_else(
+            || self.index.to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        )
+    }
 }
 
 /// An opened scan: metadata plus the list of groups. Frames are read on demand.
@@ -363,12 +383,16 @@ fn sorted_entries(
 }
 
 impl Scan {
-    /// Opens a scan folder: reads `scan.toml` and lists the groups and their frames.
+    /// Opens a scan: a folder (reads `scan.toml` and lists the groups and their frames) or a
+    /// Zarr store made by `groovescope pack` (a folder holding `zarr.json`).
     ///
     /// # Errors
     /// [`LoadError`] when the folder is not a scan, the metadata is invalid, there are no
     /// groups, or a group holds fewer than [`MIN_FRAMES_PER_GROUP`] frames.
     pub fn open(dir: &Path) -> Result<Self, LoadError> {
+        if dir.join("zarr.json").is_file() {
+            return super::zarr::open_scan(dir);
+        }
         if !dir.is_dir() {
             return Err(LoadError::NotAScan {
                 problem: "no such folder".into(),
@@ -402,6 +426,7 @@ impl Scan {
                 index: groups.len(),
                 dir: path,
                 frames,
+                zarr: None,
             });
         }
         let Some(first) = groups.first().and_then(|g| g.frames.first()) else {
