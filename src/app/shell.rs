@@ -592,6 +592,9 @@ impl eframe::App for Workbench {
         let busy = !self.is_idle();
         let ctx = ui.ctx().clone();
         self.poll();
+        if let Some(msg) = self.player.poll_device() {
+            self.error(msg);
+        }
         if let Some((kind, path)) = self.dialogs.poll()
             && let Some(p) = path
         {

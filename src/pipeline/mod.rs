@@ -10,6 +10,7 @@ pub mod depth;
 pub mod derivatives;
 pub mod dsp;
 pub mod eval;
+pub mod finish;
 pub mod graph;
 pub mod hough;
 pub mod optical_flow;

@@ -58,7 +58,7 @@ const STAGE: &str = "stripes";
 /// The dual-focus geometry shows exactly this many stripes.
 const STRIPE_COUNT: usize = 3;
 /// Largest accumulator the stage agrees to allocate (cells).
-const MAX_ACCUMULATOR_CELLS: usize = 64 << 20;
+pub const MAX_ACCUMULATOR_CELLS: usize = 64 << 20;
 /// Fraction of the peak's votes a ρ bin needs to count in the peak's sub-bin centroid.
 const RHO_REFINE_FRACTION: f32 = 0.5;
 /// Rows beyond half the stripe thickness that still count in a column's centroid (px).
@@ -391,6 +391,13 @@ fn validate_dual(d: &DualFocusMeta) -> Result<(), StageError> {
         f64::MAX,
     )?;
     check_range("dual_focus.glass_index", d.glass_index, 1.0, f64::MAX)
+}
+
+/// Cells of the accumulator `params` make for frames of `height_px` rows (θ bins × ρ bins);
+/// the stage refuses more than [`MAX_ACCUMULATOR_CELLS`].
+#[must_use]
+pub fn accumulator_cells(params: &HoughParams, height_px: usize) -> usize {
+    theta_count(params).saturating_mul(rho_count(height_px, params))
 }
 
 fn theta_count(p: &HoughParams) -> usize {

@@ -192,7 +192,7 @@ pub(super) fn votes_and_peaks(
     if w > usize::from(u16::MAX) || h > usize::from(u16::MAX) {
         return Err(bad_input(format!("image {w}×{h} is too large")));
     }
-    let cells = theta_count(params).saturating_mul(rho_count(h, params));
+    let cells = accumulator_cells(params, h);
     if cells > MAX_ACCUMULATOR_CELLS {
         return Err(invalid(
             "hough.theta_step_deg",

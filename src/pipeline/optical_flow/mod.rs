@@ -148,6 +148,10 @@ pub enum Solver {
     Jacobi,
 }
 
+/// Most Horn–Schunck iterations one solve may be asked for (about 4 s a window on a
+/// 1280×1024 frame); a larger cap, with τ = 0, would keep a stage busy for hours.
+pub const MAX_FLOW_ITERATIONS: u32 = 10_000;
+
 /// Knobs of [`compute_flow`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -471,10 +475,10 @@ impl FlowParams {
             0.0,
             1e6,
         )?;
-        if p.max_iterations == 0 {
+        if p.max_iterations == 0 || p.max_iterations > MAX_FLOW_ITERATIONS {
             return Err(StageError::InvalidParam {
                 name: "flow.max_iterations".to_string(),
-                problem: "must be at least 1".to_string(),
+                problem: format!("{} is not in [1, {MAX_FLOW_ITERATIONS}]", p.max_iterations),
             });
         }
         super::check_range(
