@@ -27,7 +27,7 @@ fn small_side_config(groups: usize) -> SynthConfig {
         width_px: 160,
         height_px: 300,
         pixel_pitch_um: 1.0,
-        group_overlap_px: 10,
+        group_overlap_px: 20,
         frames_per_group: 8,
         bit_depth: 8,
         max_groups: Some(groups),

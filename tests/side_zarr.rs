@@ -119,7 +119,7 @@ fn a_store_reconstructs_to_the_same_wav_and_a_missing_chunk_is_named_or_a_gap() 
         width_px: 160,
         height_px: 300,
         pixel_pitch_um: 1.0,
-        group_overlap_px: 10,
+        group_overlap_px: 20,
         frames_per_group: 8,
         bit_depth: 16,
         max_groups: Some(6),
