@@ -446,7 +446,7 @@ fn groove_solution_satisfies_euler_lagrange() {
             solver,
             lambda,
             groove_weight: weight,
-            max_iterations: 20_000,
+            max_iterations: MAX_FLOW_ITERATIONS,
             tolerance_px: 0.0,
             ..params(FlowMethod::GrooveHornSchunck)
         };
