@@ -13,11 +13,11 @@ use crate::io::wav::Audio;
 use crate::io::{Scan, load_group};
 use crate::pipeline::PipelineParams;
 use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample, stitch};
-use crate::pipeline::cache::native_spacing_um;
 use crate::pipeline::dsp::apply_dsp;
 use crate::pipeline::edges::{EdgeParams, decode_border_signal, detect_edges};
 use crate::pipeline::eval::{Scores, evaluate};
 use crate::pipeline::fusion::{Fused, FusionParams, fuse};
+use crate::pipeline::sampling::native_spacing_um;
 
 /// Scores of every decoder on one scan.
 #[derive(Clone, Debug)]
@@ -85,6 +85,9 @@ pub fn finish_and_score(
     Ok((audio, scores))
 }
 
+/// Per group: the edge method's velocity and displacement signals, and notes.
+type EdgeSignals = (Vec<GroupSignal>, Vec<GroupSignal>, Vec<String>);
+
 /// The edge method's signals of a whole scan: per-group velocity and border tracks.
 ///
 /// # Errors
@@ -94,7 +97,7 @@ pub fn edge_signals(
     scan: &Scan,
     params: &PipelineParams,
     edges: &EdgeParams,
-) -> Result<(Vec<GroupSignal>, Vec<GroupSignal>, Vec<String>), AccuracyError> {
+) -> Result<EdgeSignals, AccuracyError> {
     let mut velocity = Vec::new();
     let mut borders = Vec::new();
     let mut warnings = Vec::new();

@@ -48,7 +48,7 @@ use self::profile::{SampleBorder, SampleTask, fit_sample};
 use self::refine::{RefineSample, refine_border};
 use self::robust::{CombineParams, combine_borders};
 use super::audio_signal::SoundParams;
-use super::cache::native_spacing_um;
+use super::sampling::native_spacing_um;
 use super::walls::WallSide;
 use super::{StageError, check_range};
 use crate::image::Image;

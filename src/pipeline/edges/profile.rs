@@ -306,7 +306,7 @@ fn invert3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
         m[i1][j1] * m[i2][j2] - m[i1][j2] * m[i2][j1]
     };
     let det = m[0][0] * c(0, 0) + m[0][1] * c(0, 1) + m[0][2] * c(0, 2);
-    if !(det.abs() > 1e-300) {
+    if det.abs().partial_cmp(&1e-300) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     Some(std::array::from_fn(|i| {

@@ -163,6 +163,9 @@ fn sqrt_hann(n: usize) -> Vec<f64> {
         .collect()
 }
 
+/// One block's spectra: flow (re, im), edges (re, im), and the share of filled samples.
+type BlockSpectra = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, f64);
+
 /// Inverse FFT (normalised) by the conjugate trick.
 fn ifft_in_place(re: &mut [f64], im: &mut [f64]) {
     for v in im.iter_mut() {
@@ -225,7 +228,7 @@ fn fuse_channel(
         .map(|k: i64| k * hop as i64 - hop as i64)
         .take_while(|&s| s < n as i64)
         .collect();
-    let spectra: Vec<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, f64)> = starts
+    let spectra: Vec<BlockSpectra> = starts
         .iter()
         .map(|&s| {
             let (mut fr, mut fi) = (vec![0.0; block], vec![0.0; block]);
