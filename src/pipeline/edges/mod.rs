@@ -29,6 +29,7 @@
 pub mod border;
 pub mod coarse;
 pub mod differentiator;
+pub mod erf;
 pub mod geometry;
 pub mod profile;
 pub mod refine;
