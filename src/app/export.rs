@@ -9,6 +9,7 @@ use serde::Serialize;
 use super::recon::Clip;
 use super::tuning::ParamState;
 use crate::engine::GroupReport;
+use crate::io::lock::OutputLock;
 use crate::io::wav::{Audio, WavBits, write_wav};
 use crate::io::write_atomic;
 use crate::pipeline::audio_signal::resample;
@@ -123,6 +124,9 @@ pub fn export_wav(
     selection_secs: Option<(f64, f64)>,
     overwrite: bool,
 ) -> Result<(), String> {
+    // Another window exporting to the same file is refused, so a WAV and its sidecar always
+    // come from one export.
+    let _lock = OutputLock::acquire(path).map_err(|e| e.to_string())?;
     if !overwrite && would_overwrite(path) {
         return Err(format!(
             "refusing to overwrite an existing file: {}",

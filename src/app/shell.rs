@@ -222,6 +222,9 @@ impl eframe::App for Workbench {
         let ctx = ui.ctx().clone();
         self.poll();
         self.poll_dialog();
+        if let Some(msg) = self.player.poll_device() {
+            self.error(msg);
+        }
         self.poll_capture(&ctx);
         self.dropped(&ctx);
         self.shortcuts(&ctx);

@@ -11,6 +11,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use super::history::History;
+use crate::io::lock::OutputLock;
 use crate::io::write_atomic;
 use crate::pipeline::PipelineParams;
 
@@ -23,6 +24,7 @@ pub const SCAN_PRESET_FILE: &str = "preset.toml";
 /// A message naming the file when it exists and `overwrite` is false, or the write fails.
 pub fn save_preset(params: &PipelineParams, path: &Path, overwrite: bool) -> Result<(), String> {
     let text = params.to_toml_string().map_err(|e| e.to_string())?;
+    let _lock = OutputLock::acquire(path).map_err(|e| e.to_string())?;
     write_atomic(path, text.as_bytes(), overwrite).map_err(|e| e.to_string())
 }
 
@@ -31,8 +33,7 @@ pub fn save_preset(params: &PipelineParams, path: &Path, overwrite: bool) -> Res
 /// # Errors
 /// A message naming the file and the bad key or value.
 pub fn load_preset(path: &Path) -> Result<PipelineParams, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("cannot read preset: {e}: {}", path.display()))?;
+    let text = crate::io::limits::read_toml_text(path, "preset").map_err(|e| e.to_string())?;
     let params = PipelineParams::from_toml_str(&text)
         .map_err(|e| format!("invalid preset: {e}: {}", path.display()))?;
     params

@@ -526,10 +526,20 @@ impl Workbench {
             return Err("no scan open".into());
         };
         let path = scan.dir.join("scan.toml");
+        let first_frame = scan.groups.first().and_then(|g| g.frames.first());
         let result = meta
             .validate()
+            .and_then(|()| match first_frame {
+                // What the scan folder holds must agree too (the next open checks it).
+                Some(f) => crate::io::frames::frame_dimensions(f)
+                    .map_err(|e| e.to_string())
+                    .and_then(|size| meta.check_against_scan(scan.groups.len(), size)),
+                None => Ok(()),
+            })
             .and_then(|()| meta.to_toml_string().map_err(|e| e.to_string()))
             .and_then(|text| {
+                let _lock =
+                    crate::io::lock::OutputLock::acquire(&path).map_err(|e| e.to_string())?;
                 crate::io::write_atomic(&path, text.as_bytes(), true).map_err(|e| e.to_string())
             });
         match result {

@@ -9,6 +9,10 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{Once, OnceLock};
 use std::time::{Duration, Instant};
 
+/// The plain integration-test helpers (the demo copy, the binary, tiny scans).
+#[path = "../common/mod.rs"]
+pub mod common;
+
 use egui_kittest::Harness;
 use groovescope::app::{Workbench, WorkbenchOptions};
 use groovescope::image::Image;
@@ -66,7 +70,7 @@ pixel_pitch_um = 0.39
 working_distance_mm = 4.0
 [motion]
 frame_step_um = 0.78
-group_step_um = 40.0
+group_step_um = 10.0
 ";
 
 /// A hand-made scan for bad-input tests: `groups` groups of 7 textured frames.
@@ -115,14 +119,19 @@ pub fn lateral_scan() -> PathBuf {
     .clone()
 }
 
-/// The bundled demo scan (dual focus, with `reference.wav`); when it is missing, a small
-/// synthetic dual-focus scan (2 groups of 8 frames of 320×700 px) stands in.
+/// A copy of the bundled demo scan (dual focus, with `reference.wav`), made once per test
+/// process, so that a test saving metadata, presets or exports beside it never changes the
+/// bundled one; when it is missing, a small synthetic dual-focus scan (2 groups of 8 frames of
+/// 320×700 px) stands in.
 pub fn demo_scan() -> PathBuf {
     static SCAN: OnceLock<PathBuf> = OnceLock::new();
     SCAN.get_or_init(|| {
         let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
         if demo.join("scan.toml").is_file() {
-            return demo;
+            let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+                .join(format!("ui-scans-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            return common::demo_copy(&dir);
         }
         rendered_scan(
             "dual",
