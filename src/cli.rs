@@ -100,6 +100,8 @@ pub enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Render a top-view still of neighbouring grooves with known wall tones and its truth.
+    SynthStill(crate::still::cli::SynthStillArgs),
     /// Import a microscope video clip (AVI/MP4) as a scan folder (needs the `video` feature).
     ImportVideo(crate::video_cli::ImportVideoArgs),
     /// Open the workbench (optionally on a scan).
@@ -645,6 +647,7 @@ pub fn run(command: Command) -> Result<()> {
             }
             Ok(())
         }
+        Command::SynthStill(args) => crate::still::cli::run_synth_still(&args),
         Command::ImportVideo(args) => crate::video_cli::run_import_video(&args),
         Command::Gui { scan } => run_gui(scan),
     }

@@ -15,6 +15,7 @@ pub mod io;
 pub mod pipeline;
 #[cfg(feature = "gui")]
 pub mod playback;
+pub mod still;
 pub mod synth;
 pub mod video_cli;
 pub mod viz;

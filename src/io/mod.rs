@@ -4,6 +4,7 @@ pub mod atomic;
 pub mod flo;
 pub mod frames;
 pub mod scan;
+pub mod still;
 #[cfg(feature = "video")]
 pub mod video;
 pub mod wav;

@@ -10,6 +10,7 @@ pub mod hough;
 pub mod knobs;
 pub mod optical_flow;
 pub mod orientation;
+pub mod still;
 pub mod walls;
 
 /// Why a stage could not produce its output.
