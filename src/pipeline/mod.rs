@@ -5,6 +5,7 @@ pub mod cache;
 pub mod depth;
 pub mod derivatives;
 pub mod dsp;
+pub mod edges;
 pub mod eval;
 pub mod hough;
 pub mod knobs;

@@ -1,0 +1,790 @@
+//! The border model: sub-pixel position of a step between two grey levels in a 1-D profile,
+//! by a least-squares fit of an edge-spread profile.
+//!
+//! The model is a blurred step, `v(x) = low + (high − low)·Φ((x − μ)/w)`, with `Φ` the standard
+//! normal CDF (an optical edge spread: a step seen through a Gaussian point spread of σ = `w`).
+//! [`fit_border`] fits its four parameters to weighted points `(x, v)` by Levenberg–Marquardt on
+//! the weighted squared residuals, starting from a seed; [`find_border`] takes a plain profile
+//! (one value per sample), seeds the fit at its strongest gradient of the asked polarity and fits
+//! the points within `fit_half_window_px` of it, so that other borders in the profile do not pull
+//! the fit.
+//!
+//! The position's standard error comes from the fit's covariance, `s²·(JᵀWJ)⁻¹`, with the noise
+//! variance `s²` estimated from the weighted residuals (the weights are taken as relative inverse
+//! variances, e.g. pixel counts of binned points). Widths are kept within
+//! `[min_width_px, max_width_px]`: an unblurred, pixel-sampled step has no measurable width, and
+//! a floor of about a pixel's own aperture (σ ≈ 0.3 px) keeps the fit's position derivative alive.
+
+use serde::{Deserialize, Serialize};
+
+use crate::pipeline::{StageError, check_range};
+
+/// 1/√2, for Φ(z) = (1 + erf(z/√2))/2.
+const FRAC_1_SQRT_2: f64 = std::f64::consts::FRAC_1_SQRT_2;
+/// 1/√(2π), the normal density's peak.
+const FRAC_1_SQRT_2PI: f64 = 0.398_942_280_401_432_7;
+/// Levenberg–Marquardt damping at the start, and its factor per accepted/rejected step.
+const LM_DAMPING_START: f64 = 1e-3;
+/// Factor by which the damping shrinks after an accepted step and grows after a rejected one.
+const LM_DAMPING_FACTOR: f64 = 10.0;
+/// Damping beyond which the fit gives up improving (the seed or last accepted step stays).
+const LM_DAMPING_MAX: f64 = 1e10;
+/// Fewest points a fit needs (four parameters and one degree of freedom for the noise).
+pub const MIN_FIT_POINTS: usize = 5;
+
+/// Which way the grey level steps along the profile.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Polarity {
+    /// Dark to bright with increasing position.
+    Rising,
+    /// Bright to dark with increasing position.
+    Falling,
+    /// Whichever gradient is strongest.
+    #[default]
+    Either,
+}
+
+/// Knobs of the border fit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BorderParams {
+    /// Half-width of the stretch of profile around the seed that the fit reads (px); default 6.
+    pub fit_half_window_px: f64,
+    /// Smallest edge-spread σ the fit may take (px); default 0.3 (a pixel's own aperture).
+    pub min_width_px: f64,
+    /// Largest edge-spread σ (px); default 4.
+    pub max_width_px: f64,
+    /// Smallest |high − low| for a border (grey level, 1 = full scale); default 0.02.
+    pub min_contrast: f64,
+    /// Iteration cap of the fit; default 30.
+    pub max_iterations: u32,
+    /// The fit stops when the position moves by less than this (px); default 1e-5.
+    pub tolerance_px: f64,
+}
+
+impl Default for BorderParams {
+    fn default() -> Self {
+        Self {
+            fit_half_window_px: 6.0,
+            min_width_px: 0.3,
+            max_width_px: 4.0,
+            min_contrast: 0.02,
+            max_iterations: 30,
+            tolerance_px: 1e-5,
+        }
+    }
+}
+
+impl BorderParams {
+    /// Checks every knob; `prefix` names the TOML table (e.g. `edges.border`).
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the first bad key.
+    pub fn validate(&self, prefix: &str) -> Result<(), StageError> {
+        let key = |k: &str| format!("{prefix}.{k}");
+        check_range(
+            &key("fit_half_window_px"),
+            self.fit_half_window_px,
+            1.0,
+            1e4,
+        )?;
+        check_range(&key("min_width_px"), self.min_width_px, 1e-3, 1e3)?;
+        check_range(
+            &key("max_width_px"),
+            self.max_width_px,
+            self.min_width_px,
+            1e4,
+        )?;
+        check_range(&key("min_contrast"), self.min_contrast, 0.0, 1e6)?;
+        check_range(&key("tolerance_px"), self.tolerance_px, 0.0, 1.0)?;
+        if self.max_iterations == 0 {
+            return Err(StageError::InvalidParam {
+                name: key("max_iterations"),
+                problem: "must be at least 1".into(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// One weighted point of a profile: grey level `value` at position `x_px`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProfilePoint {
+    /// Position along the profile (px).
+    pub x_px: f64,
+    /// Grey level.
+    pub value: f64,
+    /// Relative inverse variance (e.g. the number of pixels averaged); ≤ 0 ignores the point.
+    pub weight: f64,
+}
+
+/// Where the fit starts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BorderSeed {
+    /// Starting position (px).
+    pub position_px: f64,
+    /// Starting edge-spread σ (px).
+    pub width_px: f64,
+}
+
+/// A border found in a profile.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Border {
+    /// Sub-pixel position μ (px, in the profile's coordinates).
+    pub position_px: f64,
+    /// Standard error of the position (px), from the fit's covariance.
+    pub std_error_px: f64,
+    /// Fitted level before the border (smaller positions).
+    pub low: f64,
+    /// Fitted level after the border.
+    pub high: f64,
+    /// Fitted edge-spread σ (px).
+    pub width_px: f64,
+    /// Root mean square of the weighted residuals (grey level).
+    pub residual_rms: f64,
+    /// Points the fit read.
+    pub points: usize,
+    /// Iterations run.
+    pub iterations: u32,
+}
+
+impl Border {
+    /// `high − low`: positive for a rising border, negative for a falling one.
+    #[must_use]
+    pub fn contrast(&self) -> f64 {
+        self.high - self.low
+    }
+
+    /// The fitted model's value at `x_px`.
+    #[must_use]
+    pub fn model_at(&self, x_px: f64) -> f64 {
+        self.low + (self.high - self.low) * normal_cdf((x_px - self.position_px) / self.width_px)
+    }
+
+    /// The model's slope dv/dx at `x_px` (grey level per px).
+    #[must_use]
+    pub fn slope_at(&self, x_px: f64) -> f64 {
+        let z = (x_px - self.position_px) / self.width_px;
+        (self.high - self.low) * normal_pdf(z) / self.width_px
+    }
+}
+
+/// erf(x) by W. J. Cody's rational approximations (relative error below 1e-15 in f64 for
+/// |x| < 0.5; below 1e-13 elsewhere through erfc's continued form).
+#[must_use]
+#[allow(clippy::excessive_precision)] // Cody's published coefficients, kept as printed
+pub fn erf(x: f64) -> f64 {
+    let a = x.abs();
+    if a < 0.5 {
+        // erf(x) = x·P(x²)/Q(x²)
+        const P: [f64; 5] = [
+            3.161_123_743_870_565_6,
+            113.864_154_151_050_16,
+            377.485_237_685_302_0,
+            3_209.377_589_138_469_4,
+            0.185_777_706_184_603_15,
+        ];
+        const Q: [f64; 4] = [
+            23.601_290_952_344_122,
+            244.024_637_934_444_17,
+            1_282.616_526_077_372_3,
+            2_844.236_833_439_170_6,
+        ];
+        let z = x * x;
+        let mut num = P[4] * z;
+        let mut den = z;
+        for i in 0..3 {
+            num = (num + P[i]) * z;
+            den = (den + Q[i]) * z;
+        }
+        x * (num + P[3]) / (den + Q[3])
+    } else {
+        let c = erfc_abs(a);
+        if x < 0.0 { c - 1.0 } else { 1.0 - c }
+    }
+}
+
+/// erfc(a) for a ≥ 0.5 (Cody).
+#[allow(clippy::excessive_precision)] // Cody's published coefficients, kept as printed
+fn erfc_abs(a: f64) -> f64 {
+    if a >= 26.5 {
+        return 0.0;
+    }
+    if a <= 4.0 {
+        const C: [f64; 9] = [
+            0.564_188_496_988_670_1,
+            8.883_149_794_388_376,
+            66.119_190_637_141_63,
+            298.635_138_197_400_1,
+            881.952_221_241_769_1,
+            1_712.047_612_634_070_7,
+            2_051.078_377_826_071_6,
+            1_230.339_354_797_997_2,
+            2.153_115_354_744_038_3e-8,
+        ];
+        const D: [f64; 8] = [
+            15.744_926_110_709_835,
+            117.693_950_891_312_5,
+            537.181_101_862_009_9,
+            1_621.389_574_566_690_3,
+            3_290.799_235_733_459_7,
+            4_362.619_090_143_247,
+            3_439.367_674_143_721_6,
+            1_230.339_354_803_749_4,
+        ];
+        let mut num = C[8] * a;
+        let mut den = a;
+        for i in 0..7 {
+            num = (num + C[i]) * a;
+            den = (den + D[i]) * a;
+        }
+        let r = (num + C[7]) / (den + D[7]);
+        return scaled_exp(a) * r;
+    }
+    const P: [f64; 6] = [
+        0.305_326_634_961_232_36,
+        0.360_344_899_949_804_45,
+        0.125_781_726_111_229_25,
+        0.016_083_785_148_742_275,
+        6.587_491_615_298_378e-4,
+        0.016_315_387_137_302_097,
+    ];
+    const Q: [f64; 5] = [
+        2.568_520_192_289_822,
+        1.872_952_849_923_460_4,
+        0.527_905_102_951_428_4,
+        0.060_518_341_312_441_32,
+        0.002_335_204_976_268_691_8,
+    ];
+    const FRAC_1_SQRT_PI: f64 = 0.564_189_583_547_756_3;
+    let z = 1.0 / (a * a);
+    let mut num = P[5] * z;
+    let mut den = z;
+    for i in 0..4 {
+        num = (num + P[i]) * z;
+        den = (den + Q[i]) * z;
+    }
+    let r = z * (num + P[4]) / (den + Q[4]);
+    scaled_exp(a) * (FRAC_1_SQRT_PI - r) / a
+}
+
+/// exp(−a²), computed as exp(−s²)·exp(−(a − s)(a + s)) with s = a rounded to 1/16 (Cody's
+/// trick against the rounding error of a² for large a).
+fn scaled_exp(a: f64) -> f64 {
+    let s = (a * 16.0).trunc() / 16.0;
+    (-s * s).exp() * (-(a - s) * (a + s)).exp()
+}
+
+/// The standard normal CDF Φ(z).
+#[must_use]
+pub fn normal_cdf(z: f64) -> f64 {
+    0.5 * (1.0 + erf(z * FRAC_1_SQRT_2))
+}
+
+/// The standard normal density φ(z).
+#[must_use]
+pub fn normal_pdf(z: f64) -> f64 {
+    FRAC_1_SQRT_2PI * (-0.5 * z * z).exp()
+}
+
+/// Model parameters: low, high, position, width.
+type Theta = [f64; 4];
+
+/// Weighted cost Σ w·r² of `theta` over `points`.
+fn cost(points: &[ProfilePoint], theta: &Theta) -> f64 {
+    let [lo, hi, mu, w] = *theta;
+    points
+        .iter()
+        .map(|p| {
+            let r = p.value - (lo + (hi - lo) * normal_cdf((p.x_px - mu) / w));
+            p.weight * r * r
+        })
+        .sum()
+}
+
+/// JᵀWJ (upper triangle used) and JᵀW·r of `theta`.
+fn normal_equations(points: &[ProfilePoint], theta: &Theta) -> ([[f64; 4]; 4], [f64; 4]) {
+    let [lo, hi, mu, w] = *theta;
+    let c = hi - lo;
+    let mut a = [[0.0; 4]; 4];
+    let mut g = [0.0; 4];
+    for p in points {
+        let z = (p.x_px - mu) / w;
+        let cdf = normal_cdf(z);
+        let pdf = normal_pdf(z);
+        let r = p.value - (lo + c * cdf);
+        let j = [1.0 - cdf, cdf, -c * pdf / w, -c * pdf * z / w];
+        for (row, &ji) in j.iter().enumerate() {
+            g[row] += p.weight * ji * r;
+            for (col, &jk) in j.iter().enumerate().skip(row) {
+                a[row][col] += p.weight * ji * jk;
+            }
+        }
+    }
+    for row in 1..4 {
+        let upper: [f64; 4] = std::array::from_fn(|col| a[col][row]);
+        a[row][..row].copy_from_slice(&upper[..row]);
+    }
+    (a, g)
+}
+
+/// Solves the symmetric positive 4×4 system `a·x = b` by Cholesky; None when not positive definite.
+#[allow(clippy::needless_range_loop)] // triangular index arithmetic reads clearest as indices
+fn solve4(a: &[[f64; 4]; 4], b: &[f64; 4]) -> Option<[f64; 4]> {
+    let mut l = [[0.0; 4]; 4];
+    for i in 0..4 {
+        for j in 0..=i {
+            let mut s = a[i][j];
+            for k in 0..j {
+                s -= l[i][k] * l[j][k];
+            }
+            if i == j {
+                if s.is_nan() || s <= 0.0 {
+                    return None;
+                }
+                l[i][i] = s.sqrt();
+            } else {
+                l[i][j] = s / l[j][j];
+            }
+        }
+    }
+    let mut y = [0.0; 4];
+    for i in 0..4 {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= l[i][k] * y[k];
+        }
+        y[i] = s / l[i][i];
+    }
+    let mut x = [0.0; 4];
+    for i in (0..4).rev() {
+        let mut s = y[i];
+        for k in i + 1..4 {
+            s -= l[k][i] * x[k];
+        }
+        x[i] = s / l[i][i];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// The (2, 2) entry of the inverse of `a` (the position's variance factor), via a solve.
+fn position_variance_factor(a: &[[f64; 4]; 4]) -> Option<f64> {
+    solve4(a, &[0.0, 0.0, 1.0, 0.0]).map(|x| x[2])
+}
+
+/// Best `low` and `high` for a fixed position and width: the 2-parameter weighted linear
+/// least squares. None when the points do not straddle the border.
+fn linear_levels(points: &[ProfilePoint], mu: f64, w: f64) -> Option<(f64, f64)> {
+    let (mut saa, mut sab, mut sbb, mut sav, mut sbv) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for p in points {
+        let b = normal_cdf((p.x_px - mu) / w);
+        let a = 1.0 - b;
+        saa += p.weight * a * a;
+        sab += p.weight * a * b;
+        sbb += p.weight * b * b;
+        sav += p.weight * a * p.value;
+        sbv += p.weight * b * p.value;
+    }
+    let det = saa * sbb - sab * sab;
+    if det.is_nan() || det <= 1e-12 * saa * sbb {
+        return None;
+    }
+    Some(((sav * sbb - sbv * sab) / det, (sbv * saa - sav * sab) / det))
+}
+
+/// Fits the border model to weighted points, starting from `seed` (levels solved linearly at
+/// the seed). Points with non-positive or non-finite weight, or non-finite values, are ignored.
+///
+/// None when fewer than [`MIN_FIT_POINTS`] usable points remain, the points do not straddle
+/// the seed, the fitted contrast is below `min_contrast`, or the position leaves the points'
+/// span.
+#[must_use]
+pub fn fit_border(
+    points: &[ProfilePoint],
+    seed: BorderSeed,
+    params: &BorderParams,
+) -> Option<Border> {
+    let usable: Vec<ProfilePoint> = points
+        .iter()
+        .copied()
+        .filter(|p| {
+            p.weight > 0.0 && p.weight.is_finite() && p.value.is_finite() && p.x_px.is_finite()
+        })
+        .collect();
+    fit_usable(&usable, seed, params)
+}
+
+fn fit_usable(points: &[ProfilePoint], seed: BorderSeed, params: &BorderParams) -> Option<Border> {
+    if points.len() < MIN_FIT_POINTS || !seed.position_px.is_finite() {
+        return None;
+    }
+    let (x_lo, x_hi) = points
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.x_px), b.max(p.x_px))
+        });
+    let clamp_w = |w: f64| w.clamp(params.min_width_px, params.max_width_px);
+    let w0 = clamp_w(if seed.width_px.is_finite() {
+        seed.width_px
+    } else {
+        1.0
+    });
+    let (lo0, hi0) = linear_levels(points, seed.position_px, w0)?;
+    let mut theta: Theta = [lo0, hi0, seed.position_px, w0];
+    let mut current = cost(points, &theta);
+    let mut damping = LM_DAMPING_START;
+    let mut iterations = 0;
+    let mut normal = normal_equations(points, &theta);
+    while iterations < params.max_iterations {
+        iterations += 1;
+        let (a, g) = &normal;
+        let mut damped = *a;
+        for (i, row) in damped.iter_mut().enumerate() {
+            row[i] += damping * a[i][i].max(1e-12);
+        }
+        let Some(step) = solve4(&damped, g) else {
+            damping *= LM_DAMPING_FACTOR;
+            if damping > LM_DAMPING_MAX {
+                break;
+            }
+            continue;
+        };
+        let mut next = theta;
+        for (t, s) in next.iter_mut().zip(step) {
+            *t += s;
+        }
+        next[3] = clamp_w(next[3]);
+        let trial = cost(points, &next);
+        if trial.is_finite() && trial <= current {
+            // Position and width both settled (the levels follow them linearly).
+            let moved = (next[2] - theta[2]).abs().max((next[3] - theta[3]).abs());
+            theta = next;
+            let settled = current - trial <= 1e-12 * current.max(f64::MIN_POSITIVE);
+            current = trial;
+            damping = (damping / LM_DAMPING_FACTOR).max(1e-12);
+            normal = normal_equations(points, &theta);
+            if moved < params.tolerance_px || settled {
+                break;
+            }
+        } else {
+            damping *= LM_DAMPING_FACTOR;
+            if damping > LM_DAMPING_MAX {
+                break;
+            }
+        }
+    }
+    let [low, high, mu, w] = theta;
+    if !(mu >= x_lo && mu <= x_hi) || (high - low).abs() < params.min_contrast {
+        return None;
+    }
+    let weight_sum: f64 = points.iter().map(|p| p.weight).sum();
+    let dof = (points.len() - 4) as f64;
+    let s2 = current / dof;
+    let mean_weight = weight_sum / points.len() as f64;
+    let var_factor = position_variance_factor(&normal.0)?;
+    let std_error_px = (s2 * var_factor.max(0.0)).sqrt();
+    Some(Border {
+        position_px: mu,
+        std_error_px,
+        low,
+        high,
+        width_px: w,
+        residual_rms: (current / weight_sum.max(f64::MIN_POSITIVE)).sqrt(),
+        points: points.len(),
+        iterations,
+    })
+    .filter(|b| b.std_error_px.is_finite() && mean_weight > 0.0)
+}
+
+/// Strongest gradient of the asked polarity in `profile` (central differences, points with a
+/// zero weight skipped): its sub-pixel position (a parabola through the peak) and sign.
+fn strongest_gradient(
+    profile: &[f32],
+    weights: Option<&[f32]>,
+    polarity: Polarity,
+) -> Option<(f64, f64)> {
+    let ok = |i: usize| {
+        profile.get(i).is_some_and(|v| v.is_finite())
+            && weights.is_none_or(|w| w.get(i).is_some_and(|&v| v > 0.0))
+    };
+    let grad = |i: usize| -> Option<f64> {
+        let (a, b) = (i.checked_sub(1)?, i + 1);
+        (ok(a) && ok(b)).then(|| 0.5 * (f64::from(profile[b]) - f64::from(profile[a])))
+    };
+    let score = |g: f64| match polarity {
+        Polarity::Rising => g,
+        Polarity::Falling => -g,
+        Polarity::Either => g.abs(),
+    };
+    let mut best: Option<(usize, f64)> = None;
+    for i in 1..profile.len().saturating_sub(1) {
+        if let Some(g) = grad(i)
+            && score(g) > 0.0
+            && best.is_none_or(|(_, b)| score(g) > score(b))
+        {
+            best = Some((i, g));
+        }
+    }
+    let (i, g) = best?;
+    let (gm, gp) = (
+        i.checked_sub(1).and_then(grad).map_or(0.0, score),
+        grad(i + 1).map_or(0.0, score),
+    );
+    let g0 = score(g);
+    let den = gm - 2.0 * g0 + gp;
+    let offset = if den < 0.0 {
+        (0.5 * (gm - gp) / den).clamp(-0.5, 0.5)
+    } else {
+        0.0
+    };
+    Some((i as f64 + offset, g))
+}
+
+/// Finds the border in a profile (one value per px, sample `i` at position `i`): seeded at the
+/// strongest gradient of the asked polarity, fitted over the samples within
+/// `fit_half_window_px` of the seed. `weights` (same length) are per-sample relative inverse
+/// variances; a zero weight skips a sample. None when no border of enough contrast is found.
+#[must_use]
+pub fn find_border(
+    profile: &[f32],
+    weights: Option<&[f32]>,
+    polarity: Polarity,
+    params: &BorderParams,
+) -> Option<Border> {
+    if weights.is_some_and(|w| w.len() != profile.len()) {
+        return None;
+    }
+    let (seed, _) = strongest_gradient(profile, weights, polarity)?;
+    let lo = (seed - params.fit_half_window_px).floor().max(0.0) as usize;
+    let hi =
+        ((seed + params.fit_half_window_px).ceil() as usize).min(profile.len().saturating_sub(1));
+    let points: Vec<ProfilePoint> = (lo..=hi)
+        .filter_map(|i| {
+            let value = f64::from(*profile.get(i)?);
+            let weight = weights.map_or(Some(1.0), |w| w.get(i).map(|&v| f64::from(v)))?;
+            Some(ProfilePoint {
+                x_px: i as f64,
+                value,
+                weight,
+            })
+        })
+        .collect();
+    let border = fit_border(
+        &points,
+        BorderSeed {
+            position_px: seed,
+            width_px: 1.0,
+        },
+        params,
+    )?;
+    let sign_ok = match polarity {
+        Polarity::Rising => border.contrast() > 0.0,
+        Polarity::Falling => border.contrast() < 0.0,
+        Polarity::Either => true,
+    };
+    sign_ok.then_some(border)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+    use crate::synth::noise::Rng;
+
+    /// A step from `lo` to `hi` at `mu` blurred by a Gaussian of σ = `blur`, integrated over
+    /// each pixel's aperture (16 sub-samples), as a camera records it.
+    fn blurred_step(n: usize, mu: f64, blur: f64, lo: f64, hi: f64) -> Vec<f64> {
+        (0..n)
+            .map(|i| {
+                let mut acc = 0.0;
+                for k in 0..16 {
+                    let x = i as f64 - 0.5 + (k as f64 + 0.5) / 16.0;
+                    acc += lo + (hi - lo) * normal_cdf((x - mu) / blur);
+                }
+                acc / 16.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn erf_matches_known_values() {
+        for (x, want) in [
+            (0.0, 0.0),
+            (0.1, 0.112_462_916_018_284_9),
+            (0.5, 0.520_499_877_813_046_5),
+            (1.0, 0.842_700_792_949_714_9),
+            (2.0, 0.995_322_265_018_952_7),
+            (3.5, 0.999_999_256_901_627_7),
+            (5.0, 0.999_999_999_998_462_5),
+        ] {
+            assert!((erf(x) - want).abs() < 1e-14, "erf({x}) = {}", erf(x));
+            assert!((erf(-x) + want).abs() < 1e-14);
+        }
+        assert!((normal_cdf(1.0) - 0.841_344_746_068_542_9).abs() < 1e-14);
+    }
+
+    #[test]
+    fn a_noiseless_blurred_step_is_found_exactly() {
+        let p = BorderParams::default();
+        for &blur in &[0.4, 1.0, 2.5] {
+            for k in 0..10 {
+                let mu = 20.0 + k as f64 * 0.1;
+                let prof: Vec<f32> = blurred_step(40, mu, blur, 0.15, 0.75)
+                    .iter()
+                    .map(|&v| v as f32)
+                    .collect();
+                let b = find_border(&prof, None, Polarity::Rising, &p).unwrap();
+                // The model is point-sampled; a pixel's 1 px aperture on a sharp edge (σ below
+                // half a pixel) is not quite an erf, which costs a few thousandths of a pixel.
+                let tol = if blur < 0.5 { 5e-3 } else { 2e-4 };
+                assert!((b.position_px - mu).abs() < tol, "{blur} {mu}: {b:?}");
+                assert!((b.contrast() - 0.6).abs() < 1e-3, "{b:?}");
+            }
+        }
+    }
+
+    /// The brief's bar: a blurred step with σ = 1 grey level of noise (8-bit scale) is found
+    /// within 0.02 px, averaged over the 55 columns of one output sample as the edge stage
+    /// averages them; and a single column's error matches the standard error it reports.
+    #[test]
+    fn a_noisy_blurred_step_is_found_within_two_hundredths_of_a_pixel() {
+        let p = BorderParams::default();
+        let sigma = 1.0 / 255.0;
+        let mut rng = Rng::new(7);
+        let (mut worst, mut sq_err, mut sq_se, mut n) = (0.0f64, 0.0, 0.0, 0.0);
+        for trial in 0..60 {
+            let blur = [0.5, 1.0, 2.0][trial % 3];
+            let mu = 15.0 + 0.037 * trial as f64;
+            let clean = blurred_step(32, mu, blur, 0.15, 0.75);
+            // One column: its error against the standard error it reports.
+            let col: Vec<f32> = clean
+                .iter()
+                .map(|&v| (v + sigma * rng.gaussian()) as f32)
+                .collect();
+            let b = find_border(&col, None, Polarity::Rising, &p).unwrap();
+            sq_err += (b.position_px - mu).powi(2);
+            sq_se += b.std_error_px.powi(2);
+            n += 1.0;
+            // 55 columns averaged into one profile.
+            let mut avg = vec![0.0f64; clean.len()];
+            for _ in 0..55 {
+                for (a, &v) in avg.iter_mut().zip(&clean) {
+                    *a += (v + sigma * rng.gaussian()) / 55.0;
+                }
+            }
+            let prof: Vec<f32> = avg.iter().map(|&v| v as f32).collect();
+            let b = find_border(&prof, None, Polarity::Rising, &p).unwrap();
+            worst = worst.max((b.position_px - mu).abs());
+        }
+        let ratio = (sq_err / sq_se).sqrt();
+        eprintln!(
+            "55-column worst {worst:.4} px; one column rms {:.4} px, error/standard error {ratio:.2}",
+            (sq_err / n).sqrt()
+        );
+        assert!(worst < 0.02, "worst error {worst} px");
+        assert!(
+            (0.6..1.6).contains(&ratio),
+            "error / standard error = {ratio}"
+        );
+        assert!(
+            (sq_err / n).sqrt() < 0.02,
+            "single-column rms {}",
+            (sq_err / n).sqrt()
+        );
+    }
+
+    #[test]
+    fn polarity_picks_the_asked_border() {
+        // Dark, bright band, dark: a rising border at 10.3, a falling one at 25.6.
+        let rise = blurred_step(40, 10.3, 0.8, 0.1, 0.8);
+        let fall = blurred_step(40, 25.6, 0.8, 0.0, 0.7);
+        let prof: Vec<f32> = rise
+            .iter()
+            .zip(&fall)
+            .map(|(&a, &b)| (a - b) as f32)
+            .collect();
+        let p = BorderParams::default();
+        let r = find_border(&prof, None, Polarity::Rising, &p).unwrap();
+        let f = find_border(&prof, None, Polarity::Falling, &p).unwrap();
+        assert!((r.position_px - 10.3).abs() < 1e-3, "{r:?}");
+        assert!((f.position_px - 25.6).abs() < 1e-3, "{f:?}");
+        assert!(r.contrast() > 0.0 && f.contrast() < 0.0);
+    }
+
+    #[test]
+    fn flat_or_short_profiles_have_no_border() {
+        let p = BorderParams::default();
+        assert!(find_border(&[0.5; 30], None, Polarity::Either, &p).is_none());
+        assert!(find_border(&[0.1, 0.9], None, Polarity::Either, &p).is_none());
+        assert!(find_border(&[], None, Polarity::Either, &p).is_none());
+        let nan = vec![f32::NAN; 20];
+        assert!(find_border(&nan, None, Polarity::Either, &p).is_none());
+        // A faint step below the contrast floor.
+        let faint: Vec<f32> = blurred_step(30, 14.0, 1.0, 0.5, 0.51)
+            .iter()
+            .map(|&v| v as f32)
+            .collect();
+        assert!(find_border(&faint, None, Polarity::Either, &p).is_none());
+        // Weights of the wrong length are refused.
+        assert!(find_border(&faint, Some(&[1.0; 3]), Polarity::Either, &p).is_none());
+    }
+
+    #[test]
+    fn zero_weights_skip_samples() {
+        // A spike on the bright side would pull the levels; a zero weight hides it.
+        let mut prof: Vec<f32> = blurred_step(30, 12.4, 1.0, 0.2, 0.7)
+            .iter()
+            .map(|&v| v as f32)
+            .collect();
+        prof[14] = 0.0;
+        let mut w = vec![1.0f32; 30];
+        w[14] = 0.0;
+        let b = find_border(&prof, Some(&w), Polarity::Rising, &BorderParams::default()).unwrap();
+        assert!((b.position_px - 12.4).abs() < 1e-3, "{b:?}");
+    }
+
+    #[test]
+    fn binned_points_at_any_abscissa_fit() {
+        // Quarter-pixel bins of a sharp step, weights = pixel counts, as the stage's slanted
+        // profiles give them.
+        let pts: Vec<ProfilePoint> = (0..48)
+            .map(|k| {
+                let x = -6.0 + k as f64 * 0.25;
+                ProfilePoint {
+                    x_px: x,
+                    value: if x < 0.37 { 0.1 } else { 0.9 },
+                    weight: 3.0 + (k % 4) as f64,
+                }
+            })
+            .collect();
+        let b = fit_border(
+            &pts,
+            BorderSeed {
+                position_px: 0.0,
+                width_px: 1.0,
+            },
+            &BorderParams::default(),
+        )
+        .unwrap();
+        assert!((b.position_px - 0.37).abs() < 0.13, "{b:?}");
+        assert!(b.width_px <= 0.31, "{b:?}");
+    }
+
+    #[test]
+    fn params_are_checked() {
+        let good = BorderParams::default();
+        good.validate("edges.border").unwrap();
+        let bad = BorderParams {
+            max_width_px: 0.1,
+            ..good.clone()
+        };
+        assert!(bad.validate("edges.border").is_err());
+        let bad = BorderParams {
+            max_iterations: 0,
+            ..good
+        };
+        let e = bad.validate("edges.border").unwrap_err();
+        assert!(e.to_string().contains("edges.border.max_iterations"), "{e}");
+    }
+}
