@@ -100,6 +100,8 @@ pub enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Decode a still image of grooves seen from above (micrograph, stitched strip, scan) to a WAV file.
+    Still(crate::still::cli::StillArgs),
     /// Render a top-view still of neighbouring grooves with known wall tones and its truth.
     SynthStill(crate::still::cli::SynthStillArgs),
     /// Import a microscope video clip (AVI/MP4) as a scan folder (needs the `video` feature).
@@ -647,6 +649,7 @@ pub fn run(command: Command) -> Result<()> {
             }
             Ok(())
         }
+        Command::Still(args) => crate::still::cli::run_still(&args),
         Command::SynthStill(args) => crate::still::cli::run_synth_still(&args),
         Command::ImportVideo(args) => crate::video_cli::run_import_video(&args),
         Command::Gui { scan } => run_gui(scan),

@@ -158,6 +158,8 @@ pub struct PipelineParams {
     pub sound: SoundParams,
     /// Post-processing of the whole clip.
     pub dsp: DspParams,
+    /// The still-image decoder (`groovescope still`; scans do not read it).
+    pub still: still::StillParams,
 }
 
 impl PipelineParams {
@@ -271,6 +273,7 @@ impl PipelineParams {
         check_range("sound.full_scale_mm_s", s.full_scale_mm_s, 1e-9, 1e9)?;
         check_range("dsp.lowpass_hz", self.dsp.lowpass_hz, 1.0, 1e6)?;
         hough::validate_params(&self.hough)?;
+        self.still.validate()?;
         Ok(())
     }
 }

@@ -141,3 +141,283 @@ pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// Arguments of `still`.
+#[derive(Debug, clap::Args)]
+pub struct StillArgs {
+    /// The still: a PNG or TIFF (8/16 bit, grey or colour) of grooves seen from above.
+    pub image: PathBuf,
+    /// Pixel size on the record, µm.
+    #[arg(long)]
+    pub um_per_px: f64,
+    /// Turntable speed the disc was cut at.
+    #[arg(long)]
+    pub rpm: f64,
+    /// Radius of the groove decoded, mm.
+    #[arg(long)]
+    pub radius_mm: f64,
+    /// Grooves run down the image (vertical: time runs down) or across it (horizontal:
+    /// time runs rightward).
+    #[arg(long, value_parser = ["vertical", "horizontal"], default_value = "vertical")]
+    pub axis: String,
+    /// lateral (mono) or stereo (45/45: two channels, the left wall first).
+    #[arg(long, value_parser = ["lateral", "stereo"], default_value = "lateral")]
+    pub cut: String,
+    /// Groove to decode, from 1 at the image's left (vertical) or top (horizontal); default:
+    /// the most complete groove nearest the centre.
+    #[arg(long)]
+    pub groove: Option<usize>,
+    /// Time runs up (vertical) or leftward (horizontal) instead.
+    #[arg(long)]
+    pub reverse: bool,
+    /// Output WAV file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// JSON report (grooves found, borders, gaps, scores, timings).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// A reference WAV of the groove's sound to score against (r, envelope r, SNR).
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Parameters TOML (see `groovescope params`: the [still], [sound] and [dsp] tables apply).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// WAV sample format: 16, 24 or 32f.
+    #[arg(long, default_value = "24")]
+    pub bits: crate::io::wav::WavBits,
+    /// Replace existing output files.
+    #[arg(long)]
+    pub force: bool,
+    /// No summary on stdout.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// One groove in the report.
+#[derive(Debug, serde::Serialize)]
+struct GrooveLine {
+    number: usize,
+    coverage: f64,
+    position_px: f64,
+    width_px: f64,
+}
+
+/// One border in the report.
+#[derive(Debug, serde::Serialize)]
+struct BorderLine {
+    border: &'static str,
+    lines_fitted: usize,
+    screened_out: usize,
+    rejected_outliers: usize,
+}
+
+/// One bridged gap in the report.
+#[derive(Debug, serde::Serialize)]
+struct GapLine {
+    channel: usize,
+    start_line: usize,
+    lines: usize,
+    start_ms: f64,
+    duration_ms: f64,
+}
+
+/// The JSON report of `still`.
+#[derive(Debug, serde::Serialize)]
+struct StillReport<'a> {
+    version: &'static str,
+    image: String,
+    output: String,
+    params_file: Option<String>,
+    image_width_px: usize,
+    image_height_px: usize,
+    axis: &'a str,
+    cut: &'a str,
+    reverse: bool,
+    um_per_px: f64,
+    rpm: f64,
+    radius_mm: f64,
+    groove_speed_mm_s: f64,
+    grooves_found: Vec<GrooveLine>,
+    bottoms_visible: bool,
+    groove: usize,
+    groove_chosen_automatically: bool,
+    left_wall: &'static str,
+    native_rate_hz: f64,
+    sample_rate_hz: u32,
+    channels: usize,
+    duration_secs: f64,
+    gain_per_mm_s: f64,
+    borders: Vec<BorderLine>,
+    gaps: Vec<GapLine>,
+    reference: Option<String>,
+    scores: Option<Vec<Option<crate::pipeline::eval::Scores>>>,
+    timings: super::StillTimings,
+    params: &'a crate::pipeline::PipelineParams,
+    warnings: &'a [String],
+}
+
+/// Runs `still`.
+///
+/// # Errors
+/// Any failure as one line naming the file.
+pub fn run_still(args: &StillArgs) -> Result<()> {
+    for out in std::iter::once(&args.out).chain(args.report.as_ref()) {
+        if out.exists() && !args.force {
+            bail!(
+                "refusing to overwrite an existing file (use --force): {}",
+                out.display()
+            );
+        }
+    }
+    let params = crate::cli::load_params(args.params.as_deref())?;
+    let axis = if args.axis == "horizontal" {
+        Axis::Horizontal
+    } else {
+        Axis::Vertical
+    };
+    let cut = if args.cut == "stereo" {
+        Cut::Stereo
+    } else {
+        Cut::Lateral
+    };
+    let setup = crate::pipeline::still::StillSetup {
+        axis,
+        um_per_px: args.um_per_px,
+        rpm: args.rpm,
+        radius_mm: args.radius_mm,
+        cut,
+        reverse: args.reverse,
+    };
+    setup
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{e}: {}", args.image.display()))?;
+    if args.groove == Some(0) {
+        bail!(
+            "--groove counts from 1 (the image's left or top groove): {}",
+            args.image.display()
+        );
+    }
+    let run = super::decode_still_file(&args.image, &setup, args.groove, &params)?;
+    let scores = args
+        .reference
+        .as_deref()
+        .map(|r| super::score_still(&run.audio, r))
+        .transpose()?;
+    crate::io::wav::write_wav(&args.out, &run.audio, args.bits, args.force)?;
+    let a = &run.analysis;
+    let groove = &a.grooves.grooves[a.chosen];
+    let line_ms = 1000.0 * args.um_per_px / setup.groove_speed_um_s();
+    if let Some(path) = &args.report {
+        let names = ["land|wall", "wall|bottom", "bottom|wall", "wall|land"];
+        let report = StillReport {
+            version: env!("CARGO_PKG_VERSION"),
+            image: args.image.display().to_string(),
+            output: args.out.display().to_string(),
+            params_file: args.params.as_ref().map(|p| p.display().to_string()),
+            image_width_px: run.image_px.0,
+            image_height_px: run.image_px.1,
+            axis: &args.axis,
+            cut: &args.cut,
+            reverse: args.reverse,
+            um_per_px: args.um_per_px,
+            rpm: args.rpm,
+            radius_mm: args.radius_mm,
+            groove_speed_mm_s: setup.groove_speed_um_s() / 1000.0,
+            grooves_found: a
+                .grooves
+                .grooves
+                .iter()
+                .map(|g| GrooveLine {
+                    number: g.number,
+                    coverage: g.coverage,
+                    position_px: g.position_px,
+                    width_px: g.width_px,
+                })
+                .collect(),
+            bottoms_visible: a.grooves.bottoms_visible,
+            groove: groove.number,
+            groove_chosen_automatically: args.groove.is_none(),
+            left_wall: left_wall_text(axis, args.reverse),
+            native_rate_hz: a.signal.native_rate_hz,
+            sample_rate_hz: run.audio.sample_rate_hz,
+            channels: run.audio.channels.len(),
+            duration_secs: run.audio.duration_secs(),
+            gain_per_mm_s: run.gain_per_mm_s,
+            borders: names
+                .iter()
+                .zip(a.signal.border_counts)
+                .map(|(n, c)| BorderLine {
+                    border: n,
+                    lines_fitted: c[0],
+                    screened_out: c[1],
+                    rejected_outliers: c[2],
+                })
+                .collect(),
+            gaps: a
+                .signal
+                .gaps
+                .iter()
+                .map(|g| GapLine {
+                    channel: g.channel,
+                    start_line: g.start_line,
+                    lines: g.lines,
+                    start_ms: g.start_line as f64 * line_ms,
+                    duration_ms: g.lines as f64 * line_ms,
+                })
+                .collect(),
+            reference: args.reference.as_ref().map(|p| p.display().to_string()),
+            scores: scores.clone(),
+            timings: run.timings,
+            params: &params,
+            warnings: &run.warnings,
+        };
+        let json = serde_json::to_vec_pretty(&report)?;
+        crate::io::write_atomic(path, &json, args.force)?;
+    }
+    if !args.quiet {
+        for w in &run.warnings {
+            eprintln!("warning: {w}");
+        }
+        println!(
+            "wrote {} ({:.3} s at {} Hz, {} channel{}) from groove {} of {} found ({:.1} s)",
+            args.out.display(),
+            run.audio.duration_secs(),
+            run.audio.sample_rate_hz,
+            run.audio.channels.len(),
+            if run.audio.channels.len() == 1 {
+                ""
+            } else {
+                "s"
+            },
+            groove.number,
+            a.grooves.grooves.len(),
+            run.timings.total_secs
+        );
+        for (c, s) in scores.iter().flatten().enumerate() {
+            if let Some(s) = s {
+                println!(
+                    "vs reference{}: r = {:.3}, envelope r = {}, SNR = {:.1} dB",
+                    if run.audio.channels.len() > 1 {
+                        format!(" (channel {c})")
+                    } else {
+                        String::new()
+                    },
+                    s.r,
+                    s.envelope_r_text(3),
+                    s.snr_db
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Which wall is the left channel, for the report.
+fn left_wall_text(axis: Axis, reverse: bool) -> &'static str {
+    match (axis, reverse) {
+        (Axis::Vertical, false) => "the right-hand wall (time runs down)",
+        (Axis::Vertical, true) => "the left-hand wall (time runs up)",
+        (Axis::Horizontal, false) => "the upper wall (time runs rightward)",
+        (Axis::Horizontal, true) => "the lower wall (time runs leftward)",
+    }
+}

@@ -154,7 +154,13 @@ fn local_levels(p: &[f32], window: usize) -> Vec<(f32, f32)> {
 }
 
 /// The wall runs of one profile (whole runs only: a run touching the image's edge is cut off).
-fn wall_runs(p: &[f32], tone: WallTone, window: usize, min_wall_px: f64, min_contrast: f64) -> Vec<Run> {
+fn wall_runs(
+    p: &[f32],
+    tone: WallTone,
+    window: usize,
+    min_wall_px: f64,
+    min_contrast: f64,
+) -> Vec<Run> {
     // Bright walls are dark walls of the negated profile.
     let v: Vec<f32> = match tone {
         WallTone::Dark => p.to_vec(),
@@ -187,7 +193,11 @@ fn wall_runs(p: &[f32], tone: WallTone, window: usize, min_wall_px: f64, min_con
         }
         let cross = |i: usize, j: usize| {
             let (vi, vj, t) = (f64::from(v[i]), f64::from(v[j]), f64::from(thr[i]));
-            let f = if (vj - vi).abs() > 1e-12 { ((t - vi) / (vj - vi)).clamp(0.0, 1.0) } else { 0.5 };
+            let f = if (vj - vi).abs() > 1e-12 {
+                ((t - vi) / (vj - vi)).clamp(0.0, 1.0)
+            } else {
+                0.5
+            };
             i as f64 + f * (j as f64 - i as f64)
         };
         let run = Run {
@@ -204,7 +214,9 @@ fn wall_runs(p: &[f32], tone: WallTone, window: usize, min_wall_px: f64, min_con
 /// Splits `ln(gap)` into two clusters; `(small centre, large centre, small share)`.
 fn two_means(gaps: &[f64]) -> Option<(f64, f64, f64)> {
     let logs: Vec<f64> = gaps.iter().filter(|g| **g > 0.0).map(|g| g.ln()).collect();
-    let (mut lo, mut hi) = logs.iter().fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    let (mut lo, mut hi) = logs
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
     if logs.len() < 2 || hi - lo < 1e-9 {
         return None;
     }
@@ -295,10 +307,12 @@ fn slope(blocks: &[Option<[f64; 4]>]) -> Option<f64> {
     if pts.len() < 4 {
         return None;
     }
-    let (mx, my) = pts.iter().fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
-    let (sxy, sxx) = pts
+    let (mx, my) = pts
         .iter()
-        .fold((0.0, 0.0), |(a, b), p| (a + (p.0 - mx) * (p.1 - my), b + (p.0 - mx).powi(2)));
+        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
+    let (sxy, sxx) = pts.iter().fold((0.0, 0.0), |(a, b), p| {
+        (a + (p.0 - mx) * (p.1 - my), b + (p.0 - mx).powi(2))
+    });
     (sxx > 0.0).then(|| sxy / sxx)
 }
 
@@ -338,7 +352,15 @@ pub fn detect_grooves(
     let window = (2.0 * max_width_px).ceil() as usize;
     let min_wall_px = (params.min_wall_width_um * px_per_um).max(1.5);
     let runs: Vec<Vec<Run>> = (0..profiles.blocks)
-        .map(|b| wall_runs(profiles.block(b), params.walls, window, min_wall_px, params.min_contrast))
+        .map(|b| {
+            wall_runs(
+                profiles.block(b),
+                params.walls,
+                window,
+                min_wall_px,
+                params.min_contrast,
+            )
+        })
         .collect();
     let gaps: Vec<f64> = runs
         .iter()
@@ -377,11 +399,17 @@ pub fn detect_grooves(
             grooves
         })
         .collect();
-    let centres = |gs: &Vec<[f64; 4]>| -> Vec<f64> { gs.iter().map(|g| 0.5 * (g[0] + g[3])).collect() };
+    let centres =
+        |gs: &Vec<[f64; 4]>| -> Vec<f64> { gs.iter().map(|g| 0.5 * (g[0] + g[3])).collect() };
     let spacing = median(
         per_block
             .iter()
-            .flat_map(|gs| centres(gs).windows(2).map(|w| w[1] - w[0]).collect::<Vec<_>>())
+            .flat_map(|gs| {
+                centres(gs)
+                    .windows(2)
+                    .map(|w| w[1] - w[0])
+                    .collect::<Vec<_>>()
+            })
             .collect(),
     );
     let width = median(per_block.iter().flatten().map(|g| g[3] - g[0]).collect()).unwrap_or(0.0);
@@ -443,7 +471,9 @@ pub fn detect_grooves(
         lines: profiles.lines,
         cross: profiles.cross,
         block_lines: profiles.block_lines,
-        block_centres: (0..profiles.blocks).map(|b| profiles.block_centre_line(b)).collect(),
+        block_centres: (0..profiles.blocks)
+            .map(|b| profiles.block_centre_line(b))
+            .collect(),
         grooves,
         bottoms_visible: bottom_limit.is_some(),
         energy_ratio,
@@ -465,7 +495,11 @@ pub fn choose_groove(map: &GrooveMap, asked: Option<usize>) -> Result<usize, Sti
         return if (1..=found).contains(&n) {
             Ok(n - 1)
         } else {
-            Err(StillError::GrooveOutOfRange { asked: n, found, side })
+            Err(StillError::GrooveOutOfRange {
+                asked: n,
+                found,
+                side,
+            })
         };
     }
     let best = map.grooves.iter().map(|g| g.coverage).fold(0.0, f64::max);
@@ -474,7 +508,15 @@ pub fn choose_groove(map: &GrooveMap, asked: Option<usize>) -> Result<usize, Sti
         .iter()
         .enumerate()
         .filter(|(_, g)| g.coverage >= COMPLETE_SHARE * best)
-        .min_by(|(_, a), (_, b)| (a.position_px - middle).abs().total_cmp(&(b.position_px - middle).abs()))
+        .min_by(|(_, a), (_, b)| {
+            (a.position_px - middle)
+                .abs()
+                .total_cmp(&(b.position_px - middle).abs())
+        })
         .map(|(i, _)| i)
-        .ok_or(StillError::GrooveOutOfRange { asked: 0, found, side })
+        .ok_or(StillError::GrooveOutOfRange {
+            asked: 0,
+            found,
+            side,
+        })
 }

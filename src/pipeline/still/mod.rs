@@ -14,11 +14,13 @@
 //! 3. [`RibbonBuilder`] (second pass) keeps only a band around the chosen groove's predicted path.
 //! 4. [`track_borders`] fits every border of the groove on every line
 //!    ([`crate::pipeline::edges::border`]).
-//! 5. [`decode_borders`] rejects outliers robustly, marks and interpolates gaps, turns the
-//!    displacement into velocity on the groove's arc length and gives the signal at Vt / pixel.
+//! 5. [`decode_borders`] rejects outliers robustly ([`clean`]), marks and interpolates gaps,
+//!    takes out the slow path, turns the displacement into velocity on the groove's arc length
+//!    and gives the signal at Vt / pixel.
 //!
 //! [`analyse_still`] runs all of it on an in-memory image (tests, benches, the workbench).
 
+pub mod clean;
 pub mod decode;
 pub mod detect;
 pub mod profile;
@@ -88,8 +90,9 @@ pub struct StillParams {
     /// A border further than this many robust σ from what the other borders and its
     /// neighbouring lines say is an outlier; default 5.
     pub outlier_sigmas: f64,
-    /// Length of groove over which the path's direction is averaged (µm); default 1000.
-    pub path_smoothing_um: f64,
+    /// Length of groove over which the slow path (skew, curvature, drift) is fitted as a
+    /// quadratic and taken out (µm; a shorter still gets one quadratic); default 20000.
+    pub path_window_um: f64,
     /// Wall angle from the record plane (stereo: a wall moving `a` along its normal moves its
     /// land border by `a / sin` of it); default 45.
     pub wall_angle_deg: f64,
@@ -109,7 +112,7 @@ impl Default for StillParams {
             min_track_blocks: 3,
             search_share: 0.4,
             outlier_sigmas: 5.0,
-            path_smoothing_um: 1000.0,
+            path_window_um: 20_000.0,
             wall_angle_deg: 45.0,
             border: BorderParams::default(),
         }
@@ -128,12 +131,17 @@ impl StillParams {
                 problem: format!("{} is not in [4, 4096]", self.block_lines),
             });
         }
-        check_range("still.max_groove_width_um", self.max_groove_width_um, 1e-3, 1e6)?;
+        check_range(
+            "still.max_groove_width_um",
+            self.max_groove_width_um,
+            1e-3,
+            1e6,
+        )?;
         check_range("still.min_wall_width_um", self.min_wall_width_um, 0.0, 1e6)?;
         check_range("still.min_contrast", self.min_contrast, 0.0, 1.0)?;
         check_range("still.search_share", self.search_share, 0.05, 2.0)?;
         check_range("still.outlier_sigmas", self.outlier_sigmas, 1.0, 1e3)?;
-        check_range("still.path_smoothing_um", self.path_smoothing_um, 0.0, 1e9)?;
+        check_range("still.path_window_um", self.path_window_um, 0.0, 1e9)?;
         check_range("still.wall_angle_deg", self.wall_angle_deg, 10.0, 80.0)?;
         if self.min_track_blocks == 0 {
             return Err(StageError::InvalidParam {
@@ -214,7 +222,9 @@ pub enum StillError {
         looked: String,
     },
     /// `--groove` asks for a groove that is not there.
-    #[error("groove {asked} asked for, but {found} grooves were found (numbered 1–{found} from the image's {side})")]
+    #[error(
+        "groove {asked} asked for, but {found} grooves were found (numbered 1–{found} from the image's {side})"
+    )]
     GrooveOutOfRange {
         /// The number asked for.
         asked: usize,

@@ -45,7 +45,10 @@ impl Profiles {
     #[must_use]
     pub fn block_centre_line(&self, b: usize) -> f64 {
         let first = b * self.block_lines;
-        let n = self.block_lines.min(self.lines.saturating_sub(first)).max(1);
+        let n = self
+            .block_lines
+            .min(self.lines.saturating_sub(first))
+            .max(1);
         first as f64 + 0.5 * (n as f64 - 1.0)
     }
 }
@@ -176,10 +179,7 @@ impl ProfileBuilder {
 
     /// Adds one row's gradient energies (rows in order, so the sums have a fixed order).
     fn add_energy(&mut self, row: &[f32]) {
-        let dx: f64 = row
-            .windows(2)
-            .map(|p| f64::from(p[1] - p[0]).powi(2))
-            .sum();
+        let dx: f64 = row.windows(2).map(|p| f64::from(p[1] - p[0]).powi(2)).sum();
         let dy: f64 = if self.prev_row.len() == row.len() {
             row.iter()
                 .zip(&self.prev_row)
@@ -208,16 +208,17 @@ impl ProfileBuilder {
         let b = (self.rows_seen - 1) / self.block_lines;
         let band = &self.band;
         if let Some(out) = self.out.data.get_mut(b * w..(b + 1) * w) {
-            out.par_chunks_mut(COLUMN_CHUNK)
-                .enumerate()
-                .for_each_init(Vec::new, |buf, (chunk, dst)| {
+            out.par_chunks_mut(COLUMN_CHUNK).enumerate().for_each_init(
+                Vec::new,
+                |buf, (chunk, dst)| {
                     for (i, d) in dst.iter_mut().enumerate() {
                         let x = chunk * COLUMN_CHUNK + i;
                         buf.clear();
                         buf.extend((0..rows).map(|r| band[r * w + x]));
                         *d = median_in_place(buf);
                     }
-                });
+                },
+            );
         }
         self.band.clear();
     }

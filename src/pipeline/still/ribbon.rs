@@ -76,7 +76,10 @@ impl RibbonBuilder {
         let predicted: Vec<[f64; 4]> = (0..map.lines)
             .map(|n| track.predict(map, n as f64))
             .collect();
-        if predicted.iter().any(|p| !(p[0].is_finite() && p[3].is_finite())) {
+        if predicted
+            .iter()
+            .any(|p| !(p[0].is_finite() && p[3].is_finite()))
+        {
             return Err(bad(format!("groove {} was never found", track.number)));
         }
         let share = params.search_share;

@@ -9,12 +9,14 @@ pub(crate) fn dominant_hz(x: &[f32], rate: f64) -> f64 {
     let n = x.len();
     // Remove the least-squares line first (a slow drift would bias a peak of few cycles).
     let nf = n as f64;
-    let (mi, mv) = x
-        .iter()
-        .enumerate()
-        .fold((0.0, 0.0), |(a, b), (i, &v)| (a + i as f64 / nf, b + f64::from(v) / nf));
+    let (mi, mv) = x.iter().enumerate().fold((0.0, 0.0), |(a, b), (i, &v)| {
+        (a + i as f64 / nf, b + f64::from(v) / nf)
+    });
     let (sxy, sxx) = x.iter().enumerate().fold((0.0, 0.0), |(a, b), (i, &v)| {
-        (a + (i as f64 - mi) * (f64::from(v) - mv), b + (i as f64 - mi).powi(2))
+        (
+            a + (i as f64 - mi) * (f64::from(v) - mv),
+            b + (i as f64 - mi).powi(2),
+        )
     });
     let slope = sxy / sxx;
     let y: Vec<f64> = x
@@ -87,7 +89,10 @@ fn every_groove_of_a_small_still_gives_its_tone() {
             assert_eq!(a.grooves.grooves.len(), 3, "{axis:?}");
             let want = scene.grooves[k].tones_hz.unwrap().0;
             let got = dominant_hz(&a.signal.channels[0], a.signal.native_rate_hz);
-            assert!((got / want - 1.0).abs() < 0.01, "{axis:?} groove {k}: {got} vs {want}");
+            assert!(
+                (got / want - 1.0).abs() < 0.01,
+                "{axis:?} groove {k}: {got} vs {want}"
+            );
         }
     }
 }
@@ -98,7 +103,13 @@ fn stereo_walls_keep_their_own_tones() {
     let scene = StillScene::new(&cfg, None).unwrap();
     let img = render_still(&scene).image;
     let k = 1;
-    let a = analyse_still(&img, &setup_for(&cfg, &scene, k), Some(k + 1), &StillParams::default()).unwrap();
+    let a = analyse_still(
+        &img,
+        &setup_for(&cfg, &scene, k),
+        Some(k + 1),
+        &StillParams::default(),
+    )
+    .unwrap();
     let (fl, fr) = scene.grooves[k].tones_hz.unwrap();
     let rate = a.signal.native_rate_hz;
     let gl = dominant_hz(&a.signal.channels[0], rate);
@@ -129,5 +140,8 @@ fn the_wrong_axis_an_empty_image_and_a_missing_groove_are_reported() {
     );
     let flat = Image::filled(300, 300, 0.5);
     let e = analyse_still(&flat, &setup, None, &StillParams::default()).unwrap_err();
-    assert!(matches!(e, StillError::NoGroove { .. }) && e.to_string().contains("columns 0–299"), "{e}");
+    assert!(
+        matches!(e, StillError::NoGroove { .. }) && e.to_string().contains("columns 0–299"),
+        "{e}"
+    );
 }

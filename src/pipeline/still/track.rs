@@ -48,7 +48,12 @@ impl BorderTracks {
     pub fn positions(&self, i: usize) -> Vec<f64> {
         self.fits
             .iter()
-            .map(|f| f.get(i).copied().flatten().map_or(f64::NAN, |b| b.position_px))
+            .map(|f| {
+                f.get(i)
+                    .copied()
+                    .flatten()
+                    .map_or(f64::NAN, |b| b.position_px)
+            })
             .collect()
     }
 }
@@ -84,7 +89,11 @@ fn seed_at(v: &[f32], lo: f64, hi: f64, sign: f64) -> Option<f64> {
     let (gl, gr) = (grad(c.wrapping_sub(1)), grad(c + 1));
     let shift = if gl.is_finite() && gr.is_finite() {
         let den = gl - 2.0 * g + gr;
-        if den < 0.0 { (0.5 * (gl - gr) / den).clamp(-0.5, 0.5) } else { 0.0 }
+        if den < 0.0 {
+            (0.5 * (gl - gr) / den).clamp(-0.5, 0.5)
+        } else {
+            0.0
+        }
     } else {
         0.0
     };
@@ -113,12 +122,14 @@ fn fit_line(
         };
         // Never read past halfway to the neighbouring predicted borders (moved with the seed).
         let shift = seed - p;
-        let neighbour = |j: Option<usize>| j.and_then(|j| predicted.get(j)).map(|q| q - off + shift);
+        let neighbour =
+            |j: Option<usize>| j.and_then(|j| predicted.get(j)).map(|q| q - off + shift);
         let prev = neighbour(i.checked_sub(1)).filter(|q| q.is_finite());
         let next = neighbour(Some(i + 1)).filter(|q| q.is_finite());
         let lo = prev.map_or(seed - hw, |q| (0.5 * (q + seed)).max(seed - hw));
         let hi = next.map_or(seed + hw, |q| (0.5 * (q + seed)).min(seed + hw));
-        let points: Vec<ProfilePoint> = (lo.ceil().max(0.0) as usize..=(hi.floor().max(0.0) as usize).min(v.len().saturating_sub(1)))
+        let points: Vec<ProfilePoint> = (lo.ceil().max(0.0) as usize
+            ..=(hi.floor().max(0.0) as usize).min(v.len().saturating_sub(1)))
             .filter_map(|c| {
                 let value = f64::from(*v.get(c)?);
                 value.is_finite().then_some(ProfilePoint {

@@ -126,7 +126,7 @@ impl Default for StillConfig {
             start_secs: 0.0,
             drift_um: 90.0,
             wander_um: 12.0,
-            wander_period_um: 2500.0,
+            wander_period_um: 9000.0,
             curved: true,
             land_level: 0.62,
             wall_level: 0.2,
