@@ -40,6 +40,13 @@ const ROUNDS: usize = 2;
 pub const JUMP_FLOOR_PX: f64 = 1.0;
 /// Runs at least this long are a border's course.
 pub const ANCHOR_LINES: usize = 48;
+/// Lines on each side of a line whose course [`local_residual`] fits, and lines next to it
+/// it leaves out (a speck spoils several neighbouring lines).
+const LOCAL_HALF: usize = 32;
+/// See [`LOCAL_HALF`].
+const LOCAL_HOLE: usize = 6;
+/// One land border leaves its course this many times more than the other: it is the bad one.
+const LOCAL_RATIO: f64 = 2.0;
 /// Missing lines a run may bridge and stay one run.
 const RUN_BRIDGE_LINES: usize = 3;
 
@@ -306,9 +313,13 @@ pub(crate) fn reject_stereo(
                     rejected[i] += 1;
                 }
             } else if mres[n].abs() > k * ms {
-                // The bottoms agree: a land border is off; drop the less typical fit.
+                // The bottoms agree: a land border is off. Drop the one that leaves its own
+                // course more (or, when that does not tell, the less typical fit).
+                let (e0, e3) = (local_residual(&x[0], n), local_residual(&x[3], n));
                 let drop =
                     match (dev[0][n], dev[3][n]) {
+                        _ if e0.is_finite() && e3.is_finite() && e0 > LOCAL_RATIO * e3 => vec![0],
+                        _ if e0.is_finite() && e3.is_finite() && e3 > LOCAL_RATIO * e0 => vec![3],
                         (a, b) if a.is_finite() && b.is_finite() && (a - b).abs() > 0.1 => {
                             if a > b { vec![0] } else { vec![3] }
                         }
@@ -345,6 +356,48 @@ pub(crate) fn reject_stereo(
         })
         .collect();
     [lo, hi]
+}
+
+/// |x[n] − q(n)| for the least-squares quadratic q through the finite values within
+/// [`LOCAL_HALF`] lines of `n` but more than [`LOCAL_HOLE`] away; NaN with too few of them.
+fn local_residual(x: &[f64], n: usize) -> f64 {
+    let lo = n.saturating_sub(LOCAL_HALF);
+    let hi = (n + LOCAL_HALF + 1).min(x.len());
+    let mut m = [[0.0f64; 3]; 3];
+    let mut r = [0.0f64; 3];
+    let mut count = 0;
+    for (j, &y) in x.iter().enumerate().take(hi).skip(lo) {
+        if j.abs_diff(n) <= LOCAL_HOLE || !y.is_finite() {
+            continue;
+        }
+        let u = (j as f64 - n as f64) / LOCAL_HALF as f64;
+        let p = [1.0, u, u * u];
+        for a in 0..3 {
+            r[a] += p[a] * y;
+            for b in 0..3 {
+                m[a][b] += p[a] * p[b];
+            }
+        }
+        count += 1;
+    }
+    if count < 8 || !x.get(n).is_some_and(|v| v.is_finite()) {
+        return f64::NAN;
+    }
+    // q(0) is the constant coefficient: Cramer's rule on its column.
+    let det = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(&m);
+    if d.abs() < 1e-12 {
+        return f64::NAN;
+    }
+    let mut m0 = m;
+    for (row, v) in m0.iter_mut().zip(r) {
+        row[0] = v;
+    }
+    (x[n] - det(&m0) / d).abs()
 }
 
 /// The slow median of `a − b` at line `n` over its offset block.

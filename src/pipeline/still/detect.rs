@@ -29,6 +29,9 @@ const GAP_CLUSTER_SHARE: f64 = 0.2;
 const LONE_BOTTOM_SHARE: f64 = 0.5;
 /// Linking tolerance as a share of the groove spacing (or of the width for a lone groove).
 const LINK_SHARE: f64 = 0.3;
+/// A groove in a block whose width is off the image's median by more than this share is a
+/// wrong pairing (a stereo groove's width swings by twice its walls' swing, so this is wide).
+const WIDTH_TOLERANCE: f64 = 0.6;
 /// Along-to-across gradient energy above which the axis contradicts the image.
 const AXIS_RATIO: f64 = 1.2;
 /// Grooves within this share of the best coverage count as complete when choosing one.
@@ -296,6 +299,61 @@ fn link(per_block: &[Vec<[f64; 4]>], tol: f64, max_gap: usize) -> Vec<Vec<Option
     tracks.into_iter().map(|t| t.blocks).collect()
 }
 
+/// Joins tracks that are pieces of one groove: one ends (at most one block after the other
+/// starts) within the gap allowance before the other starts, near where it starts. Where both
+/// hold a block, the groove nearer the joined track's median width is kept.
+fn merge_fragments(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64, max_gap: usize) {
+    let centre = |g: &[f64; 4]| 0.5 * (g[0] + g[3]);
+    let ends = |t: &[Option<[f64; 4]>]| -> Option<((usize, f64), (usize, f64))> {
+        let first = t.iter().position(Option::is_some)?;
+        let last = t.iter().rposition(Option::is_some)?;
+        Some(((first, centre(&t[first]?)), (last, centre(&t[last]?))))
+    };
+    loop {
+        let mut join = None;
+        'search: for a in 0..tracks.len() {
+            let Some((_, (a_last, a_c))) = ends(&tracks[a]) else {
+                continue;
+            };
+            for b in 0..tracks.len() {
+                if a == b {
+                    continue;
+                }
+                let Some(((b_first, b_c), (b_last, _))) = ends(&tracks[b]) else {
+                    continue;
+                };
+                let gap = b_first as i64 - a_last as i64;
+                if b_last > a_last && (-1..=max_gap as i64 + 1).contains(&gap) {
+                    let reach = tol * (1.0 + 0.25 * gap.max(0) as f64);
+                    if (b_c - a_c).abs() < reach {
+                        join = Some((a, b));
+                        break 'search;
+                    }
+                }
+            }
+        }
+        let Some((a, b)) = join else { return };
+        let piece = tracks.remove(b);
+        let a = if b < a { a - 1 } else { a };
+        let widths: Vec<f64> = tracks[a]
+            .iter()
+            .chain(&piece)
+            .flatten()
+            .map(|g| g[3] - g[0])
+            .collect();
+        let w = median(widths).unwrap_or(0.0);
+        for (slot, g) in tracks[a].iter_mut().zip(piece) {
+            match (slot.as_ref(), g) {
+                (None, Some(g)) => *slot = Some(g),
+                (Some(s), Some(g)) if ((g[3] - g[0]) - w).abs() < ((s[3] - s[0]) - w).abs() => {
+                    *slot = Some(g);
+                }
+                _ => {}
+            }
+        }
+    }
+}
+
 /// Least-squares slope of centre against block over the found blocks.
 fn slope(blocks: &[Option<[f64; 4]>]) -> Option<f64> {
     let pts: Vec<(f64, f64)> = blocks
@@ -413,8 +471,19 @@ pub fn detect_grooves(
             .collect(),
     );
     let width = median(per_block.iter().flatten().map(|g| g[3] - g[0]).collect()).unwrap_or(0.0);
+    // Pieces of grooves broken up by text or damage pair into grooves of the wrong width.
+    let per_block: Vec<Vec<[f64; 4]>> = per_block
+        .into_iter()
+        .map(|mut gs| {
+            gs.retain(|g| {
+                ((g[3] - g[0]) / width.max(f64::MIN_POSITIVE) - 1.0).abs() <= WIDTH_TOLERANCE
+            });
+            gs
+        })
+        .collect();
     let tol = spacing.map_or(0.5 * width, |s| LINK_SHARE * s).max(2.0);
     let mut tracks: Vec<Vec<Option<[f64; 4]>>> = link(&per_block, tol, params.max_gap_blocks);
+    merge_fragments(&mut tracks, tol, params.max_gap_blocks);
     tracks.retain(|t| t.iter().flatten().count() >= params.min_track_blocks);
     if tracks.is_empty() {
         let (lines_name, cross_name) = match profiles.axis {

@@ -23,6 +23,7 @@
 pub mod clean;
 pub mod decode;
 pub mod detect;
+pub mod measure;
 pub mod profile;
 pub mod ribbon;
 pub mod track;

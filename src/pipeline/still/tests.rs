@@ -3,55 +3,8 @@
 use super::*;
 use crate::synth::still::{StillConfig, StillScene, render_still};
 
-/// Dominant frequency (Hz) of `x` sampled at `rate`: Hann-windowed DFT peak, refined by a
-/// golden-section search on the DFT power.
-pub(crate) fn dominant_hz(x: &[f32], rate: f64) -> f64 {
-    let n = x.len();
-    // Remove the least-squares line first (a slow drift would bias a peak of few cycles).
-    let nf = n as f64;
-    let (mi, mv) = x.iter().enumerate().fold((0.0, 0.0), |(a, b), (i, &v)| {
-        (a + i as f64 / nf, b + f64::from(v) / nf)
-    });
-    let (sxy, sxx) = x.iter().enumerate().fold((0.0, 0.0), |(a, b), (i, &v)| {
-        (
-            a + (i as f64 - mi) * (f64::from(v) - mv),
-            b + (i as f64 - mi).powi(2),
-        )
-    });
-    let slope = sxy / sxx;
-    let y: Vec<f64> = x
-        .iter()
-        .enumerate()
-        .map(|(i, &v)| {
-            let w = 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / nf).cos();
-            (f64::from(v) - mv - slope * (i as f64 - mi)) * w
-        })
-        .collect();
-    let power = |f: f64| {
-        let (mut re, mut im) = (0.0, 0.0);
-        for (i, v) in y.iter().enumerate() {
-            let a = std::f64::consts::TAU * f * i as f64 / rate;
-            re += v * a.cos();
-            im += v * a.sin();
-        }
-        re * re + im * im
-    };
-    let df = rate / n as f64;
-    let best = (2..n / 2)
-        .map(|k| k as f64 * df)
-        .max_by(|a, b| power(*a).total_cmp(&power(*b)))
-        .unwrap_or(0.0);
-    let (mut a, mut b) = (best - df, best + df);
-    for _ in 0..60 {
-        let m1 = a + 0.382 * (b - a);
-        let m2 = a + 0.618 * (b - a);
-        if power(m1) > power(m2) {
-            b = m2;
-        } else {
-            a = m1;
-        }
-    }
-    0.5 * (a + b)
+fn dominant_hz(x: &[f32], rate: f64) -> f64 {
+    measure::dominant_frequency_hz(x, rate).unwrap()
 }
 
 fn small(axis: Axis, cut: Cut) -> StillConfig {

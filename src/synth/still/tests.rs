@@ -29,39 +29,10 @@ fn clean(axis: Axis, cut: Cut) -> StillConfig {
     }
 }
 
-/// Dominant frequency (cycles per sample) of `x` by a fine DFT search around the peak.
+/// Dominant frequency (cycles per sample) of a border track.
 fn dominant_cycles(x: &[f64]) -> f64 {
-    let n = x.len() as f64;
-    let mean = x.iter().sum::<f64>() / n;
-    let power = |f: f64| {
-        let (mut re, mut im) = (0.0, 0.0);
-        for (i, v) in x.iter().enumerate() {
-            let w = 0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / n).cos();
-            let a = std::f64::consts::TAU * f * i as f64;
-            re += (v - mean) * w * a.cos();
-            im += (v - mean) * w * a.sin();
-        }
-        re * re + im * im
-    };
-    let mut best = (0.0, 0.0);
-    for k in 1..x.len() / 2 {
-        let f = k as f64 / n;
-        let p = power(f);
-        if p > best.1 {
-            best = (f, p);
-        }
-    }
-    let (mut f, mut step) = (best.0, 1.0 / n);
-    for _ in 0..40 {
-        step *= 0.5;
-        let (a, b) = (power(f - step), power(f + step));
-        if a > b && a > power(f) {
-            f -= step;
-        } else if b > power(f) {
-            f += step;
-        }
-    }
-    f
+    let v: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+    crate::pipeline::still::measure::dominant_frequency_hz(&v, 1.0).unwrap()
 }
 
 #[test]
