@@ -28,7 +28,7 @@ pub const MAX_WHOLE_DECODE_PIXELS: usize = 1 << 25;
 const LUMA: [f32; 3] = [0.2126, 0.7152, 0.0722];
 
 fn bad(path: &Path, problem: impl Into<String>) -> LoadError {
-    LoadError::BadFrame {
+    LoadError::Io {
         problem: problem.into(),
         path: path.to_path_buf(),
     }
@@ -102,10 +102,11 @@ impl StillReader {
     /// Opens a PNG or TIFF still (by its content, not its name) and checks its size.
     ///
     /// # Errors
-    /// [`LoadError::BadFrame`] naming the file when it is missing, not a PNG or TIFF, corrupt,
+    /// [`LoadError::Io`] naming the file when it is missing, not a PNG or TIFF, corrupt,
     /// empty or over the size limits.
     pub fn open(path: &Path) -> Result<Self, LoadError> {
-        let file = File::open(path).map_err(|e| bad(path, e.to_string()))?;
+        let file =
+            File::open(path).map_err(|e| bad(path, format!("cannot open the still: {e}")))?;
         let mut magic = [0u8; 4];
         {
             use std::io::Read;
@@ -255,7 +256,7 @@ impl StillReader {
     /// returns how many were read (0 at the end).
     ///
     /// # Errors
-    /// [`LoadError::BadFrame`] naming the file when the data is truncated or corrupt.
+    /// [`LoadError::Io`] naming the file when the data is truncated or corrupt.
     pub fn read_rows(&mut self, out: &mut Vec<f32>, max_rows: usize) -> Result<usize, LoadError> {
         out.clear();
         let want = max_rows.min(self.height - self.next_row);
