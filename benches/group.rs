@@ -11,6 +11,7 @@ use std::sync::atomic::AtomicBool;
 use criterion::{Criterion, criterion_group, criterion_main};
 use groovescope::engine::run_group;
 use groovescope::io::{Scan, load_group};
+use groovescope::pipeline::slope_reference::SlopeReference;
 use groovescope::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
 use groovescope::synth::{SynthConfig, render_scan, tone};
 
@@ -65,7 +66,9 @@ fn bench(c: &mut Criterion) {
             g.bench_function(
                 format!("{name}: every stage, as reconstruct runs it"),
                 |b| {
-                    b.iter(|| black_box(run_group(&input, &params).is_ok()));
+                    b.iter(|| {
+                        black_box(run_group(&input, &params, &SlopeReference::default()).is_ok())
+                    });
                 },
             );
         }

@@ -74,7 +74,7 @@ fn rerun_from(c: &mut Criterion, name: &str, from: Stage, input: &GroupInput, ba
     c.bench_function(name, |b| {
         b.iter(|| {
             let mut cache = base.clone();
-            cache.invalidate_from(from);
+            cache.invalidate(from);
             let _ = cache.run_from(from, input, &params, &mut |_, _| true);
             cache
         });

@@ -10,7 +10,9 @@ PKGS=(pkg-config libasound2-dev
       espeak-ng
       # FFmpeg and libclang (bindgen) for the `video` feature (import-video, Import video…).
       libavcodec-dev libavformat-dev libavutil-dev libswscale-dev libswresample-dev
-      libavfilter-dev libavdevice-dev libclang-dev)
+      libavfilter-dev libavdevice-dev libclang-dev
+      # A C++ compiler for libFuzzer (scripts/fuzz.sh).
+      g++)
 missing=()
 for p in "${PKGS[@]}"; do
     dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

@@ -17,6 +17,8 @@ cargo test --locked
 cargo clippy --locked --all-targets --features video -- -D warnings
 cargo test --locked --features video --lib -- io::video app::import_video
 cargo test --locked --features video --test import_video
+# Every fuzz target briefly (the long runs and their figures: README, "Hostile input").
+bash scripts/fuzz.sh 5
 RUSTDOCFLAGS="-D warnings" cargo doc --locked --no-deps
 RUSTDOCFLAGS="-D warnings" cargo doc --locked --no-deps --features video
 # The workbench for real: a window under Xvfb, one screenshot taken and checked.

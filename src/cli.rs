@@ -1,18 +1,16 @@
-//! The command-line front end: clap subcommands over the engine (reconstruct, eval, flow, params, synth, inspect, gui).
+//! The command-line front end: clap subcommands over the engine (reconstruct, plan, merge, eval, flow, params, synth, inspect, gui).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use serde::Serialize;
 
-use crate::engine::{ReconstructOptions, Reconstruction, reconstruct};
-use crate::io::wav::{WavBits, read_wav, write_wav};
-use crate::io::{Scan, write_atomic};
+use crate::io::wav::{WavBits, read_wav};
 use crate::pipeline::PathChoice;
 use crate::pipeline::PipelineParams;
+pub use crate::side::cli::{Report, make_report, run_reconstruct};
 
 /// Plays gramophone records from microscope image sequences (Tian & Barron's optical-flow method).
 #[derive(Debug, Parser)]
@@ -104,6 +102,12 @@ pub enum Command {
     Still(crate::still::cli::StillArgs),
     /// Render a top-view still of neighbouring grooves with known wall tones and its truth.
     SynthStill(crate::still::cli::SynthStillArgs),
+    /// Cut a scan into shards for several machines (Slurm job arrays and the like).
+    Plan(crate::side::cli::PlanArgs),
+    /// Merge the parts of every shard of a plan into the side's WAV.
+    Merge(crate::side::cli::MergeArgs),
+    /// Convert a scan folder to a Zarr store (one zstd chunk per group) and check it.
+    Pack(crate::pack_cli::PackArgs),
     /// Import a microscope video clip (AVI/MP4) as a scan folder (needs the `video` feature).
     ImportVideo(crate::video_cli::ImportVideoArgs),
     /// Open the workbench (optionally on a scan).
@@ -148,6 +152,9 @@ pub struct ReconstructArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Shards, resume, progress lines.
+    #[command(flatten)]
+    pub side: crate::side::cli::SideRunArgs,
 }
 
 /// Arguments of `flow`.
@@ -225,8 +232,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
     };
     let mut cfg = match &args.config {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read synth settings: {}", p.display()))?;
+            let text = crate::io::limits::read_toml_text(p, "synth settings")?;
             let mut table: toml::Table = toml::to_string(&base)
                 .ok()
                 .and_then(|t| toml::from_str(&t).ok())
@@ -311,8 +317,7 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
     };
     let cfg = match config {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read scene settings: {}", p.display()))?;
+            let text = crate::io::limits::read_toml_text(p, "scene settings")?;
             toml::from_str::<SceneConfig>(&text).map_err(|e| {
                 anyhow::anyhow!("invalid scene settings: {}: {}", e.message(), p.display())
             })?
@@ -328,7 +333,7 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
     Ok(())
 }
 
-fn path_choice(arg: &str, default: PathChoice) -> PathChoice {
+pub(crate) fn path_choice(arg: &str, default: PathChoice) -> PathChoice {
     match arg {
         "depth" => PathChoice::Depth,
         "dual-focus" => PathChoice::DualFocus,
@@ -343,8 +348,7 @@ fn path_choice(arg: &str, default: PathChoice) -> PathChoice {
 pub fn load_params(path: Option<&Path>) -> Result<PipelineParams> {
     let params = match path {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("cannot read parameters: {}", p.display()))?;
+            let text = crate::io::limits::read_toml_text(p, "parameters")?;
             PipelineParams::from_toml_str(&text)
                 .map_err(|e| anyhow::anyhow!("invalid parameters: {e}: {}", p.display()))?
         }
@@ -359,40 +363,7 @@ pub fn load_params(path: Option<&Path>) -> Result<PipelineParams> {
     Ok(params)
 }
 
-/// The JSON report written beside a reconstruction.
-#[derive(Debug, Serialize)]
-pub struct Report<'a> {
-    /// groovescope version.
-    pub version: &'static str,
-    /// Scan folder.
-    pub scan: String,
-    /// Output WAV.
-    pub output: String,
-    /// Params file used (None: defaults).
-    pub params_file: Option<String>,
-    /// Params used.
-    pub params: &'a PipelineParams,
-    /// Reconstruction path that ran.
-    pub path: &'static str,
-    /// Output duration.
-    pub duration_secs: f64,
-    /// Output sample rate.
-    pub sample_rate_hz: u32,
-    /// Native sample rate before resampling.
-    pub native_rate_hz: f64,
-    /// Gain from velocity (mm/s) to output units.
-    pub gain_per_mm_s: f64,
-    /// Timings.
-    pub timings: &'a crate::engine::StageTimings,
-    /// Per group.
-    pub groups: &'a [crate::engine::GroupReport],
-    /// Scores against reference.wav.
-    pub scores: Option<crate::pipeline::eval::Scores>,
-    /// Warnings.
-    pub warnings: &'a [String],
-}
-
-fn progress_bar(total: usize, quiet: bool) -> ProgressBar {
+pub(crate) fn progress_bar(total: usize, quiet: bool) -> ProgressBar {
     if quiet {
         return ProgressBar::hidden();
     }
@@ -403,109 +374,6 @@ fn progress_bar(total: usize, quiet: bool) -> ProgressBar {
         pb.set_style(style);
     }
     pb
-}
-
-/// Builds the report for a finished reconstruction.
-#[must_use]
-pub fn make_report<'a>(
-    scan: &Scan,
-    out: &Path,
-    params_file: Option<&Path>,
-    params: &'a PipelineParams,
-    rec: &'a Reconstruction,
-) -> Report<'a> {
-    Report {
-        version: env!("CARGO_PKG_VERSION"),
-        scan: scan.dir.display().to_string(),
-        output: out.display().to_string(),
-        params_file: params_file.map(|p| p.display().to_string()),
-        params,
-        path: if params.uses_dual_focus(&scan.meta) {
-            "dual-focus"
-        } else {
-            "depth"
-        },
-        duration_secs: rec.audio.duration_secs(),
-        sample_rate_hz: rec.audio.sample_rate_hz,
-        native_rate_hz: rec.stitched.native_rate_hz,
-        gain_per_mm_s: rec.gain_per_mm_s,
-        timings: &rec.timings,
-        groups: &rec.groups,
-        scores: rec.scores,
-        warnings: &rec.warnings,
-    }
-}
-
-/// Runs `reconstruct`.
-///
-/// # Errors
-/// Any failure, with the file named.
-pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
-    for out in std::iter::once(&args.out).chain(args.report.as_ref()) {
-        if out.exists() && !args.force {
-            bail!(
-                "refusing to overwrite an existing file (use --force): {}",
-                out.display()
-            );
-        }
-    }
-    let mut params = load_params(args.params.as_deref())?;
-    params.path = path_choice(&args.path, params.path);
-    let scan = Scan::open(&args.scan)?;
-    let first = args.first_group.unwrap_or(0);
-    let end = args
-        .groups
-        .map_or(scan.groups.len(), |n| first.saturating_add(n));
-    if first >= scan.groups.len() {
-        bail!(
-            "--first-group {first} is past the last group ({} groups): {}",
-            scan.groups.len(),
-            scan.dir.display()
-        );
-    }
-    let opts = ReconstructOptions {
-        params: params.clone(),
-        groups: Some(first..end),
-        keep_going: args.keep_going,
-    };
-    let pb = progress_bar(end.min(scan.groups.len()) - first, args.quiet);
-    let cancel = AtomicBool::new(false);
-    let rec = reconstruct(
-        &scan,
-        &opts,
-        &mut |p| pb.set_position(p.done as u64),
-        &cancel,
-    );
-    pb.finish_and_clear();
-    let rec = rec?;
-    write_wav(&args.out, &rec.audio, args.bits, args.force)?;
-    if let Some(report_path) = &args.report {
-        let report = make_report(&scan, &args.out, args.params.as_deref(), &params, &rec);
-        let json = serde_json::to_vec_pretty(&report)?;
-        write_atomic(report_path, &json, args.force)?;
-    }
-    if !args.quiet {
-        for w in &rec.warnings {
-            eprintln!("warning: {w}");
-        }
-        println!(
-            "wrote {} ({:.3} s at {} Hz, {} groups in {:.1} s)",
-            args.out.display(),
-            rec.audio.duration_secs(),
-            rec.audio.sample_rate_hz,
-            rec.groups.len(),
-            rec.timings.total_secs
-        );
-        if let Some(s) = rec.scores {
-            println!(
-                "vs reference: r = {:.3}, envelope r = {}, SNR = {:.1} dB",
-                s.r,
-                s.envelope_r_text(3),
-                s.snr_db
-            );
-        }
-    }
-    Ok(rec)
 }
 
 fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64) -> Result<()> {
@@ -603,7 +471,10 @@ fn run_flow(args: &FlowArgs) -> Result<()> {
 /// Any failure, with the file named.
 pub fn run(command: Command) -> Result<()> {
     match command {
-        Command::Reconstruct(args) => run_reconstruct(&args).map(|_| ()),
+        Command::Reconstruct(args) => crate::side::cli::run_reconstruct_command(&args),
+        Command::Plan(args) => crate::side::cli::run_plan(&args),
+        Command::Merge(args) => crate::side::cli::run_merge(&args),
+        Command::Pack(args) => crate::pack_cli::run_pack(&args),
         Command::Eval {
             recovered,
             reference,

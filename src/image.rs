@@ -11,22 +11,8 @@ pub struct Image {
     pub data: Vec<f32>,
 }
 
-/// `len` zeros, written by every rayon thread in parallel (a large `vec![0.0; len]` is one
-/// thread's memset whenever the allocator recycles memory, which it does for repeated
-/// frame-sized buffers).
-#[must_use]
-pub fn zeros_par(len: usize) -> Vec<f32> {
-    use rayon::prelude::*;
-    const CHUNK: usize = 1 << 16;
-    let mut v: Vec<f32> = Vec::with_capacity(len);
-    v.spare_capacity_mut()[..len]
-        .par_chunks_mut(CHUNK)
-        .for_each(|c| c.fill(std::mem::MaybeUninit::new(0.0)));
-    // SAFETY: the capacity is at least `len`, and the fill above initialised all of the first
-    // `len` elements.
-    unsafe { v.set_len(len) };
-    v
-}
+/// `len` zeros, written in parallel (see [`crate::pipeline::simd::zeros_par`]).
+pub use crate::pipeline::simd::zeros_par;
 
 impl Image {
     /// An image of zeros.

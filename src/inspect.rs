@@ -77,7 +77,7 @@ pub fn run_inspect(
     let mut cache = StageCache::default();
     let outcome = cache.run_from(Stage::Derivatives, &input, params, &mut |_, _| true);
     let mut written = Vec::new();
-    if let Some(d) = cache.derivatives.as_ref().and_then(|d| d.get(d.len() / 2)) {
+    if let Some(d) = cache.derivatives().and_then(|d| d.get(d.len() / 2)) {
         save(
             out_dir,
             "frame.png",
@@ -86,7 +86,7 @@ pub fn run_inspect(
             &mut written,
         )?;
     }
-    if let Some(f) = cache.flows.as_ref().and_then(|f| f.get(f.len() / 2)) {
+    if let Some(f) = cache.flows().and_then(|f| f.get(f.len() / 2)) {
         let land = scan.meta.geometry().land_flow_px() as f32;
         save(
             out_dir,
@@ -110,7 +110,7 @@ pub fn run_inspect(
             &mut written,
         )?;
     }
-    if let Some(depth) = &cache.depth {
+    if let Some(depth) = cache.depth() {
         save(
             out_dir,
             "depth.png",
@@ -123,9 +123,9 @@ pub fn run_inspect(
             &mut written,
         )?;
     }
-    if let Some(st) = &cache.stripes {
+    if let Some(st) = cache.stripes() {
         let frame = cache
-            .derivatives
+            .derivatives()
             .as_ref()
             .and_then(|d| d.get(d.len() / 2))
             .map(|d| d.image.clone())
@@ -140,16 +140,16 @@ pub fn run_inspect(
             &mut written,
         )?;
     }
-    let stripes_failed = cache.stripes.is_none()
+    let stripes_failed = cache.stripes().is_none()
         && outcome.is_err()
-        && cache.flows.is_some()
+        && cache.flows().is_some()
         && params.uses_dual_focus(&input.meta);
     if stripes_failed {
         // Segmentation failed: the in-focus map and the accumulator with its peaks show why.
         let mid = |n: usize| n / 2;
         if let (Some(d), Some(f)) = (
-            cache.derivatives.as_ref().and_then(|d| d.get(mid(d.len()))),
-            cache.flows.as_ref().and_then(|f| f.get(mid(f.len()))),
+            cache.derivatives().and_then(|d| d.get(mid(d.len()))),
+            cache.flows().and_then(|f| f.get(mid(f.len()))),
         ) && let Ok((in_focus, acc, peaks)) =
             crate::pipeline::hough::hough_diagnostics(d, f, &params.hough)
         {
@@ -157,7 +157,7 @@ pub fn run_inspect(
             save_hough(out_dir, &in_focus, &hough, force, &mut written)?;
         }
     }
-    if let Some(o) = &cache.orientation {
+    if let Some(o) = cache.orientation() {
         save(
             out_dir,
             "weights.png",

@@ -12,9 +12,11 @@ pub mod engine;
 pub mod image;
 pub mod inspect;
 pub mod io;
+pub mod pack_cli;
 pub mod pipeline;
 #[cfg(feature = "gui")]
 pub mod playback;
+pub mod side;
 pub mod still;
 pub mod synth;
 pub mod video_cli;

@@ -58,6 +58,7 @@ fn default_action() -> anyhow::Result<()> {
         keep_going: false,
         force: false,
         quiet: false,
+        side: Default::default(),
     };
     run_reconstruct(&args)?;
     println!("report: {}", report.display());

@@ -100,6 +100,8 @@ struct Shared {
     loop_start: AtomicU64,
     loop_end: AtomicU64,
     last_error: Mutex<Option<String>>,
+    /// Set by the error callback when the device went away mid-stream.
+    device_lost: AtomicBool,
 }
 
 impl Default for Shared {
@@ -115,6 +117,7 @@ impl Default for Shared {
             loop_start: AtomicU64::new(NONE),
             loop_end: AtomicU64::new(NONE),
             last_error: Mutex::new(None),
+            device_lost: AtomicBool::new(false),
         }
     }
 }
@@ -227,12 +230,29 @@ fn build<T: SizedSample + FromSample<f32>>(
         config,
         move |out: &mut [T], _| cursor.fill(out),
         move |e| {
-            if let Ok(mut slot) = err_shared.last_error.try_lock() {
-                *slot = Some(e.to_string());
-            }
+            // Glitches and reroutes leave the stream playing; anything else means it is gone.
+            let lost = !matches!(
+                e.kind(),
+                cpal::ErrorKind::Xrun
+                    | cpal::ErrorKind::DeviceChanged
+                    | cpal::ErrorKind::RealtimeDenied
+            );
+            stream_failed(&err_shared, e.to_string(), lost);
         },
         None,
     )
+}
+
+/// What the stream's error callback does: keeps the message and, when the device is gone
+/// (`lost`), stops playback and flags the loss for [`Player::poll_device`]. Never blocks.
+fn stream_failed(shared: &Shared, message: String, lost: bool) {
+    if lost {
+        shared.playing.store(false, Ordering::Release);
+        shared.device_lost.store(true, Ordering::Release);
+    }
+    if let Ok(mut slot) = shared.last_error.try_lock() {
+        *slot = Some(message);
+    }
 }
 
 fn open_stream(
@@ -326,6 +346,24 @@ impl Player {
     #[must_use]
     pub fn buffers(&self) -> Option<&PlayBuffers> {
         self.current.as_deref()
+    }
+
+    /// Checks whether the device went away while the stream ran (unplugged, sound server
+    /// stopped). The first call after that closes the stream, makes the player
+    /// [`AudioStatus::Unavailable`] and returns the message to show; the loaded clip stays.
+    pub fn poll_device(&mut self) -> Option<String> {
+        if !self.shared.device_lost.swap(false, Ordering::AcqRel) {
+            return None;
+        }
+        let why = self
+            .stream_error()
+            .unwrap_or_else(|| "the stream stopped".into());
+        self.stream = None;
+        self.shared.playing.store(false, Ordering::Release);
+        self.status = AudioStatus::Unavailable(format!("the audio device stopped: {why}"));
+        Some(format!(
+            "audio unavailable: the audio device stopped: {why}"
+        ))
     }
 
     /// Starts or resumes playback.
@@ -493,6 +531,43 @@ mod tests {
             "stops at the end"
         );
         assert_eq!(&out[30..], &[0.0; 10]);
+    }
+
+    #[test]
+    fn a_device_that_vanishes_mid_playback_stops_it_with_a_message_and_keeps_the_clip() {
+        let mut p = Player {
+            shared: Arc::new(Shared::default()),
+            stream: None,
+            status: AudioStatus::Ready {
+                device: "test".into(),
+                rate_hz: 48_000,
+                channels: 2,
+            },
+            current: None,
+            previous: None,
+        };
+        p.load(PlayBuffers {
+            rate_hz: 48_000,
+            a: vec![vec![0.1; 4800]],
+            b: None,
+        });
+        p.play().unwrap();
+        // A glitch keeps playing.
+        stream_failed(&p.shared, "buffer underrun".into(), false);
+        assert!(p.is_playing() && p.poll_device().is_none());
+        // What cpal's error callback reports when the device goes away.
+        stream_failed(
+            &p.shared,
+            "The requested device is no longer available".into(),
+            true,
+        );
+        assert!(!p.is_playing());
+        let msg = p.poll_device().unwrap();
+        assert!(msg.contains("no longer available"), "{msg}");
+        assert!(p.poll_device().is_none(), "reported once");
+        assert!(matches!(p.status(), AudioStatus::Unavailable(why) if why.contains("stopped")));
+        assert!(p.play().unwrap_err().starts_with("audio unavailable:"));
+        assert_eq!(p.buffers().map(PlayBuffers::len), Some(4800));
     }
 
     #[test]

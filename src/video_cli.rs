@@ -49,6 +49,10 @@ pub struct ImportVideoArgs {
     /// Travel between the first frames of consecutive groups, µm (default: stride × frame step).
     #[arg(long, allow_hyphen_values = true)]
     pub group_step_um: Option<f64>,
+    /// Write a Zarr store (one zstd chunk per group, see `groovescope pack`) instead of a scan
+    /// folder; also chosen by an --out name ending in `.zarr`.
+    #[arg(long)]
+    pub zarr: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -102,14 +106,46 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
         pb.set_length(total as u64);
         pb.set_position(done as u64);
     };
-    let summary = import_video(
+    let zarr = args.zarr || args.out.extension().is_some_and(|e| e == "zarr");
+    // A Zarr store: the clip is imported as a scan folder beside it, packed, then removed.
+    let folder = if zarr {
+        let name = args
+            .out
+            .file_name()
+            .map_or_else(|| "scan".into(), |n| n.to_string_lossy().into_owned());
+        args.out
+            .with_file_name(format!(".{name}.frames-{}", std::process::id()))
+    } else {
+        args.out.clone()
+    };
+    if zarr && !crate::io::atomic::dir_is_missing_or_empty(&args.out)? {
+        anyhow::bail!(
+            "refusing to write into a folder that is not empty: {}",
+            args.out.display()
+        );
+    }
+    let mut summary = import_video(
         &args.clip,
-        &args.out,
+        &folder,
         &layout,
         &meta,
         &progress,
         &AtomicBool::new(false),
     )?;
+    if zarr {
+        let packed = crate::io::Scan::open(&folder).and_then(|scan| {
+            crate::io::zarr::pack_scan(
+                &scan,
+                &args.out,
+                crate::io::zarr::DEFAULT_ZSTD_LEVEL,
+                &mut |_, _| {},
+                &AtomicBool::new(false),
+            )
+        });
+        let _ = std::fs::remove_dir_all(&folder);
+        packed?;
+        summary.out_dir.clone_from(&args.out);
+    }
     pb.finish_and_clear();
     if !args.quiet {
         println!(

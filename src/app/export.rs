@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use super::recon::Clip;
 use crate::engine::GroupReport;
+use crate::io::lock::OutputLock;
 use crate::io::wav::{Audio, WavBits, write_wav};
 use crate::io::write_atomic;
 use crate::pipeline::PipelineParams;
@@ -79,6 +80,9 @@ pub fn export_wav(
     preset_file: Option<&Path>,
     overwrite: bool,
 ) -> Result<(), String> {
+    // Another window exporting to the same file is refused, so a WAV and its sidecar always
+    // come from one export.
+    let _lock = OutputLock::acquire(path).map_err(|e| e.to_string())?;
     if !overwrite && would_overwrite(path) {
         return Err(format!(
             "refusing to overwrite an existing file: {}",
@@ -125,6 +129,7 @@ pub fn export_wav(
 /// A message naming the file when it exists and `overwrite` is false, or the write fails.
 pub fn save_preset(params: &PipelineParams, path: &Path, overwrite: bool) -> Result<(), String> {
     let text = params.to_toml_string().map_err(|e| e.to_string())?;
+    let _lock = OutputLock::acquire(path).map_err(|e| e.to_string())?;
     write_atomic(path, text.as_bytes(), overwrite).map_err(|e| e.to_string())
 }
 
@@ -133,8 +138,7 @@ pub fn save_preset(params: &PipelineParams, path: &Path, overwrite: bool) -> Res
 /// # Errors
 /// A message naming the file and the bad key or value.
 pub fn load_preset(path: &Path) -> Result<PipelineParams, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("cannot read preset: {e}: {}", path.display()))?;
+    let text = crate::io::limits::read_toml_text(path, "preset").map_err(|e| e.to_string())?;
     let params = PipelineParams::from_toml_str(&text)
         .map_err(|e| format!("invalid preset: {e}: {}", path.display()))?;
     params

@@ -502,7 +502,7 @@ mod tests {
             ..ImportForm::default()
         };
         f.own_group_step = true;
-        f.group_step_um = 50.0;
+        f.group_step_um = 2.0;
         let mut run = ImportRun::start(f.request().unwrap(), Box::new(|| {})).unwrap();
         let started = std::time::Instant::now();
         let outcome = loop {
@@ -516,6 +516,6 @@ mod tests {
         assert_eq!(s.groups, 2);
         assert_eq!(run.progress(), (16, 16));
         let scan = crate::io::Scan::open(&s.out_dir).unwrap();
-        assert!((scan.meta.motion.group_step_um - 50.0).abs() < 1e-12);
+        assert!((scan.meta.motion.group_step_um - 2.0).abs() < 1e-12);
     }
 }

@@ -88,6 +88,7 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
         view,
         screenshot: screenshot.clone(),
         reconstruct_on_open,
+        hide_timings: false,
     };
     if let Some(p) = &screenshot
         && p.exists()

@@ -14,6 +14,7 @@ use crate::io::Scan;
 use crate::pipeline::PipelineParams;
 use crate::pipeline::audio_signal::GroupSignal;
 use crate::pipeline::dsp::magnitude_spectrum;
+use crate::pipeline::eval::block_peaks;
 
 /// Longest envelope block (seconds).
 pub const ENVELOPE_BLOCK_SECS: f64 = 0.005;
@@ -68,20 +69,6 @@ impl Clip {
     }
 }
 
-/// Peak |x| over consecutive blocks of `block` samples.
-#[must_use]
-pub fn peak_envelope(samples: &[f32], block: usize) -> Vec<f32> {
-    samples
-        .chunks(block.max(1))
-        .map(|c| {
-            c.iter().fold(
-                0.0_f32,
-                |m, v| if v.is_finite() { m.max(v.abs()) } else { m },
-            )
-        })
-        .collect()
-}
-
 /// Magnitude spectrum of `samples` (`crate::pipeline::dsp::magnitude_spectrum`, amplitude
 /// calibrated: a full-scale sine reads 0 dB), reduced to at most [`SPECTRUM_POINTS`] bands by
 /// keeping each band's loudest bin, so peaks survive.
@@ -125,8 +112,8 @@ pub fn make_clip(
         None => (None, None),
     };
     Clip {
-        recovered_envelope: peak_envelope(&recovered, block),
-        reference_envelope: reference.as_ref().map(|r| peak_envelope(r, block)),
+        recovered_envelope: block_peaks(&recovered, block),
+        reference_envelope: reference.as_ref().map(|r| block_peaks(r, block)),
         recovered_spectrum: clip_spectrum(&recovered, rate),
         reference_spectrum: reference.as_ref().map(|r| clip_spectrum(r, rate)),
         recovered: Arc::new(recovered),
@@ -290,7 +277,7 @@ mod tests {
 
     #[test]
     fn envelope_takes_block_peaks() {
-        let e = peak_envelope(&[0.1, -0.5, 0.2, 0.3, f32::NAN, -0.1], 2);
+        let e = block_peaks(&[0.1, -0.5, 0.2, 0.3, f32::NAN, -0.1], 2);
         assert_eq!(e, vec![0.5, 0.3, 0.1]);
     }
 

@@ -284,7 +284,12 @@ impl Workbench {
             );
             ui.separator();
             ui.heading("stages");
-            actions.extend(stages_ui(ui, statuses, &self.stage_times));
+            actions.extend(stages_ui(
+                ui,
+                statuses,
+                &self.stage_times,
+                self.hide_timings,
+            ));
             for a in actions {
                 match a {
                     NavAction::Group(g) => self.set_group(g),
@@ -587,6 +592,9 @@ impl eframe::App for Workbench {
         let busy = !self.is_idle();
         let ctx = ui.ctx().clone();
         self.poll();
+        if let Some(msg) = self.player.poll_device() {
+            self.error(msg);
+        }
         if let Some((kind, path)) = self.dialogs.poll()
             && let Some(p) = path
         {

@@ -17,8 +17,8 @@ pub struct ViewTexture {
     pub rendered: Arc<Rendered>,
     /// The texture.
     pub handle: TextureHandle,
-    /// Identity of the stage output it shows (address of its `Arc`).
-    pub source: usize,
+    /// Identity of the stage output it shows ([`crate::pipeline::StageCache::output_id`]).
+    pub source: u64,
 }
 
 /// Textures of the views and of the frame on screen.
@@ -43,13 +43,13 @@ fn options() -> TextureOptions {
 }
 
 impl Textures {
-    /// Uploads a rendering of `key` made from the stage output at address `source`.
+    /// Uploads a rendering of `key` made from the stage output with identity `source`.
     pub fn set(
         &mut self,
         ctx: &egui::Context,
         key: ViewImage,
         rendered: Arc<Rendered>,
-        source: usize,
+        source: u64,
     ) {
         let name = format!("{key:?}");
         match self.views.get_mut(&key) {
@@ -78,16 +78,17 @@ impl Textures {
         self.views.get(&key)
     }
 
-    /// The flow-colour texture of field `index` (residual after `land_px`), rendered here when
-    /// the worker did not (the operator picked another window).
+    /// The flow-colour texture of field `index` (residual after `land_px`) of the flow output
+    /// with identity `source`, rendered here when the worker did not (the operator picked
+    /// another window).
     pub fn flow(
         &mut self,
         ctx: &egui::Context,
         flows: &Arc<Vec<FlowField>>,
+        source: u64,
         index: usize,
         land_px: f32,
     ) -> Option<&ViewTexture> {
-        let source = Arc::as_ptr(flows) as usize;
         let key = ViewImage::FlowColour(index);
         if self.views.get(&key).is_none_or(|t| t.source != source) {
             let field = flows.get(index)?;

@@ -49,6 +49,9 @@ pub struct WorkbenchOptions {
     pub screenshot: Option<PathBuf>,
     /// Reconstruct the clip as soon as the scan is open.
     pub reconstruct_on_open: bool,
+    /// Show a fixed "– ms" instead of each stage's measured time, so that nothing on screen
+    /// depends on the machine or its load (snapshot tests).
+    pub hide_timings: bool,
 }
 
 /// A question waiting for the operator.
@@ -147,6 +150,8 @@ pub struct Workbench {
     pub(super) pending_capture: Option<(PathBuf, egui::Rect, bool)>,
     pub(super) view_rect: egui::Rect,
     pub(super) reconstruct_on_open: bool,
+    /// See [`WorkbenchOptions::hide_timings`].
+    pub(super) hide_timings: bool,
     pub(super) max_busy_frame: Duration,
     /// The "Import video" window and its running import.
     #[cfg(feature = "video")]
@@ -214,6 +219,7 @@ impl Workbench {
             pending_capture: None,
             view_rect: egui::Rect::NOTHING,
             reconstruct_on_open: opts.reconstruct_on_open,
+            hide_timings: opts.hide_timings,
             max_busy_frame: Duration::ZERO,
             #[cfg(feature = "video")]
             video_import: super::import_video::VideoImport::default(),
@@ -341,7 +347,7 @@ impl Workbench {
         {
             return StageStatus::Running;
         }
-        if self.cache.group == Some(self.group) && self.cache.is_fresh(stage, &self.params) {
+        if self.cache.group() == Some(self.group) && self.cache.is_fresh(stage, &self.params) {
             let unused = if self.uses_dual() {
                 stage == Stage::Depth
             } else {
@@ -480,7 +486,7 @@ impl Workbench {
         }
         self.group = g;
         self.views.nav.jump = g;
-        self.cache.invalidate_from(Stage::Derivatives);
+        self.cache.clear();
         self.stage_errors = Default::default();
         self.failed_with = Default::default();
         self.load_error = None;
@@ -547,7 +553,7 @@ impl Workbench {
 
     /// Reruns `stage` and every later stage of the current group.
     pub fn rerun(&mut self, stage: Stage) {
-        self.cache.invalidate_from(stage);
+        self.cache.invalidate(stage);
         for f in &mut self.failed_with[stage.index()..] {
             *f = None;
         }
@@ -604,10 +610,20 @@ impl Workbench {
             return Err("no scan open".into());
         };
         let path = scan.dir.join("scan.toml");
+        let first_frame = scan.groups.first().and_then(|g| g.frames.first());
         let result = meta
             .validate()
+            .and_then(|()| match first_frame {
+                // What the scan folder holds must agree too (the next open checks it).
+                Some(f) => crate::io::frames::frame_dimensions(f)
+                    .map_err(|e| e.to_string())
+                    .and_then(|size| meta.check_against_scan(scan.groups.len(), size)),
+                None => Ok(()),
+            })
             .and_then(|()| meta.to_toml_string().map_err(|e| e.to_string()))
             .and_then(|text| {
+                let _lock =
+                    crate::io::lock::OutputLock::acquire(&path).map_err(|e| e.to_string())?;
                 crate::io::write_atomic(&path, text.as_bytes(), true).map_err(|e| e.to_string())
             });
         match result {
@@ -698,35 +714,21 @@ impl Workbench {
         }
     }
 
-    fn adopt(&mut self, stage: Stage, from: &StageCache) {
-        let c = &mut self.cache;
-        match stage {
-            Stage::Derivatives => c.derivatives.clone_from(&from.derivatives),
-            Stage::Flow => c.flows.clone_from(&from.flows),
-            Stage::Depth => c.depth.clone_from(&from.depth),
-            Stage::Stripes => c.stripes.clone_from(&from.stripes),
-            Stage::Orientation => c.orientation.clone_from(&from.orientation),
-            Stage::Sound => c.signal.clone_from(&from.signal),
-        }
-        c.group = from.group;
-        c.produced_with[stage.index()].clone_from(&from.produced_with[stage.index()]);
-    }
-
     fn on_stage_done(&mut self, done: StageDone) {
         let current = done.generation == self.generation;
         match done.result {
             Ok(res) => {
-                let usable = res.cache.group == Some(self.group)
+                let usable = res.cache.group() == Some(self.group)
                     && res.cache.is_fresh(done.stage, &self.params);
                 if !usable {
                     return;
                 }
-                self.adopt(done.stage, &res.cache);
+                self.cache.adopt(done.stage, &res.cache);
                 let i = done.stage.index();
                 self.stage_errors[i] = None;
                 self.stage_times[i] = Some(done.elapsed);
                 self.stage_runs[i] += 1;
-                let source = slot_address(done.stage, &self.cache);
+                let source = self.cache.output_id(done.stage);
                 for (key, r) in res.renders {
                     self.textures.set(&self.ctx, key, r, source);
                 }
@@ -958,23 +960,5 @@ impl Workbench {
     /// Sets the export encoding.
     pub fn set_export_bits(&mut self, bits: WavBits) {
         self.views.wave.bits = bits;
-    }
-}
-
-/// Address of a stage's output `Arc` (identity for textures), 0 when empty.
-fn slot_address(stage: Stage, c: &StageCache) -> usize {
-    match stage {
-        Stage::Derivatives => c
-            .derivatives
-            .as_ref()
-            .map_or(0, |a| Arc::as_ptr(a) as usize),
-        Stage::Flow => c.flows.as_ref().map_or(0, |a| Arc::as_ptr(a) as usize),
-        Stage::Depth => c.depth.as_ref().map_or(0, |a| Arc::as_ptr(a) as usize),
-        Stage::Stripes => c.stripes.as_ref().map_or(0, |a| Arc::as_ptr(a) as usize),
-        Stage::Orientation => c
-            .orientation
-            .as_ref()
-            .map_or(0, |a| Arc::as_ptr(a) as usize),
-        Stage::Sound => c.signal.as_ref().map_or(0, |a| Arc::as_ptr(a) as usize),
     }
 }

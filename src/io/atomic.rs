@@ -3,14 +3,38 @@
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::LoadError;
 
+/// A temporary name beside `target`, unique to this process and this write (two threads, or
+/// two windows, writing the same target never share one).
 fn temp_path(target: &Path) -> PathBuf {
+    static NEXT: AtomicU64 = AtomicU64::new(0);
     let name = target
         .file_name()
         .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-    target.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+    let n = NEXT.fetch_add(1, Ordering::Relaxed);
+    target.with_file_name(format!(".{name}.{}.{n}.tmp", std::process::id()))
+}
+
+/// Moves the finished temporary file to `target`. Without `overwrite` this never replaces a
+/// file that appeared meanwhile (another run writing the same output): the file is linked
+/// in under the new name, which fails when the name exists, and the temporary name removed.
+/// File systems without hard links fall back to a rename after a fresh check.
+fn publish(tmp: &Path, target: &Path, overwrite: bool) -> std::io::Result<()> {
+    if overwrite {
+        return std::fs::rename(tmp, target);
+    }
+    match std::fs::hard_link(tmp, target) {
+        Ok(()) => std::fs::remove_file(tmp),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(std::io::Error::new(
+            e.kind(),
+            "another writer created the file meanwhile; it was left as it is (use --force to replace it)",
+        )),
+        Err(_) if !target.exists() => std::fs::rename(tmp, target),
+        Err(e) => Err(e),
+    }
 }
 
 /// Writes a file atomically through `fill`, which receives a buffered writer.
@@ -43,7 +67,7 @@ pub fn write_atomic_with(
             .map_err(std::io::IntoInnerError::into_error)?;
         file.sync_all()?;
         drop(file);
-        std::fs::rename(&tmp, target)
+        publish(&tmp, target, overwrite)
     })();
     result.map_err(|e| {
         let _ = std::fs::remove_file(&tmp);

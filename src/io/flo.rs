@@ -2,6 +2,7 @@
 
 use std::path::Path;
 
+use super::limits::{MAX_FRAME_PIXELS, check_frame_size, read_limited};
 use super::{LoadError, atomic::write_atomic};
 use crate::image::Image;
 
@@ -38,13 +39,24 @@ pub fn write_flo(path: &Path, u: &Image, v: &Image, overwrite: bool) -> Result<(
 /// Reads a `.flo` file into (u, v).
 ///
 /// # Errors
-/// [`LoadError::Io`] naming the file when it is unreadable, has a bad magic number or is truncated.
+/// [`LoadError::Io`] naming the file when it is unreadable, has a bad magic number, is past
+/// the frame limits or is truncated.
 pub fn read_flo(path: &Path) -> Result<(Image, Image), LoadError> {
+    // 12 header bytes and 8 a pixel.
+    let max_bytes = 12 + 8 * MAX_FRAME_PIXELS;
+    let bytes = read_limited(path, max_bytes, "flow file")?;
+    decode_flo(&bytes, path)
+}
+
+/// Decodes `.flo` bytes (see [`read_flo`]); `path` names them in errors.
+///
+/// # Errors
+/// As [`read_flo`].
+pub fn decode_flo(bytes: &[u8], path: &Path) -> Result<(Image, Image), LoadError> {
     let bad = |problem: &str| LoadError::Io {
         problem: problem.to_string(),
         path: path.to_path_buf(),
     };
-    let bytes = std::fs::read(path).map_err(|e| bad(&format!("cannot read flow file: {e}")))?;
     let word = |i: usize| -> Option<[u8; 4]> { bytes.get(i * 4..i * 4 + 4)?.try_into().ok() };
     let magic = word(0).map(f32::from_le_bytes);
     if magic != Some(FLO_MAGIC) {
@@ -56,17 +68,24 @@ pub fn read_flo(path: &Path) -> Result<(Image, Image), LoadError> {
     ) else {
         return Err(bad("truncated .flo header"));
     };
-    let (Ok(w), Ok(h)) = (usize::try_from(w), usize::try_from(h)) else {
+    let (Ok(w), Ok(h)) = (u64::try_from(w), u64::try_from(h)) else {
         return Err(bad("negative size in .flo header"));
     };
-    if bytes.len() != 12 + w * h * 8 {
-        return Err(bad("truncated .flo data"));
+    check_frame_size(w, h).map_err(|e| bad(&format!("flow field: {e}")))?;
+    let want = 12 + w * h * 8;
+    if bytes.len() as u64 != want {
+        return Err(bad(&format!(
+            "truncated .flo data: a {w}×{h} field takes {want} bytes, the file has {}",
+            bytes.len()
+        )));
     }
+    #[allow(clippy::cast_possible_truncation)] // both checked against the frame limits above
+    let (w, h) = (w as usize, h as usize);
     let mut u = Image::zeros(w, h);
     let mut v = Image::zeros(w, h);
-    for i in 0..w * h {
-        u.data[i] = word(3 + 2 * i).map_or(0.0, f32::from_le_bytes);
-        v.data[i] = word(4 + 2 * i).map_or(0.0, f32::from_le_bytes);
+    for (i, pair) in bytes[12..].chunks_exact(8).enumerate() {
+        u.data[i] = f32::from_le_bytes([pair[0], pair[1], pair[2], pair[3]]);
+        v.data[i] = f32::from_le_bytes([pair[4], pair[5], pair[6], pair[7]]);
     }
     Ok((u, v))
 }

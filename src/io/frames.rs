@@ -5,51 +5,124 @@ use std::path::Path;
 use image::{DynamicImage, ImageBuffer, Luma};
 use rayon::prelude::*;
 
+use super::limits::{
+    MAX_FRAME_DECODED_BYTES, MAX_FRAME_FILE_BYTES, check_frame_size, read_limited,
+};
 use super::{LoadError, atomic::write_atomic_with, scan::GroupEntry};
 use crate::image::Image;
+
+/// The samples of a decoded frame, before conversion to grey `f32`: 8-bit or 16-bit grey as
+/// stored, or colour already converted to grey (Rec. 709 luma).
+#[derive(Clone, Debug, PartialEq)]
+pub enum RawSamples {
+    /// 8-bit grey.
+    U8(Vec<u8>),
+    /// 16-bit grey.
+    U16(Vec<u16>),
+    /// Grey in `[0, 1]` from a colour frame.
+    F32(Vec<f32>),
+}
+
+/// A decoded frame before conversion to grey `f32` (what a Zarr store keeps).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RawFrame {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Row-major samples.
+    pub samples: RawSamples,
+}
+
+/// Decodes one frame to its raw samples.
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming the file when it is missing, past a limit of
+/// [`super::limits`] or cannot be decoded.
+pub fn load_frame_raw(path: &Path) -> Result<RawFrame, LoadError> {
+    let bytes = read_limited(path, MAX_FRAME_FILE_BYTES, "frame").map_err(|e| match e {
+        LoadError::Io { problem, path } => LoadError::BadFrame { problem, path },
+        other => other,
+    })?;
+    decode_frame_raw(&bytes, path)
+}
+
+/// Decodes a frame held in memory to its raw samples; `path` names it in errors. The size in
+/// its header is checked against the limits before any pixel memory is allocated.
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming `path` when the bytes are not a frame within the limits.
+pub fn decode_frame_raw(bytes: &[u8], path: &Path) -> Result<RawFrame, LoadError> {
+    let bad = |problem: String| LoadError::BadFrame {
+        problem,
+        path: path.to_path_buf(),
+    };
+    let reader = || {
+        image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| bad(e.to_string()))
+    };
+    let (w, h) = reader()?
+        .into_dimensions()
+        .map_err(|e| bad(e.to_string()))?;
+    check_frame_size(u64::from(w), u64::from(h)).map_err(bad)?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(w);
+    limits.max_image_height = Some(h);
+    limits.max_alloc = Some(MAX_FRAME_DECODED_BYTES);
+    let mut reader = reader()?;
+    reader.limits(limits);
+    let dynimg = reader.decode().map_err(|e| bad(e.to_string()))?;
+    let (width, height) = (dynimg.width() as usize, dynimg.height() as usize);
+    let samples = match dynimg {
+        DynamicImage::ImageLuma8(b) => RawSamples::U8(b.into_raw()),
+        DynamicImage::ImageLuma16(b) => RawSamples::U16(b.into_raw()),
+        other => {
+            let rgb = other.to_rgb32f();
+            RawSamples::F32(
+                rgb.pixels()
+                    .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
+                    .collect(),
+            )
+        }
+    };
+    Ok(RawFrame {
+        width,
+        height,
+        samples,
+    })
+}
+
+/// Grey `f32` in `[0, 1]` of a raw frame: 8-bit values / 255, 16-bit values / 65 535.
+#[must_use]
+pub fn grey_from_raw(raw: RawFrame) -> Image {
+    let data: Vec<f32> = match raw.samples {
+        RawSamples::U8(v) => v.iter().map(|&v| f32::from(v) / 255.0).collect(),
+        RawSamples::U16(v) => v.iter().map(|&v| f32::from(v) / 65535.0).collect(),
+        RawSamples::F32(v) => v,
+    };
+    Image {
+        width: raw.width,
+        height: raw.height,
+        data,
+    }
+}
 
 /// Loads one frame as grey in `[0, 1]` (Rec. 709 luma for colour frames).
 ///
 /// # Errors
-/// [`LoadError::BadFrame`] naming the file when it is missing or cannot be decoded.
+/// [`LoadError::BadFrame`] naming the file when it is missing, past a limit of
+/// [`super::limits`] or cannot be decoded.
 pub fn load_frame(path: &Path) -> Result<Image, LoadError> {
-    let dynimg = image::ImageReader::open(path)
-        .map_err(|e| LoadError::BadFrame {
-            problem: e.to_string(),
-            path: path.to_path_buf(),
-        })?
-        .with_guessed_format()
-        .map_err(|e| LoadError::BadFrame {
-            problem: e.to_string(),
-            path: path.to_path_buf(),
-        })?
-        .decode()
-        .map_err(|e| LoadError::BadFrame {
-            problem: e.to_string(),
-            path: path.to_path_buf(),
-        })?;
-    Ok(grey_from_dynamic(&dynimg))
+    load_frame_raw(path).map(grey_from_raw)
 }
 
-fn grey_from_dynamic(img: &DynamicImage) -> Image {
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let data: Vec<f32> = match img {
-        DynamicImage::ImageLuma8(b) => b.as_raw().iter().map(|&v| f32::from(v) / 255.0).collect(),
-        DynamicImage::ImageLuma16(b) => {
-            b.as_raw().iter().map(|&v| f32::from(v) / 65535.0).collect()
-        }
-        other => {
-            let rgb = other.to_rgb32f();
-            rgb.pixels()
-                .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
-                .collect()
-        }
-    };
-    Image {
-        width: w,
-        height: h,
-        data,
-    }
+/// Decodes a frame held in memory; `path` names it in errors (see [`decode_frame_raw`]).
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming `path` when the bytes are not a frame within the limits.
+pub fn decode_frame(bytes: &[u8], path: &Path) -> Result<Image, LoadError> {
+    decode_frame_raw(bytes, path).map(grey_from_raw)
 }
 
 /// Loads every frame of a group in parallel and checks they share one size.
@@ -57,7 +130,7 @@ fn grey_from_dynamic(img: &DynamicImage) -> Image {
 /// # Errors
 /// The first unreadable frame, or the first frame whose size differs from the group's first.
 pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
-    load_group_frames(group, 0..group.frames.len())
+    load_group_frames(group, 0..group.frame_count())
 }
 
 /// Loads the frames `range` of a group (clamped to the group) in parallel and checks they
@@ -73,6 +146,9 @@ pub fn load_group_frames(
     group: &GroupEntry,
     range: std::ops::Range<usize>,
 ) -> Result<Vec<Image>, LoadError> {
+    if let Some(z) = &group.zarr {
+        return super::zarr::load_group_frames(z, range);
+    }
     let n = group.frames.len();
     let paths = group
         .frames
@@ -111,26 +187,57 @@ pub fn load_group_frames(
     Ok(frames)
 }
 
-/// Reads a frame that is not decoded and returns its size: a PNG's chunks must match their
-/// checksums ([`check_png_chunks`]), a TIFF's image data must lie inside the file
-/// ([`check_tiff_extent`]), and any other file's header must read.
+/// Reads a frame that is not decoded and returns its size (see [`check_frame_bytes`]).
 fn check_undecoded_frame(path: &Path) -> Result<(usize, usize), LoadError> {
+    let bytes = read_limited(path, MAX_FRAME_FILE_BYTES, "frame").map_err(|e| match e {
+        LoadError::Io { problem, path } => LoadError::BadFrame { problem, path },
+        other => other,
+    })?;
+    check_frame_bytes(&bytes, path)
+}
+
+/// Checks a frame without decoding it and returns its size: a PNG's chunks must match their
+/// checksums ([`check_png_chunks`]), a TIFF's image data must lie inside the file
+/// ([`check_tiff_extent`]), any other file's header must read, and the size must be within
+/// the limits. `path` names the frame in errors.
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming `path`.
+pub fn check_frame_bytes(bytes: &[u8], path: &Path) -> Result<(usize, usize), LoadError> {
     let bad = |e: &dyn std::fmt::Display| LoadError::BadFrame {
         problem: e.to_string(),
         path: path.to_path_buf(),
     };
-    let bytes = std::fs::read(path).map_err(|e| bad(&e))?;
     let (w, h) = if bytes.starts_with(&PNG_SIGNATURE) {
-        check_png_chunks(&bytes).map_err(|e| bad(&e))?
+        check_png_chunks(bytes).map_err(|e| bad(&e))?
     } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
-        check_tiff_extent(&bytes).map_err(|e| bad(&e))?
+        check_tiff_extent(bytes).map_err(|e| bad(&e))?
     } else {
-        image::ImageReader::new(std::io::Cursor::new(&bytes))
+        image::ImageReader::new(std::io::Cursor::new(bytes))
             .with_guessed_format()
             .map_err(|e| bad(&e))?
             .into_dimensions()
             .map_err(|e| bad(&e))?
     };
+    check_frame_size(u64::from(w), u64::from(h)).map_err(|e| bad(&e))?;
+    Ok((w as usize, h as usize))
+}
+
+/// The width and height in a frame file's header, read without reading the image data.
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming the file when its header cannot be read.
+pub fn frame_dimensions(path: &Path) -> Result<(usize, usize), LoadError> {
+    let bad = |e: &dyn std::fmt::Display| LoadError::BadFrame {
+        problem: e.to_string(),
+        path: path.to_path_buf(),
+    };
+    let (w, h) = image::ImageReader::open(path)
+        .map_err(|e| bad(&e))?
+        .with_guessed_format()
+        .map_err(|e| bad(&e))?
+        .into_dimensions()
+        .map_err(|e| bad(&e))?;
     Ok((w as usize, h as usize))
 }
 
@@ -287,6 +394,7 @@ mod tests {
             index: 0,
             dir: dir.to_path_buf(),
             frames: paths.to_vec(),
+            zarr: None,
         }
     }
 

@@ -1,13 +1,16 @@
-//! Disk input and output: scans and frames, WAV files, `.flo` flow fields, atomic writes, video import (feature `video`).
+//! Disk input and output: scans (folders or Zarr stores) and frames, WAV files, `.flo` flow fields, atomic writes, video import (feature `video`).
 
 pub mod atomic;
 pub mod flo;
 pub mod frames;
+pub mod limits;
+pub mod lock;
 pub mod scan;
 pub mod still;
 #[cfg(feature = "video")]
 pub mod video;
 pub mod wav;
+pub mod zarr;
 
 use std::path::PathBuf;
 

@@ -5,6 +5,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::LoadError;
+use super::frames::frame_dimensions;
+use super::limits::{MAX_FRAMES_PER_GROUP, MAX_GROUPS, read_toml_text};
 
 /// The scan format version this build reads and writes.
 pub const FORMAT_VERSION: u32 = 1;
@@ -146,10 +148,7 @@ impl ScanMeta {
     /// # Errors
     /// [`LoadError`] when the file cannot be read or is invalid.
     pub fn load(path: &Path) -> Result<Self, LoadError> {
-        let text = std::fs::read_to_string(path).map_err(|e| LoadError::Io {
-            problem: format!("cannot read scan metadata: {e}"),
-            path: path.to_path_buf(),
-        })?;
+        let text = read_toml_text(path, "scan metadata")?;
         Self::from_toml_str(&text, path)
     }
 
@@ -212,6 +211,48 @@ impl ScanMeta {
         Ok(())
     }
 
+    /// Checks the metadata against what the scan folder holds: `groups` group folders whose
+    /// first frame is `frame_size` (width, height) px. A per-group list must have one entry a
+    /// group, the glass edge must lie inside the frame, and the group step must be at most the
+    /// stretch of groove a group's samples cover (its width less the stitcher's margins), or
+    /// consecutive groups would leave gaps in the sound.
+    ///
+    /// # Errors
+    /// A sentence naming the key and both numbers.
+    pub fn check_against_scan(
+        &self,
+        groups: usize,
+        frame_size: (usize, usize),
+    ) -> Result<(), String> {
+        if let Some(radii) = &self.record.group_radius_mm
+            && radii.len() != groups
+        {
+            return Err(format!(
+                "record.group_radius_mm has {} entries but the scan has {groups} groups",
+                radii.len()
+            ));
+        }
+        let (width, height) = frame_size;
+        if let Some(df) = &self.dual_focus {
+            let last_row = height.saturating_sub(1) as f64;
+            if df.glass_edge_row > last_row {
+                return Err(format!(
+                    "dual_focus.glass_edge_row = {} lies outside the frame, whose last row is {last_row} ({height} rows)",
+                    df.glass_edge_row
+                ));
+            }
+        }
+        let margin_px = crate::pipeline::sampling::SAMPLE_MARGIN_PX;
+        let view_um = (width as f64 - 1.0 - 2.0 * margin_px) * self.camera.pixel_pitch_um;
+        if groups > 1 && self.motion.group_step_um > view_um {
+            return Err(format!(
+                "motion.group_step_um = {} µm is longer than the {view_um:.2} µm a group's frames are sampled over ({width} px of {} µm less the stitcher's {margin_px} px margin each side), so consecutive groups would not overlap and the sound would have gaps",
+                self.motion.group_step_um, self.camera.pixel_pitch_um
+            ));
+        }
+        Ok(())
+    }
+
     /// Camera geometry derived from the metadata, for the stages.
     #[must_use]
     pub fn geometry(&self) -> Geometry {
@@ -261,15 +302,35 @@ impl Geometry {
     }
 }
 
-/// One group folder: its index, folder and sorted frame files.
+/// One group: its index, folder and sorted frame files, or its chunk in a Zarr store.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GroupEntry {
     /// Position in the scan, from 0.
     pub index: usize,
-    /// The group folder.
+    /// The group folder (in a Zarr store: the store joined with the group's name, which
+    /// names the group in messages).
     pub dir: PathBuf,
-    /// Frame files sorted by name.
+    /// Frame files sorted by name (empty in a Zarr store).
     pub frames: Vec<PathBuf>,
+    /// Where the frames are in a Zarr store (None for a scan folder).
+    pub zarr: Option<super::zarr::ZarrGroup>,
+}
+
+impl GroupEntry {
+    /// Frames in the group.
+    #[must_use]
+    pub fn frame_count(&self) -> usize {
+        self.zarr.as_ref().map_or(self.frames.len(), |z| z.frames)
+    }
+
+    /// The group's name: its folder's name.
+    #[must_use]
+    pub fn name(&self) -> String {
+        self.dir.file_name().map_or_else(
+            || self.index.to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        )
+    }
 }
 
 /// An opened scan: metadata plus the list of groups. Frames are read on demand.
@@ -291,30 +352,47 @@ fn is_frame_file(p: &Path) -> bool {
         .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "tif" | "tiff"))
 }
 
-fn sorted_entries(dir: &Path) -> Result<Vec<PathBuf>, LoadError> {
-    let rd = std::fs::read_dir(dir).map_err(|e| LoadError::Io {
+/// The entries of `dir` that pass `keep`, sorted by name; more than `limit` of them is refused.
+fn sorted_entries(
+    dir: &Path,
+    keep: impl Fn(&Path) -> bool,
+    limit: usize,
+    what: &str,
+) -> Result<Vec<PathBuf>, LoadError> {
+    let list_err = |e: std::io::Error| LoadError::Io {
         problem: format!("cannot list folder: {e}"),
         path: dir.to_path_buf(),
-    })?;
+    };
+    let rd = std::fs::read_dir(dir).map_err(list_err)?;
     let mut out = Vec::new();
     for entry in rd {
-        let entry = entry.map_err(|e| LoadError::Io {
-            problem: format!("cannot list folder: {e}"),
-            path: dir.to_path_buf(),
-        })?;
-        out.push(entry.path());
+        let path = entry.map_err(list_err)?.path();
+        if !keep(&path) {
+            continue;
+        }
+        if out.len() == limit {
+            return Err(LoadError::NotAScan {
+                problem: format!("the folder holds more than {limit} {what}, past the limit"),
+                path: dir.to_path_buf(),
+            });
+        }
+        out.push(path);
     }
     out.sort();
     Ok(out)
 }
 
 impl Scan {
-    /// Opens a scan folder: reads `scan.toml` and lists the groups and their frames.
+    /// Opens a scan: a folder (reads `scan.toml` and lists the groups and their frames) or a
+    /// Zarr store made by `groovescope pack` (a folder holding `zarr.json`).
     ///
     /// # Errors
     /// [`LoadError`] when the folder is not a scan, the metadata is invalid, there are no
     /// groups, or a group holds fewer than [`MIN_FRAMES_PER_GROUP`] frames.
     pub fn open(dir: &Path) -> Result<Self, LoadError> {
+        if dir.join("zarr.json").is_file() {
+            return super::zarr::open_scan(dir);
+        }
         if !dir.is_dir() {
             return Err(LoadError::NotAScan {
                 problem: "no such folder".into(),
@@ -330,14 +408,13 @@ impl Scan {
         }
         let meta = ScanMeta::load(&meta_path)?;
         let mut groups = Vec::new();
-        for path in sorted_entries(dir)? {
-            if !path.is_dir() {
-                continue;
-            }
-            let frames: Vec<PathBuf> = sorted_entries(&path)?
-                .into_iter()
-                .filter(|p| p.is_file() && is_frame_file(p))
-                .collect();
+        for path in sorted_entries(dir, Path::is_dir, MAX_GROUPS, "group folders")? {
+            let frames = sorted_entries(
+                &path,
+                |p| p.is_file() && is_frame_file(p),
+                MAX_FRAMES_PER_GROUP,
+                "frames",
+            )?;
             if frames.len() < MIN_FRAMES_PER_GROUP {
                 return Err(LoadError::TooFewFrames {
                     found: frames.len(),
@@ -349,14 +426,21 @@ impl Scan {
                 index: groups.len(),
                 dir: path,
                 frames,
+                zarr: None,
             });
         }
-        if groups.is_empty() {
+        let Some(first) = groups.first().and_then(|g| g.frames.first()) else {
             return Err(LoadError::NotAScan {
                 problem: "the scan holds no group folders with frames".into(),
                 path: dir.to_path_buf(),
             });
-        }
+        };
+        let frame_size = frame_dimensions(first)?;
+        meta.check_against_scan(groups.len(), frame_size)
+            .map_err(|problem| LoadError::Metadata {
+                problem,
+                path: meta_path.clone(),
+            })?;
         let reference = Some(dir.join("reference.wav")).filter(|p| p.is_file());
         Ok(Self {
             dir: dir.to_path_buf(),

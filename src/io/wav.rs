@@ -4,6 +4,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use super::limits::MAX_WAV_SAMPLES;
 use super::{LoadError, atomic::write_atomic_with};
 
 /// Sample encoding of an exported WAV file.
@@ -80,14 +81,34 @@ impl Audio {
 /// Reads a WAV file (any integer depth or 32-bit float) into `[-1, 1]` floats.
 ///
 /// # Errors
-/// [`LoadError::Sound`] naming the file when it is missing, not WAV, unsupported or empty.
+/// [`LoadError::Sound`] naming the file when it is missing, not WAV, unsupported, empty or
+/// longer than [`MAX_WAV_SAMPLES`].
 pub fn read_wav(path: &Path) -> Result<Audio, LoadError> {
+    let file = std::fs::File::open(path).map_err(|e| LoadError::Sound {
+        problem: format!("cannot read WAV: {e}"),
+        path: path.to_path_buf(),
+    })?;
+    read_wav_from(std::io::BufReader::new(file), path)
+}
+
+/// Reads WAV data from `source` (see [`read_wav`]); `path` names it in errors. The sample
+/// count in the header is checked against [`MAX_WAV_SAMPLES`] before samples are read.
+///
+/// # Errors
+/// As [`read_wav`].
+pub fn read_wav_from(source: impl std::io::Read, path: &Path) -> Result<Audio, LoadError> {
     let err = |problem: String| LoadError::Sound {
         problem,
         path: path.to_path_buf(),
     };
     let mut reader =
-        hound::WavReader::open(path).map_err(|e| err(format!("cannot read WAV: {e}")))?;
+        hound::WavReader::new(source).map_err(|e| err(format!("cannot read WAV: {e}")))?;
+    let samples = u64::from(reader.len());
+    if samples > MAX_WAV_SAMPLES {
+        return Err(err(format!(
+            "the WAV header announces {samples} samples, past the limit of {MAX_WAV_SAMPLES}"
+        )));
+    }
     let spec = reader.spec();
     if spec.channels == 0 || spec.sample_rate == 0 {
         return Err(err(

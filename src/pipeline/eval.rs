@@ -83,21 +83,27 @@ pub fn pearson(a: &[f32], b: &[f32]) -> f64 {
     }
 }
 
-/// Peak envelope used by [`Scores::envelope_r`]: |x| is reduced to its maximum over
-/// consecutive blocks of `window` samples (the last block may be shorter), then each block peak
-/// is replaced by the mean of itself and its neighbour blocks (a 3-block moving average).
-/// One value per block.
+/// Peak |x| over consecutive blocks of `block` samples (the last block may be shorter),
+/// non-finite samples left out: one value per block.
+#[must_use]
+pub fn block_peaks(samples: &[f32], block: usize) -> Vec<f32> {
+    samples
+        .chunks(block.max(1))
+        .map(|c| {
+            c.iter().fold(
+                0.0_f32,
+                |m, v| if v.is_finite() { m.max(v.abs()) } else { m },
+            )
+        })
+        .collect()
+}
+
+/// Peak envelope used by [`Scores::envelope_r`]: the [`block_peaks`] of blocks of `window`
+/// samples, each replaced by the mean of itself and its neighbour blocks (a 3-block moving
+/// average). One value per block.
 #[must_use]
 pub fn peak_envelope(samples: &[f32], window: usize) -> Vec<f32> {
-    let window = window.max(1);
-    let peaks: Vec<f32> = samples
-        .chunks(window)
-        .map(|c| {
-            c.iter()
-                .map(|v| if v.is_finite() { v.abs() } else { 0.0 })
-                .fold(0.0f32, f32::max)
-        })
-        .collect();
+    let peaks = block_peaks(samples, window);
     let n = peaks.len();
     (0..n)
         .map(|k| {

@@ -1,263 +1,167 @@
-//! One-line documentation of every pipeline knob, printed by `groovescope params` and shown as GUI tooltips.
+//! One-line documentation of every pipeline knob, the one source of it: printed by `groovescope params`, shown as GUI tooltips and made the params fields' doc comments.
 
-/// `(table.key, what it does)` for every key of [`super::PipelineParams`]; a test keeps it complete.
-pub const KNOB_DOCS: &[(&str, &str)] = &[
-    (
-        "path",
-        "reconstruction path: auto (dual focus when scan.toml has [dual_focus]), depth, dual_focus",
-    ),
-    (
-        "derivatives.mode",
-        "simoncelli: 7-frame pre-blur + p5/d5 filters; two_frame: simple differences of frame pairs",
-    ),
-    (
-        "derivatives.prewarp",
-        "shift frames back by the known land motion before filtering (keeps steps > 1 px linear)",
-    ),
-    (
-        "flow.method",
-        "groove_horn_schunck (with ∂u/∂y = −u/(c·f) on the walls), horn_schunck, lucas_kanade",
-    ),
-    (
-        "flow.solver",
-        "gauss_seidel or jacobi iteration for the Horn–Schunck variants",
-    ),
-    (
-        "flow.lambda",
-        "smoothness weight λ (α); larger = smoother flow",
-    ),
-    (
-        "flow.max_iterations",
-        "iteration cap (paper: 100; the groove method's wall-estimating plain pass keeps its own cap of at least that)",
-    ),
-    (
-        "flow.tolerance_px",
-        "convergence threshold τ on the mean flow update, px (the groove method's wall-estimating plain pass keeps its own, tighter threshold)",
-    ),
-    (
-        "flow.gradient_threshold",
-        "pixels with a weaker gradient carry no flow (grey levels per px)",
-    ),
-    ("flow.lk_window_px", "Lucas–Kanade window side, px (odd)"),
-    (
-        "depth.kalman",
-        "run the Barron–Ngai–Spies Kalman filter (false: average per-frame depths)",
-    ),
-    (
-        "depth.process_noise",
-        "Kalman process noise of the planar-orientation state, per frame",
-    ),
-    (
-        "depth.measurement_noise_px2",
-        "Kalman measurement noise of one flow value, px²",
-    ),
-    (
-        "depth.median_px",
-        "side of the median filter on the state µ (paper: 5)",
-    ),
-    (
-        "depth.min_confidence",
-        "flow values with lower confidence are ignored",
-    ),
-    (
-        "walls.method",
-        "depth_levels: bands between the land and bottom depth levels about each wall's mid-depth crossing; slope_runs: runs of rows steeper than min_slope",
-    ),
-    (
-        "walls.min_slope",
-        "|∂Z/∂Y| above this marks a wall pixel (45° walls give 1); depth_levels: least mean slope of a wall band",
-    ),
-    (
-        "walls.trim_px",
-        "rows trimmed from each end of a wall band, px",
-    ),
-    (
-        "hough.gradient_threshold",
-        "in-focus pixels have a gradient magnitude above this",
-    ),
-    (
-        "hough.theta_min_deg",
-        "start of the θ range of the Hough transform, degrees",
-    ),
-    ("hough.theta_max_deg", "end of the θ range, degrees"),
-    (
-        "hough.theta_step_deg",
-        "θ bin width, degrees (coarser is faster)",
-    ),
-    (
-        "hough.rho_step_px",
-        "ρ bin width, px (ρ runs from 0 to the image height)",
-    ),
-    ("hough.peak_count", "peaks searched for (paper: 3)"),
-    (
-        "hough.window_theta_deg",
-        "half-width of a peak's window in θ, degrees",
-    ),
-    (
-        "hough.window_rho_px",
-        "half-width of a peak's window in ρ, px",
-    ),
-    (
-        "hough.line_smoothing_px",
-        "moving-average half-width of the centroid lines, px",
-    ),
-    (
-        "orientation.robust",
-        "Lorentzian M-estimator (false: plain least squares)",
-    ),
-    (
-        "orientation.neighbourhood_px",
-        "side of the fitting neighbourhood about each sample on a wall line, px (paper: 100)",
-    ),
-    (
-        "orientation.sigma_start_um",
-        "starting Lorentzian scale σ, µm of residual",
-    ),
-    (
-        "orientation.sigma_decay",
-        "σ is multiplied by this each round (0 < f ≤ 1)",
-    ),
-    ("orientation.sigma_min_um", "σ never falls below this, µm"),
-    (
-        "orientation.residual_tolerance_um",
-        "τ1: stop when the weighted mean residual falls below this, µm",
-    ),
-    (
-        "orientation.divergence_factor",
-        "τ2: stop (diverged) when the residual grows by more than this factor",
-    ),
-    (
-        "orientation.max_iterations",
-        "iteration cap of the robust fit",
-    ),
-    (
-        "orientation.outlier_sigmas",
-        "residuals beyond this many σ count as outliers in the report",
-    ),
-    (
-        "orientation.max_wall_slope_change",
-        "reject a fit whose cross-groove wall slope strays from the group's median by more than this fraction (0 = off)",
-    ),
-    (
-        "sound.output_rate_hz",
-        "output sample rate, Hz (44100 or 48000)",
-    ),
-    (
-        "sound.native_spacing_um",
-        "spacing of the native samples along the groove, µm (0: one output sample)",
-    ),
-    (
-        "sound.normalize_peak",
-        "peak level after normalisation (0 < p ≤ 1); 0 scales velocity by full_scale_mm_s",
-    ),
-    (
-        "sound.full_scale_mm_s",
-        "groove velocity mapped to full scale when not normalising, mm/s",
-    ),
-    ("dsp.lowpass", "apply the 2nd-order Butterworth low-pass"),
-    ("dsp.lowpass_hz", "its −3 dB cutoff, Hz"),
-    ("dsp.eq", "playback EQ: flat, riaa, turnover500"),
-    (
-        "flow.groove_weight",
-        "weight γ of the groove-orientation penalty, as a multiple of λ",
-    ),
-    (
-        "flow.sor_omega",
-        "over-relaxation ω of Gauss–Seidel (1 = plain; 1 < ω < 2 converges faster); Jacobi ignores it",
-    ),
-    (
-        "depth.neighbourhood_px",
-        "side of the neighbourhood whose flows measure each pixel's plane (odd, px)",
-    ),
-    (
-        "walls.smooth_px",
-        "half-side of the box smoothing the depth map before differencing, px",
-    ),
-    (
-        "walls.column_window_px",
-        "columns over which the median wall band is taken (odd, px)",
-    ),
-    (
-        "hough.min_votes_per_column",
-        "a peak needs this many votes per image column",
-    ),
-    (
-        "hough.min_peak_ratio",
-        "a peak needs this fraction of the strongest peak's votes",
-    ),
-    (
-        "hough.peak_rho_band_px",
-        "find peaks on votes summed over ±this many ρ px (0 = plain Hough), for wiggling stripes",
-    ),
-    (
-        "hough.max_vote_points",
-        "at most this many in-focus pixels vote (0 = all); beyond it every k-th votes",
-    ),
-    (
-        "dsp.dc_block",
-        "apply a first-order DC-blocking high-pass first (per-group tilt bias becomes DC)",
-    ),
-    ("dsp.dc_block_hz", "its −3 dB corner, Hz"),
-    (
-        "still.block_lines",
-        "still images: lines per detection block (its median cross profile finds the grooves)",
-    ),
-    (
-        "still.max_groove_width_um",
-        "widest groove looked for, µm (sets the window of the local light levels)",
-    ),
-    (
-        "still.min_wall_width_um",
-        "narrowest wall looked for, µm (never under 1.5 px)",
-    ),
-    ("still.walls", "dark (walls darker than the land) or bright"),
-    (
-        "still.min_contrast",
-        "smallest wall contrast, as a share of the local bright level",
-    ),
-    (
-        "still.max_gap_blocks",
-        "blocks a groove may be lost for (text, damage) and still be followed",
-    ),
-    (
-        "still.min_track_blocks",
-        "fewest blocks a groove must be found in",
-    ),
-    (
-        "still.search_share",
-        "half-width of each border's search about its prediction, as a share of its wall's width",
-    ),
-    (
-        "still.outlier_sigmas",
-        "a border this many robust σ from what the other borders say is an outlier",
-    ),
-    (
-        "still.path_window_um",
-        "groove length over which the slow path (skew, curvature, drift) is fitted as a quadratic and taken out, µm",
-    ),
-    (
-        "still.wall_angle_deg",
-        "wall angle from the record plane (stereo: border motion × sin of it = channel)",
-    ),
-    (
-        "still.border.fit_half_window_px",
-        "half-width of the profile stretch the edge-spread fit reads, px",
-    ),
-    (
-        "still.border.min_width_px",
-        "smallest edge-spread σ the fit may take, px",
-    ),
-    ("still.border.max_width_px", "largest edge-spread σ, px"),
-    (
-        "still.border.min_contrast",
-        "smallest step between the fitted levels (grey level, 1 = full scale)",
-    ),
-    ("still.border.max_iterations", "iteration cap of the fit"),
-    (
-        "still.border.tolerance_px",
-        "the fit stops when the position moves by less than this, px",
-    ),
-];
+/// Defines [`KNOB_DOCS`] and `knob!`, which gives a key's line as a string literal for the doc
+/// comment of its params field: the table is the one source of every knob's documentation.
+macro_rules! knob_docs {
+    ($($key:tt => $doc:tt,)*) => {
+        /// `(table.key, what it does)` for every key of [`super::PipelineParams`], read by the TOML
+        /// writer and the workbench's tooltips, and through `knob!` by the fields' doc comments; a
+        /// test keeps it complete.
+        pub const KNOB_DOCS: &[(&str, &str)] = &[$(($key, $doc)),*];
+
+        /// The documentation line of a knob (`table.key`) as a string literal.
+        macro_rules! knob {
+            $(($key) => { $doc };)*
+        }
+    };
+}
+
+knob_docs! {
+    "path"
+        => "reconstruction path: auto (dual focus when scan.toml has [dual_focus]), depth, dual_focus",
+    "derivatives.mode"
+        => "simoncelli: 7-frame pre-blur + p5/d5 filters; two_frame: simple differences of frame pairs",
+    "derivatives.prewarp"
+        => "shift frames back by the known land motion before filtering (keeps steps > 1 px linear)",
+    "flow.method"
+        => "groove_horn_schunck (with ∂u/∂y = −u/(c·f) on the walls), horn_schunck, lucas_kanade",
+    "flow.solver"
+        => "gauss_seidel or jacobi iteration for the Horn–Schunck variants",
+    "flow.lambda"
+        => "smoothness weight λ (α); larger = smoother flow",
+    "flow.max_iterations"
+        => "iteration cap (paper: 100; the groove method's wall-estimating plain pass keeps its own cap of at least that)",
+    "flow.tolerance_px"
+        => "convergence threshold τ on the mean flow update, px (the groove method's wall-estimating plain pass keeps its own, tighter threshold)",
+    "flow.gradient_threshold"
+        => "pixels with a weaker gradient carry no flow (grey levels per px)",
+    "flow.lk_window_px"
+        => "Lucas–Kanade window side, px (odd)",
+    "depth.kalman"
+        => "run the Barron–Ngai–Spies Kalman filter (false: average per-frame depths)",
+    "depth.process_noise"
+        => "Kalman process noise of the planar-orientation state, per frame",
+    "depth.measurement_noise_px2"
+        => "Kalman measurement noise of one flow value, px²",
+    "depth.median_px"
+        => "side of the median filter on the state µ (paper: 5)",
+    "depth.min_confidence"
+        => "flow values with lower confidence are ignored",
+    "walls.method"
+        => "depth_levels: bands between the land and bottom depth levels about each wall's mid-depth crossing; slope_runs: runs of rows steeper than min_slope",
+    "walls.min_slope"
+        => "|∂Z/∂Y| above this marks a wall pixel (45° walls give 1); depth_levels: least mean slope of a wall band",
+    "walls.trim_px"
+        => "rows trimmed from each end of a wall band, px",
+    "hough.gradient_threshold"
+        => "in-focus pixels have a gradient magnitude above this",
+    "hough.theta_min_deg"
+        => "start of the θ range of the Hough transform, degrees",
+    "hough.theta_max_deg"
+        => "end of the θ range, degrees",
+    "hough.theta_step_deg"
+        => "θ bin width, degrees (coarser is faster)",
+    "hough.rho_step_px"
+        => "ρ bin width, px (ρ runs from 0 to the image height)",
+    "hough.peak_count"
+        => "peaks searched for (paper: 3)",
+    "hough.window_theta_deg"
+        => "half-width of a peak's window in θ, degrees",
+    "hough.window_rho_px"
+        => "half-width of a peak's window in ρ, px",
+    "hough.line_smoothing_px"
+        => "moving-average half-width of the centroid lines, px",
+    "orientation.robust"
+        => "Lorentzian M-estimator (false: plain least squares)",
+    "orientation.neighbourhood_px"
+        => "side of the fitting neighbourhood about each sample on a wall line, px (paper: 100)",
+    "orientation.sigma_start_um"
+        => "starting Lorentzian scale σ, µm of residual",
+    "orientation.sigma_decay"
+        => "σ is multiplied by this each round (0 < f ≤ 1)",
+    "orientation.sigma_min_um"
+        => "σ never falls below this, µm",
+    "orientation.residual_tolerance_um"
+        => "τ1: stop when the weighted mean residual falls below this, µm",
+    "orientation.divergence_factor"
+        => "τ2: stop (diverged) when the residual grows by more than this factor",
+    "orientation.max_iterations"
+        => "iteration cap of the robust fit",
+    "orientation.outlier_sigmas"
+        => "residuals beyond this many σ count as outliers in the report",
+    "orientation.max_wall_slope_change"
+        => "reject a fit whose cross-groove wall slope strays from the group's median by more than this fraction (0 = off)",
+    "sound.output_rate_hz"
+        => "output sample rate, Hz (44100 or 48000)",
+    "sound.native_spacing_um"
+        => "spacing of the native samples along the groove, µm (0: one output sample)",
+    "sound.normalize_peak"
+        => "peak level after normalisation (0 < p ≤ 1); 0 scales velocity by full_scale_mm_s",
+    "sound.full_scale_mm_s"
+        => "groove velocity mapped to full scale when not normalising, mm/s",
+    "dsp.lowpass"
+        => "apply the 2nd-order Butterworth low-pass",
+    "dsp.lowpass_hz"
+        => "its −3 dB cutoff, Hz",
+    "dsp.eq"
+        => "playback EQ: flat, riaa, turnover500",
+    "flow.groove_weight"
+        => "weight γ of the groove-orientation penalty, as a multiple of λ",
+    "flow.sor_omega"
+        => "over-relaxation ω of Gauss–Seidel (1 = plain; 1 < ω < 2 converges faster); Jacobi ignores it",
+    "depth.neighbourhood_px"
+        => "side of the neighbourhood whose flows measure each pixel's plane (odd, px)",
+    "walls.smooth_px"
+        => "half-side of the box smoothing the depth map before differencing, px",
+    "walls.column_window_px"
+        => "columns over which the median wall band is taken (odd, px)",
+    "hough.min_votes_per_column"
+        => "a peak needs this many votes per image column",
+    "hough.min_peak_ratio"
+        => "a peak needs this fraction of the strongest peak's votes",
+    "hough.peak_rho_band_px"
+        => "find peaks on votes summed over ±this many ρ px (0 = plain Hough), for wiggling stripes",
+    "hough.max_vote_points"
+        => "at most this many in-focus pixels vote (0 = all); beyond it every k-th votes",
+    "dsp.dc_block"
+        => "apply a first-order DC-blocking high-pass first (per-group tilt bias becomes DC)",
+    "dsp.dc_block_hz"
+        => "its −3 dB corner, Hz",
+    "still.block_lines"
+        => "still images: lines per detection block (its median cross profile finds the grooves)",
+    "still.max_groove_width_um"
+        => "widest groove looked for, µm (sets the window of the local light levels)",
+    "still.min_wall_width_um"
+        => "narrowest wall looked for, µm (never under 1.5 px)",
+    "still.walls"
+        => "dark (walls darker than the land) or bright",
+    "still.min_contrast"
+        => "smallest wall contrast, as a share of the local bright level",
+    "still.max_gap_blocks"
+        => "blocks a groove may be lost for (text, damage) and still be followed",
+    "still.min_track_blocks"
+        => "fewest blocks a groove must be found in",
+    "still.search_share"
+        => "half-width of each border's search about its prediction, as a share of its wall's width",
+    "still.outlier_sigmas"
+        => "a border this many robust σ from what the other borders say is an outlier",
+    "still.path_window_um"
+        => "groove length over which the slow path (skew, curvature, drift) is fitted as a quadratic and taken out, µm",
+    "still.wall_angle_deg"
+        => "wall angle from the record plane (stereo: border motion × sin of it = channel)",
+    "still.border.fit_half_window_px"
+        => "half-width of the profile stretch the edge-spread fit reads, px",
+    "still.border.min_width_px"
+        => "smallest edge-spread σ the fit may take, px",
+    "still.border.max_width_px"
+        => "largest edge-spread σ, px",
+    "still.border.min_contrast"
+        => "smallest step between the fitted levels (grey level, 1 = full scale)",
+    "still.border.max_iterations"
+        => "iteration cap of the fit",
+    "still.border.tolerance_px"
+        => "the fit stops when the position moves by less than this, px",
+}
 
 /// The documentation line of `key` (`table.key`), if any.
 #[must_use]

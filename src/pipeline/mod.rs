@@ -1,5 +1,9 @@
 //! The reconstruction pipeline: pure per-group stages (no I/O, no GUI) and the stage cache both front ends share.
 
+// First, so that `knob!` (the knob docs) is in scope for the stages' params.
+#[macro_use]
+pub mod knobs;
+
 pub mod audio_signal;
 pub mod cache;
 pub mod depth;
@@ -7,10 +11,14 @@ pub mod derivatives;
 pub mod dsp;
 pub mod edges;
 pub mod eval;
+pub mod finish;
+pub mod graph;
 pub mod hough;
-pub mod knobs;
 pub mod optical_flow;
 pub mod orientation;
+pub mod sampling;
+pub mod simd;
+pub mod slope_reference;
 pub mod still;
 pub mod walls;
 
@@ -73,56 +81,6 @@ use optical_flow::FlowParams;
 use orientation::OrientationParams;
 use walls::WallParams;
 
-/// The per-group stages, in the order they run. A change to one makes it and every later stage stale.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Stage {
-    /// Ix, Iy, It of every 7-frame window (dual-focus path: the middle window only, the one
-    /// its stripes are read from).
-    Derivatives,
-    /// Optical flow of every derivative set.
-    Flow,
-    /// Kalman depth map and wall lines (depth path).
-    Depth,
-    /// In-focus map, Hough accumulator, stripes and centroid lines (dual-focus path).
-    Stripes,
-    /// Robust wall orientation per sample column.
-    Orientation,
-    /// Velocity samples of the group.
-    Sound,
-}
-
-impl Stage {
-    /// Every stage in run order.
-    pub const ALL: [Stage; 6] = [
-        Stage::Derivatives,
-        Stage::Flow,
-        Stage::Depth,
-        Stage::Stripes,
-        Stage::Orientation,
-        Stage::Sound,
-    ];
-
-    /// Position in [`Stage::ALL`].
-    #[must_use]
-    pub fn index(self) -> usize {
-        self as usize
-    }
-
-    /// Human-readable name.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Stage::Derivatives => "derivatives",
-            Stage::Flow => "flow",
-            Stage::Depth => "depth",
-            Stage::Stripes => "stripes",
-            Stage::Orientation => "orientation",
-            Stage::Sound => "sound",
-        }
-    }
-}
-
 /// Which reconstruction path runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
@@ -140,7 +98,9 @@ pub enum PathChoice {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]
 pub struct PipelineParams {
-    /// Reconstruction path.
+    // The line names the `[dual_focus]` table of scan.toml, not an item.
+    #[allow(rustdoc::broken_intra_doc_links)]
+    #[doc = knob!("path")]
     pub path: PathChoice,
     /// Derivative stage.
     pub derivatives: DerivativeParams,
@@ -179,24 +139,14 @@ impl PipelineParams {
         toml::to_string_pretty(self)
     }
 
-    /// The earliest stage whose params differ between `self` and `other` (None when equal).
+    /// The earliest stage (in [`Stage::ALL`] order) that reads a knob that differs between
+    /// `self` and `other` (None when none does).
     #[must_use]
     pub fn first_changed_stage(&self, other: &Self) -> Option<Stage> {
-        if self.path != other.path || self.derivatives != other.derivatives {
-            Some(Stage::Derivatives)
-        } else if self.flow != other.flow {
-            Some(Stage::Flow)
-        } else if self.depth != other.depth || self.walls != other.walls {
-            Some(Stage::Depth)
-        } else if self.hough != other.hough {
-            Some(Stage::Stripes)
-        } else if self.orientation != other.orientation {
-            Some(Stage::Orientation)
-        } else if self.sound != other.sound {
-            Some(Stage::Sound)
-        } else {
-            None
-        }
+        graph::GRAPH
+            .iter()
+            .find(|spec| (spec.knobs_changed)(self, other))
+            .map(|spec| spec.stage)
     }
 
     /// True when the dual-focus path runs for a scan with this metadata.
@@ -209,76 +159,25 @@ impl PipelineParams {
         }
     }
 
-    /// Checks every number for NaN and sign (the stages check their own ranges too).
+    /// Checks every knob: each stage's table through its params' `validate` (the same checks
+    /// the stages make).
     ///
     /// # Errors
     /// [`StageError::InvalidParam`] naming the first bad key.
     pub fn validate(&self) -> Result<(), StageError> {
-        check_range("flow.lambda", f64::from(self.flow.lambda), 1e-12, 1e12)?;
-        check_range(
-            "flow.tolerance_px",
-            f64::from(self.flow.tolerance_px),
-            0.0,
-            1e3,
-        )?;
-        check_range(
-            "flow.gradient_threshold",
-            f64::from(self.flow.gradient_threshold),
-            0.0,
-            1e6,
-        )?;
-        if self.flow.max_iterations == 0 {
-            return Err(StageError::InvalidParam {
-                name: "flow.max_iterations".into(),
-                problem: "must be at least 1".into(),
-            });
-        }
-        check_range(
-            "depth.process_noise",
-            f64::from(self.depth.process_noise),
-            0.0,
-            1e12,
-        )?;
-        check_range(
-            "depth.measurement_noise_px2",
-            f64::from(self.depth.measurement_noise_px2),
-            1e-30,
-            1e12,
-        )?;
-        check_range(
-            "depth.min_confidence",
-            f64::from(self.depth.min_confidence),
-            0.0,
-            1e12,
-        )?;
-        check_range("walls.min_slope", f64::from(self.walls.min_slope), 0.0, 1e6)?;
-        orientation::validate(&self.orientation)?;
-        let s = &self.sound;
-        if !matches!(s.output_rate_hz, 8_000..=192_000) {
-            return Err(StageError::InvalidParam {
-                name: "sound.output_rate_hz".into(),
-                problem: format!(
-                    "{} Hz is not a usable rate (8000..192000)",
-                    s.output_rate_hz
-                ),
-            });
-        }
-        check_range("sound.native_spacing_um", s.native_spacing_um, 0.0, 1e6)?;
-        check_range(
-            "sound.normalize_peak",
-            f64::from(s.normalize_peak),
-            0.0,
-            1.0,
-        )?;
-        check_range("sound.full_scale_mm_s", s.full_scale_mm_s, 1e-9, 1e9)?;
-        check_range("dsp.lowpass_hz", self.dsp.lowpass_hz, 1.0, 1e6)?;
-        hough::validate_params(&self.hough)?;
-        self.still.validate()?;
-        Ok(())
+        self.flow.validate()?;
+        self.depth.validate()?;
+        self.walls.validate()?;
+        self.orientation.validate()?;
+        self.sound.validate()?;
+        self.dsp.validate()?;
+        self.hough.validate()?;
+        self.still.validate()
     }
 }
 
-pub use cache::{FlowDetail, GroupInput, StageCache};
+pub use cache::{GroupInput, StageCache};
+pub use graph::{DepthOutput, FlowDetail, OrientationOutput, Stage, frames_read};
 
 /// The `lo` and `hi` quantiles (0–1) of the finite values, from at most about `samples` of them
 /// taken at an even stride; None when none is finite.
@@ -298,12 +197,42 @@ pub fn sampled_quantiles(values: &[f32], lo: f64, hi: f64, samples: usize) -> Op
     Some((a, b))
 }
 
-/// The median of `v` (the upper one of an even count); None when empty. NaN sorts last.
-pub(crate) fn median(mut v: Vec<f64>) -> Option<f64> {
+/// Values a median is taken of: a total order (floats by `total_cmp`, so NaN sorts last).
+pub(crate) trait TotalOrder: Copy {
+    /// The order.
+    fn total_order(&self, other: &Self) -> std::cmp::Ordering;
+}
+
+impl TotalOrder for f32 {
+    fn total_order(&self, other: &Self) -> std::cmp::Ordering {
+        self.total_cmp(other)
+    }
+}
+
+impl TotalOrder for f64 {
+    fn total_order(&self, other: &Self) -> std::cmp::Ordering {
+        self.total_cmp(other)
+    }
+}
+
+impl TotalOrder for usize {
+    fn total_order(&self, other: &Self) -> std::cmp::Ordering {
+        self.cmp(other)
+    }
+}
+
+/// The median of `v` (the upper one of an even count), by selection, reordering `v`; None
+/// when empty. The one median of the pipeline: every stage's medians call it.
+pub(crate) fn median_in_place<T: TotalOrder>(v: &mut [T]) -> Option<T> {
     if v.is_empty() {
         return None;
     }
     let mid = v.len() / 2;
-    let (_, &mut m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    let (_, &mut m, _) = v.select_nth_unstable_by(mid, T::total_order);
     Some(m)
+}
+
+/// [`median_in_place`] of a vector it takes.
+pub(crate) fn median(mut v: Vec<f64>) -> Option<f64> {
+    median_in_place(&mut v)
 }

@@ -114,7 +114,7 @@ pub fn finish_sound(
             sample_rate_hz: out_rate,
             channels,
         },
-        f64::from(gain),
+        gain,
     ))
 }
 

@@ -18,7 +18,7 @@ pixel_pitch_um = 0.39
 working_distance_mm = 4.0
 [motion]
 frame_step_um = 0.78
-group_step_um = 460.2
+group_step_um = 4.0
 "#;
 
 /// Writes a scan of `groups` groups of `frames` textured frames (`w`×`h`) under `dir`.
@@ -52,4 +52,45 @@ pub fn groovescope(args: &[&str]) -> Output {
 /// Stderr as text.
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A copy of the bundled demo scan (13 dual-focus groups of 7 frames, with `reference.wav`)
+/// in `dir/demo`, for tests that damage or lock it.
+pub fn demo_copy(dir: &Path) -> PathBuf {
+    fn copy_dir(from: &Path, to: &Path) {
+        std::fs::create_dir_all(to).unwrap();
+        for entry in std::fs::read_dir(from).unwrap() {
+            let p = entry.unwrap().path();
+            let dest = to.join(p.file_name().unwrap());
+            if p.is_dir() {
+                copy_dir(&p, &dest);
+            } else {
+                std::fs::copy(&p, &dest).unwrap();
+            }
+        }
+    }
+    let out = dir.join("demo");
+    copy_dir(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo"),
+        &out,
+    );
+    out
+}
+
+/// xorshift64*: a fixed, seedable stream for mutation and monkey tests.
+pub struct Rng(pub u64);
+
+impl Rng {
+    /// The next 64 random bits.
+    pub fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    /// A number in `0..n` (0 when `n` is 0).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
 }

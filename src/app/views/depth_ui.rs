@@ -65,7 +65,7 @@ pub fn depth_ui(
 ) {
     let status = data.status(Stage::Depth).clone();
     stage_banner(ui, Stage::Depth, &status);
-    let Some(depth) = data.cache.depth.clone() else {
+    let Some(depth) = data.cache.depth().cloned() else {
         empty_note(
             ui,
             "no depth map: the depth path has not run (dual-focus scans use stripes instead)",

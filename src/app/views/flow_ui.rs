@@ -30,7 +30,7 @@ pub fn flow_ui(
 ) {
     let status = data.status(Stage::Flow).clone();
     stage_banner(ui, Stage::Flow, &status);
-    let Some(flows) = data.cache.flows.clone() else {
+    let Some(flows) = data.cache.flows().cloned() else {
         empty_note(ui, "no flow yet");
         return;
     };
@@ -92,7 +92,13 @@ pub fn flow_ui(
         };
         (t, None)
     } else {
-        let Some(t) = textures.flow(ui.ctx(), &flows, window, land as f32) else {
+        let Some(t) = textures.flow(
+            ui.ctx(),
+            &flows,
+            data.cache.output_id(Stage::Flow),
+            window,
+            land as f32,
+        ) else {
             return;
         };
         (t.handle.clone(), Some(t.rendered.hi))

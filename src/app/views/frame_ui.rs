@@ -49,7 +49,7 @@ impl StageData<'_> {
     /// The flow field computed on `frame` (or the middle one when none matches).
     #[must_use]
     pub fn flow_for_frame(&self, frame: usize) -> Option<(usize, &FlowField)> {
-        let flows = self.cache.flows.as_ref()?;
+        let flows = self.cache.flows()?;
         flows
             .iter()
             .enumerate()
@@ -79,7 +79,7 @@ impl StageData<'_> {
         {
             s += &format!("  ·  flow ({u:+.4}, {v:+.4}) px/frame");
         }
-        if let Some(z) = self.cache.depth.as_ref().and_then(|d| d.map.z_um.get(x, y)) {
+        if let Some(z) = self.cache.depth().and_then(|d| d.map.z_um.get(x, y)) {
             s += &format!("  ·  depth {z:.2} µm");
         }
         s

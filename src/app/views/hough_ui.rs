@@ -81,7 +81,7 @@ pub fn hough_ui(
     let status = data.status(Stage::Stripes).clone();
     stage_banner(ui, Stage::Stripes, &status);
     hough_controls(ui, draft);
-    let Some(stripes) = data.cache.stripes.clone() else {
+    let Some(stripes) = data.cache.stripes().cloned() else {
         empty_note(
             ui,
             "no Hough accumulator: the dual-focus path has not run (scan without [dual_focus], or path = depth)",

@@ -118,6 +118,7 @@ pub fn stages_ui(
     ui: &mut Ui,
     status: &[StageStatus; 6],
     times: &[Option<Duration>; 6],
+    hide_times: bool,
 ) -> Vec<NavAction> {
     let mut out = Vec::new();
     for s in Stage::ALL {
@@ -125,7 +126,11 @@ pub fn stages_ui(
         ui.horizontal(|ui| {
             ui.colored_label(st.colour(), format!("{}: {}", s.name(), st.word()));
             if let (StageStatus::Fresh, Some(t)) = (st, times[s.index()]) {
-                ui.weak(format!("{:.0} ms", t.as_secs_f64() * 1000.0));
+                if hide_times {
+                    ui.weak("– ms");
+                } else {
+                    ui.weak(format!("{:.0} ms", t.as_secs_f64() * 1000.0));
+                }
             }
             if ui
                 .small_button("rerun")

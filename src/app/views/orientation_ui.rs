@@ -48,7 +48,7 @@ pub fn orientation_ui(
 ) {
     let status = data.status(Stage::Orientation).clone();
     stage_banner(ui, Stage::Orientation, &status);
-    let Some(out) = data.cache.orientation.clone() else {
+    let Some(out) = data.cache.orientation().cloned() else {
         empty_note(ui, "no orientation yet");
         return;
     };
@@ -89,10 +89,10 @@ pub fn orientation_ui(
     let dim = status.dim();
     let lines = data
         .cache
-        .depth
+        .depth()
         .as_ref()
         .map(|d| d.walls.clone())
-        .or_else(|| data.cache.stripes.as_ref().map(|s| s.lines.clone()))
+        .or_else(|| data.cache.stripes().map(|s| s.lines.clone()))
         .unwrap_or_default();
     let resp = image_plot("orientation_weights", (height - plot_h - 70.0).max(100.0)).show(
         ui,

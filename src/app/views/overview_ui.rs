@@ -60,14 +60,20 @@ pub fn overview_ui(
     let mut open = None;
     let cell_h = (height / 2.0 - 40.0).max(80.0);
     let cell_w = (ui.available_width() / 3.0 - 12.0).max(80.0);
-    let dual = data.cache.stripes.is_some();
+    let dual = data.cache.stripes().is_some();
     let frame_tex = data
         .frames
         .and_then(|f| textures.frame(ui.ctx(), data.group, data.frame, f).cloned());
-    let flow_tex = data.cache.flows.clone().and_then(|f| {
+    let flow_tex = data.cache.flows().cloned().and_then(|f| {
         let mid = f.len() / 2;
         textures
-            .flow(ui.ctx(), &f, mid, data.land_flow_px() as f32)
+            .flow(
+                ui.ctx(),
+                &f,
+                data.cache.output_id(Stage::Flow),
+                mid,
+                data.land_flow_px() as f32,
+            )
             .map(|t| t.handle.clone())
     });
     let third = if dual {
@@ -136,7 +142,7 @@ pub fn overview_ui(
                         if let Some(t) = &third {
                             p.image(image_item(name, t, dim));
                         }
-                        if let (false, Some(d)) = (dual, &data.cache.depth) {
+                        if let (false, Some(d)) = (dual, data.cache.depth()) {
                             wall_lines(p, &d.walls, Color32::WHITE);
                         }
                     });
@@ -151,7 +157,7 @@ pub fn overview_ui(
                     &mut open,
                     View::Hough,
                 );
-                match (&acc, &data.cache.stripes) {
+                match (&acc, data.cache.stripes()) {
                     (Some(t), Some(_)) => {
                         let [w, h] = t.size();
                         let dim = data.status(Stage::Stripes).dim();
@@ -191,7 +197,7 @@ pub fn overview_ui(
                 thumb("ov_orientation", cell_h, cell_w)
                     .show_axes(true)
                     .show(ui, |p| {
-                        if let Some(o) = &data.cache.orientation {
+                        if let Some(o) = data.cache.orientation() {
                             for (i, w) in o.orientation.walls.iter().enumerate() {
                                 for (k, seg) in tan_segments(w).into_iter().enumerate() {
                                     p.line(

@@ -41,7 +41,7 @@ pub fn stripes_ui(
 ) {
     let status = data.status(Stage::Stripes).clone();
     stage_banner(ui, Stage::Stripes, &status);
-    let Some(stripes) = data.cache.stripes.clone() else {
+    let Some(stripes) = data.cache.stripes().cloned() else {
         empty_note(
             ui,
             "no stripes: the dual-focus path has not run (scan without [dual_focus], or path = depth)",
@@ -56,7 +56,7 @@ pub fn stripes_ui(
     });
     let frame_index = data
         .cache
-        .derivatives
+        .derivatives()
         .as_ref()
         .and_then(|d| d.get(d.len() / 2))
         .map_or(data.frame, |d| d.frame_index);

@@ -129,3 +129,17 @@ impl GrooveRow<'_> {
         }
     }
 }
+
+/// One [`GrooveRow::fill`], to be compiled for an instruction set.
+pub(super) struct GrooveFill<'a, 'b> {
+    pub(super) row: &'a GrooveRow<'b>,
+    pub(super) out: &'a mut [Vec<f32>; GROOVE_COEFS],
+}
+
+impl Compiled for GrooveFill<'_, '_> {
+    type Output = ();
+    #[inline(always)]
+    fn run(self) {
+        self.row.fill(self.out);
+    }
+}

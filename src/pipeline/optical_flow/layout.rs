@@ -1,6 +1,10 @@
 //! The Horn–Schunck storage: the red–black split of the flow state and the per-pixel factors in blocks of 8 columns.
 
 use super::*;
+pub(super) use crate::pipeline::simd::hs::{
+    GROOVE_COEFS, HalfEdges, HalfRowInputs, LANES, PAIR, PLAIN_COEFS, SolveScalars, update_half_row,
+};
+pub(super) use crate::pipeline::simd::{Aligned, RowWriter, memory::vec_pair_from_rows};
 
 /// Sizes of the red–black split: half-row `E` holds even columns, `O` odd ones. Each half-row
 /// is stored lane-major: its columns are cut into [`LANES`] runs of `m` (the last one padded),
@@ -13,30 +17,34 @@ pub(super) struct Layout {
     pub(super) width: usize,
     pub(super) height: usize,
     /// Even-column count, ⌈w/2⌉.
-    pub(super) ne: usize,
+    pub(super) even_cols: usize,
     /// Odd-column count, ⌊w/2⌋.
-    pub(super) no: usize,
-    /// Vectors per half-row (both halves): ⌈ne/8⌉.
+    pub(super) odd_cols: usize,
+    /// Vectors per half-row (both halves): ⌈even_cols/8⌉.
     pub(super) m: usize,
 }
 
 impl Layout {
     #[inline]
     pub(super) fn new(width: usize, height: usize) -> Self {
-        let ne = width.div_ceil(2);
+        let even_cols = width.div_ceil(2);
         Self {
             width,
             height,
-            ne,
-            no: width / 2,
-            m: ne.div_ceil(LANES),
+            even_cols,
+            odd_cols: width / 2,
+            m: even_cols.div_ceil(LANES),
         }
     }
 
-    /// Columns in half `hp` (0 = even, 1 = odd).
+    /// Columns in half `half` (0 = even, 1 = odd).
     #[inline]
-    pub(super) fn half(&self, hp: usize) -> usize {
-        if hp == 0 { self.ne } else { self.no }
+    pub(super) fn columns_in(&self, half: usize) -> usize {
+        if half == 0 {
+            self.even_cols
+        } else {
+            self.odd_cols
+        }
     }
 
     /// Slots of each of a half-row's u and v (columns and padding).
@@ -58,6 +66,22 @@ impl Layout {
         (i % self.m) * PAIR + i / self.m
     }
 
+    /// Where half `half`'s neighbours in the other half stop being whole vectors.
+    #[inline]
+    pub(super) fn half_edges(&self, half: usize) -> HalfEdges {
+        // The last image column is even (half 0) when the width is odd.
+        let holds_last = (self.width % 2 == 1) == (half == 0);
+        let i = self.columns_in(half).saturating_sub(1);
+        HalfEdges {
+            odd: half == 1,
+            last: if holds_last && self.m > 0 {
+                (i % self.m, i / self.m)
+            } else {
+                (usize::MAX, 0)
+            },
+        }
+    }
+
     /// Calls `f(i, slot)` for the half's first `n` columns in column order, `slot` being
     /// [`Layout::slot`], without division.
     #[inline(always)]
@@ -71,87 +95,6 @@ impl Layout {
                 f(i, k * PAIR + lane);
             }
         }
-    }
-}
-
-/// Floats per 64-byte cache line.
-const LINE_FLOATS: usize = 16;
-
-/// A float array that starts a 64-byte cache line: with rows a whole number of lines long, the
-/// row kernels' 8-float loads and stores never straddle two lines (a straddling load costs two
-/// cache accesses; on this machine's sweeps, about a tenth of the time).
-#[derive(Debug, Default)]
-pub(super) struct Aligned {
-    buf: Vec<f32>,
-    off: usize,
-    len: usize,
-}
-
-impl Aligned {
-    /// `len` values written by `fill`.
-    ///
-    /// # Safety
-    /// `fill` must initialise every element of the slice it is given.
-    pub(super) unsafe fn build(len: usize, fill: impl FnOnce(&mut [MaybeUninit<f32>])) -> Self {
-        let mut buf: Vec<f32> = Vec::with_capacity(len + LINE_FLOATS);
-        // f32 storage is 4-byte aligned, so whole floats reach the next line boundary.
-        let at = (buf.as_ptr() as usize / std::mem::size_of::<f32>()) % LINE_FLOATS;
-        let off = (LINE_FLOATS - at) % LINE_FLOATS;
-        let spare = buf.spare_capacity_mut();
-        for x in &mut spare[..off] {
-            x.write(0.0);
-        }
-        fill(&mut spare[off..off + len]);
-        // SAFETY: the capacity is at least `off + len`; the loop above initialised the first
-        // `off` elements and `fill`, by the caller's contract, the next `len`.
-        unsafe { buf.set_len(off + len) };
-        Self { buf, off, len }
-    }
-
-    /// `len` zeros, filled in parallel.
-    pub(super) fn zeros(len: usize) -> Self {
-        // SAFETY: the chunks cover the slice, and each is filled whole.
-        unsafe {
-            Self::build(len, |s| {
-                s.par_chunks_mut(1 << 16)
-                    .for_each(|c| c.fill(MaybeUninit::new(0.0)));
-            })
-        }
-    }
-}
-
-impl std::ops::Deref for Aligned {
-    type Target = [f32];
-    #[inline]
-    fn deref(&self) -> &[f32] {
-        &self.buf[self.off..self.off + self.len]
-    }
-}
-
-impl std::ops::DerefMut for Aligned {
-    #[inline]
-    fn deref_mut(&mut self) -> &mut [f32] {
-        &mut self.buf[self.off..self.off + self.len]
-    }
-}
-
-impl Clone for Aligned {
-    /// A copy placed anew (a plain copy of the vector could start mid-line).
-    fn clone(&self) -> Self {
-        // SAFETY: `self` holds `len` values, so the zip writes every element.
-        unsafe {
-            Self::build(self.len, |s| {
-                for (d, &x) in s.iter_mut().zip(self.iter()) {
-                    d.write(x);
-                }
-            })
-        }
-    }
-}
-
-impl PartialEq for Aligned {
-    fn eq(&self, other: &Self) -> bool {
-        **self == **other
     }
 }
 
@@ -183,9 +126,9 @@ impl SplitState {
             .zip(u.data.par_chunks(w))
             .zip(v.data.par_chunks(w))
             .for_each(|(((er, or), ur), vr)| {
-                for (hp, dst) in [(0, er), (1, or)] {
-                    lay.each_slot(lay.half(hp), |i, at| {
-                        let x = 2 * i + hp;
+                for (half, dst) in [(0, er), (1, or)] {
+                    lay.each_slot(lay.columns_in(half), |i, at| {
+                        let x = 2 * i + half;
                         let ux = ur[x] - base;
                         dst[at] = if ux.is_finite() { ux } else { 0.0 };
                         dst[at + LANES] = if vr[x].is_finite() { vr[x] } else { 0.0 };
@@ -199,44 +142,38 @@ impl SplitState {
     pub(super) fn to_images(&self, lay: &Layout, base: f32) -> (Image, Image) {
         let (w, h) = (lay.width, lay.height);
         let (stride, slots) = (lay.stride(), lay.slots());
-        let (m, ne, no) = (lay.m, lay.ne, lay.no);
-        let mut u: Vec<f32> = Vec::with_capacity(w * h);
-        let mut v: Vec<f32> = Vec::with_capacity(w * h);
+        let (m, even_cols, odd_cols) = (lay.m, lay.even_cols, lay.odd_cols);
         // One pass over the state writes both images, row by row.
-        u.spare_capacity_mut()[..w * h]
-            .par_chunks_mut(w)
-            .zip(v.spare_capacity_mut()[..w * h].par_chunks_mut(w))
-            .zip(self.e.par_chunks(stride))
-            .zip(self.o.par_chunks(stride))
-            .for_each_init(
-                // Each half's values in column order (padding slots last).
-                || [vec![0.0_f32; slots], vec![0.0_f32; slots]],
-                |[even, odd], (((ur, vr), er), or)| {
-                    // Adding −0 leaves every value, −0 included, as it is.
-                    for (part, row, base) in [(0, ur, base), (1, vr, -0.0)] {
-                        from_lanes(m, er, part, even);
-                        from_lanes(m, or, part, odd);
-                        // Interleaves the halves.
-                        let mut pairs = row.chunks_exact_mut(2);
-                        for ((pair, &e), &o) in (&mut pairs).zip(&even[..no]).zip(&odd[..no]) {
-                            pair[0].write(e + base);
-                            pair[1].write(o + base);
-                        }
-                        if let (Some(last), Some(&e)) =
-                            (pairs.into_remainder().first_mut(), even.get(ne - 1))
-                        {
-                            last.write(e + base);
-                        }
+        let (u, v) = vec_pair_from_rows(
+            w,
+            h,
+            // Each half's values in column order (padding slots last).
+            || [vec![0.0_f32; slots], vec![0.0_f32; slots]],
+            |[even, odd], y, ur, vr| {
+                let (Some(er), Some(or)) = (
+                    self.e.get(y * stride..(y + 1) * stride),
+                    self.o.get(y * stride..(y + 1) * stride),
+                ) else {
+                    return;
+                };
+                // Adding −0 leaves every value, −0 included, as it is.
+                for (part, row, base) in [(0, ur, base), (1, vr, -0.0)] {
+                    from_lanes(m, er, part, even);
+                    from_lanes(m, or, part, odd);
+                    // Interleaves the halves: ⌊w/2⌋ pairs, then for an odd width the last even
+                    // column.
+                    for (&e, &o) in even[..odd_cols].iter().zip(&odd[..odd_cols]) {
+                        row.push(e + base);
+                        row.push(o + base);
                     }
-                },
-            );
-        // SAFETY: both capacities are at least w·h, and the loop wrote every element: each
-        // row chunk of w values gets ⌊w/2⌋ pairs (no = ⌊w/2⌋ ≤ ne ≤ 8m values in each half's
-        // array) and, for an odd width, the last even column in the remainder.
-        unsafe {
-            u.set_len(w * h);
-            v.set_len(w * h);
-        }
+                    if even_cols > odd_cols
+                        && let Some(&e) = even.get(even_cols - 1)
+                    {
+                        row.push(e + base);
+                    }
+                }
+            },
+        );
         let image = |data| Image {
             width: w,
             height: h,
@@ -277,36 +214,24 @@ pub(super) fn from_lanes(m: usize, row: &[f32], part: usize, nat: &mut [f32]) {
     }
 }
 
-/// Coefficients per plain pixel: `gx, gy, gt` = `Ix, Iy, It / sqrt(λ + Ix² + Iy²)`.
-pub(super) const PLAIN_COEFS: usize = 3;
-/// Coefficients per groove pixel: `wu, wd, puu, puv, pvv, pu0, pv0` (see [`GrooveRow::fill`]).
-pub(super) const GROOVE_COEFS: usize = 7;
-
 /// Which stencil the solver runs.
 #[derive(Clone, Copy, Debug)]
-pub(super) enum Kernel {
+pub(super) enum Stencil {
     /// `u = ū − gx·t, v = v̄ − gy·t, t = gx·ū + gy·v̄ + gt`.
     Plain,
-    /// The general 2×2 update; `q` = λ/4.
-    Groove { q: f32 },
+    /// The general 2×2 update with `quarter_lambda` = λ/4.
+    Groove { quarter_lambda: f32 },
 }
 
-impl Kernel {
+impl Stencil {
     #[inline]
     pub(super) fn coefs(self) -> usize {
         match self {
-            Kernel::Plain => PLAIN_COEFS,
-            Kernel::Groove { .. } => GROOVE_COEFS,
+            Stencil::Plain => PLAIN_COEFS,
+            Stencil::Groove { .. } => GROOVE_COEFS,
         }
     }
 }
-
-/// Floats per stored vector pair (u, then v).
-pub(super) const PAIR: usize = 2 * LANES;
-
-/// Columns per coefficient block: a row kernel reads every coefficient of 8 columns from one
-/// contiguous block (one stream per half-row instead of one per coefficient).
-pub(super) const LANES: usize = 8;
 
 /// Where the coefficients of one half-row live: block k holds the `c` coefficients of vector
 /// k's lanes (columns `l·m + k`, see [`Layout`]), coefficient j at `k·8·c + 8·j + l`; padding
@@ -314,7 +239,7 @@ pub(super) const LANES: usize = 8;
 #[derive(Clone, Copy, Debug)]
 pub(super) struct CoefRow {
     /// The half (0 = even, 1 = odd).
-    pub(super) hp: usize,
+    pub(super) half: usize,
     /// Columns in the half.
     pub(super) n: usize,
     /// Vectors per half-row.
@@ -324,12 +249,12 @@ pub(super) struct CoefRow {
 }
 
 impl CoefRow {
-    /// Half `hp` (0 = even, 1 = odd) of `lay` with `c` coefficients per column.
+    /// Half `half` (0 = even, 1 = odd) of `lay` with `c` coefficients per column.
     #[inline]
-    pub(super) fn new(lay: &Layout, hp: usize, c: usize) -> Self {
+    pub(super) fn new(lay: &Layout, half: usize, c: usize) -> Self {
         Self {
-            hp,
-            n: lay.half(hp),
+            half,
+            n: lay.columns_in(half),
             m: lay.m,
             c,
         }
@@ -347,25 +272,21 @@ impl CoefRow {
         (i % self.m) * LANES * self.c + j * LANES + i / self.m
     }
 
-    /// Writes this half-row's blocks into `dst` (a half-row of [`CoefRow::len`] values) from
-    /// `rows[j]`, coefficient j of every column of the image row in column order (the half's
-    /// column i is image column 2i + `hp`); the padding gets zeros, so every value of `dst`
-    /// is written. `C` is the coefficient count, `c`.
-    pub(super) fn scatter<const C: usize>(
-        self,
-        rows: &[Vec<f32>; C],
-        dst: &mut [MaybeUninit<f32>],
-    ) {
-        for (k, block) in dst.chunks_exact_mut(LANES * C).enumerate() {
-            for (out, row) in block.chunks_exact_mut(LANES).zip(rows) {
-                for (lane, d) in out.iter_mut().enumerate() {
+    /// Writes this half-row's blocks into `dst` (a half-row of [`CoefRow::len`] values, in
+    /// order) from `rows[j]`, coefficient j of every column of the image row in column order
+    /// (the half's column i is image column 2i + `half`); the padding gets zeros. `C` is the
+    /// coefficient count, `c`.
+    pub(super) fn scatter<const C: usize>(self, rows: &[Vec<f32>; C], dst: &mut RowWriter) {
+        for k in 0..self.m {
+            for row in rows {
+                for lane in 0..LANES {
                     let i = lane * self.m + k;
                     let x = if i < self.n {
-                        row.get(2 * i + self.hp)
+                        row.get(2 * i + self.half)
                     } else {
                         None
                     };
-                    d.write(x.copied().unwrap_or(0.0));
+                    dst.push(x.copied().unwrap_or(0.0));
                 }
             }
         }

@@ -86,8 +86,7 @@
 //! so one colour of a row is a dense, vectorisable stencil over the other colour. A
 //! half-row's per-pixel factors are interleaved in blocks of 8 columns (all factors of 8
 //! columns in one run), so the kernel reads them as one stream and keeps every pointer in a
-//! register (9–14 % faster than one array per factor). Several
-//! iterations are run per pass over the image (temporal blocking): a wavefront keeps a band
+//! register. Several iterations are run per pass over the image (temporal blocking): a wavefront keeps a band
 //! of rows in cache while they are updated `2K` times (trapezoids per thread, then the small
 //! inverted triangles at the band seams). Red–black Gauss–Seidel and Jacobi (ping-pong
 //! buffers) share this machinery. Convergence (`mean |Δu| + |Δv| < τ`) is measured on the
@@ -97,29 +96,33 @@
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::mem::MaybeUninit;
 
 use super::StageError;
 use super::derivatives::Derivatives;
 use crate::image::{Image, zeros_par};
+use crate::pipeline::simd::{Compiled, Isa};
 
+mod bands;
 mod groove;
-mod kernel;
 mod layout;
 mod lucas_kanade;
+#[cfg(test)]
+mod reference;
 mod solver;
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // tests fail loudly on purpose
 mod tests;
 mod wall_sides;
+mod warm_start;
 
+use bands::*;
 use groove::*;
-use kernel::*;
 use layout::*;
 use lucas_kanade::*;
 use solver::*;
 pub use wall_sides::estimate_wall_sides;
 use wall_sides::*;
+pub use warm_start::flows_of_group;
 
 /// Which flow algorithm runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -145,34 +148,45 @@ pub enum Solver {
     Jacobi,
 }
 
+/// Most Horn–Schunck iterations one solve may be asked for (about 4 s a window on a
+/// 1280×1024 frame); a larger cap, with τ = 0, would keep a stage busy for hours.
+pub const MAX_FLOW_ITERATIONS: u32 = 10_000;
+
 /// Knobs of [`compute_flow`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FlowParams {
-    /// Algorithm.
+    #[doc = knob!("flow.method")]
     pub method: FlowMethod,
-    /// Iteration scheme.
+    #[doc = knob!("flow.solver")]
     pub solver: Solver,
-    /// Smoothness weight λ (α in Horn–Schunck).
+    #[doc = knob!("flow.lambda")]
     pub lambda: f32,
-    /// Iteration cap (paper: 100). The groove method's wall-estimating plain pass may run up to
+    #[doc = knob!("flow.max_iterations")]
+    ///
+    /// The groove method's wall-estimating plain pass may run up to
     /// [`WALL_PRESOLVE_MAX_ITERATIONS`] whatever this is.
     pub max_iterations: u32,
-    /// Convergence threshold τ: stop when the mean absolute update falls below it (px). The
-    /// default, 10⁻⁴, is set for the groove method (its wall-estimating plain pass converges to
+    #[doc = knob!("flow.tolerance_px")]
+    ///
+    /// The default, 10⁻⁴, is set for the groove method (its wall-estimating plain pass converges to
     /// [`WALL_PRESOLVE_TOLERANCE_PX`] regardless); a plain Horn–Schunck field meant to be fully
     /// converged (a `.flo` export, the depth scenes) is closer with 10⁻⁵.
     pub tolerance_px: f32,
-    /// Pixels whose gradient magnitude is below this carry no flow (confidence 0).
+    #[doc = knob!("flow.gradient_threshold")]
     pub gradient_threshold: f32,
-    /// Lucas–Kanade window side, px (odd).
+    #[doc = knob!("flow.lk_window_px")]
     pub lk_window_px: usize,
-    /// Weight γ of the groove-orientation penalty, as a multiple of λ (γ = groove_weight·λ).
+    #[doc = knob!("flow.groove_weight")]
     pub groove_weight: f32,
-    /// Over-relaxation factor ω of the Gauss–Seidel sweeps, in (0, 2): 1 is plain
-    /// Gauss–Seidel, 1 < ω < 2 is SOR (the same solution, reached in fewer iterations).
-    /// Jacobi ignores it.
+    #[doc = knob!("flow.sor_omega")]
+    ///
+    /// In (0, 2): the same solution as plain Gauss–Seidel, reached in fewer iterations.
     pub sor_omega: f32,
+    /// Instruction set of the solver's kernels (not a knob: never in the TOML; by default the
+    /// CPU's best, detected once).
+    #[serde(skip)]
+    pub isa: Isa,
 }
 
 impl Default for FlowParams {
@@ -187,6 +201,7 @@ impl Default for FlowParams {
             lk_window_px: 7,
             groove_weight: 1.0,
             sor_omega: 1.7,
+            isa: Isa::detect(),
         }
     }
 }
@@ -242,10 +257,9 @@ const BLOCK_CACHE_BYTES: usize = 896 * 1024;
 /// Longest block of iterations between convergence checks.
 const MAX_BLOCK_ITERATIONS: usize = 16;
 /// Most levels (red–black half-sweeps, or Jacobi sweeps) one wavefront pass runs; a longer
-/// block runs as several passes, with the same bits. On 1280×1024 plain Horn–Schunck, passes
-/// of 8 iterations took 7 % less time than 16 (12: 4 % less; 6: the same as 8; with the
-/// lane-major layout 6 and 12 iterations measure the same as 8); the groove method's blocks of
-/// 8 iterations fit in one pass as before.
+/// block runs as several passes, with the same bits, whose rows stay in the level-2 cache (the
+/// measured pass lengths: docs/PERFORMANCE.md). The groove method's blocks of 8 iterations fit
+/// in one pass.
 const PASS_LEVELS: usize = 16;
 /// Convergence threshold of the plain pass whose flow [`estimate_wall_sides`] reads when the
 /// groove method estimates its own walls (the user's τ when that is tighter). Wall sides come
@@ -298,7 +312,7 @@ pub fn compute_flow_from(
     init: Option<&FlowField>,
     params: &FlowParams,
 ) -> Result<FlowField, StageError> {
-    validate(params)?;
+    params.validate()?;
     let (width, height) = check_derivatives(d)?;
     let n = width * height;
     if !d.base_flow_px.is_finite() {
@@ -318,7 +332,7 @@ pub fn compute_flow_from(
         )));
     }
     let lay = Layout::new(width, height);
-    let simd = Simd::detect();
+    let isa = params.isa;
     if let Some(f) = init {
         for (name, im) in [("u", &f.u), ("v", &f.v)] {
             if im.width != width || im.height != height || im.data.len() != n {
@@ -333,7 +347,7 @@ pub fn compute_flow_from(
         Some(f) => SplitState::from_images(&lay, &f.u, &f.v, d.base_flow_px),
         None => SplitState::zeros(&lay),
     };
-    let plain = || Problem::plain(&lay, d, params.lambda);
+    let plain = || HsSystem::plain(&lay, d, params.lambda);
     let (state, iterations, converged) = if groove {
         if !(focal_px.is_finite() && focal_px > 0.0) {
             return Err(StageError::InvalidParam {
@@ -362,7 +376,7 @@ pub fn compute_flow_from(
                     max_iterations: params.max_iterations.max(WALL_PRESOLVE_MAX_ITERATIONS),
                     ..params.clone()
                 };
-                let (it, _) = plain().solve(&mut st, &presolve, simd);
+                let (it, _) = plain().solve(&mut st, &presolve, isa);
                 first_iterations = it;
                 let (u, v) = st.to_images(&lay, d.base_flow_px);
                 let interim = FlowField {
@@ -377,12 +391,12 @@ pub fn compute_flow_from(
                 &estimated
             }
         };
-        let problem = Problem::groove(&lay, d, walls, focal_px, params, simd);
-        let (it, conv) = problem.solve(&mut st, params, simd);
+        let problem = HsSystem::groove(&lay, d, walls, focal_px, params, isa);
+        let (it, conv) = problem.solve(&mut st, params, isa);
         (st, first_iterations.saturating_add(it), conv)
     } else {
         let mut st = start();
-        let (it, conv) = plain().solve(&mut st, params, simd);
+        let (it, conv) = plain().solve(&mut st, params, isa);
         (st, it, conv)
     };
     let (u, v) = state.to_images(&lay, d.base_flow_px);
@@ -405,7 +419,7 @@ pub fn compute_flow_from(
 /// # Errors
 /// As [`compute_flow`].
 pub fn flow_confidence_only(d: &Derivatives, params: &FlowParams) -> Result<FlowField, StageError> {
-    validate(params)?;
+    params.validate()?;
     if params.method == FlowMethod::LucasKanade {
         return compute_flow(d, 1.0, None, params);
     }
@@ -446,53 +460,53 @@ fn bad_input(problem: String) -> StageError {
     }
 }
 
-fn validate(p: &FlowParams) -> Result<(), StageError> {
-    super::check_range(
-        "flow.lambda",
-        f64::from(p.lambda),
-        f64::from(f32::MIN_POSITIVE),
-        f64::from(f32::MAX),
-    )?;
-    super::check_range(
-        "flow.tolerance_px",
-        f64::from(p.tolerance_px),
-        0.0,
-        f64::from(f32::MAX),
-    )?;
-    super::check_range(
-        "flow.gradient_threshold",
-        f64::from(p.gradient_threshold),
-        0.0,
-        f64::from(f32::MAX),
-    )?;
-    super::check_range(
-        "flow.groove_weight",
-        f64::from(p.groove_weight),
-        0.0,
-        f64::from(f32::MAX),
-    )?;
-    if !(p.sor_omega > 0.0 && p.sor_omega < 2.0) {
-        return Err(StageError::InvalidParam {
-            name: "flow.sor_omega".to_string(),
-            problem: format!("{} is not in (0, 2)", p.sor_omega),
-        });
+impl FlowParams {
+    /// Checks every flow knob.
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the first bad key.
+    pub fn validate(&self) -> Result<(), StageError> {
+        let p = self;
+        super::check_range("flow.lambda", f64::from(p.lambda), 1e-12, 1e12)?;
+        super::check_range("flow.tolerance_px", f64::from(p.tolerance_px), 0.0, 1e3)?;
+        super::check_range(
+            "flow.gradient_threshold",
+            f64::from(p.gradient_threshold),
+            0.0,
+            1e6,
+        )?;
+        if p.max_iterations == 0 || p.max_iterations > MAX_FLOW_ITERATIONS {
+            return Err(StageError::InvalidParam {
+                name: "flow.max_iterations".to_string(),
+                problem: format!("{} is not in [1, {MAX_FLOW_ITERATIONS}]", p.max_iterations),
+            });
+        }
+        super::check_range(
+            "flow.groove_weight",
+            f64::from(p.groove_weight),
+            0.0,
+            f64::from(f32::MAX),
+        )?;
+        if !(p.sor_omega > 0.0 && p.sor_omega < 2.0) {
+            return Err(StageError::InvalidParam {
+                name: "flow.sor_omega".to_string(),
+                problem: format!("{} is not in (0, 2)", p.sor_omega),
+            });
+        }
+        if p.lk_window_px.is_multiple_of(2)
+            || p.lk_window_px < 3
+            || p.lk_window_px > MAX_LK_WINDOW_PX
+        {
+            return Err(StageError::InvalidParam {
+                name: "flow.lk_window_px".to_string(),
+                problem: format!(
+                    "{} must be odd and in [3, {MAX_LK_WINDOW_PX}]",
+                    p.lk_window_px
+                ),
+            });
+        }
+        Ok(())
     }
-    if p.max_iterations == 0 {
-        return Err(StageError::InvalidParam {
-            name: "flow.max_iterations".to_string(),
-            problem: "must be at least 1".to_string(),
-        });
-    }
-    if p.lk_window_px.is_multiple_of(2) || p.lk_window_px < 3 || p.lk_window_px > MAX_LK_WINDOW_PX {
-        return Err(StageError::InvalidParam {
-            name: "flow.lk_window_px".to_string(),
-            problem: format!(
-                "{} must be odd and in [3, {MAX_LK_WINDOW_PX}]",
-                p.lk_window_px
-            ),
-        });
-    }
-    Ok(())
 }
 
 /// `sqrt(Ix² + Iy²)`, zeroed below `threshold` (a row at a time, so the loop vectorises).

@@ -1,73 +1,62 @@
-//! The Horn–Schunck system and its temporally blocked solve: the wavefront over row bands, the seam triangles and the convergence schedule.
+//! The Horn–Schunck system and its temporally blocked solve: blocks of iterations, the wavefront passes over row bands and the seam triangles.
 
 use super::*;
 
 /// A Horn–Schunck system ready to iterate: the coefficient blocks ([`CoefRow`]) of every
 /// image row's even half, then those of every odd half (so a wavefront step, whose levels all
 /// update one half, reads consecutive rows of one run).
-pub(super) struct Problem {
+pub(super) struct HsSystem {
     pub(super) lay: Layout,
-    pub(super) kernel: Kernel,
+    pub(super) stencil: Stencil,
     pub(super) coef: Aligned,
-    /// Each half's [`Edges`] (worked out once: a row update would otherwise divide twice).
-    pub(super) edges: [Edges; 2],
+    /// Each half's [`HalfEdges`] (worked out once: a row update would otherwise divide twice).
+    pub(super) edges: [HalfEdges; 2],
 }
 
-impl Problem {
+impl HsSystem {
     /// Fills the coefficients a row at a time: `f(y, rows)` writes coefficient k of every
     /// column of image row `y` into `rows[k]` (natural column order, so the caller's loop can
     /// vectorise); the rows are then scattered into their halves' lane-major blocks.
     pub(super) fn build_rows<const C: usize>(
         lay: &Layout,
-        kernel: Kernel,
+        stencil: Stencil,
         f: impl Fn(usize, &mut [Vec<f32>; C]) + Sync,
     ) -> Self {
         let (w, h) = (lay.width, lay.height);
         let halves = [CoefRow::new(lay, 0, C), CoefRow::new(lay, 1, C)];
-        // Both halves have m blocks; width ≥ 2 (checked by the caller), so m ≥ 1 and `max(1)`
-        // only keeps the chunk size valid.
-        let len = halves[0].len().max(1);
-        // SAFETY: the even halves' h rows of len values come first, then the odd halves'; the
-        // two runs of row chunks cover the array exactly, and `CoefRow::scatter` writes every
-        // value of each chunk.
-        let coef = unsafe {
-            Aligned::build(2 * len * h, |all| {
-                let (evens, odds) = all.split_at_mut(len * h);
-                evens
-                    .par_chunks_mut(len)
-                    .zip(odds.par_chunks_mut(len))
-                    .enumerate()
-                    .for_each_init(
-                        // The image row's C coefficients.
-                        || std::array::from_fn(|_| vec![0.0_f32; w]),
-                        |rows: &mut [Vec<f32>; C], (y, (even, odd))| {
-                            f(y, rows);
-                            halves[0].scatter(rows, even);
-                            halves[1].scatter(rows, odd);
-                        },
-                    );
-            })
-        };
+        // The even halves' h rows come first, then the odd halves'; both halves have m
+        // blocks, so rows of the same length.
+        let coef = Aligned::from_row_pairs(
+            halves[0].len(),
+            h,
+            // The image row's C coefficients.
+            || std::array::from_fn(|_| vec![0.0_f32; w]),
+            |rows: &mut [Vec<f32>; C], y, even, odd| {
+                f(y, rows);
+                halves[0].scatter(rows, even);
+                halves[1].scatter(rows, odd);
+            },
+        );
         Self {
             lay: *lay,
-            kernel,
+            stencil,
             coef,
-            edges: [Edges::new(lay, 0), Edges::new(lay, 1)],
+            edges: [lay.half_edges(0), lay.half_edges(1)],
         }
     }
 
-    /// Image row `y`'s coefficient blocks of half `hp`.
+    /// Image row `y`'s coefficient blocks of half `half`.
     #[inline]
-    pub(super) fn coef_row(&self, y: usize, hp: usize) -> &[f32] {
-        let len = CoefRow::new(&self.lay, hp, self.kernel.coefs()).len();
-        let at = (hp * self.lay.height + y) * len;
+    pub(super) fn coef_row(&self, y: usize, half: usize) -> &[f32] {
+        let len = CoefRow::new(&self.lay, half, self.stencil.coefs()).len();
+        let at = (half * self.lay.height + y) * len;
         self.coef.get(at..at + len).unwrap_or_default()
     }
 
     /// The plain system.
     pub(super) fn plain(lay: &Layout, d: &Derivatives, lambda: f32) -> Self {
         let w = lay.width;
-        Self::build_rows::<PLAIN_COEFS>(lay, Kernel::Plain, |y, [gx, gy, gt]| {
+        Self::build_rows::<PLAIN_COEFS>(lay, Stencil::Plain, |y, [gx, gy, gt]| {
             let span = y * w..(y + 1) * w;
             let (Some(ix), Some(iy), Some(it)) = (
                 d.ix.data.get(span.clone()),
@@ -84,14 +73,14 @@ impl Problem {
         })
     }
 
-    /// The groove system, its coefficient rows built with `simd`.
+    /// The groove system, its coefficient rows built for `isa`.
     pub(super) fn groove(
         lay: &Layout,
         d: &Derivatives,
         walls: &WallSideMap,
         focal_px: f64,
         params: &FlowParams,
-        simd: Simd,
+        isa: Isa,
     ) -> Self {
         let (w, h) = (lay.width, lay.height);
         let lambda = f64::from(params.lambda);
@@ -99,8 +88,8 @@ impl Problem {
         let base = f64::from(d.base_flow_px);
         Self::build_rows::<GROOVE_COEFS>(
             lay,
-            Kernel::Groove {
-                q: 0.25 * params.lambda,
+            Stencil::Groove {
+                quarter_lambda: 0.25 * params.lambda,
             },
             |y, rows| {
                 let span = y * w..(y + 1) * w;
@@ -134,33 +123,31 @@ impl Problem {
                     has_above,
                     has_below,
                 };
-                simd.groove_row(&row, rows);
+                isa.compiled(GrooveFill {
+                    row: &row,
+                    out: rows,
+                });
             },
         )
     }
 
     /// Iterates from the state in `st`; returns (iterations, converged).
-    pub(super) fn solve(
-        &self,
-        st: &mut SplitState,
-        params: &FlowParams,
-        simd: Simd,
-    ) -> (u32, bool) {
-        self.solve_with(st, params, simd, rayon::current_num_threads(), None)
+    pub(super) fn solve(&self, st: &mut SplitState, params: &FlowParams, isa: Isa) -> (u32, bool) {
+        self.solve_with(st, params, isa, rayon::current_num_threads(), None)
     }
 
-    /// [`Problem::solve`] with at most `max_bands` row bands and, if given, a fixed block length.
+    /// [`HsSystem::solve`] with at most `max_bands` row bands and, if given, a fixed block length.
     pub(super) fn solve_with(
         &self,
         st: &mut SplitState,
         params: &FlowParams,
-        simd: Simd,
+        isa: Isa,
         max_bands: usize,
         block_override: Option<usize>,
     ) -> (u32, bool) {
         let lay = &self.lay;
         let jacobi = params.solver == Solver::Jacobi;
-        let floats_per_px = self.kernel.coefs() + if jacobi { 4 } else { 2 };
+        let floats_per_px = self.stencil.coefs() + if jacobi { 4 } else { 2 };
         let row_bytes = lay.width * floats_per_px * std::mem::size_of::<f32>();
         let rows_fit = (BLOCK_CACHE_BYTES / row_bytes.max(1)).max(4);
         // Levels (half-sweeps for red–black, sweeps for Jacobi) per block.
@@ -181,7 +168,7 @@ impl Problem {
         while done < max {
             let k = next.min(max - done);
             let (mid, delta) = self.block(
-                simd,
+                isa,
                 st,
                 other.as_mut(),
                 k,
@@ -217,7 +204,7 @@ impl Problem {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn block(
         &self,
-        simd: Simd,
+        isa: Isa,
         st: &mut SplitState,
         mut other: Option<&mut SplitState>,
         k: usize,
@@ -255,7 +242,7 @@ impl Problem {
                     (&mut two, 1.0)
                 }
             };
-            let (m, l) = self.pass(simd, states, levels, bands, w, mid_here, last_here);
+            let (m, l) = self.pass(isa, states, levels, bands, w, mid_here, last_here);
             // A Jacobi pass of odd length leaves its result in the second state.
             if let Some(b) = other.as_deref_mut()
                 && !levels.is_multiple_of(2)
@@ -278,7 +265,7 @@ impl Problem {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn pass(
         &self,
-        simd: Simd,
+        isa: Isa,
         states: &mut [&mut SplitState],
         levels: usize,
         bands: usize,
@@ -310,18 +297,18 @@ impl Problem {
         // Each row's measured changes, summed level by level in increasing order and then
         // row by row, so the totals do not depend on the bands (or the threads).
         let mut per_row = vec![(0.0_f64, 0.0_f64); if measure { h } else { 0 }];
-        split_chunks(&self.lay, states, &mut per_row, &bounds)
+        split_bands(&self.lay, states, &mut per_row, &bounds)
             .into_par_iter()
-            .for_each(|mut ch| self.phase_one(simd, &mut ch, &sched));
+            .for_each(|mut ch| self.phase_one(isa, &mut ch, &sched));
         if bands > 1 {
             let reach = levels + 1;
             let zones: Vec<(usize, usize)> = bounds[1..]
                 .iter()
                 .map(|&(seam, _)| (seam - reach, seam + reach))
                 .collect();
-            split_chunks(&self.lay, states, &mut per_row, &zones)
+            split_bands(&self.lay, states, &mut per_row, &zones)
                 .into_par_iter()
-                .for_each(|mut ch| self.phase_two(simd, &mut ch, &sched));
+                .for_each(|mut ch| self.phase_two(isa, &mut ch, &sched));
         }
         per_row
             .iter()
@@ -330,7 +317,7 @@ impl Problem {
 
     /// The band's own trapezoid: level h covers rows `[a + h + 1, b − h − 1)` (no shrink at
     /// the image top and bottom), visited as a wavefront (row s − h at step s).
-    pub(super) fn phase_one(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) {
+    pub(super) fn phase_one(&self, isa: Isa, ch: &mut RowBand, s: &Schedule) {
         let (a, b, h_img) = (ch.y0, ch.y0 + ch.rows, self.lay.height);
         // Taken out so that a row's sum and the chunk's state can be borrowed at once.
         let sums = std::mem::take(&mut ch.sums);
@@ -348,7 +335,7 @@ impl Problem {
                 let y = step - lvl;
                 if y >= lo(lvl) && y < hi(lvl) {
                     s.add(lvl, sums.get_mut(y - a), |measure| {
-                        self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
+                        self.update_row(isa, ch, y, lvl, measure, s.omega, &mut scratch)
                     });
                 }
             }
@@ -356,14 +343,14 @@ impl Problem {
     }
 
     /// The seam's inverted triangles: level h covers rows `[seam − h − 1, seam + h + 1)`.
-    pub(super) fn phase_two(&self, simd: Simd, ch: &mut Chunk, s: &Schedule) {
+    pub(super) fn phase_two(&self, isa: Isa, ch: &mut RowBand, s: &Schedule) {
         let seam = ch.y0 + s.levels + 1;
         let sums = std::mem::take(&mut ch.sums);
         let mut scratch = Vec::new();
         for lvl in 0..s.levels {
             for y in seam - lvl - 1..seam + lvl + 1 {
                 s.add(lvl, sums.get_mut(y - ch.y0), |measure| {
-                    self.update_row(simd, ch, y, lvl, measure, s.omega, &mut scratch)
+                    self.update_row(isa, ch, y, lvl, measure, s.omega, &mut scratch)
                 });
             }
         }
@@ -373,8 +360,8 @@ impl Problem {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn update_row(
         &self,
-        simd: Simd,
-        ch: &mut Chunk,
+        isa: Isa,
+        ch: &mut RowBand,
         y: usize,
         lvl: usize,
         measure: bool,
@@ -393,12 +380,12 @@ impl Problem {
         let stride = lay.stride();
         if ch.bufs.len() == 1 {
             // Red–black: colour lvl % 2; red = (x + y) even, i.e. half (y + colour) % 2.
-            let hp = (y + lvl) % 2;
+            let half = (y + lvl) % 2;
             let Some((e, o)) = ch.bufs.first_mut() else {
                 return 0.0;
             };
-            let (same, other): (&mut [f32], &[f32]) = if hp == 0 { (e, o) } else { (o, e) };
-            let lr = &other[r * stride..(r + 1) * stride];
+            let (same, other): (&mut [f32], &[f32]) = if half == 0 { (e, o) } else { (o, e) };
+            let across = &other[r * stride..(r + 1) * stride];
             let (up_row, mid, dn_row) = rows3(same, stride, r, r_up, r_dn);
             let keep_old = measure || up_own || dn_own;
             if keep_old {
@@ -407,9 +394,9 @@ impl Problem {
             }
             let up_row = if up_own { &scratch[..] } else { up_row };
             let dn_row = if dn_own { &scratch[..] } else { dn_row };
-            self.run_row(simd, hp, y, omega, lr, up_row, dn_row, mid);
+            self.run_row(isa, half, y, omega, across, up_row, dn_row, mid);
             if measure {
-                delta += abs_diff_sum(lay, lay.half(hp), mid, scratch);
+                delta += abs_diff_sum(lay, lay.columns_in(half), mid, scratch);
             }
         } else {
             // Jacobi: read state lvl % 2, write the other, both halves.
@@ -422,21 +409,21 @@ impl Problem {
             } else {
                 (s1, s0)
             };
-            for hp in 0..2 {
-                let (src_same, src_other, dst_same): (&[f32], &[f32], &mut [f32]) = if hp == 0 {
+            for half in 0..2 {
+                let (src_same, src_other, dst_same): (&[f32], &[f32], &mut [f32]) = if half == 0 {
                     (&*src.0, &*src.1, &mut *dst.0)
                 } else {
                     (&*src.1, &*src.0, &mut *dst.1)
                 };
                 let row = |rr: usize| rr * stride..(rr + 1) * stride;
-                let lr = &src_other[row(r)];
+                let across = &src_other[row(r)];
                 let old = &src_same[row(r)];
                 let up_row = if up_own { old } else { &src_same[row(r_up)] };
                 let dn_row = if dn_own { old } else { &src_same[row(r_dn)] };
                 let mid = &mut dst_same[row(r)];
-                self.run_row(simd, hp, y, omega, lr, up_row, dn_row, mid);
+                self.run_row(isa, half, y, omega, across, up_row, dn_row, mid);
                 if measure {
-                    delta += abs_diff_sum(lay, lay.half(hp), mid, old);
+                    delta += abs_diff_sum(lay, lay.columns_in(half), mid, old);
                 }
             }
         }
@@ -447,191 +434,38 @@ impl Problem {
     #[allow(clippy::too_many_arguments)]
     pub(super) fn run_row(
         &self,
-        simd: Simd,
-        hp: usize,
+        isa: Isa,
+        half: usize,
         y: usize,
         omega: f32,
-        lr: &[f32],
+        across: &[f32],
         up: &[f32],
         dn: &[f32],
         dst: &mut [f32],
     ) {
-        let coef = self.coef_row(y, hp);
-        let edges = self.edges[hp];
+        let coef = self.coef_row(y, half);
+        let edges = self.edges[half];
         let relax = omega != 1.0;
-        let k = Consts {
-            q: match self.kernel {
-                Kernel::Plain => 0.0,
-                Kernel::Groove { q } => q,
+        let k = SolveScalars {
+            quarter_lambda: match self.stencil {
+                Stencil::Plain => 0.0,
+                Stencil::Groove { quarter_lambda } => quarter_lambda,
             },
             omega,
         };
-        match self.kernel {
-            Kernel::Plain if relax => simd.row::<false, true>(k, edges, lr, up, dn, coef, dst),
-            Kernel::Plain => simd.row::<false, false>(k, edges, lr, up, dn, coef, dst),
-            Kernel::Groove { .. } if relax => {
-                simd.row::<true, true>(k, edges, lr, up, dn, coef, dst)
+        let rows = HalfRowInputs {
+            across,
+            up,
+            down: dn,
+            coef,
+        };
+        match self.stencil {
+            Stencil::Plain if relax => update_half_row::<false, true>(isa, k, edges, rows, dst),
+            Stencil::Plain => update_half_row::<false, false>(isa, k, edges, rows, dst),
+            Stencil::Groove { .. } if relax => {
+                update_half_row::<true, true>(isa, k, edges, rows, dst)
             }
-            Kernel::Groove { .. } => simd.row::<true, false>(k, edges, lr, up, dn, coef, dst),
+            Stencil::Groove { .. } => update_half_row::<true, false>(isa, k, edges, rows, dst),
         }
     }
-}
-
-/// Iterations still needed for the per-pixel change to fall below `tolerance`, if the
-/// changes `d0` after `k0` iterations and `d1` after `k1` fit a geometric decay; a block ends
-/// there instead of running its full length past the point of convergence.
-pub(super) fn iterations_to_tolerance(
-    (k0, d0): (usize, f64),
-    (k1, d1): (usize, f64),
-    tolerance: f64,
-) -> Option<usize> {
-    if k1 <= k0 || !(d1 > 0.0 && d0 > d1 && tolerance > 0.0) {
-        return None;
-    }
-    let log_rate = (d1 / d0).ln() / (k1 - k0) as f64;
-    let n = ((tolerance / d1).ln() / log_rate).ceil();
-    (n.is_finite() && n >= 1.0).then(|| n.min(usize::MAX as f64) as usize)
-}
-
-/// Level count and the first measured level of one block.
-pub(super) struct Schedule {
-    pub(super) levels: usize,
-    /// Levels of the last iteration, whose changes are measured.
-    pub(super) measure_from: usize,
-    /// Levels of the middle iteration, measured too (empty for short blocks).
-    pub(super) mid: std::ops::Range<usize>,
-    /// Over-relaxation factor (1 for Jacobi).
-    pub(super) omega: f32,
-}
-
-impl Schedule {
-    /// Runs `update(measure)` for one row at level `lvl` and adds what it measured to the
-    /// row's middle-iteration (`.0`) or last-iteration (`.1`) sum in `row` (present whenever
-    /// the block measures).
-    #[inline(always)]
-    pub(super) fn add(
-        &self,
-        lvl: usize,
-        row: Option<&mut (f64, f64)>,
-        update: impl FnOnce(bool) -> f64,
-    ) {
-        match row {
-            Some(r) if lvl >= self.measure_from => r.1 += update(true),
-            Some(r) if self.mid.contains(&lvl) => r.0 += update(true),
-            _ => {
-                update(false);
-            }
-        }
-    }
-}
-
-/// Mutable rows `[y0, y0 + rows)` of one (red–black) or two (Jacobi) states: `(e, o)` each,
-/// and of the per-row sums of measured changes (empty when the block measures nothing).
-pub(super) struct Chunk<'a> {
-    pub(super) y0: usize,
-    pub(super) rows: usize,
-    pub(super) bufs: Vec<(&'a mut [f32], &'a mut [f32])>,
-    pub(super) sums: &'a mut [(f64, f64)],
-}
-
-/// Cuts every state, and the per-row sums, into the disjoint, sorted row ranges `bounds`.
-pub(super) fn split_chunks<'a>(
-    lay: &Layout,
-    states: &'a mut [&mut SplitState],
-    sums: &'a mut [(f64, f64)],
-    bounds: &[(usize, usize)],
-) -> Vec<Chunk<'a>> {
-    let mut chunks: Vec<Chunk<'a>> = bounds
-        .iter()
-        .zip(split_rows(sums, 1, bounds))
-        .map(|(&(lo, hi), sums)| Chunk {
-            y0: lo,
-            rows: hi - lo,
-            bufs: Vec::with_capacity(states.len()),
-            sums,
-        })
-        .collect();
-    for st in states.iter_mut() {
-        let st: &'a mut SplitState = st;
-        let es = split_rows(&mut st.e, lay.stride(), bounds);
-        let os = split_rows(&mut st.o, lay.stride(), bounds);
-        for ((ch, e), o) in chunks.iter_mut().zip(es).zip(os) {
-            ch.bufs.push((e, o));
-        }
-    }
-    chunks
-}
-
-/// The disjoint, sorted row ranges `bounds` of an array of rows `stride` values long (each
-/// empty when the array is).
-fn split_rows<'a, T>(
-    mut rows: &'a mut [T],
-    stride: usize,
-    bounds: &[(usize, usize)],
-) -> Vec<&'a mut [T]> {
-    let mut at = 0;
-    bounds
-        .iter()
-        .map(|&(lo, hi)| {
-            if rows.is_empty() {
-                return &mut [][..];
-            }
-            let (_, rest) = std::mem::take(&mut rows).split_at_mut((lo - at) * stride);
-            let (mine, next) = rest.split_at_mut((hi - lo) * stride);
-            rows = next;
-            at = hi;
-            mine
-        })
-        .collect()
-}
-
-/// Rows `up` and `dn` (read) and `mid` (written) of a buffer with row stride `stride`;
-/// `up`, `dn` ∈ {mid − 1, mid + 1}.
-#[inline]
-pub(super) fn rows3(
-    buf: &mut [f32],
-    stride: usize,
-    mid: usize,
-    up: usize,
-    dn: usize,
-) -> (&[f32], &mut [f32], &[f32]) {
-    let (before, rest) = buf.split_at_mut(mid * stride);
-    let (m, after) = rest.split_at_mut(stride);
-    let (before, after): (&[f32], &[f32]) = (before, after);
-    let pick = |r: usize| -> &[f32] {
-        if r < mid {
-            &before[r * stride..(r + 1) * stride]
-        } else {
-            &after[(r - mid - 1) * stride..(r - mid) * stride]
-        }
-    };
-    (pick(up), m, pick(dn))
-}
-
-/// Σ|a − b| over the first `n` columns of a stored half-row's u and v (`a`, `b`, as [`Layout`]
-/// says): 16 f32 accumulators, one per lane of the u and of the v vectors, filled vector by
-/// vector in stored order (padding lanes left out) and then added in lane order. The order
-/// depends only on the layout, so the sum is the same whatever the bands.
-#[inline]
-pub(super) fn abs_diff_sum(lay: &Layout, n: usize, a: &[f32], b: &[f32]) -> f64 {
-    let m = lay.m;
-    let (Some(a), Some(b)) = (a.get(..m * PAIR), b.get(..m * PAIR)) else {
-        return 0.0;
-    };
-    let mut acc = [0.0_f32; PAIR];
-    // Vectors below `full` have a column in every lane (the last lane's run is the shortest);
-    // after it lane l holds one only while l·m + k < n.
-    let full = n.saturating_sub((LANES - 1) * m).min(m);
-    let (pa, pb) = (a.as_chunks::<PAIR>().0, b.as_chunks::<PAIR>().0);
-    for (x, y) in pa[..full].iter().zip(&pb[..full]) {
-        for q in 0..PAIR {
-            acc[q] += (x[q] - y[q]).abs();
-        }
-    }
-    for (k, (x, y)) in pa.iter().zip(pb).enumerate().skip(full) {
-        for q in (0..PAIR).filter(|q| (q % LANES) * m + k < n) {
-            acc[q] += (x[q] - y[q]).abs();
-        }
-    }
-    f64::from(acc.iter().sum::<f32>())
 }

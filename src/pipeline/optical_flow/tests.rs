@@ -1,8 +1,11 @@
-//! Unit tests of the flow stage: known shifts, tilted planes, the groove constraint's Euler–Lagrange equations, and the fast solver against a naive one.
+//! Unit tests of the flow stage: known shifts, tilted planes, the groove constraint's Euler–Lagrange equations; the fast solver against the reference and its blocking in the sub-modules.
 
 use super::*;
 use crate::pipeline::derivatives::{DerivativeMode, DerivativeParams, compute_derivatives};
 use proptest::prelude::*;
+
+mod reference;
+mod solver;
 
 /// splitmix64, for reproducible textures.
 struct Rng(u64);
@@ -110,6 +113,7 @@ fn no_prewarp() -> DerivativeParams {
     DerivativeParams {
         mode: DerivativeMode::Simoncelli,
         prewarp: false,
+        ..DerivativeParams::default()
     }
 }
 
@@ -442,7 +446,7 @@ fn groove_solution_satisfies_euler_lagrange() {
             solver,
             lambda,
             groove_weight: weight,
-            max_iterations: 20_000,
+            max_iterations: MAX_FLOW_ITERATIONS,
             tolerance_px: 0.0,
             ..params(FlowMethod::GrooveHornSchunck)
         };
@@ -485,297 +489,6 @@ fn groove_solution_satisfies_euler_lagrange() {
         eprintln!("{solver:?}: worst interior |∂E/∂(u,v)| {worst:.3e} vs {scale:.3e} at zero flow");
         assert!(worst < 1e-4 * scale, "{worst} vs {scale}");
     }
-}
-
-/// A 37×230 tilted plane (odd width: halves of 19 and 18 columns, whole and partial blocks)
-/// with wall sides in stripes of 40 rows, for the band and SIMD tests.
-fn banded_problem() -> (Layout, Derivatives, WallSideMap) {
-    let (w, h) = (37, 230);
-    let frames = tilted_plane(w, h, 7, 0.6, 1.0, 100.0);
-    let walls = WallSideMap {
-        width: w,
-        height: h,
-        sign: (0..w * h).map(|i| [0, 1, -1][(i / w / 40) % 3]).collect(),
-    };
-    (
-        Layout::new(w, h),
-        middle(&frames, 0.0, &no_prewarp()),
-        walls,
-    )
-}
-
-#[test]
-fn blocking_bands_and_simd_do_not_change_the_result() {
-    let (lay, d, walls) = banded_problem();
-    let p = FlowParams::default();
-    let built = Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::Baseline);
-    let fast = Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect());
-    // Both halves' coefficients of every row, in one array.
-    assert!(built.coef == fast.coef);
-    assert!(built.coef.iter().all(|c| c.is_finite()));
-    for solver in [Solver::GaussSeidel, Solver::Jacobi] {
-        for omega in [1.0, 1.7] {
-            let p = FlowParams {
-                solver,
-                sor_omega: omega,
-                max_iterations: 37,
-                tolerance_px: 0.0,
-                ..FlowParams::default()
-            };
-            for problem in [
-                Problem::plain(&lay, &d, p.lambda),
-                Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect()),
-            ] {
-                let mut reference = SplitState::zeros(&lay);
-                let (it, _) = problem.solve_with(&mut reference, &p, Simd::Baseline, 1, Some(1));
-                assert_eq!(it, 37);
-                for (bands, block) in [(1, None), (2, Some(5)), (3, Some(4)), (4, Some(16))] {
-                    let mut st = SplitState::zeros(&lay);
-                    problem.solve_with(&mut st, &p, Simd::detect(), bands, block);
-                    assert!(
-                        st.e == reference.e && st.o == reference.o,
-                        "{solver:?} ω {omega} bands {bands} block {block:?}"
-                    );
-                }
-            }
-        }
-    }
-}
-
-/// With τ > 0 each block measures its changes; their sums, and so where the solve stops, do
-/// not depend on how many row bands (threads) ran it.
-#[test]
-fn measured_stops_do_not_depend_on_the_bands() {
-    let (lay, d, walls) = banded_problem();
-    let p = FlowParams {
-        tolerance_px: 1e-4,
-        ..FlowParams::default()
-    };
-    for problem in [
-        Problem::plain(&lay, &d, p.lambda),
-        Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect()),
-    ] {
-        // One measured block of 5 iterations: the same sums, to the bit.
-        let sums: Vec<(f64, f64)> = (1..=4)
-            .map(|bands| {
-                let mut st = SplitState::zeros(&lay);
-                problem.pass(
-                    Simd::detect(),
-                    &mut [&mut st],
-                    10,
-                    bands,
-                    1.0,
-                    Some(2),
-                    true,
-                )
-            })
-            .collect();
-        assert!(sums[0].0 > 0.0 && sums[0].1 > 0.0);
-        assert!(sums.iter().all(|s| s == &sums[0]), "{sums:?}");
-        let mut reference = SplitState::zeros(&lay);
-        let stop = problem.solve_with(&mut reference, &p, Simd::detect(), 1, None);
-        for bands in [2, 3, 4] {
-            let mut st = SplitState::zeros(&lay);
-            let got = problem.solve_with(&mut st, &p, Simd::detect(), bands, None);
-            assert_eq!(got, stop, "bands {bands}");
-            assert!(st.e == reference.e && st.o == reference.o, "bands {bands}");
-        }
-    }
-}
-
-/// Cutting a block into wavefront passes changes no bit: neither the state nor the measured
-/// sums, for red–black and Jacobi, plain and groove.
-#[test]
-fn passes_do_not_change_the_result() {
-    let (lay, d, walls) = banded_problem();
-    for solver in [Solver::GaussSeidel, Solver::Jacobi] {
-        let p = FlowParams {
-            solver,
-            ..FlowParams::default()
-        };
-        for problem in [
-            Problem::plain(&lay, &d, p.lambda),
-            Problem::groove(&lay, &d, &walls, 100.0, &p, Simd::detect()),
-        ] {
-            let run = |pass_levels| {
-                let mut st = SplitState::zeros(&lay);
-                let mut other = (solver == Solver::Jacobi).then(|| st.clone());
-                let sums = problem.block(
-                    Simd::detect(),
-                    &mut st,
-                    other.as_mut(),
-                    13,
-                    2,
-                    1.0,
-                    true,
-                    pass_levels,
-                );
-                (st, sums)
-            };
-            let (whole, sums) = run(64);
-            assert!(sums.0 > 0.0 && sums.1 > 0.0, "{solver:?}");
-            for pass_levels in [1, 2, 5, 8] {
-                let (st, got) = run(pass_levels);
-                assert!(
-                    st.e == whole.e && st.o == whole.o && got == sums,
-                    "{solver:?} passes of {pass_levels} levels: {got:?} against {sums:?}"
-                );
-            }
-        }
-    }
-}
-
-/// Straightforward red–black Gauss–Seidel on the full grid, for comparison.
-fn naive_plain_gs(d: &Derivatives, lambda: f32, iterations: usize) -> (Vec<f32>, Vec<f32>) {
-    let (w, h) = (d.ix.width, d.ix.height);
-    let mut u = vec![0.0_f32; w * h];
-    let mut v = vec![0.0_f32; w * h];
-    // Mirrored left/right columns; beyond the top and bottom rows the pixel itself.
-    let at = |f: &[f32], x: isize, y: isize, own: usize| {
-        let x = if x < 0 {
-            1
-        } else if x >= w as isize {
-            w as isize - 2
-        } else {
-            x
-        };
-        if y < 0 || y >= h as isize {
-            return f[own];
-        }
-        f[y as usize * w + x as usize]
-    };
-    for _ in 0..iterations {
-        for colour in 0..2 {
-            for y in 0..h {
-                for x in 0..w {
-                    if (x + y) % 2 != colour {
-                        continue;
-                    }
-                    let (xi, yi) = (x as isize, y as isize);
-                    let i = y * w + x;
-                    let ub = 0.25
-                        * ((at(&u, xi - 1, yi, i) + at(&u, xi + 1, yi, i))
-                            + (at(&u, xi, yi - 1, i) + at(&u, xi, yi + 1, i)));
-                    let vb = 0.25
-                        * ((at(&v, xi - 1, yi, i) + at(&v, xi + 1, yi, i))
-                            + (at(&v, xi, yi - 1, i) + at(&v, xi, yi + 1, i)));
-                    let (gx, gy, gt) = (d.ix.data[i], d.iy.data[i], d.it.data[i]);
-                    let t = (gx * ub + gy * vb + gt) / (lambda + gx * gx + gy * gy);
-                    u[i] = ub - gx * t;
-                    v[i] = vb - gy * t;
-                }
-            }
-        }
-    }
-    (u, v)
-}
-
-#[test]
-fn fast_solver_matches_naive_gauss_seidel() {
-    for (w, h) in [
-        (31, 29),
-        (40, 64),
-        (2, 2),
-        (3, 5),
-        (17, 9),
-        (64, 6),
-        (33, 4),
-    ] {
-        let frames = translating(w, h, 7, 0.4, -0.2, 9);
-        let d = middle(&frames, 0.0, &no_prewarp());
-        let p = FlowParams {
-            sor_omega: 1.0,
-            max_iterations: 23,
-            tolerance_px: 0.0,
-            ..params(FlowMethod::HornSchunck)
-        };
-        let flow = compute_flow(&d, 1e4, None, &p).unwrap();
-        let (u, v) = naive_plain_gs(&d, p.lambda, 23);
-        let diff = flow
-            .u
-            .data
-            .iter()
-            .zip(&u)
-            .chain(flow.v.data.iter().zip(&v))
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0_f32, f32::max);
-        assert!(diff < 1e-5, "{w}x{h}: {diff}");
-    }
-}
-
-#[test]
-fn coefficient_slots_cover_each_half_row_once() {
-    for w in [2, 3, 16, 17, 31, 40, 1280] {
-        let lay = Layout::new(w, 1);
-        for hp in 0..2 {
-            let cr = CoefRow::new(&lay, hp, GROOVE_COEFS);
-            let mut seen = vec![false; cr.len()];
-            for i in 0..cr.n {
-                for k in 0..cr.c {
-                    let at = cr.at(i, k);
-                    assert!(!seen[at], "w {w} half {hp}: column {i} coefficient {k}");
-                    seen[at] = true;
-                }
-                // Column i is lane i div m of vector i mod m, in the state as here.
-                assert_eq!(cr.at(i, 0), (i % lay.m) * LANES * cr.c + i / lay.m);
-                assert_eq!(lay.slot(i), (i % lay.m) * PAIR + i / lay.m);
-            }
-            // What is left is the padding.
-            let unseen = seen.iter().filter(|s| !**s).count();
-            assert_eq!(unseen, (lay.slots() - cr.n) * cr.c);
-            // `each_slot` visits the columns in order, at their slots.
-            let mut next = 0;
-            lay.each_slot(cr.n, |i, at| {
-                assert_eq!((i, at), (next, lay.slot(next)), "w {w} half {hp}");
-                next += 1;
-            });
-            assert_eq!(next, cr.n);
-        }
-    }
-}
-
-#[test]
-fn geometric_decay_predicts_the_iterations_left() {
-    // 1e-2 after 16 iterations, 1e-3 after 32: a tenth per 16 iterations, so 1e-5 needs
-    // 32 more.
-    assert_eq!(
-        iterations_to_tolerance((16, 1e-2), (32, 1e-3), 1e-5),
-        Some(32)
-    );
-    assert_eq!(
-        iterations_to_tolerance((16, 1e-2), (32, 1e-3), 0.9e-3),
-        Some(1)
-    );
-    // Growing, flat or missing changes predict nothing.
-    assert_eq!(iterations_to_tolerance((16, 1e-3), (32, 1e-2), 1e-5), None);
-    assert_eq!(iterations_to_tolerance((16, 1e-3), (32, 1e-3), 1e-5), None);
-    assert_eq!(iterations_to_tolerance((16, 1e-3), (32, 0.0), 1e-5), None);
-    assert_eq!(iterations_to_tolerance((16, 1e-2), (32, 1e-3), 0.0), None);
-}
-
-#[test]
-fn adaptive_blocks_stop_close_to_where_every_iteration_is_checked() {
-    let (w, h) = (64, 48);
-    let frames = translating(w, h, 7, 0.4, -0.2, 5);
-    let d = middle(&frames, 0.0, &no_prewarp());
-    let lay = Layout::new(w, h);
-    let p = FlowParams {
-        max_iterations: 1000,
-        tolerance_px: 1e-6,
-        sor_omega: 1.0,
-        ..params(FlowMethod::HornSchunck)
-    };
-    let problem = Problem::plain(&lay, &d, p.lambda);
-    let mut st = SplitState::zeros(&lay);
-    let (exact, ok) = problem.solve_with(&mut st, &p, Simd::detect(), 1, Some(1));
-    assert!(ok && exact > 2 * MAX_BLOCK_ITERATIONS as u32, "{exact}");
-    let mut st = SplitState::zeros(&lay);
-    let (adaptive, ok) = problem.solve(&mut st, &p, Simd::detect());
-    assert!(ok);
-    assert!(
-        adaptive >= exact && adaptive <= exact + 3,
-        "checked every iteration: {exact}, adaptive blocks: {adaptive}"
-    );
 }
 
 #[test]
@@ -901,19 +614,5 @@ proptest! {
             prop_assert!(im.data.iter().all(|x| x.is_finite()));
         }
         prop_assert_eq!(flow.frame_index, 3);
-    }
-}
-
-#[test]
-fn aligned_buffers_start_cache_lines() {
-    for len in [1, 100, 1000] {
-        let a = Aligned::zeros(len);
-        let b = a.clone();
-        for x in [&a, &b] {
-            assert_eq!(x.len(), len);
-            assert!(x.iter().all(|&v| v == 0.0));
-            assert_eq!(x.as_ptr() as usize % 64, 0, "len {len}");
-        }
-        assert!(a == b);
     }
 }

@@ -92,8 +92,8 @@ fn bridge(v: &mut [f64], channel: usize, gaps: &mut Vec<LineGap>) -> bool {
         if i < n {
             let b = v[i];
             let span = (i - last_good) as f64;
-            for j in start..i {
-                v[j] = a + (b - a) * (j - last_good) as f64 / span;
+            for (j, vj) in v.iter_mut().enumerate().take(i).skip(start) {
+                *vj = a + (b - a) * (j - last_good) as f64 / span;
             }
         } else {
             v[start..].fill(a);

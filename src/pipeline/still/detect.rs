@@ -315,11 +315,11 @@ fn merge_fragments(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64, max_gap: u
             let Some((_, (a_last, a_c))) = ends(&tracks[a]) else {
                 continue;
             };
-            for b in 0..tracks.len() {
+            for (b, track_b) in tracks.iter().enumerate() {
                 if a == b {
                     continue;
                 }
-                let Some(((b_first, b_c), (b_last, _))) = ends(&tracks[b]) else {
+                let Some(((b_first, b_c), (b_last, _))) = ends(track_b) else {
                     continue;
                 };
                 let gap = b_first as i64 - a_last as i64;

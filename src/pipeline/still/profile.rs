@@ -126,7 +126,7 @@ impl ProfileBuilder {
     /// [`StillError::Param`] when `rows` is not whole rows or runs past the image's height.
     pub fn push_rows(&mut self, rows: &[f32]) -> Result<(), StillError> {
         let w = self.width;
-        if rows.len() % w != 0 || self.rows_seen + rows.len() / w > self.height {
+        if !rows.len().is_multiple_of(w) || self.rows_seen + rows.len() / w > self.height {
             return Err(StageError::BadInput {
                 stage: "still",
                 problem: format!(

@@ -132,7 +132,7 @@ impl RibbonBuilder {
     /// [`StillError::Param`] when `rows` is not whole rows or runs past the image's height.
     pub fn push_rows(&mut self, rows: &[f32]) -> Result<(), StillError> {
         let iw = self.image_width;
-        if rows.len() % iw != 0 || self.rows_seen + rows.len() / iw > self.image_height {
+        if !rows.len().is_multiple_of(iw) || self.rows_seen + rows.len() / iw > self.image_height {
             return Err(StageError::BadInput {
                 stage: "still",
                 problem: format!(

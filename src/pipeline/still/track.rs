@@ -60,7 +60,7 @@ impl BorderTracks {
 
 /// Sign of the step of border `i` along increasing cross position (+1 rising).
 fn step_sign(i: usize, tone: WallTone) -> f64 {
-    let dark = if i % 2 == 0 { -1.0 } else { 1.0 };
+    let dark = if i.is_multiple_of(2) { -1.0 } else { 1.0 };
     match tone {
         WallTone::Dark => dark,
         WallTone::Bright => -dark,

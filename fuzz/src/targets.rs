@@ -1,0 +1,350 @@
+//! Fuzz targets: every parser and loader groovescope runs on files from outside, as `fn(&[u8])`.
+//!
+//! Shared by the libFuzzer binary (`fuzz/fuzz_targets/groovescope.rs`) and the corpus replay
+//! in `tests/hostile_corpus.rs`, so every seed and every crash found runs in `cargo test`.
+//! A target must never panic: errors are fine, panics are bugs; each also asserts what must
+//! hold of what it accepted (round trips, sizes, value ranges). Adding a target is one
+//! function here and one line in [`TARGETS`] (its seeds go in `fuzz/corpus/NAME/`).
+
+use std::io::Cursor;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+use arbitrary::Unstructured;
+use groovescope::engine::{ReconstructOptions, reconstruct};
+use groovescope::io::frames::{check_frame_bytes, decode_frame};
+use groovescope::io::{Scan, ScanMeta, flo, load_group, wav};
+use groovescope::pipeline::PipelineParams;
+
+/// One fuzz target: its name (the corpus folder and `GROOVESCOPE_FUZZ_TARGET`) and function.
+pub struct Target {
+    /// Name of the target.
+    pub name: &'static str,
+    /// Runs one input; panics only on a bug.
+    pub run: fn(&[u8]),
+}
+
+/// Every target, in the order `scripts/fuzz.sh` runs them.
+pub const TARGETS: &[Target] = &[
+    Target {
+        name: "scan_toml",
+        run: scan_toml,
+    },
+    Target {
+        name: "params_toml",
+        run: params_toml,
+    },
+    Target {
+        name: "frame",
+        run: frame,
+    },
+    Target {
+        name: "scan_folder",
+        run: scan_folder,
+    },
+    Target {
+        name: "reference_wav",
+        run: reference_wav,
+    },
+    Target {
+        name: "flo",
+        run: flo_file,
+    },
+];
+
+/// The target called `name`.
+#[must_use]
+pub fn target(name: &str) -> Option<&'static Target> {
+    TARGETS.iter().find(|t| t.name == name)
+}
+
+/// `scan.toml`: whatever validates writes back to text that reads back to the same text.
+pub fn scan_toml(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let path = Path::new("scan.toml");
+    let Ok(meta) = ScanMeta::from_toml_str(text, path) else {
+        return;
+    };
+    let written = meta
+        .to_toml_string()
+        .expect("validated metadata serialises");
+    let again = ScanMeta::from_toml_str(&written, path).expect("written metadata reads back");
+    let rewritten = again
+        .to_toml_string()
+        .expect("read-back metadata serialises");
+    assert_eq!(written, rewritten, "scan.toml does not round-trip");
+    let geometry = meta.geometry();
+    assert!(geometry.focal_px.is_finite() || geometry.focal_px.is_infinite());
+    let _ = meta.groove_speed_mm_s(0);
+    let _ = meta.check_against_scan(3, (64, 48));
+}
+
+/// The params / preset TOML: parse, validate, round-trip whatever validates.
+pub fn params_toml(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let Ok(params) = PipelineParams::from_toml_str(text) else {
+        return;
+    };
+    if params.validate().is_err() {
+        return;
+    }
+    let written = params.to_toml_string().expect("valid params serialise");
+    let again = PipelineParams::from_toml_str(&written).expect("written params read back");
+    assert_eq!(
+        written,
+        again.to_toml_string().expect("read-back params serialise"),
+        "params do not round-trip"
+    );
+    let _ = params.first_changed_stage(&PipelineParams::default());
+}
+
+/// One frame (PNG, TIFF or anything the decoder guesses): a decoded frame is grey in `[0, 1]`
+/// and has the size the undecoded check reads from its header.
+pub fn frame(data: &[u8]) {
+    let path = Path::new("frame");
+    let checked = check_frame_bytes(data, path);
+    let Ok(img) = decode_frame(data, path) else {
+        return;
+    };
+    assert_eq!(img.data.len(), img.width * img.height, "frame buffer size");
+    assert!(
+        img.data.iter().all(|v| (0.0..=1.0).contains(v)),
+        "a decoded frame holds a value outside [0, 1]"
+    );
+    if let Ok(size) = checked {
+        assert_eq!(
+            size,
+            (img.width, img.height),
+            "header and decoded sizes differ"
+        );
+    }
+}
+
+/// `reference.wav`: read it; what reads has channels of one length and a non-zero rate.
+pub fn reference_wav(data: &[u8]) {
+    let Ok(audio) = wav::read_wav_from(Cursor::new(data), Path::new("reference.wav")) else {
+        return;
+    };
+    assert!(audio.sample_rate_hz > 0 && !audio.is_empty());
+    assert!(audio.channels.iter().all(|c| c.len() == audio.len()));
+    let _ = audio.mono();
+}
+
+/// `.flo`: a field that reads encodes back to the same bytes.
+pub fn flo_file(data: &[u8]) {
+    let Ok((u, v)) = flo::decode_flo(data, Path::new("field.flo")) else {
+        return;
+    };
+    assert_eq!(flo::encode_flo(&u, &v), data, ".flo does not round-trip");
+}
+
+/// A whole tiny scan folder built from the bytes (metadata, groups of PNG or TIFF frames,
+/// some damaged, an optional `reference.wav`), opened and reconstructed with the defaults.
+pub fn scan_folder(data: &[u8]) {
+    let mut u = Unstructured::new(data);
+    let Ok(dir) = scratch_dir() else {
+        return;
+    };
+    if write_scan(&mut u, dir.path()).is_err() {
+        return;
+    }
+    let Ok(scan) = Scan::open(dir.path()) else {
+        return;
+    };
+    assert!(!scan.groups.is_empty());
+    for group in &scan.groups {
+        if let Ok(frames) = load_group(group) {
+            assert!(frames.len() == group.frames.len());
+        }
+    }
+    // The whole pipeline on one input in eight (it costs about ten loads).
+    if !u.ratio(1u8, 8).unwrap_or(false) {
+        return;
+    }
+    let keep_going = u.arbitrary::<bool>().unwrap_or(false);
+    let opts = ReconstructOptions {
+        params: PipelineParams::default(),
+        groups: None,
+        keep_going,
+    };
+    if let Ok(rec) = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false)) {
+        assert!(rec.audio.channels.iter().flatten().all(|v| v.is_finite()));
+    }
+}
+
+/// A fresh folder for one scan, in memory where `/dev/shm` exists.
+fn scratch_dir() -> std::io::Result<tempfile::TempDir> {
+    let shm = Path::new("/dev/shm");
+    if shm.is_dir() {
+        tempfile::tempdir_in(shm)
+    } else {
+        tempfile::tempdir()
+    }
+}
+
+/// A number for a metadata key: usually sensible, sometimes anything.
+fn number(u: &mut Unstructured, typical: f64) -> arbitrary::Result<f64> {
+    Ok(match u.int_in_range(0u8..=7)? {
+        0 => u.arbitrary::<f64>()?,
+        1 => -typical,
+        2 => 0.0,
+        _ => typical * (0.5 + f64::from(u.int_in_range(0u8..=100)?) / 50.0),
+    })
+}
+
+/// Writes `scan.toml`, groups of frames and maybe `reference.wav` into `dir`.
+fn write_scan(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<()> {
+    let groups = u.int_in_range(0usize..=3)?;
+    let width = u.int_in_range(1u32..=32)?;
+    let height = u.int_in_range(1u32..=32)?;
+    let mut meta = format!(
+        "format = 1\n[record]\nrpm = {}\nradius_mm = {}\ncut = \"{}\"\n",
+        number(u, 78.0)?,
+        number(u, 115.0)?,
+        u.choose(&["lateral", "stereo", "vertical", "sideways"])?
+    );
+    if u.ratio(1u8, 4)? {
+        let n = u.int_in_range(0usize..=4)?;
+        let radii: Vec<String> = (0..n)
+            .map(|_| number(u, 100.0).map(|r| r.to_string()))
+            .collect::<Result<_, _>>()?;
+        meta += &format!("group_radius_mm = [{}]\n", radii.join(", "));
+    }
+    meta += &format!(
+        "[camera]\npixel_pitch_um = {}\nworking_distance_mm = {}\n[motion]\nframe_step_um = {}\ngroup_step_um = {}\n",
+        number(u, 0.39)?,
+        number(u, 4.0)?,
+        number(u, 0.78)?,
+        number(u, 8.0)?
+    );
+    if u.ratio(1u8, 3)? {
+        meta += &format!(
+            "[dual_focus]\nfocus_distance_mm = {}\nglass_thickness_mm = {}\nglass_index = {}\nglass_side = \"{}\"\nglass_edge_row = {}\n",
+            number(u, 4.0)?,
+            number(u, 0.11)?,
+            number(u, 1.5)?,
+            u.choose(&["top", "bottom"])?,
+            number(u, f64::from(height) / 2.0)?
+        );
+    }
+    if u.ratio(1u8, 16)? {
+        let len = u.int_in_range(0usize..=64)?;
+        meta = String::from_utf8_lossy(u.bytes(len)?).into_owned();
+    }
+    std::fs::write(dir.join("scan.toml"), meta).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    for g in 0..groups {
+        let group_dir = dir.join(format!("g{g:05}"));
+        std::fs::create_dir(&group_dir).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        let frames = u.int_in_range(5usize..=9)?;
+        for k in 0..frames {
+            let (bytes, ext) = frame_bytes(u, width, height, g * 16 + k)?;
+            std::fs::write(group_dir.join(format!("f{k:03}.{ext}")), bytes)
+                .map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        }
+    }
+    if u.ratio(1u8, 3)? {
+        let mut bytes = wav_bytes(u)?;
+        damage(u, &mut bytes)?;
+        std::fs::write(dir.join("reference.wav"), bytes)
+            .map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    }
+    Ok(())
+}
+
+/// One frame file: a textured PNG or TIFF (8 or 16 bit, grey or colour), sometimes of
+/// another size, sometimes damaged.
+fn frame_bytes(
+    u: &mut Unstructured,
+    width: u32,
+    height: u32,
+    seed: usize,
+) -> arbitrary::Result<(Vec<u8>, &'static str)> {
+    let (w, h) = if u.ratio(1u8, 32)? {
+        (u.int_in_range(1u32..=40)?, u.int_in_range(1u32..=40)?)
+    } else {
+        (width, height)
+    };
+    let phase = u.arbitrary::<u8>()?;
+    let texture = |x: u32, y: u32| -> u8 {
+        let v = (x * 37 + y * 91 + seed as u32 * 13) % 251;
+        (v as u8).wrapping_add(phase)
+    };
+    let img = image::GrayImage::from_fn(w, h, |x, y| image::Luma([texture(x, y)]));
+    let dynimg = match u.int_in_range(0u8..=3)? {
+        0 => image::DynamicImage::ImageLuma8(img),
+        1 => image::DynamicImage::ImageLuma16(image::ImageBuffer::from_fn(w, h, |x, y| {
+            image::Luma([u16::from(texture(x, y)) * 257])
+        })),
+        2 => image::DynamicImage::ImageRgb8(image::DynamicImage::ImageLuma8(img).to_rgb8()),
+        _ => image::DynamicImage::ImageRgba16(image::DynamicImage::ImageLuma8(img).to_rgba16()),
+    };
+    let (format, ext) = if u.ratio(1u8, 4)? {
+        (image::ImageFormat::Tiff, "tif")
+    } else {
+        (image::ImageFormat::Png, "png")
+    };
+    let mut out = Cursor::new(Vec::new());
+    dynimg
+        .write_to(&mut out, format)
+        .map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    let mut bytes = out.into_inner();
+    if u.ratio(1u8, 24)? {
+        damage(u, &mut bytes)?;
+    }
+    Ok((bytes, ext))
+}
+
+/// A short valid WAV file (8–32 bit integer or 32-bit float, 1–2 channels).
+fn wav_bytes(u: &mut Unstructured) -> arbitrary::Result<Vec<u8>> {
+    let float = u.arbitrary::<bool>()?;
+    let spec = hound::WavSpec {
+        channels: u.int_in_range(1u16..=2)?,
+        sample_rate: *u.choose(&[8_000u32, 44_100, 48_000, 1])?,
+        bits_per_sample: if float {
+            32
+        } else {
+            *u.choose(&[8u16, 16, 24, 32])?
+        },
+        sample_format: if float {
+            hound::SampleFormat::Float
+        } else {
+            hound::SampleFormat::Int
+        },
+    };
+    let mut out = Cursor::new(Vec::new());
+    let mut w =
+        hound::WavWriter::new(&mut out, spec).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    let n = u.int_in_range(0usize..=64)? * usize::from(spec.channels);
+    for i in 0..n {
+        let r = if float {
+            w.write_sample((i as f32 * 0.1).sin())
+        } else {
+            w.write_sample(((i as f32 * 0.1).sin() * 100.0) as i32)
+        };
+        r.map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    }
+    w.finalize()
+        .map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    Ok(out.into_inner())
+}
+
+/// Cuts the file short or overwrites a few bytes.
+fn damage(u: &mut Unstructured, bytes: &mut Vec<u8>) -> arbitrary::Result<()> {
+    if bytes.is_empty() {
+        return Ok(());
+    }
+    if u.arbitrary::<bool>()? {
+        let keep = u.int_in_range(0..=bytes.len() - 1)?;
+        bytes.truncate(keep);
+    } else {
+        for _ in 0..u.int_in_range(1u8..=4)? {
+            let at = u.int_in_range(0..=bytes.len() - 1)?;
+            bytes[at] = u.arbitrary()?;
+        }
+    }
+    Ok(())
+}

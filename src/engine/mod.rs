@@ -1,0 +1,371 @@
+//! Whole-scan reconstruction: streams groups through the stage cache, then finishes and scores the clip.
+
+pub mod stream;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+use crate::io::wav::{Audio, read_wav};
+use crate::io::{LoadError, Scan, ScanMeta};
+use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample};
+use crate::pipeline::eval::{Scores, evaluate};
+use crate::pipeline::finish::finish_clip;
+pub use crate::pipeline::finish::{BRIDGE_GAP_SAMPLES, bridge_short_gaps};
+use crate::pipeline::sampling::native_spacing_um;
+use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
+use crate::pipeline::walls::WallSide;
+use crate::pipeline::{FlowDetail, GroupInput, PipelineParams, Stage, StageCache, StageError};
+pub use stream::{GroupOutcome, GroupStream, SlopeMode, run_groups};
+
+/// What one group adds to the clip's slope history: per wall, its own median |b| from its fits
+/// before the clip check. It depends on that group's frames alone.
+pub type SlopeEntry = (WallSide, f64);
+
+/// Longest lag searched when scoring against the reference (seconds).
+pub const MAX_EVAL_LAG_SECS: f64 = 0.0003;
+
+/// Why a reconstruction failed as a whole.
+#[derive(Debug, thiserror::Error)]
+pub enum EngineError {
+    /// Reading the scan failed.
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    /// A parameter is invalid, or the stitched signal could not be made.
+    #[error(transparent)]
+    Stage(#[from] StageError),
+    /// The operator cancelled.
+    #[error("reconstruction cancelled")]
+    Cancelled,
+    /// No group produced sound.
+    #[error("no group produced any sound (see the per-group warnings): {}", path.display())]
+    NoSound {
+        /// The scan folder.
+        path: PathBuf,
+        /// What went wrong per group.
+        warnings: Vec<String>,
+    },
+}
+
+/// Which groups to run and how to treat unreadable ones.
+#[derive(Clone, Debug, Default)]
+pub struct ReconstructOptions {
+    /// Pipeline knobs.
+    pub params: PipelineParams,
+    /// First group (inclusive) and end group (exclusive); `None` = all.
+    pub groups: Option<std::ops::Range<usize>>,
+    /// Treat unreadable frames as gaps (a warning) instead of failing.
+    pub keep_going: bool,
+}
+
+/// Progress of a running reconstruction.
+#[derive(Clone, Debug)]
+pub struct Progress {
+    /// Groups finished so far.
+    pub done: usize,
+    /// Groups to run.
+    pub total: usize,
+    /// The group just finished and its signal (None when it failed).
+    pub signal: Option<Arc<GroupSignal>>,
+}
+
+/// Per-group facts for the report.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct GroupReport {
+    /// Group index.
+    pub group: usize,
+    /// Mean outlier fraction of the robust fits (None when the group failed).
+    pub outlier_fraction: Option<f64>,
+    /// Fits rejected for an implausible wall slope (they became gaps).
+    pub rejected_fits: usize,
+    /// Samples produced.
+    pub samples: usize,
+    /// Failure or warning text.
+    pub warning: Option<String>,
+}
+
+/// Total seconds spent per stage over all groups.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct StageTimings {
+    /// Frame loading and grey conversion.
+    pub load_secs: f64,
+    /// Seconds per [`Stage`], by name.
+    pub stages_secs: Vec<(String, f64)>,
+    /// Stitching, resampling and DSP.
+    pub finish_secs: f64,
+    /// Wall-clock total.
+    pub total_secs: f64,
+}
+
+/// The result of a whole-scan reconstruction.
+#[derive(Clone, Debug)]
+pub struct Reconstruction {
+    /// Final audio at the output rate, after DSP and normalisation.
+    pub audio: Audio,
+    /// The stitched native-rate signal (velocity, mm/s).
+    pub stitched: StitchedSignal,
+    /// Per-group report rows.
+    pub groups: Vec<GroupReport>,
+    /// Stage timings.
+    pub timings: StageTimings,
+    /// Gain applied to velocity (mm/s) to reach the output level.
+    pub gain_per_mm_s: f64,
+    /// Scores against `reference.wav`, when the scan has one.
+    pub scores: Option<Scores>,
+    /// Warnings worth showing (gaps, failed groups).
+    pub warnings: Vec<String>,
+}
+
+/// Runs one group through every stage for its sound (used by the engine and by benchmarks):
+/// on the dual-focus path the flow stage gives only the in-focus map ([`FlowDetail::InFocusMap`]),
+/// which is all the stripes read. `reference` is the clip's wall-slope reference for this group
+/// (the default: none).
+///
+/// # Errors
+/// The first stage error.
+pub fn run_group(
+    input: &GroupInput,
+    params: &PipelineParams,
+    reference: &SlopeReference,
+) -> Result<(StageCache, Vec<Duration>), StageError> {
+    let mut cache = StageCache::new(FlowDetail::InFocusMap);
+    cache.set_slope_reference(reference.clone());
+    let mut times = vec![Duration::ZERO; Stage::ALL.len()];
+    let mut t0 = Instant::now();
+    cache.run_from(Stage::Derivatives, input, params, &mut |stage, _| {
+        times[stage.index()] = t0.elapsed();
+        t0 = Instant::now();
+        true
+    })?;
+    Ok((cache, times))
+}
+
+/// Reconstructs the sound of a scan.
+///
+/// Groups are decoded on a loader thread one group ahead and processed in order (each stage
+/// parallel inside), so memory stays at about two groups whatever the scan length.
+/// `progress` is called after every group; setting `cancel` stops at the next group.
+///
+/// # Errors
+/// [`EngineError`] on invalid params, an unreadable frame (unless `keep_going`), cancellation,
+/// or when no group produced sound.
+pub fn reconstruct(
+    scan: &Scan,
+    opts: &ReconstructOptions,
+    progress: &mut dyn FnMut(&Progress),
+    cancel: &AtomicBool,
+) -> Result<Reconstruction, EngineError> {
+    let started = Instant::now();
+    let params = &opts.params;
+    params.validate()?;
+    let range = opts.groups.clone().unwrap_or(0..scan.groups.len());
+    let range = range.start.min(scan.groups.len())..range.end.min(scan.groups.len());
+    let total = range.len();
+    let mut clip = ClipGroups::with_capacity(total);
+    // Each group's fits are checked against the median wall slope of the groups before it.
+    let mut slopes = SlopeHistory::default();
+    run_groups(
+        &GroupStream {
+            scan,
+            params,
+            keep_going: opts.keep_going,
+            mode: SlopeMode::Check,
+        },
+        range,
+        &mut slopes,
+        cancel,
+        &mut |outcome| {
+            let signal = outcome.signal.clone();
+            clip.add(outcome);
+            progress(&Progress {
+                done: clip.groups_seen,
+                total,
+                signal,
+            });
+            Ok(())
+        },
+    )?;
+    let mut rec = finish_reconstruction(
+        clip,
+        &scan.meta,
+        scan.reference.as_deref(),
+        params,
+        &scan.dir,
+    )?;
+    rec.timings.total_secs = started.elapsed().as_secs_f64();
+    Ok(rec)
+}
+
+/// The groups of a clip gathered in order: signals, report rows, warnings and timings.
+#[derive(Clone, Debug, Default)]
+pub struct ClipGroups {
+    /// The signals of the groups that produced sound, in group order.
+    pub signals: Vec<GroupSignal>,
+    /// Report rows in group order.
+    pub reports: Vec<GroupReport>,
+    /// Per-group warnings (failed groups), in group order.
+    pub warnings: Vec<String>,
+    /// Decode seconds, summed.
+    pub load_secs: f64,
+    /// Seconds per [`Stage`], summed.
+    pub stage_secs: Vec<f64>,
+    /// Groups added so far.
+    pub groups_seen: usize,
+}
+
+impl ClipGroups {
+    /// Room for `groups` groups.
+    #[must_use]
+    pub fn with_capacity(groups: usize) -> Self {
+        Self {
+            signals: Vec::with_capacity(groups),
+            reports: Vec::with_capacity(groups),
+            stage_secs: vec![0.0; Stage::ALL.len()],
+            ..Self::default()
+        }
+    }
+
+    /// Adds the next group's outcome.
+    pub fn add(&mut self, outcome: GroupOutcome) {
+        self.groups_seen += 1;
+        self.load_secs += outcome.load_secs;
+        for (acc, t) in self.stage_secs.iter_mut().zip(&outcome.stage_secs) {
+            *acc += t;
+        }
+        if let Some(report) = outcome.report {
+            if let Some(w) = &report.warning {
+                self.warnings.push(w.clone());
+            }
+            self.reports.push(report);
+        }
+        if let Some(sig) = outcome.signal {
+            self.signals.push(Arc::unwrap_or_clone(sig));
+        }
+    }
+}
+
+/// Finishes gathered groups into a reconstruction ([`finish_clip`]) and scores it against
+/// `reference` when given. `scan_dir` names the scan in errors. `total_secs` is left for the
+/// caller to set.
+///
+/// # Errors
+/// [`EngineError::NoSound`] when no group produced sound; [`EngineError::Stage`] when
+/// finishing fails.
+pub fn finish_reconstruction(
+    clip: ClipGroups,
+    meta: &ScanMeta,
+    reference: Option<&std::path::Path>,
+    params: &PipelineParams,
+    scan_dir: &std::path::Path,
+) -> Result<Reconstruction, EngineError> {
+    let ClipGroups {
+        signals,
+        reports,
+        mut warnings,
+        load_secs,
+        stage_secs,
+        ..
+    } = clip;
+    if signals.is_empty() {
+        return Err(EngineError::NoSound {
+            path: scan_dir.to_path_buf(),
+            warnings,
+        });
+    }
+    let mut timings = StageTimings {
+        load_secs,
+        stages_secs: Stage::ALL
+            .iter()
+            .zip(&stage_secs)
+            .map(|(s, t)| (s.name().to_string(), *t))
+            .collect(),
+        ..StageTimings::default()
+    };
+    let t_finish = Instant::now();
+    let rejected: usize = reports.iter().map(|r| r.rejected_fits).sum();
+    if rejected > 0 {
+        warnings.push(format!(
+            "{rejected} orientation fits rejected for an implausible wall slope (left as gaps)"
+        ));
+    }
+    let finished = finish_clip(&signals, native_spacing_um(meta, &params.sound), params)?;
+    warnings.extend(finished.warnings);
+    let audio = Audio {
+        sample_rate_hz: finished.sample_rate_hz,
+        channels: finished.channels,
+    };
+    let stitched = finished.stitched;
+    timings.finish_secs = t_finish.elapsed().as_secs_f64();
+    let scores = match reference {
+        Some(path) => score_against_reference(
+            &audio,
+            &stitched,
+            meta.groove_speed_mm_s(0),
+            path,
+            &mut warnings,
+        ),
+        None => None,
+    };
+    Ok(Reconstruction {
+        audio,
+        stitched,
+        groups: reports,
+        timings,
+        gain_per_mm_s: finished.gain_per_mm_s,
+        scores,
+        warnings,
+    })
+}
+
+/// Reference sound aligned to the stretch a reconstruction covers, at the recovered rate.
+///
+/// # Errors
+/// [`LoadError`] when the reference cannot be read or resampled.
+pub fn aligned_reference(
+    recovered: &Audio,
+    stitched: &StitchedSignal,
+    groove_speed_mm_s: f64,
+    path: &std::path::Path,
+) -> Result<Vec<f32>, LoadError> {
+    let reference = read_wav(path)?;
+    let mono = reference.mono();
+    let rate = f64::from(reference.sample_rate_hz);
+    let start_secs = stitched.start_um / (groove_speed_mm_s * 1000.0);
+    let skip = (start_secs * rate).round().max(0.0) as usize;
+    let tail = mono.get(skip..).unwrap_or(&[]);
+    let resampled = if reference.sample_rate_hz == recovered.sample_rate_hz {
+        tail.to_vec()
+    } else {
+        resample(tail, rate, recovered.sample_rate_hz).map_err(|e| LoadError::Sound {
+            problem: format!("cannot resample the reference: {e}"),
+            path: path.to_path_buf(),
+        })?
+    };
+    Ok(resampled)
+}
+
+fn score_against_reference(
+    audio: &Audio,
+    stitched: &StitchedSignal,
+    groove_speed_mm_s: f64,
+    path: &std::path::Path,
+    warnings: &mut Vec<String>,
+) -> Option<Scores> {
+    match aligned_reference(audio, stitched, groove_speed_mm_s, path) {
+        Ok(reference) => {
+            let max_lag = (MAX_EVAL_LAG_SECS * f64::from(audio.sample_rate_hz)) as usize;
+            let scores = evaluate(&audio.mono(), &reference, max_lag, audio.sample_rate_hz);
+            if scores.is_none() {
+                warnings.push("too little overlap with reference.wav to score".into());
+            }
+            scores
+        }
+        Err(e) => {
+            warnings.push(format!("reference not scored: {e}"));
+            None
+        }
+    }
+}

@@ -1,0 +1,214 @@
+//! The group stream: a named loader thread decodes the next group while the current one runs through the stages.
+
+use std::ops::Range;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::time::Instant;
+
+use super::{EngineError, GroupReport, SlopeEntry, run_group};
+use crate::image::Image;
+use crate::io::{LoadError, Scan, load_group_frames};
+use crate::pipeline::audio_signal::GroupSignal;
+use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
+use crate::pipeline::{GroupInput, PipelineParams, Stage, StageError, frames_read};
+
+/// How a group meets the clip's slope history.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SlopeMode {
+    /// Checked against its reference, then added to it (every group of a reconstruction).
+    Check,
+    /// Only added to it (a group before a shard's range, run for its slope entries alone,
+    /// which do not depend on the reference).
+    RecordOnly,
+}
+
+/// What one group gave.
+#[derive(Clone, Debug)]
+pub struct GroupOutcome {
+    /// Group index in the scan.
+    pub group: usize,
+    /// Its report row (None only if the stages ran but left no signal, which they do not).
+    pub report: Option<GroupReport>,
+    /// Its sound (None when it failed and became a gap).
+    pub signal: Option<Arc<GroupSignal>>,
+    /// What it added to the slope reference.
+    pub slopes: Vec<SlopeEntry>,
+    /// Seconds decoding its frames.
+    pub load_secs: f64,
+    /// Seconds per [`Stage`] (zero for a group that failed).
+    pub stage_secs: Vec<f64>,
+}
+
+impl GroupOutcome {
+    fn failed(group: usize, warning: String, load_secs: f64) -> Self {
+        Self {
+            group,
+            report: Some(GroupReport {
+                group,
+                outlier_fraction: None,
+                rejected_fits: 0,
+                samples: 0,
+                warning: Some(warning),
+            }),
+            signal: None,
+            slopes: Vec::new(),
+            load_secs,
+            stage_secs: vec![0.0; Stage::ALL.len()],
+        }
+    }
+}
+
+/// What a stream of groups runs on.
+#[derive(Clone, Copy, Debug)]
+pub struct GroupStream<'a> {
+    /// The scan.
+    pub scan: &'a Scan,
+    /// The params.
+    pub params: &'a PipelineParams,
+    /// Unreadable groups become gaps with a warning instead of failing the run.
+    pub keep_going: bool,
+    /// How groups meet the slope history.
+    pub mode: SlopeMode,
+}
+
+/// Runs the groups `range` of `stream.scan` in order, one group decoded ahead on a named
+/// loader thread, and hands each outcome to `on_group`. Memory stays at about two groups.
+///
+/// A group that cannot be read fails the run, or with `keep_going` becomes a gap with a
+/// warning; a group whose stages fail becomes a gap with a warning; an invalid parameter
+/// fails the run.
+///
+/// # Errors
+/// [`EngineError`] as above, [`EngineError::Cancelled`] when `cancel` is set, or whatever
+/// `on_group` returns.
+pub fn run_groups(
+    stream: &GroupStream<'_>,
+    range: Range<usize>,
+    slopes: &mut SlopeHistory,
+    cancel: &AtomicBool,
+    on_group: &mut dyn FnMut(GroupOutcome) -> Result<(), EngineError>,
+) -> Result<(), EngineError> {
+    let GroupStream {
+        scan,
+        params,
+        keep_going,
+        mode,
+    } = *stream;
+    let range = range.start.min(scan.groups.len())..range.end.min(scan.groups.len());
+    let meta = Arc::new(scan.meta.clone());
+    // A decoded group: its index, the first frame loaded, the frames, the seconds it took.
+    type Loaded = (usize, usize, Result<Vec<Image>, LoadError>, f64);
+    let (tx, rx) = mpsc::sync_channel::<Loaded>(1);
+    let entries = scan.groups.get(range).unwrap_or_default();
+    let loader_cancel = AtomicBool::new(false);
+    std::thread::scope(|s| {
+        // Own the receiver here so that an early return (or a panic) drops it, which unblocks a
+        // loader waiting in `send` instead of deadlocking the scope's join.
+        let rx = rx;
+        let loader = std::thread::Builder::new()
+            .name("groovescope-loader".into())
+            .spawn_scoped(s, || {
+                for entry in entries {
+                    if cancel.load(Ordering::Relaxed) || loader_cancel.load(Ordering::Relaxed) {
+                        break;
+                    }
+                    let t = Instant::now();
+                    let window = frames_read(entry.frame_count(), &scan.meta, params);
+                    let first = window.start;
+                    let frames = load_group_frames(entry, window);
+                    if tx
+                        .send((entry.index, first, frames, t.elapsed().as_secs_f64()))
+                        .is_err()
+                    {
+                        break;
+                    }
+                }
+                drop(tx);
+            });
+        if let Err(e) = loader {
+            return Err(EngineError::Load(LoadError::Io {
+                problem: format!("cannot start the loader thread: {e}"),
+                path: scan.dir.clone(),
+            }));
+        }
+        let stop = |e: EngineError| {
+            loader_cancel.store(true, Ordering::Relaxed);
+            Err(e)
+        };
+        for (group, first_frame, frames, load_secs) in rx.iter() {
+            if cancel.load(Ordering::Relaxed) {
+                return stop(EngineError::Cancelled);
+            }
+            let frames = match frames {
+                Ok(f) => f,
+                Err(e) if keep_going => {
+                    let w = format!("group {group}: {e} (filled with silence)");
+                    if let Err(e) = on_group(GroupOutcome::failed(group, w, load_secs)) {
+                        return stop(e);
+                    }
+                    continue;
+                }
+                Err(e) => return stop(e.into()),
+            };
+            let input = GroupInput {
+                group,
+                frames: Arc::new(frames),
+                first_frame,
+                meta: meta.clone(),
+            };
+            let outcome = match process_group(&input, params, slopes, mode) {
+                Ok(o) => GroupOutcome { load_secs, ..o },
+                Err(e @ StageError::InvalidParam { .. }) => return stop(e.into()),
+                Err(e) => {
+                    let w = format!("group {group}: {e} (filled with silence)");
+                    GroupOutcome::failed(group, w, load_secs)
+                }
+            };
+            if let Err(e) = on_group(outcome) {
+                return stop(e);
+            }
+        }
+        Ok(())
+    })?;
+    if cancel.load(Ordering::Relaxed) {
+        return Err(EngineError::Cancelled);
+    }
+    Ok(())
+}
+
+/// One decoded group through the stages with the clip's slope reference; its own slope
+/// medians go into the history (a failed group adds none).
+fn process_group(
+    input: &GroupInput,
+    params: &PipelineParams,
+    slopes: &mut SlopeHistory,
+    mode: SlopeMode,
+) -> Result<GroupOutcome, StageError> {
+    let reference = match mode {
+        SlopeMode::Check => slopes.reference(params.orientation.max_wall_slope_change),
+        SlopeMode::RecordOnly => SlopeReference::default(),
+    };
+    let (cache, times) = run_group(input, params, &reference)?;
+    let entries: Vec<SlopeEntry> = cache
+        .orientation()
+        .map(|o| o.own_slopes.clone())
+        .unwrap_or_default();
+    slopes.push(&entries);
+    let orientation = cache.orientation().map(|o| &o.orientation);
+    let report = cache.signal().map(|sig| GroupReport {
+        group: input.group,
+        outlier_fraction: orientation.map(|o| o.outlier_fraction),
+        rejected_fits: orientation.map_or(0, |o| o.rejected_fits),
+        samples: sig.positions_um.len(),
+        warning: None,
+    });
+    Ok(GroupOutcome {
+        group: input.group,
+        report,
+        signal: cache.signal().cloned(),
+        slopes: entries,
+        load_secs: 0.0,
+        stage_secs: times.iter().map(std::time::Duration::as_secs_f64).collect(),
+    })
+}

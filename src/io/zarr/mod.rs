@@ -1,0 +1,466 @@
+//! The Zarr v3 scan store: one zstd-compressed chunk per group, for side-scale scans (see docs/FORMAT.md).
+//!
+//! `scan.zarr/` holds a root group whose `groovescope` attribute carries the scan's
+//! `scan.toml` text, the group names and the sample type, and one array `frames` of shape
+//! `[groups, frames, height, width]` chunked `[1, frames, height, width]`: the samples as
+//! stored in the frames (uint8 or uint16 grey; float32 grey for colour frames), `bytes` then
+//! `zstd` with its checksum. `reference.wav` (when the scan has one) sits in the store folder
+//! beside `zarr.json`. A missing chunk is an error naming it (a gap with `--keep-going`), never
+//! a silent run of fill values.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use zarrs::array::codec::ZstdCodec;
+use zarrs::array::{Array, ArrayBuilder, CodecOptions, data_type};
+use zarrs::filesystem::FilesystemStore;
+use zarrs::group::{Group, GroupBuilder};
+
+use super::LoadError;
+use super::frames::{RawFrame, RawSamples, grey_from_raw};
+use super::scan::{GroupEntry, MIN_FRAMES_PER_GROUP, Scan, ScanMeta};
+use crate::image::Image;
+
+mod pack;
+pub use pack::{PackSummary, pack_scan};
+
+/// Path of the frames array inside the store.
+pub const FRAMES_ARRAY: &str = "/frames";
+/// Root attribute holding the scan's metadata.
+pub const SCAN_ATTRIBUTE: &str = "groovescope";
+/// Store layout version this build reads and writes.
+pub const STORE_FORMAT: u32 = 1;
+/// Default zstd level of `pack`.
+pub const DEFAULT_ZSTD_LEVEL: i32 = 3;
+
+/// How frame samples are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SampleType {
+    /// 8-bit grey.
+    U8,
+    /// 16-bit grey.
+    U16,
+    /// Grey `f32` from colour frames.
+    F32,
+}
+
+impl SampleType {
+    /// The type of a raw frame's samples.
+    #[must_use]
+    pub fn of(samples: &RawSamples) -> Self {
+        match samples {
+            RawSamples::U8(_) => Self::U8,
+            RawSamples::U16(_) => Self::U16,
+            RawSamples::F32(_) => Self::F32,
+        }
+    }
+
+    fn data_type(self) -> zarrs::array::DataType {
+        match self {
+            Self::U8 => data_type::uint8(),
+            Self::U16 => data_type::uint16(),
+            Self::F32 => data_type::float32(),
+        }
+    }
+}
+
+/// The root group's `groovescope` attribute.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StoreAttributes {
+    /// [`STORE_FORMAT`].
+    pub store_format: u32,
+    /// The scan's `scan.toml`.
+    pub scan_toml: String,
+    /// Group names, in order (the folder names of the scan it was packed from).
+    pub groups: Vec<String>,
+    /// How samples are stored.
+    pub sample_type: SampleType,
+}
+
+/// Where one group's frames are in a store.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ZarrGroup {
+    /// The store folder.
+    pub store: PathBuf,
+    /// The group's chunk index.
+    pub group: usize,
+    /// Frames in the group.
+    pub frames: usize,
+    /// Frame width (px).
+    pub width: usize,
+    /// Frame height (px).
+    pub height: usize,
+    /// How samples are stored.
+    pub sample_type: SampleType,
+}
+
+impl ZarrGroup {
+    /// The file of the group's chunk (it names the group in errors).
+    #[must_use]
+    pub fn chunk_path(&self) -> PathBuf {
+        self.store
+            .join("frames")
+            .join("c")
+            .join(self.group.to_string())
+            .join("0")
+            .join("0")
+            .join("0")
+    }
+}
+
+fn io_err(problem: String, path: &Path) -> LoadError {
+    LoadError::Io {
+        problem,
+        path: path.to_path_buf(),
+    }
+}
+
+fn not_a_store(problem: String, path: &Path) -> LoadError {
+    LoadError::NotAScan {
+        problem: format!("not a groovescope Zarr store: {problem}"),
+        path: path.to_path_buf(),
+    }
+}
+
+fn open_store(dir: &Path) -> Result<Arc<FilesystemStore>, LoadError> {
+    FilesystemStore::new(dir)
+        .map(Arc::new)
+        .map_err(|e| io_err(format!("cannot open the Zarr store: {e}"), dir))
+}
+
+/// Opens a store written by [`pack_scan`] or the video import as a [`Scan`].
+///
+/// # Errors
+/// [`LoadError`] naming the store when its metadata is missing or does not fit a scan.
+pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
+    let store = open_store(dir)?;
+    let group = Group::open(store.clone(), "/").map_err(|e| not_a_store(e.to_string(), dir))?;
+    let attrs: StoreAttributes = group
+        .attributes()
+        .get(SCAN_ATTRIBUTE)
+        .cloned()
+        .ok_or_else(|| not_a_store(format!("no `{SCAN_ATTRIBUTE}` attribute"), dir))
+        .and_then(|v| serde_json::from_value(v).map_err(|e| not_a_store(e.to_string(), dir)))?;
+    if attrs.store_format != STORE_FORMAT {
+        return Err(not_a_store(
+            format!(
+                "store format {} (this build reads {STORE_FORMAT})",
+                attrs.store_format
+            ),
+            dir,
+        ));
+    }
+    let meta = ScanMeta::from_toml_str(&attrs.scan_toml, &dir.join("zarr.json"))?;
+    let array = Array::open(store, FRAMES_ARRAY).map_err(|e| not_a_store(e.to_string(), dir))?;
+    let shape = array.shape().to_vec();
+    let dims: Vec<usize> = shape.iter().map(|&d| d as usize).collect();
+    let [groups, frames, height, width] = dims[..] else {
+        return Err(not_a_store(format!("frames array of shape {shape:?}"), dir));
+    };
+    if groups != attrs.groups.len()
+        || *array.data_type() != attrs.sample_type.data_type()
+        || array
+            .chunk_shape(&[0, 0, 0, 0])
+            .map(|c| c.iter().map(|d| d.get()).collect::<Vec<_>>())
+            .ok()
+            != Some(vec![1, shape[1], shape[2], shape[3]])
+    {
+        return Err(not_a_store(
+            "the frames array does not match the group list, sample type or one chunk a group"
+                .into(),
+            dir,
+        ));
+    }
+    if groups == 0 {
+        return Err(LoadError::NotAScan {
+            problem: "the scan holds no groups".into(),
+            path: dir.to_path_buf(),
+        });
+    }
+    if frames < MIN_FRAMES_PER_GROUP {
+        return Err(LoadError::TooFewFrames {
+            found: frames,
+            needed: MIN_FRAMES_PER_GROUP,
+            path: dir.join("frames"),
+        });
+    }
+    let entries = attrs
+        .groups
+        .iter()
+        .enumerate()
+        .map(|(index, name)| GroupEntry {
+            index,
+            dir: dir.join(name),
+            frames: Vec::new(),
+            zarr: Some(ZarrGroup {
+                store: dir.to_path_buf(),
+                group: index,
+                frames,
+                width,
+                height,
+                sample_type: attrs.sample_type,
+            }),
+        })
+        .collect();
+    Ok(Scan {
+        dir: dir.to_path_buf(),
+        meta,
+        groups: entries,
+        reference: Some(dir.join("reference.wav")).filter(|p| p.is_file()),
+    })
+}
+
+/// Reads one group's chunk as raw frames.
+///
+/// # Errors
+/// [`LoadError::BadFrame`] naming the chunk when it is missing or does not decode (its zstd
+/// checksum catches damage).
+pub fn load_group_raw(z: &ZarrGroup) -> Result<Vec<RawFrame>, LoadError> {
+    let chunk = z.chunk_path();
+    let bad = |problem: String| LoadError::BadFrame {
+        problem,
+        path: chunk.clone(),
+    };
+    let store = open_store(&z.store)?;
+    let array = Array::open(store, FRAMES_ARRAY).map_err(|e| bad(e.to_string()))?;
+    let idx = [z.group as u64, 0, 0, 0];
+    let px = z.width * z.height;
+    let missing = || {
+        bad(format!(
+            "the chunk of group {} is missing from the store",
+            z.group
+        ))
+    };
+    let frames: Vec<RawSamples> = match z.sample_type {
+        SampleType::U8 => chunk_frames(&array, &idx, px, RawSamples::U8),
+        SampleType::U16 => chunk_frames(&array, &idx, px, RawSamples::U16),
+        SampleType::F32 => chunk_frames(&array, &idx, px, RawSamples::F32),
+    }
+    .map_err(|e| bad(e.to_string()))?
+    .ok_or_else(missing)?;
+    if frames.len() != z.frames {
+        return Err(bad(format!(
+            "the chunk holds {} frames, the array says {}",
+            frames.len(),
+            z.frames
+        )));
+    }
+    Ok(frames
+        .into_iter()
+        .map(|samples| RawFrame {
+            width: z.width,
+            height: z.height,
+            samples,
+        })
+        .collect())
+}
+
+/// A chunk's frames of `px` samples each (None when the chunk is missing).
+fn chunk_frames<T: zarrs::array::ElementOwned + Clone>(
+    array: &Array<FilesystemStore>,
+    idx: &[u64],
+    px: usize,
+    wrap: fn(Vec<T>) -> RawSamples,
+) -> Result<Option<Vec<RawSamples>>, zarrs::array::ArrayError> {
+    Ok(array
+        .retrieve_chunk_if_exists::<Vec<T>>(idx)?
+        .map(|v| v.chunks(px.max(1)).map(|f| wrap(f.to_vec())).collect()))
+}
+
+/// The frames `range` (clamped) of a group as grey `f32`, exactly as the frames of the scan
+/// folder it was packed from load. The whole chunk is decoded, so damage anywhere in it is
+/// reported.
+///
+/// # Errors
+/// As [`load_group_raw`].
+pub fn load_group_frames(
+    z: &ZarrGroup,
+    range: std::ops::Range<usize>,
+) -> Result<Vec<Image>, LoadError> {
+    let raw = load_group_raw(z)?;
+    let n = raw.len();
+    Ok(raw
+        .into_iter()
+        .skip(range.start.min(n))
+        .take(range.end.min(n).saturating_sub(range.start.min(n)))
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(grey_from_raw)
+        .collect())
+}
+
+/// Writes a store group by group (used by `pack` and by the video import).
+pub struct ZarrWriter {
+    dir: PathBuf,
+    store: Arc<FilesystemStore>,
+    array: Array<FilesystemStore>,
+    frames: usize,
+    width: usize,
+    height: usize,
+    sample_type: SampleType,
+    names: Vec<String>,
+}
+
+impl std::fmt::Debug for ZarrWriter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ZarrWriter")
+            .field("dir", &self.dir)
+            .field("groups", &self.names.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl ZarrWriter {
+    /// Starts a store in the empty folder `dir` for groups of `frames` frames of
+    /// `width`×`height` samples of `sample_type`, compressed at zstd `level`.
+    ///
+    /// # Errors
+    /// [`LoadError::Io`] naming `dir` when the store cannot be created.
+    pub fn create(
+        dir: &Path,
+        frames: usize,
+        width: usize,
+        height: usize,
+        sample_type: SampleType,
+        level: i32,
+    ) -> Result<Self, LoadError> {
+        let err =
+            |e: &dyn std::fmt::Display| io_err(format!("cannot create the Zarr store: {e}"), dir);
+        std::fs::create_dir_all(dir).map_err(|e| err(&e))?;
+        let store = open_store(dir)?;
+        let (f, h, w) = (frames as u64, height as u64, width as u64);
+        let fill: zarrs::array::FillValue = match sample_type {
+            SampleType::U8 => 0u8.into(),
+            SampleType::U16 => 0u16.into(),
+            SampleType::F32 => 0f32.into(),
+        };
+        let array = ArrayBuilder::new(
+            vec![0, f, h, w],
+            vec![1, f, h, w],
+            sample_type.data_type(),
+            fill,
+        )
+        .bytes_to_bytes_codecs(vec![Arc::new(ZstdCodec::new(level, true))])
+        .dimension_names(["group", "frame", "y", "x"].into())
+        .build(store.clone(), FRAMES_ARRAY)
+        .map_err(|e| err(&e))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            store,
+            array,
+            frames,
+            width,
+            height,
+            sample_type,
+            names: Vec::new(),
+        })
+    }
+
+    /// Appends the next group's frames as one chunk.
+    ///
+    /// # Errors
+    /// [`LoadError`] naming the group when its frames do not fit the store, or the write fails.
+    pub fn write_group(
+        &mut self,
+        name: &str,
+        frames: Vec<RawFrame>,
+        source: &Path,
+    ) -> Result<(), LoadError> {
+        let g = self.names.len() as u64;
+        if frames.len() != self.frames {
+            return Err(LoadError::Io {
+                problem: format!(
+                    "a Zarr store needs the same number of frames in every group: this one has {}, the first {}",
+                    frames.len(),
+                    self.frames
+                ),
+                path: source.to_path_buf(),
+            });
+        }
+        let mut u8s = Vec::new();
+        let mut u16s = Vec::new();
+        let mut f32s = Vec::new();
+        for f in frames {
+            if f.width != self.width || f.height != self.height {
+                return Err(LoadError::MixedSizes {
+                    found_w: f.width,
+                    found_h: f.height,
+                    want_w: self.width,
+                    want_h: self.height,
+                    path: source.to_path_buf(),
+                });
+            }
+            match (f.samples, self.sample_type) {
+                (RawSamples::U8(v), SampleType::U8) => u8s.extend(v),
+                (RawSamples::U16(v), SampleType::U16) => u16s.extend(v),
+                (RawSamples::F32(v), SampleType::F32) => f32s.extend(v),
+                (other, want) => {
+                    return Err(LoadError::Io {
+                        problem: format!(
+                            "a Zarr store needs one sample type: this group has {:?} frames, the first group {want:?}",
+                            SampleType::of(&other)
+                        ),
+                        path: source.to_path_buf(),
+                    });
+                }
+            }
+        }
+        let mut shape = self.array.shape().to_vec();
+        shape[0] = g + 1;
+        let err = |e: &dyn std::fmt::Display| {
+            io_err(format!("cannot write the group's chunk: {e}"), source)
+        };
+        self.array.set_shape(shape).map_err(|e| err(&e))?;
+        // The array's metadata follows every group, so each chunk reads back as it is written.
+        self.array.store_metadata().map_err(|e| err(&e))?;
+        // A chunk of zeros is still written: a missing chunk means a lost group, not black frames.
+        let opts = CodecOptions::default().with_store_empty_chunks(true);
+        let idx = [g, 0, 0, 0];
+        match self.sample_type {
+            SampleType::U8 => self.array.store_chunk_opt(&idx, u8s, &opts),
+            SampleType::U16 => self.array.store_chunk_opt(&idx, u16s, &opts),
+            SampleType::F32 => self.array.store_chunk_opt(&idx, f32s, &opts),
+        }
+        .map_err(|e| err(&e))?;
+        self.names.push(name.to_string());
+        Ok(())
+    }
+
+    /// Writes the metadata (array shape, root attributes with `scan_toml`) and ends the store.
+    ///
+    /// # Errors
+    /// [`LoadError::Io`] naming the store when a write fails.
+    pub fn finish(self, scan_toml: &str) -> Result<PathBuf, LoadError> {
+        let err = |e: &dyn std::fmt::Display| {
+            io_err(format!("cannot write the Zarr metadata: {e}"), &self.dir)
+        };
+        self.array.store_metadata().map_err(|e| err(&e))?;
+        let attrs = StoreAttributes {
+            store_format: STORE_FORMAT,
+            scan_toml: scan_toml.to_string(),
+            groups: self.names,
+            sample_type: self.sample_type,
+        };
+        let mut map = serde_json::Map::new();
+        map.insert(
+            SCAN_ATTRIBUTE.into(),
+            serde_json::to_value(&attrs).map_err(|e| err(&e))?,
+        );
+        GroupBuilder::new()
+            .attributes(map)
+            .build(self.store.clone(), "/")
+            .map_err(|e| err(&e))?
+            .store_metadata()
+            .map_err(|e| err(&e))?;
+        Ok(self.dir)
+    }
+
+    /// Groups written so far.
+    #[must_use]
+    pub fn groups(&self) -> usize {
+        self.names.len()
+    }
+}

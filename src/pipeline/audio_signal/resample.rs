@@ -1,0 +1,138 @@
+//! Band-limited resampling to the output rate (rubato's windowed sinc) with its delay removed exactly.
+
+use super::*;
+
+/// Sinc length of the resampler (input samples) when upsampling; scaled by the ratio when
+/// downsampling so the filter spans as many output samples.
+pub(super) const SINC_LEN_BASE: usize = 256;
+/// Cap on the downsampling sinc length.
+pub(super) const SINC_LEN_MAX: usize = 4096;
+/// Oversampling of the tabulated sinc (cubic interpolation between table entries).
+pub(super) const SINC_OVERSAMPLING: usize = 128;
+/// Input frames per resampler call.
+pub(super) const RESAMPLE_CHUNK: usize = 4096;
+/// Leading zeros tried so that the resampler's delay is a whole number of output samples.
+pub(super) const DELAY_PAD_SEARCH: usize = 4096;
+/// Delay of rubato's `SincFixedIn` (cubic sinc-table interpolation) in input samples: output n
+/// is the input at time n/ratio − delay, with delay = 1 − 1/ratio − 1/oversampling (its first
+/// output lies one output step after its start index, and the cubic table lookup is one table
+/// step late). Measured, and checked by the `resampler_delay_is_exact` test for up- and
+/// downsampling.
+pub(super) fn resampler_delay_in(ratio: f64) -> f64 {
+    #[allow(clippy::cast_precision_loss)] // small
+    let table_step = 1.0 / SINC_OVERSAMPLING as f64;
+    1.0 - 1.0 / ratio - table_step
+}
+
+/// Band-limited resampling of one channel from `from_hz` to `to_hz` (rubato windowed-sinc,
+/// cubic between table entries). The output has round(n·to/from) samples, aligned with the
+/// input (output k is the input at time k/to): the resampler's latency is removed, its fractional
+/// part by leading zeros chosen so that the delay is a whole number of output samples (to within
+/// 1/`DELAY_PAD_SEARCH` sample for irrational ratios). Non-finite samples count as 0.
+///
+/// # Errors
+/// [`StageError`] on non-positive or NaN rates, or a resampler failure.
+pub fn resample(samples: &[f32], from_hz: f64, to_hz: u32) -> Result<Vec<f32>, StageError> {
+    check_range("from_hz", from_hz, f64::MIN_POSITIVE, f64::MAX)?;
+    if to_hz == 0 {
+        return Err(StageError::InvalidParam {
+            name: "sound.output_rate_hz".to_string(),
+            problem: "0 Hz".to_string(),
+        });
+    }
+    let clean = |v: &f32| if v.is_finite() { *v } else { 0.0 };
+    let ratio = f64::from(to_hz) / from_hz;
+    if samples.is_empty() {
+        return Ok(Vec::new());
+    }
+    if (ratio - 1.0).abs() < 1e-12 {
+        return Ok(samples.iter().map(clean).collect());
+    }
+    let fail = |e: &dyn std::fmt::Display| StageError::BadInput {
+        stage: "resample",
+        problem: e.to_string(),
+    };
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // bounded by the cap
+    let sinc_len = if ratio < 1.0 {
+        ((SINC_LEN_BASE as f64 / ratio).ceil() as usize).min(SINC_LEN_MAX)
+    } else {
+        SINC_LEN_BASE
+    }
+    .div_ceil(8)
+        * 8;
+    let window = WindowFunction::BlackmanHarris2;
+    let params = SincInterpolationParameters {
+        sinc_len,
+        f_cutoff: calculate_cutoff(sinc_len, window),
+        interpolation: SincInterpolationType::Cubic,
+        oversampling_factor: SINC_OVERSAMPLING,
+        window,
+    };
+    let mut resampler =
+        SincFixedIn::<f64>::new(ratio, 1.0, params, RESAMPLE_CHUNK, 1).map_err(|e| fail(&e))?;
+
+    // Leading zeros so that (delay + pad)·ratio is (nearly) a whole number of output samples.
+    // The delay may be negative (downsampling): start the search where it no longer is.
+    let delay_in = resampler_delay_in(ratio);
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // a few samples
+    let min_pad = (-delay_in).ceil().max(0.0) as usize;
+    let frac_off = |pad: usize| {
+        #[allow(clippy::cast_precision_loss)]
+        let d = (delay_in + pad as f64) * ratio;
+        (d - d.round()).abs()
+    };
+    let pad = (min_pad..min_pad + DELAY_PAD_SEARCH)
+        .min_by(|&a, &b| frac_off(a).total_cmp(&frac_off(b)))
+        .unwrap_or(min_pad);
+    #[allow(
+        clippy::cast_precision_loss,
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss
+    )]
+    let delay_out = ((delay_in + pad as f64) * ratio).round() as usize;
+    #[allow(
+        clippy::cast_precision_loss,
+        clippy::cast_possible_truncation,
+        clippy::cast_sign_loss
+    )]
+    let target = (samples.len() as f64 * ratio).round() as usize;
+    let needed = delay_out + target;
+
+    let mut input = vec![0.0f64; pad];
+    input.extend(samples.iter().map(|v| f64::from(clean(v))));
+    let mut out: Vec<f64> = Vec::with_capacity(needed + RESAMPLE_CHUNK);
+    let mut buf = resampler.output_buffer_allocate(true);
+    let mut chunks = input.chunks_exact(RESAMPLE_CHUNK);
+    for chunk in chunks.by_ref() {
+        let (_, written) = resampler
+            .process_into_buffer(&[chunk], &mut buf, None)
+            .map_err(|e| fail(&e))?;
+        out.extend_from_slice(buf.first().and_then(|b| b.get(..written)).unwrap_or(&[]));
+    }
+    let rest = chunks.remainder();
+    if !rest.is_empty() {
+        let (_, written) = resampler
+            .process_partial_into_buffer(Some(&[rest]), &mut buf, None)
+            .map_err(|e| fail(&e))?;
+        out.extend_from_slice(buf.first().and_then(|b| b.get(..written)).unwrap_or(&[]));
+    }
+    // Flush the latency with silence; each call yields about RESAMPLE_CHUNK·ratio samples.
+    let max_flushes = needed / (RESAMPLE_CHUNK / 2).max(1) + 4;
+    for _ in 0..max_flushes {
+        if out.len() >= needed {
+            break;
+        }
+        let (_, written) = resampler
+            .process_partial_into_buffer(None::<&[&[f64]]>, &mut buf, None)
+            .map_err(|e| fail(&e))?;
+        out.extend_from_slice(buf.first().and_then(|b| b.get(..written)).unwrap_or(&[]));
+    }
+    #[allow(clippy::cast_possible_truncation)] // audio samples are f32
+    let result = out
+        .get(delay_out..needed)
+        .ok_or_else(|| fail(&"resampler produced too few samples"))?
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    Ok(result)
+}

@@ -1,0 +1,103 @@
+//! Circular cross-correlation and the calibrated magnitude spectrum, by real FFTs (`realfft`).
+
+use realfft::RealFftPlanner;
+use realfft::num_complex::Complex;
+
+use super::*;
+
+/// Floor of [`magnitude_spectrum`] levels (dB), so silence is finite.
+pub(super) const SPECTRUM_FLOOR_DB: f64 = -300.0;
+
+/// The spectrum of the real signal `x` (bins 0..=n/2, n = `x.len()`, even).
+fn real_spectrum(planner: &mut RealFftPlanner<f64>, x: &mut [f64]) -> Vec<Complex<f64>> {
+    let fft = planner.plan_fft_forward(x.len());
+    let mut spectrum = fft.make_output_vec();
+    // The lengths come from the plan, so this cannot fail.
+    let _ = fft.process(x, &mut spectrum);
+    spectrum
+}
+
+/// Circular cross-correlation c[m] = Σ_i a[i]·b[i + m] (indices mod n) of two real signals
+/// zero-padded to n = the next power of two ≥ a.len() + b.len(), so that every lag in
+/// (−a.len(), b.len()) appears unaliased at index lag mod n. Returns (c, n).
+pub(crate) fn cross_correlation(a: &[f64], b: &[f64]) -> (Vec<f64>, usize) {
+    let n = (a.len() + b.len()).next_power_of_two().max(2);
+    let mut planner = RealFftPlanner::<f64>::new();
+    let (mut ar, mut br) = (vec![0.0; n], vec![0.0; n]);
+    ar[..a.len()].copy_from_slice(a);
+    br[..b.len()].copy_from_slice(b);
+    let sa = real_spectrum(&mut planner, &mut ar);
+    let sb = real_spectrum(&mut planner, &mut br);
+    // conj(A)·B, bin by bin; the DC and Nyquist bins of real signals are real.
+    let mut product: Vec<Complex<f64>> = sa.iter().zip(&sb).map(|(x, y)| x.conj() * y).collect();
+    for end in [0, n / 2] {
+        if let Some(p) = product.get_mut(end) {
+            p.im = 0.0;
+        }
+    }
+    let inverse = planner.plan_fft_inverse(n);
+    let mut c = inverse.make_output_vec();
+    // As above: the lengths come from the plan and both end bins are real.
+    let _ = inverse.process(&mut product, &mut c);
+    #[allow(clippy::cast_precision_loss)] // n ≤ 2^52
+    let scale = 1.0 / n as f64;
+    for v in &mut c {
+        *v *= scale;
+    }
+    (c, n)
+}
+
+/// Magnitude spectrum of `samples` (Hann window, zero-padded to a power of two), as
+/// `(frequency Hz, level dB)` for bins 0..=N/2. Levels are amplitude-calibrated: a sine of
+/// amplitude A that falls on a bin reads 20·log10(A) dB (floored at −300 dB). Non-finite samples
+/// count as 0. Empty input or a non-positive/NaN rate gives an empty spectrum.
+#[must_use]
+pub fn magnitude_spectrum(samples: &[f32], sample_rate_hz: f64) -> Vec<(f64, f64)> {
+    if samples.is_empty() || !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
+        return Vec::new();
+    }
+    let len = samples.len();
+    let n = len.next_power_of_two().max(2);
+    let mut re = vec![0.0; n];
+    let mut window_sum = 0.0;
+    #[allow(clippy::cast_precision_loss)] // lengths ≤ 2^52
+    let denom = len as f64;
+    for (i, (&x, r)) in samples.iter().zip(re.iter_mut()).enumerate() {
+        #[allow(clippy::cast_precision_loss)]
+        let w = if len > 1 {
+            0.5 - 0.5 * (2.0 * PI * i as f64 / (denom - 1.0)).cos()
+        } else {
+            1.0
+        };
+        window_sum += w;
+        let v = if x.is_finite() { f64::from(x) } else { 0.0 };
+        *r = v * w;
+    }
+    let spectrum = real_spectrum(&mut RealFftPlanner::<f64>::new(), &mut re);
+    let scale = if window_sum > 0.0 {
+        2.0 / window_sum
+    } else {
+        0.0
+    };
+    #[allow(clippy::cast_precision_loss)]
+    let bin_hz = sample_rate_hz / n as f64;
+    spectrum
+        .iter()
+        .enumerate()
+        .map(|(k, bin)| {
+            let mag = bin.norm()
+                * if k == 0 || k == n / 2 {
+                    scale / 2.0
+                } else {
+                    scale
+                };
+            let db = if mag > 0.0 {
+                (20.0 * mag.log10()).max(SPECTRUM_FLOOR_DB)
+            } else {
+                SPECTRUM_FLOOR_DB
+            };
+            #[allow(clippy::cast_precision_loss)]
+            (k as f64 * bin_hz, db)
+        })
+        .collect()
+}

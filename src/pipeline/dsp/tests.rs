@@ -1,0 +1,254 @@
+//! Tests of the DSP: Butterworth and EQ responses against their analog curves, the DC blocker, bad params, the FFT, cross-correlation and spectrum against direct sums.
+
+use super::*;
+
+const FS: f64 = 44_100.0;
+
+/// Amplitude of a unit sine after the section chain, by running it through (used by tests to
+/// check that `run` matches the coefficients' response).
+fn measured_gain_db(params: &DspParams, freq_hz: f64, fs: f64) -> f64 {
+    let n = (fs * 2.0) as usize;
+    let mut x: Vec<f32> = (0..n)
+        .map(|i| (2.0 * PI * freq_hz * i as f64 / fs).sin() as f32)
+        .collect();
+    apply_dsp(&mut x, fs, params).unwrap();
+    // Steady-state amplitude from the second half (RMS·√2).
+    let tail = &x[n / 2..];
+    let rms = (tail.iter().map(|&v| f64::from(v).powi(2)).sum::<f64>() / tail.len() as f64).sqrt();
+    20.0 * (rms * SQRT_2).log10()
+}
+
+const HALF_POWER: f64 = std::f64::consts::FRAC_1_SQRT_2;
+
+fn only(lowpass: bool, eq: EqCurve, dc_block: bool) -> DspParams {
+    DspParams {
+        lowpass,
+        eq,
+        dc_block,
+        ..DspParams::default()
+    }
+}
+
+#[test]
+fn butterworth_minus_3db_at_cutoff_and_12db_per_octave() {
+    for &(fc, fs) in &[(3000.0, FS), (1000.0, 48_000.0), (8000.0, 22_050.0)] {
+        let lp = butterworth_lowpass(fc, fs);
+        let at_fc = lp.gain_db(fc, fs);
+        assert!(
+            (at_fc - 20.0 * HALF_POWER.log10()).abs() < 0.1,
+            "{fc}/{fs}: {at_fc}"
+        );
+        assert!(lp.gain_db(10.0, fs).abs() < 0.01);
+        // Analog Butterworth an octave up: −10·log10(1 + 2⁴) = −12.30 dB; the bilinear
+        // transform adds attenuation towards Nyquist (zero there), so the digital one is at
+        // least that, and close to it when 2·fc is far below Nyquist.
+        let oct = lp.gain_db(2.0 * fc, fs);
+        if 2.0 * fc < fs / 2.0 {
+            assert!(oct < -12.30 + 0.01, "{fc}/{fs}: octave {oct}");
+        }
+        if 2.0 * fc < fs / 20.0 {
+            assert!((oct - -12.30).abs() < 0.1, "{fc}/{fs}: octave {oct}");
+        }
+    }
+    // Digital response at 2·fc matches the analog formula mapped through the pre-warp.
+    let (fc, fs) = (3000.0, FS);
+    let lp = butterworth_lowpass(fc, fs);
+    let warp = |f: f64| (PI * f / fs).tan();
+    let ratio = warp(2.0 * fc) / warp(fc);
+    let expected = -10.0 * (1.0 + ratio.powi(4)).log10();
+    assert!((lp.gain_db(2.0 * fc, fs) - expected).abs() < 1e-9);
+}
+
+#[test]
+fn running_the_filter_matches_its_response() {
+    let p = only(true, EqCurve::Flat, false);
+    let got = measured_gain_db(&p, 3000.0, FS);
+    assert!((got - -3.0103).abs() < 0.1, "{got}");
+    let got = measured_gain_db(&p, 6000.0, FS);
+    let expected = butterworth_lowpass(3000.0, FS).gain_db(6000.0, FS);
+    assert!((got - expected).abs() < 0.1, "{got} vs {expected}");
+    let p = only(false, EqCurve::Riaa, false);
+    for f in [100.0, 1000.0, 5000.0] {
+        let got = measured_gain_db(&p, f, FS);
+        let expected = chain_gain_db(&dsp_chain(FS, &p).unwrap(), f, FS);
+        assert!((got - expected).abs() < 0.1, "{f}: {got} vs {expected}");
+    }
+}
+
+#[test]
+fn riaa_follows_the_analog_curve() {
+    // Published RIAA playback values (0 dB at 1 kHz).
+    for &(f, db) in &[
+        (20.0, 19.27),
+        (100.0, 13.09),
+        (1000.0, 0.0),
+        (10_000.0, -13.73),
+    ] {
+        let a = EqCurve::Riaa.analog_gain_db(f);
+        assert!((a - db).abs() < 0.02, "analog {f}: {a} vs {db}");
+    }
+    let chain = dsp_chain(FS, &only(false, EqCurve::Riaa, false)).unwrap();
+    // Tolerances grow with frequency: the bilinear transform compresses towards Nyquist.
+    for &(f, tol) in &[
+        (20.0, 0.01),
+        (100.0, 0.01),
+        (500.0, 0.02),
+        (1000.0, 0.05),
+        (3000.0, 0.25),
+        (5000.0, 0.6),
+    ] {
+        let d = chain_gain_db(&chain, f, FS);
+        let a = EqCurve::Riaa.analog_gain_db(f);
+        assert!((d - a).abs() < tol, "{f} Hz: digital {d} analog {a}");
+    }
+    // Corners sit where they should: the treble pole is −3 dB below the shelf's asymptote
+    // at 2122 Hz only in the analog sense; check the digital 1 kHz normalisation instead.
+    assert!(chain_gain_db(&chain, 1000.0, FS).abs() < 0.05);
+}
+
+#[test]
+fn turnover500_follows_the_analog_curve() {
+    let chain = dsp_chain(FS, &only(false, EqCurve::Turnover500, false)).unwrap();
+    // Analog: +3 dB point relative to the HF asymptote at 500 Hz, no treble roll-off.
+    let a500 = EqCurve::Turnover500.analog_gain_db(500.0);
+    let a_hf = EqCurve::Turnover500.analog_gain_db(20_000.0);
+    assert!((a500 - a_hf - 3.0).abs() < 0.1, "{a500} {a_hf}");
+    for f in [30.0, 100.0, 250.0, 500.0, 1000.0, 5000.0, 15_000.0] {
+        let d = chain_gain_db(&chain, f, FS);
+        let a = EqCurve::Turnover500.analog_gain_db(f);
+        assert!((d - a).abs() < 0.05, "{f} Hz: digital {d} analog {a}");
+    }
+    // +6 dB/octave slope between shelf and turnover: 100 → 200 Hz gains ≈ −5 dB or so.
+    let slope = chain_gain_db(&chain, 100.0, FS) - chain_gain_db(&chain, 200.0, FS);
+    assert!(slope > 4.0 && slope < 6.1, "{slope}");
+}
+
+#[test]
+fn dc_blocker_kills_dc_and_passes_audio() {
+    let hp = dc_blocker(10.0, FS);
+    assert!((hp.gain_db(10.0, FS) - -3.0103).abs() < 0.01);
+    assert!(hp.gain_db(1000.0, FS).abs() < 0.01);
+    // A DC offset plus a tone: the offset is gone after a few time constants.
+    let n = 44_100;
+    let mut x: Vec<f32> = (0..n)
+        .map(|i| 0.5 + 0.1 * (2.0 * PI * 1000.0 * i as f64 / FS).sin() as f32)
+        .collect();
+    apply_dsp(&mut x, FS, &only(false, EqCurve::Flat, true)).unwrap();
+    let tail = &x[n / 2..];
+    let mean = tail.iter().map(|&v| f64::from(v)).sum::<f64>() / tail.len() as f64;
+    assert!(mean.abs() < 1e-3, "{mean}");
+    // Steady-state start: no step transient from the initial offset.
+    assert!(x[0].abs() < 5e-3, "{}", x[0]);
+}
+
+#[test]
+fn dc_block_starts_settled_on_the_mean_level_not_the_first_sample() {
+    // An offset tone that starts at its crest: a filter settled on the first sample
+    // (0.5 + 0.1) would start 0.1 low and drift back over the first time constant (16 ms).
+    let n = 4410;
+    let mut x: Vec<f32> = (0..n)
+        .map(|i| 0.5 + 0.1 * (2.0 * PI * 1000.0 * i as f64 / FS).cos() as f32)
+        .collect();
+    apply_dsp(&mut x, FS, &only(false, EqCurve::Flat, true)).unwrap();
+    let head = &x[..882];
+    let mean = head.iter().map(|&v| f64::from(v)).sum::<f64>() / head.len() as f64;
+    assert!(mean.abs() < 0.01, "mean of the first 20 ms: {mean}");
+}
+
+#[test]
+fn invalid_params_are_rejected() {
+    let mut x = vec![0.0f32; 16];
+    let bad = |p: DspParams, fs: f64| {
+        let mut y = vec![0.0f32; 4];
+        apply_dsp(&mut y, fs, &p).is_err()
+    };
+    assert!(bad(
+        DspParams {
+            lowpass_hz: 22_050.0,
+            ..DspParams::default()
+        },
+        FS
+    ));
+    assert!(bad(
+        DspParams {
+            lowpass_hz: f64::NAN,
+            ..DspParams::default()
+        },
+        FS
+    ));
+    assert!(bad(
+        DspParams {
+            lowpass_hz: -1.0,
+            ..DspParams::default()
+        },
+        FS
+    ));
+    assert!(bad(
+        DspParams {
+            dc_block_hz: f64::NAN,
+            ..DspParams::default()
+        },
+        FS
+    ));
+    assert!(bad(DspParams::default(), f64::NAN));
+    assert!(bad(DspParams::default(), 0.0));
+    assert!(bad(only(false, EqCurve::Riaa, false), 4000.0));
+    // A disabled low-pass does not need a valid cutoff.
+    let p = DspParams {
+        lowpass: false,
+        lowpass_hz: f64::NAN,
+        ..DspParams::default()
+    };
+    assert!(apply_dsp(&mut x, FS, &p).is_ok());
+}
+
+#[test]
+fn filters_stay_finite_on_nan_input() {
+    let mut x = vec![1.0f32; 1000];
+    x[10] = f32::NAN;
+    x[20] = f32::INFINITY;
+    apply_dsp(&mut x, FS, &only(true, EqCurve::Riaa, true)).unwrap();
+    assert!(x.iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn cross_correlation_matches_direct_sums() {
+    let a: Vec<f64> = (0..37).map(|i| ((i * 5 + 1) % 13) as f64 - 6.0).collect();
+    let b: Vec<f64> = (0..50).map(|i| ((i * 3 + 2) % 7) as f64 - 3.0).collect();
+    let (c, n) = cross_correlation(&a, &b);
+    assert!(n >= a.len() + b.len() && n.is_power_of_two());
+    for lag in -(a.len() as i64 - 1)..b.len() as i64 {
+        let direct: f64 = (0..a.len() as i64)
+            .filter(|&i| i + lag >= 0 && i + lag < b.len() as i64)
+            .map(|i| a[i as usize] * b[(i + lag) as usize])
+            .sum();
+        let idx = lag.rem_euclid(n as i64) as usize;
+        assert!(
+            (c[idx] - direct).abs() < 1e-9,
+            "lag {lag}: {} vs {direct}",
+            c[idx]
+        );
+    }
+}
+
+#[test]
+fn spectrum_finds_a_tone_at_its_level() {
+    let fs = 48_000.0;
+    let n = 8192;
+    let f0 = 46.0 * fs / n as f64; // on a bin
+    let x: Vec<f32> = (0..n)
+        .map(|i| (0.25 * (2.0 * PI * f0 * i as f64 / fs).sin()) as f32)
+        .collect();
+    let spec = magnitude_spectrum(&x, fs);
+    assert_eq!(spec.len(), n / 2 + 1);
+    let (peak_f, peak_db) = spec
+        .iter()
+        .copied()
+        .fold((0.0, f64::MIN), |a, b| if b.1 > a.1 { b } else { a });
+    assert!((peak_f - f0).abs() < 1e-6, "{peak_f} vs {f0}");
+    assert!((peak_db - 20.0 * 0.25f64.log10()).abs() < 0.05, "{peak_db}");
+    // Far from the tone the Hann leakage is tiny.
+    assert!(spec[400].1 < peak_db - 100.0);
+    assert!(magnitude_spectrum(&[], fs).is_empty());
+    assert!(magnitude_spectrum(&x, f64::NAN).is_empty());
+}

@@ -1,0 +1,181 @@
+//! Clip finishing: group signals in, sound out — stitch, bridge short gaps, resample, DSP, normalise.
+//!
+//! Whole-scan reconstruction (`engine`) and the merge of shard parts (`side::merge`) both end
+//! here, so a merged side is the same sound, bit for bit, as a one-process run: the input is
+//! the ordered list of group signals, nothing else.
+
+use super::audio_signal::{GroupSignal, StitchedSignal, resample, stitch};
+use super::dsp::apply_dsp;
+use super::{PipelineParams, StageError};
+
+/// Gaps up to this many native samples are bridged by linear interpolation; longer ones stay silent.
+pub const BRIDGE_GAP_SAMPLES: usize = 4;
+
+/// A finished clip: output-rate channels after DSP and normalisation, and what led there.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FinishedClip {
+    /// Output sample rate (Hz).
+    pub sample_rate_hz: u32,
+    /// One buffer per channel at the output rate, scaled to output level (non-finite → 0).
+    pub channels: Vec<Vec<f32>>,
+    /// The stitched native-rate signal (velocity, mm/s), short gaps bridged.
+    pub stitched: StitchedSignal,
+    /// Gain applied to velocity (mm/s) to reach the output level.
+    pub gain_per_mm_s: f64,
+    /// Short gaps bridged, long gaps left silent: one line each.
+    pub warnings: Vec<String>,
+}
+
+/// Finishes a clip from its group signals (in group order) on a native grid of `spacing_um`:
+/// stitches them ([`stitch`]), bridges gaps of at most [`BRIDGE_GAP_SAMPLES`]
+/// ([`bridge_short_gaps`]), resamples each channel to `sound.output_rate_hz`, applies the DSP
+/// chain, and scales to output level: with `sound.normalize_peak` > 0 the largest finite
+/// |sample| becomes it (silence keeps gain 1), else `sound.full_scale_mm_s` maps to 1.0.
+///
+/// # Errors
+/// [`StageError`] when stitching, resampling or the DSP chain fails (no signals, bad params).
+pub fn finish_clip(
+    signals: &[GroupSignal],
+    spacing_um: f64,
+    params: &PipelineParams,
+) -> Result<FinishedClip, StageError> {
+    let mut stitched = stitch(signals, spacing_um)?;
+    let mut warnings = Vec::new();
+    let bridged = bridge_short_gaps(&mut stitched);
+    if bridged > 0 {
+        warnings.push(format!(
+            "{bridged} short gaps (≤ {BRIDGE_GAP_SAMPLES} native samples) bridged by interpolation"
+        ));
+    }
+    for gap in &stitched.gaps {
+        warnings.push(format!(
+            "gap of {} native samples at sample {} filled with silence",
+            gap.len(),
+            gap.start
+        ));
+    }
+    let out_rate = params.sound.output_rate_hz;
+    let mut channels = Vec::with_capacity(stitched.channels.len());
+    for ch in &stitched.channels {
+        let mut y = resample(ch, stitched.native_rate_hz, out_rate)?;
+        apply_dsp(&mut y, f64::from(out_rate), &params.dsp)?;
+        channels.push(y);
+    }
+    let peak =
+        channels.iter().flatten().fold(
+            0.0_f32,
+            |m, v| if v.is_finite() { m.max(v.abs()) } else { m },
+        );
+    let gain_per_mm_s = if params.sound.normalize_peak > 0.0 {
+        if peak > 0.0 {
+            f64::from(params.sound.normalize_peak / peak)
+        } else {
+            1.0
+        }
+    } else {
+        1.0 / params.sound.full_scale_mm_s
+    };
+    for ch in &mut channels {
+        for v in ch.iter_mut() {
+            #[allow(clippy::cast_possible_truncation)] // output samples are f32
+            let scaled = (f64::from(*v) * gain_per_mm_s) as f32;
+            *v = if v.is_finite() { scaled } else { 0.0 };
+        }
+    }
+    Ok(FinishedClip {
+        sample_rate_hz: out_rate,
+        channels,
+        stitched,
+        gain_per_mm_s,
+        warnings,
+    })
+}
+
+/// Bridges gaps of at most [`BRIDGE_GAP_SAMPLES`] with data on both sides by linear
+/// interpolation, removes them from `gaps`, and returns how many were bridged.
+pub fn bridge_short_gaps(signal: &mut StitchedSignal) -> usize {
+    let mut bridged = 0;
+    let mut kept = Vec::new();
+    let n = signal.channels.first().map_or(0, Vec::len);
+    for gap in std::mem::take(&mut signal.gaps) {
+        if gap.len() > BRIDGE_GAP_SAMPLES || gap.start == 0 || gap.end >= n {
+            kept.push(gap);
+            continue;
+        }
+        let (a, b) = (gap.start - 1, gap.end);
+        for ch in &mut signal.channels {
+            let (Some(&va), Some(&vb)) = (ch.get(a), ch.get(b)) else {
+                continue;
+            };
+            for k in gap.clone() {
+                let t = (k - a) as f32 / (b - a) as f32;
+                if let Some(v) = ch.get_mut(k) {
+                    *v = va + (vb - va) * t;
+                }
+            }
+        }
+        bridged += 1;
+    }
+    signal.gaps = kept;
+    bridged
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+
+    fn stitched(values: Vec<f32>, gaps: Vec<std::ops::Range<usize>>) -> StitchedSignal {
+        StitchedSignal {
+            start_um: 0.0,
+            spacing_um: 1.0,
+            native_rate_hz: 1000.0,
+            channels: vec![values],
+            gaps,
+        }
+    }
+
+    #[test]
+    fn a_short_gap_is_bridged_linearly_and_a_long_one_stays() {
+        let mut s = stitched(
+            vec![1.0, 0.0, 0.0, 4.0, 5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 7.0],
+            vec![1..3, 5..11],
+        );
+        assert_eq!(bridge_short_gaps(&mut s), 1);
+        assert_eq!(&s.channels[0][..4], &[1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(s.gaps, vec![5..11]);
+    }
+
+    #[test]
+    fn gaps_at_either_end_are_not_bridged() {
+        let mut s = stitched(vec![0.0, 1.0, 2.0, 0.0], vec![0..1, 3..4]);
+        assert_eq!(bridge_short_gaps(&mut s), 0);
+        assert_eq!(s.gaps.len(), 2);
+    }
+
+    #[test]
+    fn a_tone_comes_out_normalised_to_the_peak_asked_for() {
+        // Two overlapping groups of a 1 kHz velocity tone on a 44.1 kHz native grid.
+        let spacing_um = 939_336.0 / 44_100.0;
+        let group = |g: usize, first: usize| GroupSignal {
+            group: g,
+            positions_um: (first..first + 300)
+                .map(|k| k as f64 * spacing_um)
+                .collect(),
+            channels: vec![
+                (first..first + 300)
+                    .map(|k| (k as f32 * 0.1425).sin() * 20.0)
+                    .collect(),
+            ],
+            groove_speed_mm_s: 939.336,
+        };
+        let mut params = PipelineParams::default();
+        params.sound.normalize_peak = 0.5;
+        let clip = finish_clip(&[group(0, 0), group(1, 250)], spacing_um, &params).unwrap();
+        assert_eq!(clip.sample_rate_hz, params.sound.output_rate_hz);
+        let peak = clip.channels[0].iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!((peak - 0.5).abs() < 1e-6, "{peak}");
+        assert!(clip.stitched.gaps.is_empty());
+        assert!(finish_clip(&[], spacing_um, &params).is_err());
+    }
+}

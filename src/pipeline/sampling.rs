@@ -1,0 +1,67 @@
+//! Where a group's output samples fall: the scan's global sample grid placed on the columns of one frame.
+
+use crate::io::ScanMeta;
+
+use super::audio_signal::SoundParams;
+
+/// Columns kept clear of each frame edge when placing samples (px): pre-warping clamps there.
+pub const SAMPLE_MARGIN_PX: f64 = 8.0;
+
+/// Where a group's samples fall: the groove position of each column of the reference frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SampleGrid {
+    /// Frame of the group whose columns are sampled.
+    pub frame_index: usize,
+    /// Groove position of column 0 (µm from the scan start).
+    pub column0_um: f64,
+    /// Groove length per column at the walls' depth (µm).
+    pub um_per_px: f64,
+    /// Columns of the samples (on the scan's global sample grid).
+    pub columns: Vec<f32>,
+}
+
+/// Sample spacing along the groove (µm): the param, or one output sample at the scan's groove speed.
+#[must_use]
+pub fn native_spacing_um(meta: &ScanMeta, sound: &SoundParams) -> f64 {
+    if sound.native_spacing_um > 0.0 {
+        sound.native_spacing_um
+    } else {
+        meta.groove_speed_mm_s(0) * 1000.0 / f64::from(sound.output_rate_hz)
+    }
+}
+
+/// Places the scan's global sample grid on the columns of one frame of one group.
+#[must_use]
+pub fn sample_grid(
+    meta: &ScanMeta,
+    group: usize,
+    frame_index: usize,
+    width: usize,
+    projection_depth_um: f64,
+    sound: &SoundParams,
+) -> SampleGrid {
+    let geom = meta.geometry();
+    let cx = (width as f64 - 1.0) / 2.0;
+    let cam_s = group as f64 * meta.motion.group_step_um
+        + frame_index as f64 * meta.motion.frame_step_um
+        + cx * geom.pixel_pitch_um;
+    let um_per_px = geom.pixel_pitch_um * projection_depth_um / geom.working_distance_um;
+    let column0_um = cam_s - cx * um_per_px;
+    let spacing = native_spacing_um(meta, sound);
+    let lo = column0_um + SAMPLE_MARGIN_PX * um_per_px;
+    let hi = column0_um + (width as f64 - 1.0 - SAMPLE_MARGIN_PX) * um_per_px;
+    let mut columns = Vec::new();
+    if spacing > 0.0 && hi > lo {
+        let first = (lo / spacing).ceil() as i64;
+        let last = (hi / spacing).floor() as i64;
+        for j in first..=last {
+            columns.push(((j as f64 * spacing - column0_um) / um_per_px) as f32);
+        }
+    }
+    SampleGrid {
+        frame_index,
+        column0_um,
+        um_per_px,
+        columns,
+    }
+}

@@ -1,0 +1,535 @@
+//! The `reconstruct` subcommand (a whole run or one shard, journaled and resumable), with `plan` and `merge` beside it.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use anyhow::{Result, bail};
+use indicatif::ProgressBar;
+use serde::Serialize;
+
+use crate::cli::{ReconstructArgs, load_params, path_choice, progress_bar};
+use crate::engine::{ClipGroups, Reconstruction, StageTimings, finish_reconstruction};
+use crate::io::wav::write_wav;
+use crate::io::{Scan, ScanMeta, write_atomic};
+use crate::pipeline::PipelineParams;
+use crate::side::part::{PART_FILE, read_part, write_part};
+use crate::side::plan::Plan;
+use crate::side::run::{RangeRun, RunEvent, run_range};
+use crate::side::{RunIdentity, params_fingerprint};
+
+mod plan_merge;
+pub use plan_merge::{MergeArgs, PlanArgs, run_merge, run_plan};
+
+/// `reconstruct`'s options for long runs.
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct SideRunArgs {
+    /// Run one shard of this plan (see `groovescope plan`); --out is then the part folder.
+    #[arg(long, requires = "shard")]
+    pub plan: Option<PathBuf>,
+    /// The shard of --plan to run, from 0.
+    #[arg(long, requires = "plan")]
+    pub shard: Option<usize>,
+    /// Continue from the journal an interrupted run left beside its output (a fresh start
+    /// when there is none).
+    #[arg(long)]
+    pub resume: bool,
+    /// Print one JSON line per finished group on stdout (done, total, groups/s, ETA);
+    /// messages go to stderr.
+    #[arg(long)]
+    pub progress_json: bool,
+}
+
+/// Progress of a run in the JSON report: the rate it ran at.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct RunProgress {
+    /// Groups run in this process (after those resumed).
+    pub groups_run: usize,
+    /// Groups read back from the journal.
+    pub resumed_groups: usize,
+    /// Groups before the range run for the slope history (shards).
+    pub context_groups: usize,
+    /// Wall-clock seconds of this process's run.
+    pub elapsed_secs: f64,
+    /// Groups (context included) per second.
+    pub groups_per_sec: f64,
+}
+
+/// The JSON report written beside a reconstruction.
+#[derive(Debug, Serialize)]
+pub struct Report<'a> {
+    /// groovescope version.
+    pub version: &'static str,
+    /// Scan folder.
+    pub scan: String,
+    /// Output WAV.
+    pub output: String,
+    /// Params file used (None: defaults).
+    pub params_file: Option<String>,
+    /// Params used.
+    pub params: &'a PipelineParams,
+    /// Reconstruction path that ran.
+    pub path: &'static str,
+    /// Output duration.
+    pub duration_secs: f64,
+    /// Output sample rate.
+    pub sample_rate_hz: u32,
+    /// Native sample rate before resampling.
+    pub native_rate_hz: f64,
+    /// Gain from velocity (mm/s) to output units.
+    pub gain_per_mm_s: f64,
+    /// Timings.
+    pub timings: &'a StageTimings,
+    /// Rate of the run (None for the library's reports).
+    pub progress: Option<RunProgress>,
+    /// Per group.
+    pub groups: &'a [crate::engine::GroupReport],
+    /// Scores against reference.wav.
+    pub scores: Option<crate::pipeline::eval::Scores>,
+    /// Warnings.
+    pub warnings: &'a [String],
+}
+
+/// Builds the report for a finished reconstruction of the scan at `scan_dir`.
+#[must_use]
+pub fn make_report<'a>(
+    scan_dir: &Path,
+    meta: &ScanMeta,
+    out: &Path,
+    params_file: Option<&Path>,
+    params: &'a PipelineParams,
+    rec: &'a Reconstruction,
+) -> Report<'a> {
+    Report {
+        version: env!("CARGO_PKG_VERSION"),
+        scan: scan_dir.display().to_string(),
+        output: out.display().to_string(),
+        params_file: params_file.map(|p| p.display().to_string()),
+        params,
+        path: if params.uses_dual_focus(meta) {
+            "dual-focus"
+        } else {
+            "depth"
+        },
+        duration_secs: rec.audio.duration_secs(),
+        sample_rate_hz: rec.audio.sample_rate_hz,
+        native_rate_hz: rec.stitched.native_rate_hz,
+        gain_per_mm_s: rec.gain_per_mm_s,
+        timings: &rec.timings,
+        progress: None,
+        groups: &rec.groups,
+        scores: rec.scores,
+        warnings: &rec.warnings,
+    }
+}
+
+/// Terminal progress: an indicatif bar (groups/s, ETA), or with `--progress-json` one JSON
+/// line per event on stdout.
+struct ProgressOut {
+    bar: ProgressBar,
+    json: bool,
+    quiet: bool,
+    started: Instant,
+    resumed: usize,
+    context: usize,
+}
+
+impl ProgressOut {
+    fn new(total: usize, args: &ReconstructArgs) -> Self {
+        let json = args.side.progress_json;
+        Self {
+            bar: progress_bar(total, args.quiet || json),
+            json,
+            quiet: args.quiet,
+            started: Instant::now(),
+            resumed: 0,
+            context: 0,
+        }
+    }
+
+    fn line(&self, value: &serde_json::Value) {
+        json_line(value);
+    }
+
+    fn note(&self, text: &str) {
+        if self.json || !self.quiet {
+            self.bar.suspend(|| eprintln!("{text}"));
+        }
+    }
+
+    fn event(&mut self, event: RunEvent<'_>) {
+        match event {
+            RunEvent::Resumed(n) => {
+                self.resumed = n;
+                self.bar.set_position(n as u64);
+                self.bar.reset_eta();
+                self.note(&format!(
+                    "resuming after {n} groups read back from the journal"
+                ));
+                if self.json {
+                    self.line(&serde_json::json!({"event": "resumed", "groups": n}));
+                }
+            }
+            RunEvent::Context(r) => {
+                self.context += r.len();
+                self.note(&format!(
+                    "running groups {}..{} for the slope history before the shard",
+                    r.start, r.end
+                ));
+                if self.json {
+                    self.line(&serde_json::json!({"event": "context", "first_group": r.start, "end_group": r.end}));
+                }
+            }
+            RunEvent::Group {
+                outcome,
+                done,
+                total,
+            } => {
+                self.bar.set_position(done as u64);
+                if self.json {
+                    let elapsed = self.started.elapsed().as_secs_f64();
+                    let run = (done - self.resumed) as f64;
+                    let rate = if elapsed > 0.0 { run / elapsed } else { 0.0 };
+                    let eta = if rate > 0.0 {
+                        (total - done) as f64 / rate
+                    } else {
+                        0.0
+                    };
+                    self.line(&serde_json::json!({
+                        "event": "group", "group": outcome.group, "done": done, "total": total,
+                        "elapsed_secs": elapsed, "groups_per_sec": rate, "eta_secs": eta,
+                        "failed": outcome.signal.is_none(),
+                    }));
+                }
+            }
+        }
+    }
+
+    fn summary(&self, groups_run: usize) -> RunProgress {
+        self.bar.finish_and_clear();
+        let elapsed = self.started.elapsed().as_secs_f64();
+        let n = groups_run + self.context;
+        RunProgress {
+            groups_run,
+            resumed_groups: self.resumed,
+            context_groups: self.context,
+            elapsed_secs: elapsed,
+            groups_per_sec: if elapsed > 0.0 {
+                n as f64 / elapsed
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
+/// Prints one JSON line on stdout and flushes it; a closed stdout (the reader went away) is
+/// not an error of the run.
+fn json_line(value: &serde_json::Value) {
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{value}");
+    let _ = out.flush();
+}
+
+/// The journal of a whole run writing `out`: `OUT.journal` beside it.
+#[must_use]
+pub fn journal_path(out: &Path) -> PathBuf {
+    let name = out
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    out.with_file_name(format!("{name}.journal"))
+}
+
+/// Takes the output lock of every path (one writer at a time per output: a second run writing
+/// the same files is refused before any work, instead of mixing its files with the first's).
+pub(crate) fn lock_outputs(paths: &[&Path]) -> Result<Vec<crate::io::lock::OutputLock>> {
+    Ok(paths
+        .iter()
+        .map(|p| crate::io::lock::OutputLock::acquire(p))
+        .collect::<Result<Vec<_>, _>>()?)
+}
+
+/// Refuses params whose Hough accumulator would be too large for `scan`, naming the params file.
+fn check_hough(params: &PipelineParams, scan: &Scan, file: Option<&Path>) -> Result<()> {
+    if let Err(e) = crate::io::limits::check_hough_accumulator(params, scan) {
+        let file = file.map_or("the default params".into(), |p| p.display().to_string());
+        bail!("{e}: {file}");
+    }
+    Ok(())
+}
+
+pub(crate) fn refuse_existing(paths: &[&Path], force: bool) -> Result<()> {
+    for out in paths {
+        if out.exists() && !force {
+            bail!(
+                "refusing to overwrite an existing file (use --force): {}",
+                out.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Runs `run` with the terminal progress `args` ask for; returns its result and rate.
+fn run_with_progress(
+    run: &RangeRun<'_>,
+    args: &ReconstructArgs,
+) -> Result<(crate::side::run::RangeResult, RunProgress)> {
+    let mut progress = ProgressOut::new(run.range.len(), args);
+    let cancel = AtomicBool::new(false);
+    let result = run_range(run, &mut |e| progress.event(e), &cancel);
+    match result {
+        Ok(r) => {
+            let p = progress.summary(r.groups.len() - r.resumed);
+            Ok((r, p))
+        }
+        Err(e) => {
+            progress.bar.finish_and_clear();
+            Err(e.into())
+        }
+    }
+}
+
+/// Runs `reconstruct`: one shard of a plan with `--plan`/`--shard`, else the whole range.
+///
+/// # Errors
+/// Any failure, with the file named.
+pub fn run_reconstruct_command(args: &ReconstructArgs) -> Result<()> {
+    match (&args.side.plan, args.side.shard) {
+        (Some(plan), Some(shard)) => run_shard(args, plan, shard),
+        _ => run_reconstruct(args).map(|_| ()),
+    }
+}
+
+/// Runs `reconstruct` over a range of groups (all by default), journaled beside the output.
+///
+/// # Errors
+/// Any failure, with the file named.
+pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
+    let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
+        .chain(args.report.as_deref())
+        .collect();
+    let _locks = lock_outputs(&outputs)?;
+    refuse_existing(&outputs, args.force)?;
+    let mut params = load_params(args.params.as_deref())?;
+    params.path = path_choice(&args.path, params.path);
+    let scan = Scan::open(&args.scan)?;
+    check_hough(&params, &scan, args.params.as_deref())?;
+    let first = args.first_group.unwrap_or(0);
+    let end = args
+        .groups
+        .map_or(scan.groups.len(), |n| first.saturating_add(n))
+        .min(scan.groups.len());
+    if first >= scan.groups.len() {
+        bail!(
+            "--first-group {first} is past the last group ({} groups): {}",
+            scan.groups.len(),
+            scan.dir.display()
+        );
+    }
+    let journal = journal_path(&args.out);
+    let run = RangeRun {
+        scan: &scan,
+        params: &params,
+        keep_going: args.keep_going,
+        range: first..end,
+        shard: false,
+        journal: &journal,
+        identity: RunIdentity::new(&scan, &params, args.keep_going, first..end, None),
+        resume: args.side.resume,
+        force: args.force,
+    };
+    let started = Instant::now();
+    let (result, run_progress) = run_with_progress(&run, args)?;
+    let mut clip = ClipGroups::with_capacity(result.groups.len());
+    for g in result.groups {
+        clip.add(g);
+    }
+    let mut rec = finish_reconstruction(
+        clip,
+        &scan.meta,
+        scan.reference.as_deref(),
+        &params,
+        &scan.dir,
+    )?;
+    rec.timings.total_secs = started.elapsed().as_secs_f64();
+    write_wav(&args.out, &rec.audio, args.bits, args.force)?;
+    if let Some(report_path) = &args.report {
+        let mut report = make_report(
+            &scan.dir,
+            &scan.meta,
+            &args.out,
+            args.params.as_deref(),
+            &params,
+            &rec,
+        );
+        report.progress = Some(run_progress.clone());
+        write_atomic(
+            report_path,
+            &serde_json::to_vec_pretty(&report)?,
+            args.force,
+        )?;
+    }
+    result.journal.remove()?;
+    finish_message(args, &rec, &run_progress);
+    Ok(rec)
+}
+
+fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress) {
+    if args.side.progress_json {
+        let line = serde_json::json!({
+            "event": "done", "output": args.out.display().to_string(),
+            "groups": rec.groups.len(), "elapsed_secs": p.elapsed_secs,
+            "groups_per_sec": p.groups_per_sec,
+        });
+        json_line(&line);
+    }
+    if args.quiet {
+        return;
+    }
+    for w in &rec.warnings {
+        eprintln!("warning: {w}");
+    }
+    let text = format!(
+        "wrote {} ({:.3} s at {} Hz, {} groups in {:.1} s, {:.1} groups/s)",
+        args.out.display(),
+        rec.audio.duration_secs(),
+        rec.audio.sample_rate_hz,
+        rec.groups.len(),
+        rec.timings.total_secs,
+        p.groups_per_sec
+    );
+    let scores = rec.scores.map(|s| {
+        format!(
+            "vs reference: r = {:.3}, envelope r = {}, SNR = {:.1} dB",
+            s.r,
+            s.envelope_r_text(3),
+            s.snr_db
+        )
+    });
+    for line in std::iter::once(text).chain(scores) {
+        if args.side.progress_json {
+            eprintln!("{line}");
+        } else {
+            println!("{line}");
+        }
+    }
+}
+
+/// The shard's report beside its part.
+#[derive(Debug, Serialize)]
+struct ShardReport<'a> {
+    version: &'static str,
+    scan: &'a str,
+    plan: String,
+    shard: usize,
+    shards: usize,
+    groups: (usize, usize),
+    progress: RunProgress,
+    load_secs: f64,
+    warnings: Vec<String>,
+}
+
+fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<()> {
+    let plan = Plan::load(plan_path)?;
+    let params = if args.params.is_none() && args.path == "auto" {
+        plan.params.clone()
+    } else {
+        let mut p = load_params(args.params.as_deref())?;
+        p.path = path_choice(&args.path, plan.params.path);
+        if params_fingerprint(&p) != plan.params_fingerprint {
+            bail!(
+                "--params/--path give other params than the plan's (leave them out to run the plan's): {}",
+                plan_path.display()
+            );
+        }
+        p
+    };
+    if args.keep_going && !plan.keep_going {
+        bail!(
+            "--keep-going was not planned (make the plan with --keep-going): {}",
+            plan_path.display()
+        );
+    }
+    if args.first_group.is_some() || args.groups.is_some() {
+        bail!("--first-group/--groups do not go with --plan: the plan gives the shard's groups");
+    }
+    let scan = Scan::open(&args.scan)?;
+    check_hough(&params, &scan, Some(plan_path))?;
+    let (shard, id) = plan.shard(index, &scan, plan_path)?;
+    let range = shard.first_group..shard.end_group;
+    let identity = RunIdentity::new(&scan, &params, plan.keep_going, range.clone(), Some(id));
+    std::fs::create_dir_all(&args.out).map_err(|e| {
+        anyhow::anyhow!("cannot create the part folder: {e}: {}", args.out.display())
+    })?;
+    let part_path = args.out.join(PART_FILE);
+    let _lock = lock_outputs(&[part_path.as_path()])?;
+    if part_path.exists() && !args.force {
+        if args.side.resume
+            && read_part(&args.out).is_ok_and(|p| identity.difference(&p.identity).is_none())
+        {
+            if !args.quiet {
+                eprintln!("shard {index} is already complete: {}", part_path.display());
+            }
+            return Ok(());
+        }
+        bail!(
+            "refusing to overwrite an existing part (use --force): {}",
+            part_path.display()
+        );
+    }
+    let journal = args.out.join("journal");
+    let run = RangeRun {
+        scan: &scan,
+        params: &params,
+        keep_going: plan.keep_going,
+        range: range.clone(),
+        shard: true,
+        journal: &journal,
+        identity: identity.clone(),
+        resume: args.side.resume,
+        force: args.force,
+    };
+    let (result, mut run_progress) = run_with_progress(&run, args)?;
+    run_progress.context_groups = result.context_groups;
+    let written = write_part(&args.out, &identity, &result.groups, args.force)?;
+    let report = ShardReport {
+        version: env!("CARGO_PKG_VERSION"),
+        scan: &identity.scan,
+        plan: plan_path.display().to_string(),
+        shard: index,
+        shards: plan.shards.len(),
+        groups: identity.groups,
+        progress: run_progress.clone(),
+        load_secs: result.groups.iter().map(|g| g.load_secs).sum(),
+        warnings: result
+            .groups
+            .iter()
+            .filter_map(|g| g.report.as_ref().and_then(|r| r.warning.clone()))
+            .collect(),
+    };
+    write_atomic(
+        &args.out.join("report.json"),
+        &serde_json::to_vec_pretty(&report)?,
+        true,
+    )?;
+    result.journal.remove()?;
+    let text = format!(
+        "wrote {} (shard {index} of {}: groups {}..{}, {} run before them for the slope history, {:.1} s, {:.1} groups/s)",
+        written.display(),
+        plan.shards.len(),
+        range.start,
+        range.end,
+        run_progress.context_groups,
+        run_progress.elapsed_secs,
+        run_progress.groups_per_sec
+    );
+    if args.side.progress_json {
+        json_line(&serde_json::json!({"event": "done", "output": written.display().to_string()}));
+        eprintln!("{text}");
+    } else if !args.quiet {
+        println!("{text}");
+    }
+    Ok(())
+}

@@ -1,0 +1,220 @@
+//! The `plan` and `merge` subcommands.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use anyhow::Result;
+
+use super::{lock_outputs, make_report, refuse_existing};
+use crate::cli::{load_params, path_choice};
+use crate::engine::{GroupOutcome, GroupStream, SlopeMode, run_groups};
+use crate::io::wav::{WavBits, write_wav};
+use crate::io::{Scan, ScanMeta, write_atomic};
+use crate::pipeline::PipelineParams;
+use crate::pipeline::slope_reference::SlopeHistory;
+use crate::side::merge::merge_parts;
+use crate::side::plan::Plan;
+
+/// Arguments of `plan`.
+#[derive(Debug, clap::Args)]
+pub struct PlanArgs {
+    /// Scan folder or Zarr store.
+    pub scan: PathBuf,
+    /// Number of shards.
+    #[arg(long)]
+    pub shards: usize,
+    /// The plan file to write.
+    #[arg(long, default_value = "plan.json")]
+    pub out: PathBuf,
+    /// Parameters TOML every shard runs with.
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// Force a path instead of choosing by the `[dual_focus]` table.
+    #[arg(long, value_parser = ["auto", "depth", "dual-focus"], default_value = "auto")]
+    pub path: String,
+    /// Treat unreadable frames as silent gaps instead of failing.
+    #[arg(long)]
+    pub keep_going: bool,
+    /// Groups run here to measure the time per group (0: no estimate).
+    #[arg(long, default_value_t = 2)]
+    pub probe_groups: usize,
+    /// Print the Slurm commands that submit the shards and the merge.
+    #[arg(long)]
+    pub slurm: bool,
+    /// Folder of the parts, for the printed Slurm commands.
+    #[arg(long, default_value = "parts")]
+    pub parts: PathBuf,
+    /// Replace an existing plan file.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Arguments of `merge`.
+#[derive(Debug, clap::Args)]
+pub struct MergeArgs {
+    /// Part folders (or their part.gsp files), one per shard, in any order.
+    #[arg(required = true)]
+    pub parts: Vec<PathBuf>,
+    /// Output WAV file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// JSON report.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// WAV sample format: 16, 24 or 32f.
+    #[arg(long, default_value = "24")]
+    pub bits: WavBits,
+    /// Replace existing output files.
+    #[arg(long)]
+    pub force: bool,
+    /// No summary line.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Runs `merge`.
+///
+/// # Errors
+/// A refused part (named), or a write failure.
+pub fn run_merge(args: &MergeArgs) -> Result<()> {
+    let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
+        .chain(args.report.as_deref())
+        .collect();
+    let _locks = lock_outputs(&outputs)?;
+    refuse_existing(&outputs, args.force)?;
+    let started = Instant::now();
+    let merged = merge_parts(&args.parts)?;
+    let mut rec = merged.reconstruction;
+    rec.timings.total_secs = started.elapsed().as_secs_f64();
+    write_wav(&args.out, &rec.audio, args.bits, args.force)?;
+    if let Some(report_path) = &args.report {
+        let meta = ScanMeta::from_toml_str(&merged.identity.meta_toml, report_path)?;
+        let report = make_report(
+            Path::new(&merged.identity.scan),
+            &meta,
+            &args.out,
+            None,
+            &merged.identity.params,
+            &rec,
+        );
+        write_atomic(
+            report_path,
+            &serde_json::to_vec_pretty(&report)?,
+            args.force,
+        )?;
+    }
+    if !args.quiet {
+        for w in &rec.warnings {
+            eprintln!("warning: {w}");
+        }
+        println!(
+            "wrote {} ({:.3} s at {} Hz from {} parts, {} groups)",
+            args.out.display(),
+            rec.audio.duration_secs(),
+            rec.audio.sample_rate_hz,
+            merged.parts.len(),
+            rec.groups.len()
+        );
+    }
+    Ok(())
+}
+
+/// Seconds per group measured on the first `groups` groups of `scan`, decode included.
+fn probe_secs_per_group(
+    scan: &Scan,
+    params: &PipelineParams,
+    keep_going: bool,
+    groups: usize,
+) -> Result<Option<(f64, String)>> {
+    let n = groups.min(scan.groups.len());
+    if n == 0 {
+        return Ok(None);
+    }
+    let started = Instant::now();
+    let cancel = AtomicBool::new(false);
+    let mut slopes = SlopeHistory::default();
+    let mut ran = 0usize;
+    run_groups(
+        &GroupStream {
+            scan,
+            params,
+            keep_going,
+            mode: SlopeMode::Check,
+        },
+        0..n,
+        &mut slopes,
+        &cancel,
+        &mut |_: GroupOutcome| {
+            ran += 1;
+            Ok(())
+        },
+    )?;
+    let secs = started.elapsed().as_secs_f64() / ran.max(1) as f64;
+    let threads = rayon::current_num_threads();
+    Ok(Some((
+        secs,
+        format!("groups 0..{n} run here with {threads} threads, decode included"),
+    )))
+}
+
+/// Runs `plan`.
+///
+/// # Errors
+/// An unreadable scan or params, a shard count out of range, an existing plan file.
+pub fn run_plan(args: &PlanArgs) -> Result<()> {
+    refuse_existing(&[args.out.as_path()], args.force)?;
+    let mut params = load_params(args.params.as_deref())?;
+    params.path = path_choice(&args.path, params.path);
+    let scan = Scan::open(&args.scan)?;
+    let probe = probe_secs_per_group(&scan, &params, args.keep_going, args.probe_groups)?;
+    let plan = Plan::new(&scan, &params, args.keep_going, args.shards, probe)?;
+    write_atomic(&args.out, &serde_json::to_vec_pretty(&plan)?, args.force)?;
+    println!(
+        "wrote {} ({} groups in {} shards; each also runs up to {} groups before its range)",
+        args.out.display(),
+        plan.groups,
+        plan.shards.len(),
+        plan.context_groups
+    );
+    if let Some(s) = plan.secs_per_group {
+        println!("{s:.4} s a group ({})", plan.secs_per_group_basis);
+    }
+    for s in &plan.shards {
+        let eta = s.expected_secs.map_or_else(
+            || "not estimated".to_string(),
+            |t| format!("about {}", human_secs(t)),
+        );
+        println!(
+            "  shard {:>3}: groups {}..{} (from {} with context), {eta}",
+            s.index, s.first_group, s.end_group, s.context_first_group
+        );
+    }
+    if args.slurm {
+        let last = plan.shards.len() - 1;
+        let parts = args.parts.display();
+        println!(
+            "# submit the shards as a job array, then the merge once every shard has finished:\n\
+             jid=$(sbatch --parsable --array=0-{last} scripts/slurm/reconstruct-side.sbatch {} {} {parts})\n\
+             sbatch --dependency=afterok:$jid scripts/slurm/merge-side.sbatch {parts} side.wav",
+            scan.dir.display(),
+            args.out.display(),
+        );
+    }
+    Ok(())
+}
+
+/// `s` as "1 h 05 min", "3 min 20 s" or "4.2 s".
+fn human_secs(s: f64) -> String {
+    if s >= 3600.0 {
+        format!(
+            "{} h {:02} min",
+            (s / 3600.0) as u64,
+            ((s % 3600.0) / 60.0) as u64
+        )
+    } else if s >= 60.0 {
+        format!("{} min {:02} s", (s / 60.0) as u64, (s % 60.0) as u64)
+    } else {
+        format!("{s:.1} s")
+    }
+}

@@ -1,0 +1,152 @@
+//! Merge: the parts of every shard of one plan, checked, then finished exactly as a one-process run.
+
+use std::path::{Path, PathBuf};
+
+use super::part::{Part, read_part};
+use super::{RunIdentity, SideError};
+use crate::engine::{ClipGroups, Reconstruction, finish_reconstruction};
+use crate::io::ScanMeta;
+use crate::pipeline::PipelineParams;
+
+/// A merged side.
+#[derive(Debug)]
+pub struct Merged {
+    /// The reconstruction, as one process would have made it.
+    pub reconstruction: Reconstruction,
+    /// The identity of shard 0 (scan, params) with the whole scan's range.
+    pub identity: RunIdentity,
+    /// The parts, in shard order.
+    pub parts: Vec<PathBuf>,
+}
+
+/// Reads every part and checks that together they are all the shards of one plan: one scan,
+/// one plan, one set of params, each shard once.
+///
+/// # Errors
+/// [`SideError::Refused`] naming the part: truncated, from another scan, another plan, other
+/// params, a duplicated shard; or naming the shard that is missing.
+pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<Part>, SideError> {
+    let Some(first_path) = paths.first() else {
+        return Err(SideError::refused("no parts given", "."));
+    };
+    let mut parts: Vec<Part> = Vec::with_capacity(paths.len());
+    for path in paths {
+        let part = read_part(path)?;
+        let Some(shard) = part.identity.shard.clone() else {
+            return Err(SideError::refused(
+                "not a shard's part (no plan in its header)",
+                path,
+            ));
+        };
+        if let Some(first) = parts.first() {
+            let mut expected = first.identity.clone();
+            expected.shard = Some(super::ShardId {
+                index: shard.index,
+                ..first.identity.shard.clone().unwrap_or(shard.clone())
+            });
+            expected.groups = part.identity.groups;
+            if let Some(diff) = expected.difference(&part.identity) {
+                return Err(SideError::refused(
+                    format!("part {diff} (against {})", first.path.display()),
+                    path,
+                ));
+            }
+            if let Some(twin) = parts
+                .iter()
+                .find(|p| p.identity.shard.as_ref().map(|s| s.index) == Some(shard.index))
+            {
+                return Err(SideError::refused(
+                    format!(
+                        "duplicates shard {} of {} (also given as {})",
+                        shard.index,
+                        shard.count,
+                        twin.path.display()
+                    ),
+                    path,
+                ));
+            }
+        }
+        if shard.index >= shard.count {
+            return Err(SideError::refused(
+                "its shard index is past its count",
+                path,
+            ));
+        }
+        parts.push(part);
+    }
+    parts.sort_by_key(|p| p.identity.groups.0);
+    let count = parts
+        .first()
+        .and_then(|p| p.identity.shard.as_ref())
+        .map_or(0, |s| s.count);
+    for k in 0..count {
+        if !parts
+            .iter()
+            .any(|p| p.identity.shard.as_ref().is_some_and(|s| s.index == k))
+        {
+            return Err(SideError::refused(
+                format!("shard {k} of {count} is missing from the parts given"),
+                first_path.parent().unwrap_or(Path::new(".")),
+            ));
+        }
+    }
+    // The plan tiles the scan, so shards of one plan cover every group once, in order.
+    let mut next = 0;
+    for p in &parts {
+        if p.identity.groups.0 != next {
+            return Err(SideError::refused(
+                format!(
+                    "covers groups {}..{} but the parts before end at {next}",
+                    p.identity.groups.0, p.identity.groups.1
+                ),
+                &p.path,
+            ));
+        }
+        next = p.identity.groups.1;
+    }
+    if let Some(p) = parts.last()
+        && next != p.identity.scan_groups
+    {
+        return Err(SideError::refused(
+            format!(
+                "the parts end at group {next} of {}",
+                p.identity.scan_groups
+            ),
+            &p.path,
+        ));
+    }
+    Ok(parts)
+}
+
+/// Merges checked parts ([`read_parts`]) into the side's reconstruction: their groups in order
+/// through [`finish_reconstruction`], scored against the scan's `reference.wav` when the scan
+/// named in the parts is still there.
+///
+/// # Errors
+/// [`SideError`] from the checks, or when no group produced sound.
+pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged, SideError> {
+    let parts = read_parts(paths)?;
+    let Some(first) = parts.first() else {
+        return Err(SideError::refused("no parts given", "."));
+    };
+    let mut identity = first.identity.clone();
+    identity.groups = (0, identity.scan_groups);
+    let meta = ScanMeta::from_toml_str(&identity.meta_toml, &first.path)?;
+    let params: PipelineParams = identity.params.clone();
+    let scan_dir = PathBuf::from(&identity.scan);
+    let reference = Some(scan_dir.join("reference.wav")).filter(|p| p.is_file());
+    let mut clip = ClipGroups::with_capacity(identity.scan_groups);
+    let part_paths: Vec<PathBuf> = parts.iter().map(|p| p.path.clone()).collect();
+    for part in parts {
+        for g in part.groups {
+            clip.add(g);
+        }
+    }
+    let reconstruction =
+        finish_reconstruction(clip, &meta, reference.as_deref(), &params, &scan_dir)?;
+    Ok(Merged {
+        reconstruction,
+        identity,
+        parts: part_paths,
+    })
+}

@@ -1,0 +1,166 @@
+//! Shard parts: one shard's group records, sealed with an end record whose checksum covers the whole file.
+//!
+//! A part folder (`reconstruct --plan P --shard K --out part-K/`) holds `part.gsp` (the
+//! records, see [`super::record`]) and `report.json` (the shard's timings and warnings, for
+//! people). `part.gsp` is written atomically; a part without its end record, with records
+//! missing, or whose checksum fails is truncated and refused by merge.
+
+use std::path::{Path, PathBuf};
+
+use super::journal::read_record_file;
+use super::record::{Record, encode, write_frame};
+use super::{RunIdentity, SideError};
+use crate::engine::GroupOutcome;
+use crate::io::write_atomic;
+
+/// First bytes of a part file.
+pub const PART_MAGIC: &[u8] = b"GROOVESCOPE PART 1\n";
+/// The part file's name inside a part folder.
+pub const PART_FILE: &str = "part.gsp";
+
+/// A part read back and checked.
+#[derive(Clone, Debug)]
+pub struct Part {
+    /// The part file.
+    pub path: PathBuf,
+    /// What it belongs to.
+    pub identity: RunIdentity,
+    /// Its groups, in order, covering `identity.groups` exactly.
+    pub groups: Vec<GroupOutcome>,
+}
+
+/// The part file of `path`: `path` itself, or `path/part.gsp` for a folder.
+#[must_use]
+pub fn part_file(path: &Path) -> PathBuf {
+    if path.is_dir() {
+        path.join(PART_FILE)
+    } else {
+        path.to_path_buf()
+    }
+}
+
+/// The bytes of a part: header, the groups' records, and the end record.
+///
+/// # Errors
+/// [`SideError::Refused`] when the header cannot be encoded.
+pub fn part_bytes(identity: &RunIdentity, groups: &[GroupOutcome]) -> Result<Vec<u8>, SideError> {
+    let header = serde_json::to_vec(identity).map_err(|e| {
+        SideError::refused(
+            format!("cannot encode the part header: {e}"),
+            &identity.scan,
+        )
+    })?;
+    let mut bytes = PART_MAGIC.to_vec();
+    let frame_err = |e: std::io::Error| SideError::io("part", &e, &identity.scan);
+    write_frame(&mut bytes, &header).map_err(frame_err)?;
+    for g in groups {
+        write_frame(&mut bytes, &encode(&Record::Group(g.clone()))).map_err(frame_err)?;
+    }
+    let end = Record::End {
+        groups: groups.len() as u64,
+        file_crc: crc32fast::hash(&bytes),
+    };
+    write_frame(&mut bytes, &encode(&end)).map_err(frame_err)?;
+    Ok(bytes)
+}
+
+/// Writes a part atomically to `dir/part.gsp`.
+///
+/// # Errors
+/// [`SideError`] when it exists (without `force`) or cannot be written.
+pub fn write_part(
+    dir: &Path,
+    identity: &RunIdentity,
+    groups: &[GroupOutcome],
+    force: bool,
+) -> Result<PathBuf, SideError> {
+    let path = dir.join(PART_FILE);
+    write_atomic(&path, &part_bytes(identity, groups)?, force)?;
+    Ok(path)
+}
+
+/// Reads and checks a part (a folder or its `part.gsp`).
+///
+/// # Errors
+/// [`SideError::Refused`] naming the part when it is missing, not a part, or truncated
+/// (no end record, a group record missing, a checksum that fails).
+pub fn read_part(path: &Path) -> Result<Part, SideError> {
+    let file = part_file(path);
+    if !file.is_file() {
+        return Err(SideError::refused(
+            format!("not a part: no {PART_FILE} there"),
+            path,
+        ));
+    }
+    let bytes =
+        std::fs::read(&file).map_err(|e| SideError::io("cannot read the part", &e, &file))?;
+    let (identity, records, valid) = read_record_file(&bytes, PART_MAGIC, "part", &file)?;
+    let (lo, hi) = identity.groups;
+    let mut groups = Vec::with_capacity(hi.saturating_sub(lo));
+    let mut end = None;
+    let mut start_of_end = 0;
+    let mut prev_end = bytes.len().min(valid);
+    for (i, (record, end_at)) in records.iter().enumerate() {
+        match record {
+            Record::Group(g) if end.is_none() => groups.push(g.clone()),
+            Record::End { groups, file_crc } if end.is_none() => {
+                end = Some((*groups, *file_crc));
+                start_of_end = if i == 0 {
+                    0
+                } else {
+                    records.get(i - 1).map_or(0, |r| r.1)
+                };
+                prev_end = *end_at;
+            }
+            _ => {
+                return Err(SideError::refused(
+                    "damaged part: records after its end",
+                    &file,
+                ));
+            }
+        }
+    }
+    let truncated = |what: String| {
+        SideError::refused(
+            format!("truncated part ({what}; it should hold groups {lo}..{hi})"),
+            &file,
+        )
+    };
+    let last = groups
+        .last()
+        .map_or_else(|| "no group".to_string(), |g| format!("group {}", g.group));
+    let Some((count, file_crc)) = end else {
+        return Err(truncated(format!("no end record after {last}")));
+    };
+    // With no group records, the end follows the header directly.
+    if start_of_end == 0 {
+        start_of_end = header_end(&bytes);
+    }
+    if prev_end != bytes.len() {
+        return Err(truncated("bytes after the end record".into()));
+    }
+    if bytes.get(..start_of_end).map(crc32fast::hash) != Some(file_crc) {
+        return Err(truncated("its checksum does not match".into()));
+    }
+    let expected: Vec<usize> = (lo..hi).collect();
+    let found: Vec<usize> = groups.iter().map(|g| g.group).collect();
+    if count != groups.len() as u64 || found != expected {
+        return Err(truncated(format!(
+            "{} group records of {}, ending at {last}",
+            groups.len(),
+            hi.saturating_sub(lo)
+        )));
+    }
+    Ok(Part {
+        path: path.to_path_buf(),
+        identity,
+        groups,
+    })
+}
+
+/// Offset just past the header frame.
+fn header_end(bytes: &[u8]) -> usize {
+    super::record::read_frames(bytes, PART_MAGIC.len())
+        .first()
+        .map_or(0, |f| f.1)
+}

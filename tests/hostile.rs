@@ -1,0 +1,277 @@
+//! Hostile input: metadata that contradicts the scan, and files that ask for more than the limits (issue 19).
+
+#![allow(clippy::unwrap_used)] // tests may panic
+
+mod common;
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+use common::{SCAN_TOML, demo_copy, groovescope, stderr, write_scan};
+use groovescope::engine::{ReconstructOptions, reconstruct};
+use groovescope::io::limits::{MAX_FRAMES_PER_GROUP, MAX_TOML_BYTES, MAX_WAV_SAMPLES};
+use groovescope::io::{Scan, load_frame, load_group_frames};
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Runs `groovescope reconstruct SCAN --params PARAMS` to `x.wav` beside the params; returns
+/// the stderr of the failed run (the output must not exist).
+fn refused_reconstruct(scan: &Path, params: &Path) -> String {
+    let out = params.with_file_name("x.wav");
+    let o = groovescope(&[
+        "reconstruct",
+        s(scan),
+        "--out",
+        s(&out),
+        "--params",
+        s(params),
+        "--quiet",
+    ]);
+    assert!(!o.status.success());
+    assert!(!out.exists());
+    let err = stderr(&o);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    err
+}
+
+fn open_err(dir: &Path) -> String {
+    Scan::open(dir).unwrap_err().to_string()
+}
+
+#[test]
+fn a_per_group_radius_list_of_the_wrong_length_names_the_key_and_both_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 2, 7, 32, 16);
+    let spiral = |radii: &str| {
+        let text = SCAN_TOML.replace(
+            "cut = \"lateral\"\n",
+            &format!("cut = \"lateral\"\ngroup_radius_mm = [{radii}]\n"),
+        );
+        std::fs::write(scan.join("scan.toml"), text).unwrap();
+    };
+    spiral("115.0, 114.9, 114.8");
+    let msg = open_err(&scan);
+    assert!(
+        msg.contains("record.group_radius_mm has 3 entries but the scan has 2 groups")
+            && msg.contains("scan.toml"),
+        "{msg}"
+    );
+    spiral("115.0");
+    assert!(open_err(&scan).contains("has 1 entries"));
+    spiral("115.0, 114.9");
+    let opened = Scan::open(&scan).unwrap();
+    assert!((opened.meta.radius_mm(1) - 114.9).abs() < 1e-12);
+}
+
+#[test]
+fn a_glass_edge_outside_the_frame_names_the_key_and_both_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let dual = |row: &str| {
+        let text = format!(
+            "{SCAN_TOML}[dual_focus]\nfocus_distance_mm = 4.0\nglass_thickness_mm = 0.11\nglass_index = 1.515\nglass_edge_row = {row}\n"
+        );
+        std::fs::write(scan.join("scan.toml"), text).unwrap();
+    };
+    dual("40.0");
+    let msg = open_err(&scan);
+    assert!(
+        msg.contains("dual_focus.glass_edge_row = 40")
+            && msg.contains("last row is 15")
+            && msg.contains("scan.toml"),
+        "{msg}"
+    );
+    dual("8.0");
+    assert!(Scan::open(&scan).is_ok());
+}
+
+#[test]
+fn a_group_step_longer_than_a_group_sees_names_the_key_and_both_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    // 32 px frames of 0.39 µm less 8 px margins each side: 15 px = 5.85 µm sampled per group.
+    let scan = write_scan(&dir.path().join("scan"), 2, 7, 32, 16);
+    let text = SCAN_TOML.replace("group_step_um = 4.0", "group_step_um = 460.2");
+    std::fs::write(scan.join("scan.toml"), &text).unwrap();
+    let msg = open_err(&scan);
+    assert!(
+        msg.contains("motion.group_step_um = 460.2") && msg.contains("5.85"),
+        "{msg}"
+    );
+    // One group has no neighbour to overlap.
+    let single = write_scan(&dir.path().join("single"), 1, 7, 32, 16);
+    std::fs::write(single.join("scan.toml"), &text).unwrap();
+    assert!(Scan::open(&single).is_ok());
+}
+
+#[test]
+fn an_unreadable_reference_is_a_warning_naming_it_and_the_reconstruction_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    std::fs::write(demo.join("reference.wav"), b"RIFF\x10\0\0\0WAVEjunk").unwrap();
+    let scan = Scan::open(&demo).unwrap();
+    let opts = ReconstructOptions {
+        groups: Some(0..4),
+        ..ReconstructOptions::default()
+    };
+    let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false)).unwrap();
+    assert!(rec.scores.is_none());
+    assert!(!rec.audio.is_empty());
+    assert!(
+        rec.warnings
+            .iter()
+            .any(|w| w.contains("reference not scored") && w.contains("reference.wav")),
+        "{:?}",
+        rec.warnings
+    );
+}
+
+/// A valid 16×12 grey PNG whose header claims `w`×`h` (its checksum fixed up).
+fn png_claiming(w: u32, h: u32) -> Vec<u8> {
+    let img = image::GrayImage::from_fn(16, 12, |x, y| image::Luma([(x * 7 + y) as u8]));
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png).unwrap();
+    let mut png = out.into_inner();
+    png[16..20].copy_from_slice(&w.to_be_bytes());
+    png[20..24].copy_from_slice(&h.to_be_bytes());
+    let crc = crc32fast::hash(&png[12..29]);
+    png[29..33].copy_from_slice(&crc.to_be_bytes());
+    png
+}
+
+#[test]
+fn a_50000_by_50000_png_header_is_refused_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("huge.png");
+    std::fs::write(&p, png_claiming(50_000, 50_000)).unwrap();
+    let msg = load_frame(&p).unwrap_err().to_string();
+    assert!(
+        msg.contains("50000×50000") && msg.contains("16384") && msg.contains("huge.png"),
+        "{msg}"
+    );
+    // Past the pixel limit with both sides inside the side limit.
+    std::fs::write(&p, png_claiming(16_000, 16_000)).unwrap();
+    let msg = load_frame(&p).unwrap_err().to_string();
+    assert!(
+        msg.contains("256000000 pixels") && msg.contains("67108864"),
+        "{msg}"
+    );
+    // Outside a group's decoded window the header check refuses it too.
+    let scan = write_scan(&dir.path().join("scan"), 1, 8, 32, 16);
+    let frame = scan.join("g00000/f000.png");
+    std::fs::write(&frame, png_claiming(50_000, 50_000)).unwrap();
+    let opened = Scan::open(&scan);
+    let msg = match opened {
+        Ok(scan) => load_group_frames(&scan.groups[0], 1..8)
+            .unwrap_err()
+            .to_string(),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        msg.contains("50000×50000") && msg.contains("f000.png"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_wav_header_announcing_more_samples_than_the_limit_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("long.wav");
+    let mut wav = Vec::new();
+    wav.extend_from_slice(b"RIFF");
+    wav.extend_from_slice(&u32::MAX.to_le_bytes());
+    wav.extend_from_slice(b"WAVEfmt ");
+    wav.extend_from_slice(&16u32.to_le_bytes());
+    wav.extend_from_slice(&1u16.to_le_bytes()); // PCM
+    wav.extend_from_slice(&1u16.to_le_bytes()); // mono
+    wav.extend_from_slice(&48_000u32.to_le_bytes());
+    wav.extend_from_slice(&96_000u32.to_le_bytes());
+    wav.extend_from_slice(&2u16.to_le_bytes());
+    wav.extend_from_slice(&16u16.to_le_bytes());
+    wav.extend_from_slice(b"data");
+    wav.extend_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+    wav.extend_from_slice(&[0u8; 64]);
+    std::fs::write(&p, &wav).unwrap();
+    let msg = groovescope::io::wav::read_wav(&p).unwrap_err().to_string();
+    assert!(
+        msg.contains(&MAX_WAV_SAMPLES.to_string()) && msg.contains("long.wav"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_params_file_past_the_toml_limit_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let params = dir.path().join("big.toml");
+    let mut text = String::from("[flow]\nlambda = 0.5\n");
+    while text.len() as u64 <= MAX_TOML_BYTES {
+        text += "# padding padding padding padding padding padding padding padding\n";
+    }
+    std::fs::write(&params, text).unwrap();
+    let err = refused_reconstruct(&scan, &params);
+    assert!(
+        err.contains("big.toml") && err.contains(&MAX_TOML_BYTES.to_string()),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_group_with_more_frames_than_the_limit_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan");
+    let group = scan.join("g00000");
+    std::fs::create_dir_all(&group).unwrap();
+    std::fs::write(scan.join("scan.toml"), SCAN_TOML).unwrap();
+    for k in 0..=MAX_FRAMES_PER_GROUP {
+        std::fs::write(group.join(format!("f{k:05}.png")), b"").unwrap();
+    }
+    let msg = open_err(&scan);
+    assert!(
+        msg.contains(&format!("more than {MAX_FRAMES_PER_GROUP} frames")) && msg.contains("g00000"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_hough_accumulator_past_the_limit_is_refused_before_any_group_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    let params = dir.path().join("fine.toml");
+    std::fs::write(
+        &params,
+        "[hough]\ntheta_step_deg = 0.001\nrho_step_px = 0.02\n",
+    )
+    .unwrap();
+    let err = refused_reconstruct(&demo, &params);
+    assert!(
+        err.contains("hough.theta_step_deg = 0.001")
+            && err.contains("67108864")
+            && err.contains("384-row")
+            && err.contains("fine.toml"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_flow_iteration_cap_past_the_limit_is_refused_naming_the_key() {
+    // Found by the monkey test: 10³⁰ typed into the iterations field became 4,294,967,295
+    // iterations, and with τ = 0 the flow stage never finished.
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let params = dir.path().join("slow.toml");
+    std::fs::write(
+        &params,
+        "[flow]\nmax_iterations = 4294967295\ntolerance_px = 0.0\n",
+    )
+    .unwrap();
+    let err = refused_reconstruct(&scan, &params);
+    assert!(
+        err.contains("flow.max_iterations")
+            && err.contains("4294967295")
+            && err.contains("10000")
+            && err.contains("slow.toml"),
+        "{err}"
+    );
+}

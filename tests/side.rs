@@ -1,0 +1,361 @@
+//! Whole sides: shards merged byte-identical to one process, resume after kill -9, and every refusal.
+
+#![allow(clippy::unwrap_used)] // tests may panic
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::OnceLock;
+use std::sync::atomic::AtomicBool;
+
+use common::{groovescope, stderr};
+use groovescope::synth::{BUILTIN_RATE_HZ, SynthConfig, render_scan, tone};
+
+/// Groups in the shared scan: enough that 2 and 3 shards start past the 64-group slope history.
+const GROUPS: usize = 150;
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A small dual-focus scan (160×300 px, 8 frames a group, 1 µm pixels) of a 1 kHz tone, rough
+/// enough that the clip's slope reference rejects fits, so shards must rebuild its history.
+fn small_side_config(groups: usize) -> SynthConfig {
+    SynthConfig {
+        width_px: 160,
+        height_px: 300,
+        pixel_pitch_um: 1.0,
+        group_overlap_px: 20,
+        frames_per_group: 8,
+        bit_depth: 8,
+        max_groups: Some(groups),
+        ..SynthConfig::dual_focus_demo()
+    }
+}
+
+fn shared() -> &'static (tempfile::TempDir, PathBuf, Vec<u8>) {
+    static SCAN: OnceLock<(tempfile::TempDir, PathBuf, Vec<u8>)> = OnceLock::new();
+    SCAN.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let scan = dir.path().join("scan");
+        let cfg = small_side_config(GROUPS);
+        let sound = tone(1000.0, 0.03, BUILTIN_RATE_HZ);
+        render_scan(&sound, &cfg, &scan, &|_, _| {}, &AtomicBool::new(false)).unwrap();
+        let out = dir.path().join("one.wav");
+        let o = groovescope(&["reconstruct", s(&scan), "--out", s(&out), "--quiet"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(!groovescope::side::cli::journal_path(&out).exists());
+        let wav = std::fs::read(&out).unwrap();
+        (dir, scan, wav)
+    })
+}
+
+fn plan(scan: &Path, shards: usize, out: &Path, extra: &[&str]) {
+    let mut args = vec![
+        "plan",
+        s(scan),
+        "--shards",
+        &shards.to_string(),
+        "--out",
+        s(out),
+        "--probe-groups",
+        "0",
+    ]
+    .into_iter()
+    .map(String::from)
+    .collect::<Vec<_>>();
+    args.extend(extra.iter().map(|a| (*a).to_string()));
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = groovescope(&refs);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+fn run_shard(scan: &Path, plan: &Path, k: usize, out: &Path) {
+    let o = groovescope(&[
+        "reconstruct",
+        s(scan),
+        "--plan",
+        s(plan),
+        "--shard",
+        &k.to_string(),
+        "--out",
+        s(out),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "shard {k}: {}", stderr(&o));
+}
+
+fn merge(parts: &[PathBuf], out: &Path) -> std::process::Output {
+    let mut args = vec!["merge".to_string()];
+    args.extend(parts.iter().map(|p| s(p).to_string()));
+    args.extend(["--out".into(), s(out).into(), "--quiet".into()]);
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    groovescope(&refs)
+}
+
+#[test]
+fn merged_shards_are_byte_identical_to_one_process_for_1_2_3_and_7_shards() {
+    let (_keep, scan, one) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    for n in [1, 2, 3, 7] {
+        let p = tmp.path().join(format!("plan{n}.json"));
+        plan(scan, n, &p, &[]);
+        // Shards in reverse order: each is independent of the others.
+        let parts: Vec<PathBuf> = (0..n)
+            .rev()
+            .map(|k| {
+                let dir = tmp.path().join(format!("n{n}-part-{k}"));
+                run_shard(scan, &p, k, &dir);
+                assert!(dir.join("part.gsp").is_file() && !dir.join("journal").exists());
+                dir
+            })
+            .collect();
+        let out = tmp.path().join(format!("merged{n}.wav"));
+        let o = merge(&parts, &out);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(
+            std::fs::read(&out).unwrap() == *one,
+            "{n} shards: merged WAV differs from the one-process WAV"
+        );
+    }
+}
+
+#[test]
+fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() {
+    let (_keep, scan, _) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let (p2, p3) = (t.join("p2.json"), t.join("p3.json"));
+    plan(scan, 2, &p2, &[]);
+    plan(scan, 3, &p3, &[]);
+    let part = |name: &str, plan: &Path, k: usize| {
+        let dir = t.join(name);
+        run_shard(scan, plan, k, &dir);
+        dir
+    };
+    let (a0, a1) = (part("a0", &p2, 0), part("a1", &p2, 1));
+    let b1 = part("b1", &p3, 1);
+    let expect_refusal = |parts: &[PathBuf], words: &str, named: &Path| {
+        let out = t.join("x.wav");
+        let o = merge(parts, &out);
+        let e = stderr(&o);
+        assert!(!o.status.success() && !out.exists(), "{e}");
+        assert!(e.contains(words), "{e}");
+        assert!(e.contains(s(named)), "{e}");
+        assert_eq!(e.trim().lines().count(), 1, "{e}");
+    };
+    expect_refusal(std::slice::from_ref(&a0), "shard 1 of 2 is missing", t);
+    expect_refusal(
+        &[a0.clone(), a1.clone(), a1.clone()],
+        "duplicates shard 1",
+        &a1,
+    );
+    expect_refusal(&[a0.clone(), b1.clone()], "another plan", &b1);
+
+    // Other params: a plan with another λ.
+    let params = t.join("params.toml");
+    std::fs::write(&params, "[flow]\nlambda = 0.2\n").unwrap();
+    let pp = t.join("pp.json");
+    plan(scan, 2, &pp, &["--params", s(&params)]);
+    let c1 = part("c1", &pp, 1);
+    expect_refusal(&[a0.clone(), c1.clone()], "other params", &c1);
+
+    // Another scan: the same frames under other metadata.
+    let other = t.join("other-scan");
+    copy_dir(scan, &other);
+    let meta = std::fs::read_to_string(other.join("scan.toml")).unwrap();
+    std::fs::write(
+        other.join("scan.toml"),
+        meta.replacen("rpm = 78.0", "rpm = 80.0", 1),
+    )
+    .unwrap();
+    let po = t.join("po.json");
+    plan(&other, 2, &po, &[]);
+    let d1 = t.join("d1");
+    run_shard(&other, &po, 1, &d1);
+    expect_refusal(&[a0.clone(), d1.clone()], "another scan", &d1);
+
+    // A truncated part: the end record cut off, then a group record cut in half.
+    for cut in [10, 400] {
+        let torn = t.join(format!("torn{cut}"));
+        copy_dir(&a1, &torn);
+        let file = torn.join("part.gsp");
+        let len = std::fs::metadata(&file).unwrap().len();
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(&file)
+            .unwrap()
+            .set_len(len - cut)
+            .unwrap();
+        expect_refusal(&[a0.clone(), torn.clone()], "truncated part", &file);
+    }
+    // The good pair still merges.
+    let o = merge(&[a1, a0], &t.join("ok.wav"));
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn a_plan_for_another_scan_and_a_shard_out_of_range_are_refused() {
+    let (_keep, scan, _) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let t = tmp.path();
+    let p = t.join("plan.json");
+    plan(scan, 3, &p, &[]);
+    let other = t.join("other");
+    copy_dir(scan, &other);
+    std::fs::remove_dir_all(other.join("g00149")).unwrap();
+    let run = |scan: &Path, k: &str| {
+        groovescope(&[
+            "reconstruct",
+            s(scan),
+            "--plan",
+            s(&p),
+            "--shard",
+            k,
+            "--out",
+            s(&t.join("part")),
+        ])
+    };
+    let o = run(&other, "0");
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("another scan") && e.contains(s(&p)), "{e}");
+    let o = run(scan, "3");
+    let e = stderr(&o);
+    assert!(!o.status.success());
+    assert!(
+        e.contains("--shard 3 is out of range") && e.contains("3 shards"),
+        "{e}"
+    );
+    assert!(!t.join("part").join("part.gsp").exists());
+    // A plan edited by hand is refused too.
+    let text = std::fs::read_to_string(&p).unwrap();
+    std::fs::write(
+        &p,
+        text.replacen("\"end_group\": 50", "\"end_group\": 51", 1),
+    )
+    .unwrap();
+    let e = stderr(&run(scan, "0"));
+    assert!(e.contains("edited or is damaged"), "{e}");
+}
+
+/// Spawns `args`, reads its `--progress-json` lines and kills it (SIGKILL) once `done` reaches
+/// `kill_at`; returns whether it was killed before finishing.
+fn kill_at(args: &[&str], kill_at: usize) -> bool {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+        .args(args)
+        .arg("--progress-json")
+        .env_remove("DISPLAY")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let reader = BufReader::new(child.stdout.take().unwrap());
+    for line in reader.lines() {
+        let v: serde_json::Value = serde_json::from_str(&line.unwrap()).unwrap();
+        if v["event"] == "group" && v["done"].as_u64().unwrap() as usize >= kill_at {
+            child.kill().unwrap();
+            let status = child.wait().unwrap();
+            return !status.success();
+        }
+    }
+    child.wait().unwrap();
+    false
+}
+
+/// A group to kill at, from the clock (the test is the same whichever it is).
+fn random_group(lo: usize, hi: usize) -> usize {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .subsec_nanos() as usize;
+    lo + nanos % (hi - lo)
+}
+
+#[test]
+fn a_run_killed_at_a_random_group_resumes_to_the_same_bytes() {
+    let (_keep, scan, one) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("side.wav");
+    let journal = tmp.path().join("side.wav.journal");
+    let k = random_group(2, GROUPS / 2);
+    eprintln!("killing the whole run at group {k}");
+    assert!(kill_at(&["reconstruct", s(scan), "--out", s(&out)], k));
+    assert!(journal.is_file(), "no journal left by the killed run");
+    assert!(!out.exists(), "a partial WAV under the output name");
+    // Without --resume the journal is not silently discarded.
+    let o = groovescope(&["reconstruct", s(scan), "--out", s(&out), "--quiet"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("--resume"),
+        "{}",
+        stderr(&o)
+    );
+    // A journal from other params is refused, never mixed.
+    let params = tmp.path().join("params.toml");
+    std::fs::write(&params, "[flow]\nlambda = 0.3\n").unwrap();
+    let o = groovescope(&[
+        "reconstruct",
+        s(scan),
+        "--out",
+        s(&out),
+        "--resume",
+        "--params",
+        s(&params),
+    ]);
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains("other params") && e.contains(s(&journal)),
+        "{e}"
+    );
+    // Resume: the same bytes as the uninterrupted run, and the journal is gone.
+    let o = groovescope(&["reconstruct", s(scan), "--out", s(&out), "--resume"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("resuming after"), "{}", stderr(&o));
+    assert!(std::fs::read(&out).unwrap() == *one, "resumed WAV differs");
+    assert!(!journal.exists());
+
+    // A shard killed mid-run resumes too (a Slurm requeue), and merges to the same bytes.
+    let p = tmp.path().join("plan.json");
+    plan(scan, 2, &p, &[]);
+    let part1 = tmp.path().join("part-1");
+    let k = random_group(2, GROUPS / 2 - 10);
+    eprintln!("killing shard 1 at its group {k}");
+    let shard_args = [
+        "reconstruct",
+        s(scan),
+        "--plan",
+        s(&p),
+        "--shard",
+        "1",
+        "--out",
+        s(&part1),
+        "--resume",
+    ];
+    assert!(kill_at(&shard_args, k));
+    assert!(part1.join("journal").is_file() && !part1.join("part.gsp").exists());
+    let o = groovescope(&shard_args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let part0 = tmp.path().join("part-0");
+    run_shard(scan, &p, 0, &part0);
+    let merged = tmp.path().join("merged.wav");
+    assert!(merge(&[part0, part1], &merged).status.success());
+    assert!(
+        std::fs::read(&merged).unwrap() == *one,
+        "merged WAV after a resumed shard differs"
+    );
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let dst = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &dst);
+        } else {
+            std::fs::copy(e.path(), &dst).unwrap();
+        }
+    }
+}

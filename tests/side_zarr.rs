@@ -1,0 +1,170 @@
+//! The Zarr scan store: pack round trip frame for frame, the same WAV from either form, a missing chunk.
+
+#![allow(clippy::unwrap_used)] // tests may panic
+
+mod common;
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+use common::{groovescope, stderr};
+use groovescope::image::Image;
+use groovescope::io::{Scan, load_group, save_grey_png};
+use groovescope::side::scan_fingerprint;
+use groovescope::synth::{BUILTIN_RATE_HZ, SynthConfig, render_scan, tone};
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A scan of textured frames: 8- or 16-bit grey PNG, or RGB PNG (stored as f32 grey).
+fn textured_scan(dir: &Path, groups: usize, kind: &str) {
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join("scan.toml"), common::SCAN_TOML).unwrap();
+    for g in 0..groups {
+        let gd = dir.join(format!("g{g:05}"));
+        std::fs::create_dir_all(&gd).unwrap();
+        for k in 0..7 {
+            let img = Image::from_fn(33, 21, |x, y| {
+                let v = 0.5 + 0.4 * ((x as f32 + 3.0 * k as f32 + g as f32) * 0.37).sin();
+                v * (0.6 + 0.02 * y as f32)
+            });
+            let path = gd.join(format!("f{k:03}.png"));
+            match kind {
+                "rgb" => {
+                    let rgb = image::RgbImage::from_fn(33, 21, |x, y| {
+                        let v = (img.data[(y * 33 + x) as usize] * 255.0) as u8;
+                        image::Rgb([v, v / 2, 255 - v])
+                    });
+                    rgb.save(&path).unwrap();
+                }
+                _ => save_grey_png(&img, &path, kind == "16", false).unwrap(),
+            }
+        }
+    }
+    std::fs::write(dir.join("reference.wav"), b"not read here").unwrap();
+}
+
+#[test]
+fn pack_round_trips_every_frame_bit_for_bit_for_8_bit_16_bit_and_colour_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    for kind in ["8", "16", "rgb"] {
+        let folder = tmp.path().join(format!("scan{kind}"));
+        let store = tmp.path().join(format!("scan{kind}.zarr"));
+        textured_scan(&folder, 3, kind);
+        let o = groovescope(&["pack", s(&folder), "--out", s(&store)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let (a, b) = (Scan::open(&folder).unwrap(), Scan::open(&store).unwrap());
+        assert!(b.groups.iter().all(|g| g.zarr.is_some()));
+        assert_eq!(a.meta, b.meta);
+        assert_eq!(scan_fingerprint(&a), scan_fingerprint(&b));
+        assert!(b.reference.as_ref().is_some_and(|p| p.starts_with(&store)));
+        for (ga, gb) in a.groups.iter().zip(&b.groups) {
+            let (fa, fb) = (load_group(ga).unwrap(), load_group(gb).unwrap());
+            assert_eq!(fa.len(), 7);
+            for (x, y) in fa.iter().zip(&fb) {
+                assert_eq!((x.width, x.height), (y.width, y.height));
+                assert!(
+                    x.data
+                        .iter()
+                        .zip(&y.data)
+                        .all(|(p, q)| p.to_bits() == q.to_bits()),
+                    "{kind}-bit group {} differs",
+                    ga.index
+                );
+            }
+        }
+        // Packing onto a store that exists is refused; the store is untouched.
+        let o = groovescope(&["pack", s(&folder), "--out", s(&store)]);
+        assert!(
+            !o.status.success() && stderr(&o).contains(s(&store)),
+            "{}",
+            stderr(&o)
+        );
+        assert!(Scan::open(&store).is_ok());
+    }
+}
+
+#[test]
+fn pack_refuses_groups_of_different_frame_counts_naming_the_group() {
+    let tmp = tempfile::tempdir().unwrap();
+    let folder = tmp.path().join("scan");
+    textured_scan(&folder, 3, "8");
+    std::fs::copy(
+        folder.join("g00000/f000.png"),
+        folder.join("g00001/f999.png"),
+    )
+    .unwrap();
+    let store = tmp.path().join("scan.zarr");
+    let o = groovescope(&["pack", s(&folder), "--out", s(&store)]);
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains("g00001") && e.contains("same number of frames"),
+        "{e}"
+    );
+    assert!(!store.exists(), "a failed pack left its store");
+    let leftovers: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
+    assert_eq!(
+        leftovers.len(),
+        1,
+        "a failed pack left its temporary folder"
+    );
+}
+
+#[test]
+fn a_store_reconstructs_to_the_same_wav_and_a_missing_chunk_is_named_or_a_gap() {
+    let tmp = tempfile::tempdir().unwrap();
+    let folder = tmp.path().join("scan");
+    let cfg = SynthConfig {
+        width_px: 160,
+        height_px: 300,
+        pixel_pitch_um: 1.0,
+        group_overlap_px: 20,
+        frames_per_group: 8,
+        bit_depth: 16,
+        max_groups: Some(6),
+        ..SynthConfig::dual_focus_demo()
+    };
+    let sound = tone(1000.0, 0.01, BUILTIN_RATE_HZ);
+    render_scan(&sound, &cfg, &folder, &|_, _| {}, &AtomicBool::new(false)).unwrap();
+    let store = tmp.path().join("scan.zarr");
+    assert!(
+        groovescope(&["pack", s(&folder), "--out", s(&store), "--quiet"])
+            .status
+            .success()
+    );
+    let wav = |scan: &Path, name: &str, extra: &[&str]| {
+        let out = tmp.path().join(name);
+        let mut args = vec!["reconstruct", s(scan), "--out", s(&out), "--quiet"];
+        args.extend_from_slice(extra);
+        (groovescope(&args), out)
+    };
+    let (o, a) = wav(&folder, "folder.wav", &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (o, b) = wav(&store, "store.wav", &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
+        "WAVs differ"
+    );
+
+    let chunk = store.join("frames/c/2/0/0/0");
+    std::fs::remove_file(&chunk).unwrap();
+    let (o, _) = wav(&store, "missing.wav", &[]);
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains("missing") && e.contains(s(&chunk)),
+        "{e}"
+    );
+    let report = tmp.path().join("gap.json");
+    let (o, out) = wav(&store, "gap.wav", &["--keep-going", "--report", s(&report)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.is_file());
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    let row = &r["groups"][2];
+    assert_eq!(row["group"], 2);
+    assert!(
+        row["warning"].as_str().unwrap().contains("missing"),
+        "{row}"
+    );
+}
