@@ -4,6 +4,7 @@
 //! reference sound of a scan (r, envelope r, SNR from [`crate::pipeline::eval`]) or the true
 //! depth map of a scene (the paper's Table 2 error bands). Nothing is typed in by hand.
 
+pub mod methods;
 mod scenes;
 mod suite;
 

@@ -12,6 +12,7 @@ pub mod dsp;
 pub mod edges;
 pub mod eval;
 pub mod finish;
+pub mod fusion;
 pub mod graph;
 pub mod hough;
 pub mod optical_flow;

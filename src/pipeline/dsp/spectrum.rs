@@ -17,6 +17,25 @@ fn real_spectrum(planner: &mut RealFftPlanner<f64>, x: &mut [f64]) -> Vec<Comple
     spectrum
 }
 
+/// Forward complex FFT in place (unnormalised, natural order in and out), by `rustfft`.
+/// `re` and `im` must have the same length; otherwise they are left untouched.
+pub fn fft_in_place(re: &mut [f64], im: &mut [f64]) {
+    if re.len() != im.len() || re.len() < 2 {
+        return;
+    }
+    let fft = rustfft::FftPlanner::<f64>::new().plan_fft_forward(re.len());
+    let mut buffer: Vec<Complex<f64>> = re
+        .iter()
+        .zip(im.iter())
+        .map(|(&r, &i)| Complex::new(r, i))
+        .collect();
+    fft.process(&mut buffer);
+    for ((r, i), c) in re.iter_mut().zip(im.iter_mut()).zip(&buffer) {
+        *r = c.re;
+        *i = c.im;
+    }
+}
+
 /// Circular cross-correlation c[m] = Σ_i a[i]·b[i + m] (indices mod n) of two real signals
 /// zero-padded to n = the next power of two ≥ a.len() + b.len(), so that every lag in
 /// (−a.len(), b.len()) appears unaliased at index lag mod n. Returns (c, n).

@@ -1,6 +1,657 @@
 //! The edge decoder: sub-pixel borders between the walls and the land and bottom, read as groove displacement.
 //!
-//! The border model ([`border`]) is public on its own so that other decoders (the still-image
-//! decoder) fit the same edge-spread profile.
+//! A wall's borders move by the groove's whole lateral displacement — tens of pixels — which is
+//! a far stronger cue than the wall tilt the flow method reads; their noise is flat in
+//! displacement (so it rises 6 dB per octave once differentiated into velocity), and texture at
+//! the border, fixed to the record, not pixel noise, limits them (`../shared/PHYSICS.md`).
+//!
+//! [`detect_edges`] runs on one group of frames:
+//! 1. **Coarse borders** ([`coarse`]) on the middle frame: for every output sample, the four
+//!    borders (left land, left bottom, right bottom, right land) from its full-height strip.
+//! 2. **Bottom depth** from the walls' widths: a wall at angle α reaching from the land (at the
+//!    working distance) to a corner `D` deeper spans `D/tan α` across the groove, and the corner
+//!    is seen at the perspective of its own depth. The median over the samples and both walls.
+//! 3. **Fine fits** ([`profile`]): each border of each sample over all frames, from straightened
+//!    sub-pixel profiles of the sample's columns in every frame, placed by the frame step and the
+//!    border's own distance ([`geometry`]), dust columns rejected; the border model is
+//!    [`border`]'s.
+//!    Sharp borders are refined with one smooth curve per border over the group ([`refine`]),
+//!    which places samples whose border stays inside one pixel row.
+//! 4. **Combination** ([`robust`]): every border mapped to record `y` at its own distance, the
+//!    four combined per sample into the groove's displacement (robustly: flaked or dusty borders
+//!    are rejected), gaps marked and short ones bridged.
+//! 5. **Velocity** ([`differentiator`]): a designed least-squares FIR, one-sided at the ends.
+//!
+//! Samples are the scan's global grid (`j·Δ`, the flow method's positions), so the edge signal
+//! stitches and fuses with the flow signal sample for sample. A border lost over the whole group
+//! is a gap with a warning, not an error.
 
 pub mod border;
+pub mod coarse;
+pub mod differentiator;
+pub mod erf;
+pub mod geometry;
+pub mod profile;
+pub mod refine;
+pub mod robust;
+mod signal;
+
+use std::ops::Range;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use self::border::BorderParams;
+use self::coarse::{StripBorders, strip_borders};
+use self::differentiator::{DifferentiatorParams, differentiate};
+use self::geometry::FrameGeometry;
+use self::profile::{SampleBorder, SampleTask, fit_sample};
+use self::refine::{RefineSample, refine_border};
+use self::robust::{CombineParams, combine_borders};
+use super::audio_signal::SoundParams;
+use super::sampling::native_spacing_um;
+use super::walls::WallSide;
+use super::{StageError, check_range};
+use crate::image::Image;
+use crate::io::{Cut, ScanMeta};
+
+pub use signal::{BorderChannels, DecodedEdges, decode_border_signal};
+
+/// Stage name used in errors.
+const STAGE: &str = "edges";
+
+/// The four borders of a groove, top to bottom of the frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BorderId {
+    /// Land to left wall (dark to bright going down).
+    LeftLand = 0,
+    /// Left wall to bottom (bright to dark).
+    LeftBottom = 1,
+    /// Bottom to right wall (dark to bright).
+    RightBottom = 2,
+    /// Right wall to land (bright to dark).
+    RightLand = 3,
+}
+
+impl BorderId {
+    /// All four, in order.
+    pub const ALL: [BorderId; 4] = [
+        BorderId::LeftLand,
+        BorderId::LeftBottom,
+        BorderId::RightBottom,
+        BorderId::RightLand,
+    ];
+
+    /// The wall the border belongs to.
+    #[must_use]
+    pub fn side(self) -> WallSide {
+        match self {
+            BorderId::LeftLand | BorderId::LeftBottom => WallSide::Left,
+            BorderId::RightBottom | BorderId::RightLand => WallSide::Right,
+        }
+    }
+
+    /// True for the borders at the land (the working distance), false at the bottom.
+    #[must_use]
+    pub fn at_land(self) -> bool {
+        matches!(self, BorderId::LeftLand | BorderId::RightLand)
+    }
+
+    /// Human-readable name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            BorderId::LeftLand => "left land border",
+            BorderId::LeftBottom => "left bottom border",
+            BorderId::RightBottom => "right bottom border",
+            BorderId::RightLand => "right land border",
+        }
+    }
+}
+
+/// Knobs of the edge stage.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EdgeParams {
+    /// The border model's fit.
+    pub border: BorderParams,
+    /// The displacement-to-velocity filter.
+    pub differentiator: DifferentiatorParams,
+    /// Wall angle from the record plane (°); default 45 (the standard cutter, and the 45/45
+    /// stereo cut). Sets the bottom depth from the walls' widths and a wall's velocity scale.
+    pub wall_angle_deg: f64,
+    /// Rows read on each side of the predicted border (px); default 8.
+    pub band_half_height_px: f64,
+    /// Width of the sub-pixel bins of the straightened profiles (px); default 0.25.
+    pub bin_px: f64,
+    /// The coarse strips read every this many columns; default 4.
+    pub coarse_column_step: usize,
+    /// Lorentzian σ of a column's offset from its sample's border (px); default 1.
+    pub column_sigma_px: f64,
+    /// Most fits per border and sample while rejecting dust columns; default 3.
+    pub column_rounds: u32,
+    /// Lorentzian σ of a border's disagreement with the others (µm); default 0.3.
+    pub border_sigma_um: f64,
+    /// Floor of a border's standard error when weighting the borders (µm); default 0.02.
+    pub border_floor_um: f64,
+    /// Longest run of missing samples bridged by interpolation; default 3.
+    pub max_bridge_samples: usize,
+    /// Refine each border with one smooth curve over the group ([`refine`]); default true.
+    pub refine: bool,
+    /// Edge spread (σ, px) of the group's sharpest samples below which a border counts as
+    /// sharp: the refinement then reads where it crosses rows, not each column's crossing;
+    /// default 0.45.
+    pub hard_width_px: f64,
+    /// Standard error of one row crossing beyond its column gap (px); default 0.05.
+    pub crossing_sigma_px: f64,
+    /// Standard error given each sample's own fit in the refinement, per frame read (px);
+    /// default 2 (it only holds borders that cross no row).
+    pub anchor_sigma_px: f64,
+    /// Weight of the refined curve's third differences (1/px²); default 3.
+    pub spline_smoothness: f64,
+    /// Frames (spread over the group, the reference among them) the refinement reads; default 3.
+    pub spline_frames: usize,
+}
+
+impl Default for EdgeParams {
+    fn default() -> Self {
+        Self {
+            border: BorderParams::default(),
+            differentiator: DifferentiatorParams::default(),
+            wall_angle_deg: 45.0,
+            band_half_height_px: 8.0,
+            bin_px: 0.25,
+            coarse_column_step: 4,
+            column_sigma_px: 1.0,
+            column_rounds: 3,
+            border_sigma_um: 0.3,
+            border_floor_um: 0.02,
+            max_bridge_samples: 3,
+            refine: true,
+            hard_width_px: 0.45,
+            crossing_sigma_px: 0.05,
+            anchor_sigma_px: 2.0,
+            spline_smoothness: 3.0,
+            spline_frames: 3,
+        }
+    }
+}
+
+impl EdgeParams {
+    /// Checks every knob.
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the first bad key (`edges.…`).
+    pub fn validate(&self) -> Result<(), StageError> {
+        self.border.validate("edges.border")?;
+        self.differentiator.validate("edges.differentiator")?;
+        check_range("edges.wall_angle_deg", self.wall_angle_deg, 1.0, 89.0)?;
+        check_range(
+            "edges.band_half_height_px",
+            self.band_half_height_px,
+            2.0,
+            256.0,
+        )?;
+        check_range("edges.bin_px", self.bin_px, 0.01, 4.0)?;
+        check_range("edges.column_sigma_px", self.column_sigma_px, 1e-3, 1e3)?;
+        check_range("edges.border_sigma_um", self.border_sigma_um, 1e-4, 1e4)?;
+        check_range("edges.border_floor_um", self.border_floor_um, 1e-6, 1e4)?;
+        check_range("edges.hard_width_px", self.hard_width_px, 0.0, 100.0)?;
+        check_range(
+            "edges.crossing_sigma_px",
+            self.crossing_sigma_px,
+            1e-4,
+            100.0,
+        )?;
+        check_range("edges.anchor_sigma_px", self.anchor_sigma_px, 1e-4, 100.0)?;
+        check_range("edges.spline_smoothness", self.spline_smoothness, 0.0, 1e9)?;
+        for (name, v) in [
+            ("edges.coarse_column_step", self.coarse_column_step),
+            ("edges.column_rounds", self.column_rounds as usize),
+            ("edges.spline_frames", self.spline_frames),
+        ] {
+            if v == 0 {
+                return Err(StageError::InvalidParam {
+                    name: name.into(),
+                    problem: "must be at least 1".into(),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One border over the group's samples.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BorderTrack {
+    /// Which border.
+    pub id: BorderId,
+    /// Distance of its surface from the optical centre (µm; NaN when the bottom depth is unknown).
+    pub z_um: f64,
+    /// Record `y` per sample (µm from the optical axis; NaN = not found).
+    pub y_um: Vec<f64>,
+    /// Its standard error (µm).
+    pub std_error_um: Vec<f64>,
+    /// Its weight in the combination relative to its plain weight (0 = rejected or not seen).
+    pub weight: Vec<f64>,
+    /// Per sample, the fine fit: every frame's row, the reference frame's column weights.
+    pub fits: Vec<Option<SampleBorder>>,
+}
+
+/// One wall over the group's samples.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WallEdges {
+    /// Which wall.
+    pub side: WallSide,
+    /// The wall's lateral displacement (record `y` of its land border, µm, relative to the
+    /// groove's cross-section; NaN = gap).
+    pub displacement_um: Vec<f64>,
+    /// Its standard error (µm; NaN where bridged).
+    pub std_error_um: Vec<f64>,
+    /// The wall's velocity as the flow method reads it, `Vt·tan θ` = `Vt·sin α·∂y/∂s` (mm/s).
+    pub velocity_mm_s: Vec<f64>,
+}
+
+/// The edge stage's output for one group.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Edges {
+    /// Group index.
+    pub group: usize,
+    /// The scan's cut.
+    pub cut: Cut,
+    /// Global index of the first sample (its position is `first_sample·spacing_um`).
+    pub first_sample: i64,
+    /// Sample spacing along the groove (µm).
+    pub spacing_um: f64,
+    /// Groove position of each sample (µm from the scan start).
+    pub positions_um: Vec<f64>,
+    /// Groove speed Vt at this group (mm/s).
+    pub groove_speed_mm_s: f64,
+    /// Wall angle used (rad).
+    pub wall_angle_rad: f64,
+    /// Bottom depth below the land from the walls' widths (µm; NaN when not measured).
+    pub bottom_depth_um: f64,
+    /// Index in the group of the frame the coarse borders were read on.
+    pub reference_frame: usize,
+    /// Coarse border rows on the reference frame per sample (NaN = not found).
+    pub coarse_rows: Vec<StripBorders>,
+    /// The four borders, in [`BorderId`] order.
+    pub borders: Vec<BorderTrack>,
+    /// Each border's constant place in the cross-section (µm).
+    pub constants_um: [f64; 4],
+    /// Left and right wall.
+    pub walls: Vec<WallEdges>,
+    /// Per wall (left, right): sample ranges without a value.
+    pub gaps: [Vec<Range<usize>>; 2],
+    /// Per wall: sample ranges bridged by interpolation.
+    pub bridged: [Vec<Range<usize>>; 2],
+    /// What went wrong without stopping the stage (a border lost over the whole group, …).
+    pub warnings: Vec<String>,
+}
+
+/// Median of the finite values.
+fn finite_median(mut v: Vec<f64>) -> Option<f64> {
+    v.retain(|x| x.is_finite());
+    super::median(v)
+}
+
+/// Bottom depth (µm) from one sample's coarse rows: a wall reaching from the land to a corner
+/// `D` deeper spans `D/tan α` in record `y`, and the corner is seen at distance `WD + D`.
+fn depth_from_widths(rows: &StripBorders, geo: &FrameGeometry, tan_a: f64) -> [f64; 2] {
+    let p = geo.pitch_um;
+    let wd = geo.working_distance_um;
+    let [ll, lc, rc, rl] = *rows;
+    // Left: (lc − cy)p(1 + D/WD) − (ll − cy)p = D/tan α.
+    let left = (lc - ll) * p / (1.0 / tan_a - (lc - geo.cy) * p / wd);
+    // Right: (rl − cy)p − (rc − cy)p(1 + D/WD) = D/tan α.
+    let right = (rl - rc) * p / (1.0 / tan_a + (rc - geo.cy) * p / wd);
+    [left, right].map(|d| {
+        if d.is_finite() && d > 0.0 {
+            d
+        } else {
+            f64::NAN
+        }
+    })
+}
+
+/// A Catmull–Rom interpolant through `(s, y)` points sorted by `s` (constant beyond the ends).
+fn interpolant(points: Vec<(f64, f64)>) -> impl Fn(f64) -> f64 {
+    move |s: f64| {
+        let n = points.len();
+        if n == 0 {
+            return f64::NAN;
+        }
+        let i = points.partition_point(|p| p.0 <= s);
+        if i == 0 {
+            return points[0].1;
+        }
+        if i >= n {
+            return points[n - 1].1;
+        }
+        let (p1, p2) = (points[i - 1], points[i]);
+        let p0 = if i >= 2 { points[i - 2] } else { p1 };
+        let p3 = points.get(i + 1).copied().unwrap_or(p2);
+        let h = p2.0 - p1.0;
+        if h <= 0.0 {
+            return p1.1;
+        }
+        let t = (s - p1.0) / h;
+        // Tangents by finite differences over the neighbours (non-uniform spacing allowed).
+        let m1 = if p2.0 > p0.0 {
+            (p2.1 - p0.1) / (p2.0 - p0.0) * h
+        } else {
+            p2.1 - p1.1
+        };
+        let m2 = if p3.0 > p1.0 {
+            (p3.1 - p1.1) / (p3.0 - p1.0) * h
+        } else {
+            p2.1 - p1.1
+        };
+        let (t2, t3) = (t * t, t * t * t);
+        (2.0 * t3 - 3.0 * t2 + 1.0) * p1.1
+            + (t3 - 2.0 * t2 + t) * m1
+            + (-2.0 * t3 + 3.0 * t2) * p2.1
+            + (t3 - t2) * m2
+    }
+}
+
+/// Median of each value with its two neighbours (keeps NaN where the value is NaN).
+fn median3(v: &[f64]) -> Vec<f64> {
+    (0..v.len())
+        .map(|i| {
+            if !v[i].is_finite() {
+                return f64::NAN;
+            }
+            let lo = i.saturating_sub(1);
+            let hi = (i + 2).min(v.len());
+            finite_median(v[lo..hi].to_vec()).unwrap_or(v[i])
+        })
+        .collect()
+}
+
+/// `count` frame indices spread evenly over `len` frames, `reference` among them.
+fn spread_frames(len: usize, reference: usize, count: usize) -> Vec<usize> {
+    if count >= len {
+        return (0..len).collect();
+    }
+    let mut picks: Vec<usize> = (0..count)
+        .map(|k| {
+            if count == 1 {
+                reference
+            } else {
+                ((k * (len - 1)) as f64 / (count - 1) as f64).round() as usize
+            }
+        })
+        .collect();
+    if !picks.contains(&reference)
+        && let Some(nearest) = picks.iter_mut().min_by_key(|p| p.abs_diff(reference))
+    {
+        *nearest = reference;
+    }
+    picks.sort_unstable();
+    picks.dedup();
+    picks
+}
+
+fn check_frames(frames: &[Image]) -> Result<(usize, usize), StageError> {
+    let Some(first) = frames.first() else {
+        return Err(StageError::BadInput {
+            stage: STAGE,
+            problem: "no frames".into(),
+        });
+    };
+    if frames.iter().any(|f| !f.same_size(first)) {
+        return Err(StageError::BadInput {
+            stage: STAGE,
+            problem: "the frames differ in size".into(),
+        });
+    }
+    if first.width < 16 || first.height < 16 {
+        return Err(StageError::BadInput {
+            stage: STAGE,
+            problem: format!("{}×{} px frames are too small", first.width, first.height),
+        });
+    }
+    Ok((first.width, first.height))
+}
+
+/// Finds the borders of every wall in one group's frames and turns them into displacement and
+/// velocity per wall (see the module docs). `frames[0]` is frame `first_frame` of group `group`.
+///
+/// # Errors
+/// [`StageError::InvalidParam`] for bad params or spacing, [`StageError::BadInput`] for no
+/// frames or frames of different or tiny sizes. Borders that cannot be found are gaps (with a
+/// warning), not errors.
+pub fn detect_edges(
+    frames: &[Image],
+    first_frame: usize,
+    group: usize,
+    meta: &ScanMeta,
+    sound: &SoundParams,
+    params: &EdgeParams,
+) -> Result<Edges, StageError> {
+    params.validate()?;
+    let (width, height) = check_frames(frames)?;
+    let geo = FrameGeometry::new(meta, width, height);
+    let vt = meta.groove_speed_mm_s(group);
+    let spacing = native_spacing_um(meta, sound);
+    check_range("sound spacing (µm)", spacing, 1e-6, 1e6)?;
+    let alpha = params.wall_angle_deg.to_radians();
+    let wd = geo.working_distance_um;
+    let reference = frames.len() / 2;
+    let cams: Vec<f64> = (0..frames.len())
+        .map(|k| geo.cam_s_um(group, first_frame + k))
+        .collect();
+    let cam_ref = cams[reference];
+    let half = 0.5 * spacing;
+
+    // 1. Coarse borders on the reference frame, for the samples it sees whole at the land.
+    let sample_range = |cam_lo: f64, cam_hi: f64, z: f64| {
+        let s_lo = geo.s_at(cam_lo, -0.5, z);
+        let s_hi = geo.s_at(cam_hi, width as f64 - 0.5, z);
+        let j_lo = ((s_lo + half) / spacing).ceil() as i64;
+        let j_hi = ((s_hi - half) / spacing).floor() as i64;
+        j_lo..j_hi + 1
+    };
+    let coarse_js = sample_range(cam_ref, cam_ref, wd);
+    let coarse_rows: Vec<(i64, StripBorders)> = coarse_js
+        .clone()
+        .into_par_iter()
+        .map(|j| {
+            let s = j as f64 * spacing;
+            let x_lo = geo.x_at(cam_ref, s - half, wd).ceil().max(0.0) as usize;
+            let x_hi = (geo.x_at(cam_ref, s + half, wd).floor() as usize).min(width - 1);
+            let cols: Vec<usize> = (x_lo..=x_hi).step_by(params.coarse_column_step).collect();
+            (j, strip_borders(&frames[reference], &cols, params))
+        })
+        .collect();
+
+    // 2. Bottom depth.
+    let tan_a = alpha.tan();
+    let depths: Vec<f64> = coarse_rows
+        .iter()
+        .flat_map(|(_, r)| depth_from_widths(r, &geo, tan_a))
+        .collect();
+    let bottom_depth_um = finite_median(depths).unwrap_or(f64::NAN);
+    let z_of = |id: BorderId| {
+        if id.at_land() {
+            wd
+        } else {
+            wd + bottom_depth_um
+        }
+    };
+
+    // Samples: any frame sees them whole at the deepest border.
+    let z_deep = if bottom_depth_um.is_finite() {
+        wd + bottom_depth_um
+    } else {
+        wd
+    };
+    let (cam_first, cam_last) = (
+        cams[0].min(cams[cams.len() - 1]),
+        cams[0].max(cams[cams.len() - 1]),
+    );
+    let js = sample_range(cam_first, cam_last, z_deep);
+    let first_sample = js.start;
+    let n = usize::try_from(js.end - js.start).unwrap_or(0);
+    let positions_um: Vec<f64> = js.clone().map(|j| j as f64 * spacing).collect();
+
+    // 3. Predictions and fine fits.
+    let frame_list: Vec<(&Image, f64, usize)> = frames
+        .iter()
+        .zip(&cams)
+        .enumerate()
+        .map(|(k, (f, &c))| (f, c, first_frame + k))
+        .collect();
+    let mut borders = Vec::with_capacity(4);
+    let mut warnings = Vec::new();
+    for id in BorderId::ALL {
+        let z = z_of(id);
+        let rows: Vec<f64> = median3(
+            &coarse_rows
+                .iter()
+                .map(|(_, r)| r[id as usize])
+                .collect::<Vec<_>>(),
+        );
+        let points: Vec<(f64, f64)> = coarse_rows
+            .iter()
+            .zip(&rows)
+            .filter(|(_, r)| r.is_finite() && z.is_finite())
+            .map(|((j, _), &r)| (*j as f64 * spacing, geo.y_at(r, geo.apparent_z_um(z, r))))
+            .collect();
+        let typical_row = finite_median(rows.clone()).unwrap_or(f64::NAN);
+        let z_app = geo.apparent_z_um(z, typical_row);
+        let fits: Vec<Option<SampleBorder>> = if points.is_empty() {
+            vec![None; n]
+        } else {
+            let predict = interpolant(points.clone());
+            (0..n)
+                .into_par_iter()
+                .map(|i| {
+                    let s = positions_um[i];
+                    let task = SampleTask {
+                        s_lo_um: s - half,
+                        s_hi_um: s + half,
+                        z_um: z_app,
+                        predict_y: &predict,
+                    };
+                    fit_sample(&frame_list, reference, &geo, &task, params)
+                })
+                .collect()
+        };
+        let refined = if params.refine && !points.is_empty() {
+            let predict = interpolant(points.clone());
+            let samples: Vec<Option<RefineSample>> = fits
+                .iter()
+                .zip(&positions_um)
+                .map(|(f, &s)| {
+                    f.as_ref().map(|f| RefineSample {
+                        task: SampleTask {
+                            s_lo_um: s - half,
+                            s_hi_um: s + half,
+                            z_um: z_app,
+                            predict_y: &predict,
+                        },
+                        fit: f.fit,
+                        row_px: f.row_px,
+                        column_weights: &f.column_weights,
+                    })
+                })
+                .collect();
+            let subset: Vec<(&Image, f64)> =
+                spread_frames(frames.len(), reference, params.spline_frames)
+                    .into_iter()
+                    .map(|k| (&frames[k], cams[k]))
+                    .collect();
+            refine_border(&subset, cam_ref, &geo, &samples, spacing, params)
+        } else {
+            vec![None; n]
+        };
+        let mut y_um = vec![f64::NAN; n];
+        let mut std_error_um = vec![f64::NAN; n];
+        for (i, f) in fits.iter().enumerate() {
+            if let Some(f) = f {
+                let row = refined.get(i).copied().flatten().unwrap_or(f.row_px);
+                y_um[i] = geo.y_at(row, z_app);
+                std_error_um[i] = f.std_error_px * geo.um_per_px(z_app);
+            }
+        }
+        if n > 0 && y_um.iter().all(|v| v.is_nan()) {
+            warnings.push(format!(
+                "group {group}: the {} was lost over the whole group",
+                id.name()
+            ));
+        }
+        borders.push(BorderTrack {
+            id,
+            z_um: z,
+            y_um,
+            std_error_um,
+            weight: vec![0.0; n],
+            fits,
+        });
+    }
+
+    // 4. Combination.
+    let ys: [Vec<f64>; 4] = std::array::from_fn(|b| borders[b].y_um.clone());
+    let ses: [Vec<f64>; 4] = std::array::from_fn(|b| borders[b].std_error_um.clone());
+    let combined = combine_borders(
+        &ys,
+        &ses,
+        &CombineParams {
+            cut: meta.record.cut,
+            sigma_um: params.border_sigma_um,
+            floor_um: params.border_floor_um,
+            max_bridge: params.max_bridge_samples,
+        },
+    );
+    for (track, w) in borders.iter_mut().zip(combined.border_weights.iter()) {
+        track.weight.clone_from(w);
+    }
+
+    // 5. Velocity per wall: Vt·sin α·∂y/∂s.
+    let scale = vt * alpha.sin() / spacing;
+    let walls: Vec<WallEdges> = [WallSide::Left, WallSide::Right]
+        .into_iter()
+        .zip(combined.walls_um.iter().zip(&combined.walls_se_um))
+        .map(|(side, (disp, se))| WallEdges {
+            side,
+            displacement_um: disp.clone(),
+            std_error_um: se.clone(),
+            velocity_mm_s: differentiate(disp, &params.differentiator)
+                .into_iter()
+                .map(|v| v * scale)
+                .collect(),
+        })
+        .collect();
+    for (side, gaps) in ["left", "right"].iter().zip(&combined.gaps) {
+        if n > 0 && gaps.iter().map(ExactSizeIterator::len).sum::<usize>() == n {
+            warnings.push(format!(
+                "group {group}: no {side} wall displacement anywhere (a gap)"
+            ));
+        }
+    }
+    Ok(Edges {
+        group,
+        cut: meta.record.cut,
+        first_sample,
+        spacing_um: spacing,
+        positions_um,
+        groove_speed_mm_s: vt,
+        wall_angle_rad: alpha,
+        bottom_depth_um,
+        reference_frame: reference,
+        coarse_rows: coarse_rows.into_iter().map(|(_, r)| r).collect(),
+        borders,
+        constants_um: combined.constants_um,
+        walls,
+        gaps: combined.gaps,
+        bridged: combined.bridged,
+        warnings,
+    })
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests;

@@ -1,0 +1,419 @@
+//! The four borders combined into the groove's motion, robustly: each border's constant offset,
+//! Lorentzian rejection of borders that disagree (flakes, dust, scratches), and gaps marked and
+//! bridged.
+//!
+//! A border's record `y` is `y_β = c_β + d + k_β·e`: `d` the groove's lateral displacement,
+//! `e = h/tan α` the vertical offset `h` seen across the groove, `c_β` the border's place in
+//! the cross-section (constant), and `k = (−1, 0, 0, +1)` for (left land, left bottom, right
+//! bottom, right land) — a deeper groove widens at the land, while the bottom corners move with
+//! `d` alone. A lateral cut has `e = 0`. Each sample solves for `d` (and `e`) by weighted least
+//! squares over its borders (weights `1/se²`, the standard error floored at
+//! `border_floor_um`), reweighted by the Lorentzian `1/(1 + r²/(2σ²))` of each border's residual
+//! (σ = `border_sigma_um`) from a median start; the constants are the weighted means of
+//! `y_β − d − k_β·e`, and the two steps alternate [`ROUNDS`] times. The constants' common
+//! offset is fixed so that the lands (else the bottom corners) are symmetric about `d`, so `d`
+//! is the groove's centre line; `e`'s offset (which the tracks cannot tell from the lands'
+//! constants) so that its median is zero.
+//!
+//! The left wall's displacement is `d − e` and the right wall's `d + e` (each wall's border
+//! at the land moves by that). Where a wall's sample has no estimate it is a gap; gaps of at
+//! most `max_bridge_samples` with two samples on each side are bridged by a cubic through
+//! them and listed.
+
+use std::ops::Range;
+
+use super::profile::lorentzian_weight;
+use crate::io::Cut;
+
+/// Alternations of the per-sample solve and the constants.
+const ROUNDS: usize = 3;
+/// Lorentzian reweightings of one sample's solve.
+const SAMPLE_ITERATIONS: usize = 4;
+/// A border weighing less than this share of its plain weight after the robust solve is
+/// reported as rejected there.
+pub const REJECTED_WEIGHT: f64 = 0.1;
+/// `k_β` of the borders in [`super::BorderId`] order.
+const K: [f64; 4] = [-1.0, 0.0, 0.0, 1.0];
+
+/// What [`combine_borders`] needs besides the tracks.
+#[derive(Clone, Copy, Debug)]
+pub struct CombineParams {
+    /// The cut (lateral: `e = 0`).
+    pub cut: Cut,
+    /// Lorentzian σ of a border's residual (µm).
+    pub sigma_um: f64,
+    /// Floor of a border's standard error (µm): texture, not pixel noise, limits it.
+    pub floor_um: f64,
+    /// Longest gap bridged by interpolation (samples).
+    pub max_bridge: usize,
+}
+
+/// The borders of a track combined.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Combined {
+    /// Each border's constant `c_β` (µm; NaN for a border never seen).
+    pub constants_um: [f64; 4],
+    /// Lateral displacement `d` per sample (µm, NaN = gap).
+    pub d_um: Vec<f64>,
+    /// `e = h/tan α` per sample (µm; zeros for a lateral cut, NaN = gap).
+    pub e_um: Vec<f64>,
+    /// Left and right wall displacement, `d ∓ e` (µm, NaN = gap; bridged gaps filled).
+    pub walls_um: [Vec<f64>; 2],
+    /// Their standard errors (µm; NaN where bridged or missing).
+    pub walls_se_um: [Vec<f64>; 2],
+    /// Each border's final weight per sample relative to its plain weight (0–1; 0 = not seen).
+    pub border_weights: [Vec<f64>; 4],
+    /// Per wall: sample ranges without an estimate (after bridging).
+    pub gaps: [Vec<Range<usize>>; 2],
+    /// Per wall: sample ranges filled by interpolation.
+    pub bridged: [Vec<Range<usize>>; 2],
+}
+
+fn finite_median(mut v: Vec<f64>) -> Option<f64> {
+    v.retain(|x| x.is_finite());
+    crate::pipeline::median(v)
+}
+
+/// One sample's robust solve: borders `(k, z = y − c, w)`; returns (d, e, var_d, var_e,
+/// cov, relative weights). `lateral` fixes e = 0.
+fn solve_sample(
+    obs: &[(usize, f64, f64)],
+    lateral: bool,
+    sigma: f64,
+) -> Option<(f64, f64, [f64; 3], [f64; 4])> {
+    if obs.is_empty() {
+        return None;
+    }
+    let k = |b: usize| K.get(b).copied().unwrap_or(0.0);
+    // Median start: d from the borders that do not see e (or all, laterally), e from the lands.
+    let corners: Vec<f64> = obs
+        .iter()
+        .filter(|o| lateral || k(o.0) == 0.0)
+        .map(|o| o.1)
+        .collect();
+    let lands: Vec<(f64, f64)> = obs
+        .iter()
+        .filter(|o| k(o.0) != 0.0)
+        .map(|o| (k(o.0), o.1))
+        .collect();
+    let mut d =
+        finite_median(corners).or_else(|| finite_median(lands.iter().map(|l| l.1).collect()))?;
+    let mut e = if lateral {
+        0.0
+    } else {
+        finite_median(lands.iter().map(|(kk, z)| (z - d) * kk).collect()).unwrap_or(f64::NAN)
+    };
+    let mut rel = [0.0; 4];
+    let mut cov = [f64::NAN; 3];
+    for _ in 0..SAMPLE_ITERATIONS {
+        let (mut s00, mut s01, mut s11, mut b0, mut b1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        let mut w_rel = [0.0; 4];
+        for &(b, z, w) in obs {
+            let kb = k(b);
+            let r = z - d - if e.is_finite() { kb * e } else { 0.0 };
+            let lw = lorentzian_weight(r, sigma);
+            let ww = w * lw;
+            if let Some(slot) = w_rel.get_mut(b) {
+                *slot = lw;
+            }
+            s00 += ww;
+            s01 += ww * kb;
+            s11 += ww * kb * kb;
+            b0 += ww * z;
+            b1 += ww * kb * z;
+        }
+        rel = w_rel;
+        if lateral || s11 <= 0.0 {
+            // Laterally, or with no land border to see e: d from what there is.
+            if s00 <= 0.0 {
+                return None;
+            }
+            d = b0 / s00;
+            cov = [1.0 / s00, f64::NAN, f64::NAN];
+            if !lateral {
+                e = f64::NAN;
+            }
+            continue;
+        }
+        let det = s00 * s11 - s01 * s01;
+        if det <= 1e-12 * s00 * s11 {
+            return None;
+        }
+        d = (b0 * s11 - b1 * s01) / det;
+        e = (b1 * s00 - b0 * s01) / det;
+        cov = [s11 / det, s00 / det, -s01 / det];
+    }
+    Some((d, e, cov, rel))
+}
+
+/// Combines the four border tracks (record `y` and standard error per sample, µm; NaN = not
+/// seen), all the same length (see the module docs).
+#[must_use]
+pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams) -> Combined {
+    let n = y.iter().map(Vec::len).min().unwrap_or(0);
+    let lateral = p.cut == Cut::Lateral;
+    let weight = |b: usize, j: usize| -> Option<f64> {
+        let (yv, sv) = (*y[b].get(j)?, *se[b].get(j)?);
+        (yv.is_finite() && sv.is_finite()).then(|| 1.0 / sv.max(p.floor_um).powi(2))
+    };
+    let mut c: [f64; 4] =
+        std::array::from_fn(|b| finite_median(y[b][..n].to_vec()).unwrap_or(f64::NAN));
+    let mut d = vec![f64::NAN; n];
+    let mut e = vec![if lateral { 0.0 } else { f64::NAN }; n];
+    let mut cov = vec![[f64::NAN; 3]; n];
+    let mut rel = vec![[0.0; 4]; n];
+    for _ in 0..ROUNDS {
+        for j in 0..n {
+            let obs: Vec<(usize, f64, f64)> = (0..4)
+                .filter_map(|b| Some((b, y[b][j] - c[b], weight(b, j)?)))
+                .filter(|o| o.1.is_finite())
+                .collect();
+            match solve_sample(&obs, lateral, p.sigma_um) {
+                Some((dj, ej, cj, rj)) => {
+                    d[j] = dj;
+                    e[j] = if lateral { 0.0 } else { ej };
+                    cov[j] = cj;
+                    rel[j] = rj;
+                }
+                None => {
+                    d[j] = f64::NAN;
+                    e[j] = f64::NAN;
+                    rel[j] = [0.0; 4];
+                }
+            }
+        }
+        for (b, cb) in c.iter_mut().enumerate() {
+            let (mut sw, mut sz) = (0.0, 0.0);
+            for j in 0..n {
+                let Some(w) = weight(b, j) else { continue };
+                let ej = if K[b] == 0.0 { 0.0 } else { e[j] };
+                let r = y[b][j] - d[j] - K[b] * ej;
+                if r.is_finite() {
+                    let ww = w * rel[j][b];
+                    sw += ww;
+                    sz += ww * r;
+                }
+            }
+            if sw > 0.0 {
+                *cb = sz / sw;
+            }
+        }
+        // Gauge: the lands (else the corners) symmetric about d.
+        let pair = |a: usize, b: usize| {
+            (c[a].is_finite() && c[b].is_finite()).then(|| 0.5 * (c[a] + c[b]))
+        };
+        if let Some(off) = pair(0, 3).or_else(|| pair(1, 2)) {
+            for cb in &mut c {
+                *cb -= off;
+            }
+        }
+    }
+    if !lateral && let Some(m) = finite_median(e.clone()) {
+        // e → e − m moves the lands' constants by ∓m and leaves every border's y alone.
+        for v in &mut e {
+            *v -= m;
+        }
+        c[0] -= m;
+        c[3] += m;
+    }
+    let mut walls_um = [vec![f64::NAN; n], vec![f64::NAN; n]];
+    let mut walls_se_um = [vec![f64::NAN; n], vec![f64::NAN; n]];
+    for j in 0..n {
+        let [vd, ve, cde] = cov[j];
+        for (side, sign) in [(0usize, -1.0f64), (1, 1.0)] {
+            let v = d[j] + sign * e[j];
+            if v.is_finite() {
+                walls_um[side][j] = v;
+                let var = if lateral {
+                    vd
+                } else {
+                    vd + ve + 2.0 * sign * cde
+                };
+                walls_se_um[side][j] = var.max(0.0).sqrt();
+            }
+        }
+    }
+    let mut gaps: [Vec<Range<usize>>; 2] = Default::default();
+    let mut bridged: [Vec<Range<usize>>; 2] = Default::default();
+    for side in 0..2 {
+        let (g, b) = bridge_gaps(&mut walls_um[side], p.max_bridge);
+        gaps[side] = g;
+        bridged[side] = b;
+    }
+    let border_weights = std::array::from_fn(|b| (0..n).map(|j| rel[j][b]).collect());
+    Combined {
+        constants_um: c,
+        d_um: d,
+        e_um: e,
+        walls_um,
+        walls_se_um,
+        border_weights,
+        gaps,
+        bridged,
+    }
+}
+
+/// Runs of NaN in `v`.
+#[must_use]
+pub fn nan_runs(v: &[f64]) -> Vec<Range<usize>> {
+    let mut out = Vec::new();
+    let mut start = None;
+    for (i, x) in v.iter().enumerate() {
+        match (x.is_finite(), start) {
+            (false, None) => start = Some(i),
+            (true, Some(s)) => {
+                out.push(s..i);
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        out.push(s..v.len());
+    }
+    out
+}
+
+/// Fills NaN runs of at most `max_len` samples that have two finite samples on each side with
+/// the cubic through those four; returns the runs left as gaps and the runs bridged.
+pub fn bridge_gaps(v: &mut [f64], max_len: usize) -> (Vec<Range<usize>>, Vec<Range<usize>>) {
+    let mut gaps = Vec::new();
+    let mut bridged = Vec::new();
+    for run in nan_runs(v) {
+        let ok = |i: Option<usize>| i.and_then(|i| v.get(i)).is_some_and(|x| x.is_finite());
+        let (s, e) = (run.start, run.end);
+        let nodes = [s.checked_sub(2), s.checked_sub(1), Some(e), Some(e + 1)];
+        if run.len() > max_len || !nodes.iter().all(|&i| ok(i)) {
+            gaps.push(run);
+            continue;
+        }
+        let pts: Vec<(f64, f64)> = nodes.iter().flatten().map(|&i| (i as f64, v[i])).collect();
+        for i in run.clone() {
+            let x = i as f64;
+            let mut sum = 0.0;
+            for (a, &(xa, ya)) in pts.iter().enumerate() {
+                let mut basis = 1.0;
+                for (b, &(xb, _)) in pts.iter().enumerate() {
+                    if a != b {
+                        basis *= (x - xb) / (xa - xb);
+                    }
+                }
+                sum += basis * ya;
+            }
+            v[i] = sum;
+        }
+        bridged.push(run);
+    }
+    (gaps, bridged)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+
+    fn params(cut: Cut) -> CombineParams {
+        CombineParams {
+            cut,
+            sigma_um: 0.5,
+            floor_um: 0.01,
+            max_bridge: 3,
+        }
+    }
+
+    /// Border tracks of a groove moving by `d(j)` and `e(j)`, with a small deterministic jitter.
+    fn tracks(n: usize, d: impl Fn(usize) -> f64, e: impl Fn(usize) -> f64) -> [Vec<f64>; 4] {
+        let c = [-90.0, -20.0, 20.0, 90.0];
+        std::array::from_fn(|b| {
+            (0..n)
+                .map(|j| {
+                    let jitter = 0.01 * ((j * 7 + b * 13) % 5) as f64 - 0.02;
+                    c[b] + 3.0 + d(j) + K[b] * e(j) + jitter
+                })
+                .collect()
+        })
+    }
+
+    #[test]
+    fn lateral_walls_follow_the_displacement_and_a_flaked_border_is_rejected() {
+        let n = 40;
+        let d = |j: usize| 5.0 * (j as f64 * 0.4).sin();
+        let mut y = tracks(n, d, |_| 0.0);
+        // A flake: the left land border jumps 30 µm for samples 10..17.
+        for v in &mut y[0][10..17] {
+            *v += 30.0;
+        }
+        let se: [Vec<f64>; 4] = std::array::from_fn(|_| vec![0.02; n]);
+        let c = combine_borders(&y, &se, &params(Cut::Lateral));
+        for j in 0..n {
+            // The groove's centre: the lands are symmetric (constants ±90 → centre 3.0 + d).
+            let want = 3.0 + d(j);
+            for side in 0..2 {
+                assert!(
+                    (c.walls_um[side][j] - want).abs() < 0.05,
+                    "{j}: {}",
+                    c.walls_um[side][j]
+                );
+            }
+        }
+        for j in 10..17 {
+            assert!(
+                c.border_weights[0][j] < REJECTED_WEIGHT,
+                "{j}: {}",
+                c.border_weights[0][j]
+            );
+        }
+        assert!(c.border_weights[1][12] > 0.5);
+        assert!(c.gaps[0].is_empty() && c.gaps[1].is_empty());
+    }
+
+    #[test]
+    fn stereo_walls_move_apart_with_the_vertical_offset() {
+        let n = 30;
+        let d = |j: usize| 2.0 * (j as f64 * 0.3).sin();
+        let e = |j: usize| 1.5 * (j as f64 * 0.7).cos();
+        let y = tracks(n, d, e);
+        let se: [Vec<f64>; 4] = std::array::from_fn(|_| vec![0.02; n]);
+        let c = combine_borders(&y, &se, &params(Cut::Stereo));
+        // The constants' gauge puts the groove centre at the lands' midpoint; e's offset is
+        // its median, so compare e and the walls about their first sample.
+        for j in 0..n {
+            assert!((c.d_um[j] - (3.0 + d(j))).abs() < 0.05, "{j}");
+            let de = (c.e_um[j] - c.e_um[0]) - (e(j) - e(0));
+            assert!(de.abs() < 0.05, "{j}: {de}");
+            for (side, sign) in [(0, -1.0), (1, 1.0)] {
+                let got = c.walls_um[side][j] - c.walls_um[side][0];
+                let want = d(j) - d(0) + sign * (e(j) - e(0));
+                assert!((got - want).abs() < 0.07, "{side} {j}: {got} vs {want}");
+            }
+        }
+        assert!(crate::pipeline::median(c.e_um.clone()).unwrap().abs() < 1e-9);
+    }
+
+    #[test]
+    fn missing_samples_become_gaps_or_are_bridged() {
+        let n = 30;
+        let mut y = tracks(n, |j| 0.1 * j as f64, |_| 0.0);
+        for b in &mut y {
+            b[8] = f64::NAN; // one sample: bridged
+            for v in &mut b[15..25] {
+                *v = f64::NAN; // ten: a gap
+            }
+        }
+        let se: [Vec<f64>; 4] = std::array::from_fn(|_| vec![0.02; n]);
+        let c = combine_borders(&y, &se, &params(Cut::Lateral));
+        assert_eq!(c.bridged[0], vec![8..9]);
+        assert_eq!(c.gaps[0], vec![15..25]);
+        assert!((c.walls_um[0][8] - (3.0 + 0.8)).abs() < 0.05);
+        assert!(c.walls_um[0][20].is_nan());
+    }
+
+    #[test]
+    fn bridging_needs_two_samples_on_each_side() {
+        let mut v = vec![0.0, f64::NAN, 2.0, 3.0, 4.0, f64::NAN, f64::NAN, 7.0, 8.0];
+        let (gaps, bridged) = bridge_gaps(&mut v, 3);
+        assert_eq!(gaps, vec![1..2]);
+        assert_eq!(bridged, vec![5..7]);
+        assert!((v[5] - 5.0).abs() < 1e-12 && (v[6] - 6.0).abs() < 1e-12);
+    }
+}

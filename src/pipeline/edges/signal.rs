@@ -1,0 +1,208 @@
+//! The edge decoder's outputs as sound: per-group velocity signals, and the border tracks
+//! stitched over the whole clip and decoded there.
+//!
+//! Channels follow [`crate::pipeline::audio_signal::group_signal`] exactly, from each wall's
+//! velocity `V = Vt·tan θ`: stereo `(V_L, V_R)`; lateral `(V_L + V_R)/√2`, or `√2·V` of the one
+//! wall there is; vertical `(V_R − V_L)/√2`, or `∓√2·V`. So edges and flow agree in sign and
+//! scale sample for sample.
+//!
+//! Differentiating each group alone needs one-sided filters at its ends, where groups overlap
+//! and cross-fade. The border tracks (record `y`, absolute, µm) stitch across groups without
+//! that: [`Edges::border_signal`] gives them with their standard errors as eight channels, the
+//! engine's stitcher puts them on one grid, and [`decode_border_signal`] combines and
+//! differentiates the whole clip at once (the border constants then come from the whole clip).
+
+use std::f64::consts::SQRT_2;
+use std::ops::Range;
+
+use super::differentiator::differentiate;
+use super::robust::{CombineParams, Combined, combine_borders, nan_runs};
+use super::{EdgeParams, Edges};
+use crate::io::Cut;
+use crate::pipeline::StageError;
+use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal};
+
+/// Layout of [`Edges::border_signal`]: channel `2·b` holds border `b`'s record `y` (µm) and
+/// channel `2·b + 1` its standard error (µm; 0 or NaN = not seen), `b` in
+/// [`super::BorderId`] order.
+pub struct BorderChannels;
+
+impl BorderChannels {
+    /// Channels in a border signal.
+    pub const COUNT: usize = 8;
+}
+
+/// Velocity channels by cut from the walls' velocities (NaN = gap).
+fn channels_by_cut(cut: Cut, left: &[f64], right: &[f64]) -> Vec<Vec<f32>> {
+    #[allow(clippy::cast_possible_truncation)] // velocities are stored as f32
+    let f = |v: f64| v as f32;
+    match cut {
+        Cut::Stereo => vec![
+            left.iter().map(|&v| f(v)).collect(),
+            right.iter().map(|&v| f(v)).collect(),
+        ],
+        Cut::Lateral | Cut::Vertical => {
+            let sign_l = if cut == Cut::Lateral { 1.0 } else { -1.0 };
+            let mono = left
+                .iter()
+                .zip(right)
+                .map(|(&l, &r)| {
+                    f(match (l.is_finite(), r.is_finite()) {
+                        (true, true) => (sign_l * l + r) / SQRT_2,
+                        (true, false) => sign_l * SQRT_2 * l,
+                        (false, true) => SQRT_2 * r,
+                        (false, false) => f64::NAN,
+                    })
+                })
+                .collect();
+            vec![mono]
+        }
+    }
+}
+
+impl Edges {
+    /// The group's velocity samples by cut (mm/s, NaN = gap), on the same positions as the flow
+    /// method's group signal.
+    #[must_use]
+    pub fn to_group_signal(&self) -> GroupSignal {
+        let empty = Vec::new();
+        let wall = |i: usize| self.walls.get(i).map_or(&empty, |w| &w.velocity_mm_s);
+        GroupSignal {
+            group: self.group,
+            positions_um: self.positions_um.clone(),
+            channels: channels_by_cut(self.cut, wall(0), wall(1)),
+            groove_speed_mm_s: self.groove_speed_mm_s,
+        }
+    }
+
+    /// The four border tracks and their standard errors as one stitchable signal (see
+    /// [`BorderChannels`]); a border not seen at a sample is NaN in both its channels.
+    #[must_use]
+    pub fn border_signal(&self) -> GroupSignal {
+        #[allow(clippy::cast_possible_truncation)] // µm tracks are stored as f32
+        let f = |v: f64| v as f32;
+        let mut channels = Vec::with_capacity(BorderChannels::COUNT);
+        for b in &self.borders {
+            let (mut y, mut se) = (Vec::new(), Vec::new());
+            for (&yv, &sv) in b.y_um.iter().zip(&b.std_error_um) {
+                let seen = yv.is_finite() && sv.is_finite() && sv > 0.0;
+                y.push(if seen { f(yv) } else { f32::NAN });
+                se.push(if seen { f(sv) } else { f32::NAN });
+            }
+            channels.push(y);
+            channels.push(se);
+        }
+        GroupSignal {
+            group: self.group,
+            positions_um: self.positions_um.clone(),
+            channels,
+            groove_speed_mm_s: self.groove_speed_mm_s,
+        }
+    }
+}
+
+/// A whole clip decoded from its stitched border tracks.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DecodedEdges {
+    /// The borders combined (constants from the whole clip).
+    pub combined: Combined,
+    /// Velocity by cut (mm/s, gaps filled with 0 and listed), on the stitched grid.
+    pub velocity: StitchedSignal,
+    /// Per output channel: sample ranges without a value.
+    pub channel_gaps: Vec<Vec<Range<usize>>>,
+}
+
+/// Merges overlapping or touching ranges (sorted by start).
+fn merge(mut v: Vec<Range<usize>>) -> Vec<Range<usize>> {
+    v.sort_by_key(|r| r.start);
+    let mut out: Vec<Range<usize>> = Vec::new();
+    for r in v {
+        match out.last_mut() {
+            Some(last) if r.start <= last.end => last.end = last.end.max(r.end),
+            _ => out.push(r),
+        }
+    }
+    out
+}
+
+/// Combines and differentiates border tracks stitched over a clip (eight channels as
+/// [`Edges::border_signal`] gives them; the stitcher's gap fill, a zero standard error, counts
+/// as not seen) into velocity by `cut`.
+///
+/// # Errors
+/// [`StageError::BadInput`] when the signal does not have eight channels of one length.
+pub fn decode_border_signal(
+    stitched: &StitchedSignal,
+    cut: Cut,
+    groove_speed_mm_s: f64,
+    params: &EdgeParams,
+) -> Result<DecodedEdges, StageError> {
+    let n = stitched.channels.first().map_or(0, Vec::len);
+    if stitched.channels.len() != BorderChannels::COUNT
+        || stitched.channels.iter().any(|c| c.len() != n)
+    {
+        return Err(StageError::BadInput {
+            stage: "edges",
+            problem: format!(
+                "a border signal has {} channels of one length, got {}",
+                BorderChannels::COUNT,
+                stitched.channels.len()
+            ),
+        });
+    }
+    let mut ys: [Vec<f64>; 4] = Default::default();
+    let mut ses: [Vec<f64>; 4] = Default::default();
+    for b in 0..4 {
+        let (y, se) = (&stitched.channels[2 * b], &stitched.channels[2 * b + 1]);
+        for (&yv, &sv) in y.iter().zip(se) {
+            let seen = yv.is_finite() && sv.is_finite() && sv > 0.0;
+            ys[b].push(if seen { f64::from(yv) } else { f64::NAN });
+            ses[b].push(if seen { f64::from(sv) } else { f64::NAN });
+        }
+    }
+    let combined = combine_borders(
+        &ys,
+        &ses,
+        &CombineParams {
+            cut,
+            sigma_um: params.border_sigma_um,
+            floor_um: params.border_floor_um,
+            max_bridge: params.max_bridge_samples,
+        },
+    );
+    let alpha = params.wall_angle_deg.to_radians();
+    let scale = groove_speed_mm_s * alpha.sin() / stitched.spacing_um;
+    let velocity: Vec<Vec<f64>> = combined
+        .walls_um
+        .iter()
+        .map(|w| {
+            differentiate(w, &params.differentiator)
+                .into_iter()
+                .map(|v| v * scale)
+                .collect()
+        })
+        .collect();
+    let mut channels = channels_by_cut(cut, &velocity[0], &velocity[1]);
+    let mut channel_gaps = Vec::with_capacity(channels.len());
+    for ch in &mut channels {
+        let as_f64: Vec<f64> = ch.iter().map(|&v| f64::from(v)).collect();
+        channel_gaps.push(nan_runs(&as_f64));
+        for v in ch.iter_mut() {
+            if !v.is_finite() {
+                *v = 0.0;
+            }
+        }
+    }
+    let gaps = merge(channel_gaps.iter().flatten().cloned().collect());
+    Ok(DecodedEdges {
+        combined,
+        velocity: StitchedSignal {
+            start_um: stitched.start_um,
+            spacing_um: stitched.spacing_um,
+            native_rate_hz: stitched.native_rate_hz,
+            channels,
+            gaps,
+        },
+        channel_gaps,
+    })
+}

@@ -1,0 +1,520 @@
+//! The fused decoder: the flow method's and the edge method's velocity combined per frequency band, weighted by each one's measured noise.
+//!
+//! The flow method reads the wall tilt, whose noise is flat in velocity; the edge method reads
+//! the borders' displacement, whose noise is flat in displacement and so rises 6 dB per octave
+//! in velocity. Each therefore wins below or above a crossover, which depends on the optics and
+//! the damage and is measured, never assumed:
+//! 1. Both stitched signals are put on one grid (the scan's global sample grid); where one has a
+//!    gap (a wall's edges missing, a rejected flow fit) the other fills it.
+//! 2. A short-time Fourier transform (periodic √Hann windows of `block_samples`, half-overlapping,
+//!    which reconstruct exactly) of both. Each block's noise levels come from the periodogram of
+//!    their difference, averaged over `smoothing_blocks` blocks on each side and fitted by
+//!    [`noise::fit_noise`]: flow noise `b` flat, edge noise `a·ω²` (blocks where more than
+//!    [`MAX_FILLED_SHARE`] of the samples were filled from the other method lend no spectrum).
+//! 3. Each bin is the Wiener combination `w·E + (1 − w)·F` with `w = b/(b + a·ω²)`, and the
+//!    blocks are added back.
+//!
+//! Stereo channels fuse separately (each wall gives its channel). The report lists every block's
+//! crossover and edge weights, and maps the blocks onto the scan's groups.
+
+pub mod noise;
+
+use std::f64::consts::PI;
+use std::ops::Range;
+
+use serde::{Deserialize, Serialize};
+
+use self::noise::{NoiseModel, fit_noise};
+use super::audio_signal::StitchedSignal;
+use super::dsp::fft_in_place;
+use super::{StageError, check_range};
+use crate::io::ScanMeta;
+
+/// Blocks lend their spectrum to the noise estimate only when less than this share of their
+/// samples was filled from the other method.
+pub const MAX_FILLED_SHARE: f64 = 0.1;
+/// Frequencies (Hz) at which the report gives the edge weight.
+pub const REPORT_FREQS_HZ: [f64; 4] = [500.0, 1000.0, 2000.0, 5000.0];
+
+/// Knobs of the fused decoder.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FusionParams {
+    /// Analysis block length (samples, a power of two; shorter clips use the largest power of
+    /// two that fits); default 256.
+    pub block_samples: usize,
+    /// Blocks on each side whose difference spectra are averaged with a block's own; default 4.
+    pub smoothing_blocks: usize,
+}
+
+impl Default for FusionParams {
+    fn default() -> Self {
+        Self {
+            block_samples: 256,
+            smoothing_blocks: 4,
+        }
+    }
+}
+
+impl FusionParams {
+    /// Checks every knob.
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the bad key.
+    pub fn validate(&self) -> Result<(), StageError> {
+        if !(16..=65_536).contains(&self.block_samples) || !self.block_samples.is_power_of_two() {
+            return Err(StageError::InvalidParam {
+                name: "fusion.block_samples".into(),
+                problem: format!(
+                    "{} is not a power of two in [16, 65536]",
+                    self.block_samples
+                ),
+            });
+        }
+        if self.smoothing_blocks > 1024 {
+            return Err(StageError::InvalidParam {
+                name: "fusion.smoothing_blocks".into(),
+                problem: format!("{} is above 1024", self.smoothing_blocks),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// One analysis block of one channel.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FusionBlock {
+    /// Output channel.
+    pub channel: usize,
+    /// First sample of the block on the fused grid (may be negative for the first block).
+    pub start_sample: i64,
+    /// Crossover frequency (Hz): edges weigh more below it, flow above.
+    pub crossover_hz: f64,
+    /// Edge weight at each of [`REPORT_FREQS_HZ`].
+    pub edge_weights: Vec<f64>,
+    /// Flow noise (mm/s rms over the whole band).
+    pub flow_noise_mm_s: f64,
+    /// Edge noise (mm/s rms over the whole band).
+    pub edge_noise_mm_s: f64,
+}
+
+/// The fusion as it fell on one group.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct GroupFusion {
+    /// Group index.
+    pub group: usize,
+    /// Crossover (Hz) of the block the group's middle falls in, per channel.
+    pub crossover_hz: Vec<f64>,
+    /// Edge weight at [`REPORT_FREQS_HZ`] there, per channel.
+    pub edge_weights: Vec<Vec<f64>>,
+    /// Share of the group's samples where only the edges had data, per channel.
+    pub edges_only: Vec<f64>,
+    /// Share where only the flow had data, per channel.
+    pub flow_only: Vec<f64>,
+}
+
+/// The fused signal and how it was made.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fused {
+    /// Velocity (mm/s), on the union of both grids; gaps (neither method) are 0 and listed.
+    pub signal: StitchedSignal,
+    /// Every analysis block of every channel.
+    pub blocks: Vec<FusionBlock>,
+    /// The blocks mapped onto the scan's groups.
+    pub groups: Vec<GroupFusion>,
+}
+
+/// Which samples of a channel have data.
+fn valid_mask(signal: &StitchedSignal, len: usize) -> Vec<bool> {
+    let mut m = vec![true; len];
+    for g in &signal.gaps {
+        for v in m.iter_mut().take(g.end.min(len)).skip(g.start) {
+            *v = false;
+        }
+    }
+    m
+}
+
+/// A channel of `signal` placed on the fused grid starting at global index `origin`, `n` long.
+fn place(signal: &StitchedSignal, ch: usize, origin: i64, n: usize) -> (Vec<f64>, Vec<bool>) {
+    let mut v = vec![0.0; n];
+    let mut ok = vec![false; n];
+    let Some(data) = signal.channels.get(ch) else {
+        return (v, ok);
+    };
+    let mask = valid_mask(signal, data.len());
+    let offset = (signal.start_um / signal.spacing_um).round() as i64 - origin;
+    for (i, (&x, &good)) in data.iter().zip(&mask).enumerate() {
+        let Ok(j) = usize::try_from(i as i64 + offset) else {
+            continue;
+        };
+        if j < n && good && x.is_finite() {
+            v[j] = f64::from(x);
+            ok[j] = true;
+        }
+    }
+    (v, ok)
+}
+
+/// Periodic √Hann window of length `n` (its squares at half overlap sum to one).
+fn sqrt_hann(n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|i| (0.5 - 0.5 * (2.0 * PI * i as f64 / n as f64).cos()).sqrt())
+        .collect()
+}
+
+/// One block's spectra: flow (re, im), edges (re, im), and the share of filled samples.
+type BlockSpectra = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, f64);
+
+/// Inverse FFT (normalised) by the conjugate trick.
+fn ifft_in_place(re: &mut [f64], im: &mut [f64]) {
+    for v in im.iter_mut() {
+        *v = -*v;
+    }
+    fft_in_place(re, im);
+    let n = re.len() as f64;
+    for (r, i) in re.iter_mut().zip(im.iter_mut()) {
+        *r /= n;
+        *i = -*i / n;
+    }
+}
+
+/// Ranges where `ok` is false.
+fn false_runs(ok: &[bool]) -> Vec<Range<usize>> {
+    let mut out = Vec::new();
+    let mut start = None;
+    for (i, &o) in ok.iter().enumerate() {
+        match (o, start) {
+            (false, None) => start = Some(i),
+            (true, Some(s)) => {
+                out.push(s..i);
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        out.push(s..ok.len());
+    }
+    out
+}
+
+/// One channel fused: the output samples, the blocks' models.
+struct ChannelFusion {
+    out: Vec<f64>,
+    blocks: Vec<(i64, Option<NoiseModel>)>,
+}
+
+fn fuse_channel(
+    flow: &[f64],
+    flow_ok: &[bool],
+    edges: &[f64],
+    edges_ok: &[bool],
+    block: usize,
+    smoothing: usize,
+) -> ChannelFusion {
+    let n = flow.len();
+    // Each method's gaps filled by the other.
+    let f: Vec<f64> = (0..n)
+        .map(|i| if flow_ok[i] { flow[i] } else { edges[i] })
+        .collect();
+    let e: Vec<f64> = (0..n)
+        .map(|i| if edges_ok[i] { edges[i] } else { flow[i] })
+        .collect();
+    let hop = block / 2;
+    let window = sqrt_hann(block);
+    // Blocks start every hop from −hop so that every sample is covered by two blocks.
+    let starts: Vec<i64> = (0..)
+        .map(|k: i64| k * hop as i64 - hop as i64)
+        .take_while(|&s| s < n as i64)
+        .collect();
+    let spectra: Vec<BlockSpectra> = starts
+        .iter()
+        .map(|&s| {
+            let (mut fr, mut fi) = (vec![0.0; block], vec![0.0; block]);
+            let (mut er, mut ei) = (vec![0.0; block], vec![0.0; block]);
+            let mut filled = 0usize;
+            let mut inside = 0usize;
+            for (k, &w) in window.iter().enumerate() {
+                let Ok(i) = usize::try_from(s + k as i64) else {
+                    continue;
+                };
+                if i >= n {
+                    continue;
+                }
+                inside += 1;
+                if !(flow_ok[i] && edges_ok[i]) {
+                    filled += 1;
+                }
+                fr[k] = w * f[i];
+                er[k] = w * e[i];
+            }
+            fft_in_place(&mut fr, &mut fi);
+            fft_in_place(&mut er, &mut ei);
+            let share = if inside > 0 {
+                filled as f64 / inside as f64
+            } else {
+                1.0
+            };
+            (fr, fi, er, ei, share)
+        })
+        .collect();
+    // Difference periodograms of the blocks that may lend one (positive-frequency bins 1..=N/2).
+    let half = block / 2;
+    let diff: Vec<Option<Vec<f64>>> = spectra
+        .iter()
+        .map(|(fr, fi, er, ei, share)| {
+            (*share <= MAX_FILLED_SHARE).then(|| {
+                (1..=half)
+                    .map(|k| (fr[k] - er[k]).powi(2) + (fi[k] - ei[k]).powi(2))
+                    .collect()
+            })
+        })
+        .collect();
+    let omega: Vec<f64> = (1..=half)
+        .map(|k| 2.0 * PI * k as f64 / block as f64)
+        .collect();
+    let models: Vec<Option<NoiseModel>> = (0..spectra.len())
+        .map(|b| {
+            let lo = b.saturating_sub(smoothing);
+            let hi = (b + smoothing + 1).min(diff.len());
+            let mut acc = vec![0.0; half];
+            let mut count = 0usize;
+            for d in diff[lo..hi].iter().flatten() {
+                for (a, v) in acc.iter_mut().zip(d) {
+                    *a += v;
+                }
+                count += 1;
+            }
+            if count == 0 {
+                return None;
+            }
+            for a in &mut acc {
+                *a /= count as f64;
+            }
+            fit_noise(&omega, &acc)
+        })
+        .collect();
+    // A block with no model of its own takes the nearest block's.
+    let nearest = |b: usize| -> Option<NoiseModel> {
+        (0..models.len())
+            .filter_map(|k| models[k].map(|m| (k.abs_diff(b), m)))
+            .min_by_key(|x| x.0)
+            .map(|x| x.1)
+    };
+    let mut out = vec![0.0; n];
+    let mut block_models = Vec::with_capacity(spectra.len());
+    for (b, ((fr, fi, er, ei, _), &s)) in spectra.iter().zip(&starts).enumerate() {
+        let model = models[b].or_else(|| nearest(b));
+        block_models.push((s, model));
+        let (mut re, mut im) = (vec![0.0; block], vec![0.0; block]);
+        for k in 0..block {
+            // Bin k and its mirror share a frequency.
+            let kk = if k <= half { k } else { block - k };
+            let omega = 2.0 * PI * kk as f64 / block as f64;
+            let w = model.map_or(0.5, |m| m.edge_weight(omega));
+            re[k] = w * er[k] + (1.0 - w) * fr[k];
+            im[k] = w * ei[k] + (1.0 - w) * fi[k];
+        }
+        ifft_in_place(&mut re, &mut im);
+        for (k, (&v, &w)) in re.iter().zip(&window).enumerate() {
+            if let Ok(i) = usize::try_from(s + k as i64)
+                && i < n
+            {
+                out[i] += v * w;
+            }
+        }
+    }
+    ChannelFusion {
+        out,
+        blocks: block_models,
+    }
+}
+
+/// Fuses the flow method's and the edge method's stitched velocity (mm/s, same spacing and
+/// channel count; any start on the scan's grid) — see the module docs.
+///
+/// # Errors
+/// [`StageError::InvalidParam`] for bad params, [`StageError::BadInput`] when the signals'
+/// spacing, rate or channel count differ or one is empty.
+pub fn fuse(
+    flow: &StitchedSignal,
+    edges: &StitchedSignal,
+    meta: &ScanMeta,
+    params: &FusionParams,
+) -> Result<Fused, StageError> {
+    params.validate()?;
+    let bad = |problem: String| StageError::BadInput {
+        stage: "fusion",
+        problem,
+    };
+    check_range("flow spacing (µm)", flow.spacing_um, 1e-9, 1e9)?;
+    if (flow.spacing_um - edges.spacing_um).abs() > 1e-9 * flow.spacing_um {
+        return Err(bad(format!(
+            "the flow and edge signals are sampled {} µm and {} µm apart",
+            flow.spacing_um, edges.spacing_um
+        )));
+    }
+    if flow.channels.len() != edges.channels.len() || flow.channels.is_empty() {
+        return Err(bad(format!(
+            "the flow signal has {} channels, the edge signal {}",
+            flow.channels.len(),
+            edges.channels.len()
+        )));
+    }
+    let spacing = flow.spacing_um;
+    let index = |s: &StitchedSignal| (s.start_um / spacing).round() as i64;
+    let len = |s: &StitchedSignal| s.channels.first().map_or(0, Vec::len) as i64;
+    let origin = index(flow).min(index(edges));
+    let end = (index(flow) + len(flow)).max(index(edges) + len(edges));
+    let n = usize::try_from(end - origin).unwrap_or(0);
+    if n == 0 {
+        return Err(bad("both signals are empty".into()));
+    }
+    let block = params.block_samples.min(n.next_power_of_two() / 2).max(16);
+    let rate = flow.native_rate_hz;
+    let hz = |omega: f64| omega / (2.0 * PI) * rate;
+    let mut channels = Vec::with_capacity(flow.channels.len());
+    let mut blocks = Vec::new();
+    let mut masks = Vec::new();
+    let mut per_channel_models = Vec::new();
+    for ch in 0..flow.channels.len() {
+        let (fv, fok) = place(flow, ch, origin, n);
+        let (ev, eok) = place(edges, ch, origin, n);
+        let fused = fuse_channel(&fv, &fok, &ev, &eok, block, params.smoothing_blocks);
+        let any: Vec<bool> = fok.iter().zip(&eok).map(|(a, b)| *a || *b).collect();
+        #[allow(clippy::cast_possible_truncation)] // velocities are stored as f32
+        let samples: Vec<f32> = fused
+            .out
+            .iter()
+            .zip(&any)
+            .map(|(&v, &ok)| if ok { v as f32 } else { 0.0 })
+            .collect();
+        channels.push(samples);
+        for &(start, model) in &fused.blocks {
+            let Some(m) = model else { continue };
+            let rms = |p: &dyn Fn(f64) -> f64| {
+                let half = block / 2;
+                let sum: f64 = (1..=half)
+                    .map(|k| p(2.0 * PI * k as f64 / block as f64))
+                    .sum();
+                // Periodogram of √Hann-windowed blocks: power per bin ≈ σ²·N/2 for white noise.
+                (2.0 * sum / (block as f64 * half as f64)).sqrt()
+            };
+            blocks.push(FusionBlock {
+                channel: ch,
+                start_sample: start,
+                crossover_hz: hz(m.crossover_rad()),
+                edge_weights: REPORT_FREQS_HZ
+                    .iter()
+                    .map(|f| m.edge_weight(2.0 * PI * f / rate))
+                    .collect(),
+                flow_noise_mm_s: rms(&|_| m.flow),
+                edge_noise_mm_s: rms(&|w| m.edge_at(w)),
+            });
+        }
+        masks.push((fok, eok, any));
+        per_channel_models.push(fused.blocks);
+    }
+    let mut gaps: Vec<Range<usize>> = Vec::new();
+    for (_, _, any) in &masks {
+        gaps.extend(false_runs(any));
+    }
+    gaps.sort_by_key(|r| r.start);
+    let mut merged: Vec<Range<usize>> = Vec::new();
+    for g in gaps {
+        match merged.last_mut() {
+            Some(last) if g.start <= last.end => last.end = last.end.max(g.end),
+            _ => merged.push(g),
+        }
+    }
+    let start_um = origin as f64 * spacing;
+    let groups = map_groups(
+        &masks,
+        &per_channel_models,
+        start_um,
+        spacing,
+        block,
+        meta,
+        rate,
+    );
+    Ok(Fused {
+        signal: StitchedSignal {
+            start_um,
+            spacing_um: spacing,
+            native_rate_hz: rate,
+            channels,
+            gaps: merged,
+        },
+        blocks,
+        groups,
+    })
+}
+
+type Masks = (Vec<bool>, Vec<bool>, Vec<bool>);
+
+/// The blocks' crossovers and weights as they fell on each group of the scan.
+fn map_groups(
+    masks: &[Masks],
+    models: &[Vec<(i64, Option<NoiseModel>)>],
+    start_um: f64,
+    spacing: f64,
+    block: usize,
+    meta: &ScanMeta,
+    rate: f64,
+) -> Vec<GroupFusion> {
+    let step = meta.motion.group_step_um;
+    let n = masks.first().map_or(0, |m| m.0.len());
+    if step <= 0.0 || n == 0 {
+        return Vec::new();
+    }
+    let end_um = start_um + n as f64 * spacing;
+    let first = (start_um / step).floor().max(0.0) as usize;
+    let last = (end_um / step).floor().max(0.0) as usize;
+    (first..=last)
+        .filter_map(|g| {
+            let lo = ((g as f64 * step - start_um) / spacing).max(0.0) as usize;
+            let hi = (((g + 1) as f64 * step - start_um) / spacing).max(0.0) as usize;
+            let hi = hi.min(n);
+            if lo >= hi {
+                return None;
+            }
+            let mid = (lo + hi) as i64 / 2;
+            let mut report = GroupFusion {
+                group: g,
+                crossover_hz: Vec::new(),
+                edge_weights: Vec::new(),
+                edges_only: Vec::new(),
+                flow_only: Vec::new(),
+            };
+            for ((fok, eok, _), blocks) in masks.iter().zip(models) {
+                let model = blocks
+                    .iter()
+                    .filter(|(s, _)| *s <= mid && mid < *s + block as i64)
+                    .min_by_key(|(s, _)| (mid - (*s + block as i64 / 2)).abs())
+                    .and_then(|(_, m)| *m);
+                report
+                    .crossover_hz
+                    .push(model.map_or(f64::NAN, |m| m.crossover_rad() / (2.0 * PI) * rate));
+                report.edge_weights.push(
+                    REPORT_FREQS_HZ
+                        .iter()
+                        .map(|f| model.map_or(f64::NAN, |m| m.edge_weight(2.0 * PI * f / rate)))
+                        .collect(),
+                );
+                let len = (hi - lo) as f64;
+                report
+                    .edges_only
+                    .push((lo..hi).filter(|&i| eok[i] && !fok[i]).count() as f64 / len);
+                report
+                    .flow_only
+                    .push((lo..hi).filter(|&i| fok[i] && !eok[i]).count() as f64 / len);
+            }
+            Some(report)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests;

@@ -1,0 +1,158 @@
+//! Fused decoder tests: it beats both inputs on synthetic noises of the two kinds, reconstructs
+//! agreeing inputs exactly, fills each method's gaps from the other and checks its inputs.
+
+use super::*;
+use crate::io::ScanMeta;
+use crate::synth::noise::Rng;
+
+fn meta() -> ScanMeta {
+    ScanMeta::from_toml_str(
+        "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\ncut = \"lateral\"\n\
+         [camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n\
+         [motion]\nframe_step_um = 0.78\ngroup_step_um = 460.2\n",
+        std::path::Path::new("scan.toml"),
+    )
+    .unwrap()
+}
+
+fn signal(start_sample: i64, channels: Vec<Vec<f32>>) -> StitchedSignal {
+    StitchedSignal {
+        start_um: start_sample as f64 * 21.3,
+        spacing_um: 21.3,
+        native_rate_hz: 44_100.0,
+        channels,
+        gaps: Vec::new(),
+    }
+}
+
+/// A two-tone signal, the same plus flat noise (flow-like), and plus white noise through the
+/// edge decoder's differentiator (edge-like: flat in displacement, so `σ²·ω²` in velocity).
+fn inputs(n: usize, flow_sigma: f64, edge_sigma: f64) -> (Vec<f64>, Vec<f32>, Vec<f32>) {
+    use crate::pipeline::edges::differentiator::{DifferentiatorParams, differentiate};
+    let mut rng = Rng::new(3);
+    let truth: Vec<f64> = (0..n)
+        .map(|i| {
+            let t = i as f64 / 44_100.0;
+            30.0 * (2.0 * PI * 700.0 * t).sin() + 10.0 * (2.0 * PI * 4100.0 * t).sin()
+        })
+        .collect();
+    let flow: Vec<f32> = truth
+        .iter()
+        .map(|&v| (v + flow_sigma * rng.gaussian()) as f32)
+        .collect();
+    let white: Vec<f64> = (0..n).map(|_| edge_sigma * rng.gaussian()).collect();
+    let plain = DifferentiatorParams {
+        aperture_samples: 0.0,
+        ..DifferentiatorParams::default()
+    };
+    let edge_noise = differentiate(&white, &plain);
+    let edges: Vec<f32> = truth
+        .iter()
+        .zip(&edge_noise)
+        .map(|(&v, &e)| (v + e) as f32)
+        .collect();
+    (truth, flow, edges)
+}
+
+fn error_power(x: &[f32], truth: &[f64], range: Range<usize>) -> f64 {
+    range
+        .map(|i| (f64::from(x[i]) - truth[i]).powi(2))
+        .sum::<f64>()
+}
+
+#[test]
+fn fusion_beats_both_inputs() {
+    let n = 8192;
+    let (truth, flow, edges) = inputs(n, 2.0, 2.0);
+    let fused = fuse(
+        &signal(100, vec![flow.clone()]),
+        &signal(100, vec![edges.clone()]),
+        &meta(),
+        &FusionParams::default(),
+    )
+    .unwrap();
+    let inner = 300..n - 300;
+    let (ef, ee, eu) = (
+        error_power(&flow, &truth, inner.clone()),
+        error_power(&edges, &truth, inner.clone()),
+        error_power(&fused.signal.channels[0], &truth, inner),
+    );
+    eprintln!("error power: flow {ef:.0}, edges {ee:.0}, fused {eu:.0}");
+    assert!(eu < 0.6 * ef.min(ee), "fused {eu} vs flow {ef}, edges {ee}");
+    // Flow noise σ² = 4, edge noise 4·ω²: equal at ω = 1 rad/sample, i.e. 7.0 kHz.
+    let mut xs: Vec<f64> = fused.blocks.iter().map(|b| b.crossover_hz).collect();
+    xs.sort_by(f64::total_cmp);
+    let median = xs[xs.len() / 2];
+    assert!(
+        (5_500.0..9_000.0).contains(&median),
+        "crossover {median} Hz"
+    );
+    assert!(!fused.groups.is_empty());
+    let w = &fused.groups[fused.groups.len() / 2].edge_weights[0];
+    assert!(w[0] > 0.9 && w[3] < w[0], "{w:?}");
+}
+
+#[test]
+fn agreeing_inputs_come_back_unchanged() {
+    let n = 1000;
+    let (truth, _, _) = inputs(n, 0.0, 0.0);
+    let x: Vec<f32> = truth.iter().map(|&v| v as f32).collect();
+    let fused = fuse(
+        &signal(7, vec![x.clone()]),
+        &signal(7, vec![x.clone()]),
+        &meta(),
+        &FusionParams::default(),
+    )
+    .unwrap();
+    assert_eq!(fused.signal.channels[0].len(), n);
+    for (a, b) in fused.signal.channels[0].iter().zip(&x) {
+        assert!((a - b).abs() < 1e-3, "{a} vs {b}");
+    }
+    assert!(fused.signal.gaps.is_empty());
+}
+
+#[test]
+#[allow(clippy::single_range_in_vec_init)] // one gap in each signal, on purpose
+fn each_method_fills_the_others_gaps() {
+    let n = 4096;
+    let (truth, flow, edges) = inputs(n, 2.0, 0.5);
+    let mut f = signal(0, vec![flow]);
+    f.gaps = vec![1000..1600];
+    let mut e = signal(0, vec![edges.clone()]);
+    e.gaps = vec![3000..3100];
+    // The edge signal also starts later: the grids are aligned by position.
+    let e_late = StitchedSignal {
+        start_um: 10.0 * 21.3,
+        channels: vec![edges[10..].to_vec()],
+        gaps: vec![2990..3090],
+        ..e
+    };
+    let fused = fuse(&f, &e_late, &meta(), &FusionParams::default()).unwrap();
+    let out = &fused.signal.channels[0];
+    assert_eq!(out.len(), n);
+    // Deep inside the flow's gap the output is the edge signal.
+    for i in 1100..1500 {
+        assert!((f64::from(out[i]) - f64::from(edges[i])).abs() < 0.5, "{i}");
+    }
+    // Inside the edges' gap it tracks the truth about as well as the flow does.
+    let err = error_power(out, &truth, 3020..3080) / 60.0;
+    assert!(err < 6.0, "{err}");
+    assert!(fused.signal.gaps.is_empty());
+    let g = &fused.groups[0];
+    assert!(g.edges_only[0] > 0.0 || fused.groups.iter().any(|g| g.edges_only[0] > 0.0));
+}
+
+#[test]
+fn mismatched_inputs_are_refused() {
+    let a = signal(0, vec![vec![0.0; 100]]);
+    let two = signal(0, vec![vec![0.0; 100], vec![0.0; 100]]);
+    assert!(fuse(&a, &two, &meta(), &FusionParams::default()).is_err());
+    let mut other = a.clone();
+    other.spacing_um = 20.0;
+    assert!(fuse(&a, &other, &meta(), &FusionParams::default()).is_err());
+    let bad = FusionParams {
+        block_samples: 100,
+        ..FusionParams::default()
+    };
+    assert!(fuse(&a, &a, &meta(), &bad).is_err());
+}
