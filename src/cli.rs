@@ -98,6 +98,10 @@ pub enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Decode a still image of grooves seen from above (micrograph, stitched strip, scan) to a WAV file.
+    Still(crate::still::cli::StillArgs),
+    /// Render a top-view still of neighbouring grooves with known wall tones and its truth.
+    SynthStill(crate::still::cli::SynthStillArgs),
     /// Cut a scan into shards for several machines (Slurm job arrays and the like).
     Plan(crate::side::cli::PlanArgs),
     /// Merge the parts of every shard of a plan into the side's WAV.
@@ -516,6 +520,8 @@ pub fn run(command: Command) -> Result<()> {
             }
             Ok(())
         }
+        Command::Still(args) => crate::still::cli::run_still(&args),
+        Command::SynthStill(args) => crate::still::cli::run_synth_still(&args),
         Command::ImportVideo(args) => crate::video_cli::run_import_video(&args),
         Command::Gui { scan } => run_gui(scan),
     }

@@ -17,6 +17,7 @@ pub mod pipeline;
 #[cfg(feature = "gui")]
 pub mod playback;
 pub mod side;
+pub mod still;
 pub mod synth;
 pub mod video_cli;
 pub mod viz;

@@ -20,6 +20,7 @@ pub mod orientation;
 pub mod sampling;
 pub mod simd;
 pub mod slope_reference;
+pub mod still;
 pub mod walls;
 
 /// Why a stage could not produce its output.
@@ -118,6 +119,8 @@ pub struct PipelineParams {
     pub sound: SoundParams,
     /// Post-processing of the whole clip.
     pub dsp: DspParams,
+    /// The still-image decoder (`groovescope still`; scans do not read it).
+    pub still: still::StillParams,
 }
 
 impl PipelineParams {
@@ -169,7 +172,8 @@ impl PipelineParams {
         self.orientation.validate()?;
         self.sound.validate()?;
         self.dsp.validate()?;
-        self.hough.validate()
+        self.hough.validate()?;
+        self.still.validate()
     }
 }
 
