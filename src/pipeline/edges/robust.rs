@@ -23,7 +23,7 @@
 use std::ops::Range;
 
 use super::profile::lorentzian_weight;
-use crate::io::Cut;
+use crate::meta::Cut;
 
 /// Alternations of the per-sample solve and the constants.
 const ROUNDS: usize = 3;
