@@ -17,7 +17,7 @@ use super::optical_flow::FlowField;
 use super::slope_reference::SlopeReference;
 use super::{PipelineParams, StageError};
 use crate::image::Image;
-use crate::io::ScanMeta;
+use crate::meta::ScanMeta;
 
 /// What a group's stages run on.
 #[derive(Clone, Debug)]

@@ -72,7 +72,7 @@ pub fn check_range(name: &str, value: f64, lo: f64, hi: f64) -> Result<(), Stage
 
 use serde::{Deserialize, Serialize};
 
-use crate::io::ScanMeta;
+use crate::meta::ScanMeta;
 use audio_signal::SoundParams;
 use depth::DepthParams;
 use derivatives::DerivativeParams;

@@ -179,7 +179,7 @@ pub struct StillArgs {
     /// A reference WAV of the groove's sound to score against (r, envelope r, SNR).
     #[arg(long)]
     pub reference: Option<PathBuf>,
-    /// Parameters TOML (see `groovescope params`: the [still], [sound] and [dsp] tables apply).
+    /// Parameters TOML (see `groovescope params`: the `[still]`, `[sound]` and `[dsp]` tables apply).
     #[arg(long)]
     pub params: Option<PathBuf>,
     /// WAV sample format: 16, 24 or 32f.

@@ -28,7 +28,7 @@ use self::noise::{NoiseModel, fit_noise};
 use super::audio_signal::StitchedSignal;
 use super::dsp::fft_in_place;
 use super::{StageError, check_range};
-use crate::io::ScanMeta;
+use crate::meta::ScanMeta;
 
 /// Blocks lend their spectrum to the noise estimate only when less than this share of their
 /// samples was filled from the other method.

@@ -18,7 +18,7 @@
 use super::clean::{reject_jumps, reject_lateral, reject_stereo, screened};
 use super::track::BorderTracks;
 use super::{Axis, StillError, StillParams, StillSetup};
-use crate::io::Cut;
+use crate::meta::Cut;
 
 /// Path windows overlap by half; a window's weight falls linearly from its centre.
 const PATH_WINDOW_OVERLAP: usize = 2;

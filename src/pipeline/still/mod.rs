@@ -43,7 +43,7 @@ pub use track::{BorderTracks, track_borders};
 use super::edges::border::BorderParams;
 use super::{StageError, check_range};
 use crate::image::Image;
-use crate::io::Cut;
+use crate::meta::Cut;
 
 /// Which way the grooves run in a still.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]

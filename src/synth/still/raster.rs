@@ -3,7 +3,7 @@
 //!
 //! Rendering runs line by line along the grooves (in parallel; every random value comes from a
 //! hash of the seed and its position, so the image does not depend on the threads). Each line is
-//! averaged over [`SUB_LINES`] sub-lines; within a sub-line every material's share of a pixel is
+//! averaged over `SUB_LINES` sub-lines; within a sub-line every material's share of a pixel is
 //! its exact overlap with the pixel.
 
 use rayon::prelude::*;
