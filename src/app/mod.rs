@@ -7,6 +7,7 @@
 //! `groovescope-dialog` shows file dialogs; `groovescope-import` imports a video clip (feature
 //! `video`); the cpal callback reads a prepared buffer.
 
+mod actions;
 pub mod clip_state;
 pub mod dialogs;
 pub mod export;
