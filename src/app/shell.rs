@@ -269,7 +269,7 @@ impl Workbench {
         });
     }
 
-    fn side_panel(&mut self, ui: &mut Ui, statuses: &[super::views::StageStatus; 6]) {
+    fn side_panel(&mut self, ui: &mut Ui, statuses: &[super::views::StageStatus; crate::pipeline::Stage::COUNT]) {
         egui::ScrollArea::vertical().show(ui, |ui| {
             ui.heading("navigate");
             let groups = self.scan.as_ref().map_or(0, |s| s.groups.len());
@@ -365,7 +365,7 @@ impl Workbench {
         });
     }
 
-    fn central(&mut self, ui: &mut Ui, statuses: &[super::views::StageStatus; 6]) {
+    fn central(&mut self, ui: &mut Ui, statuses: &[super::views::StageStatus; crate::pipeline::Stage::COUNT]) {
         ui.horizontal_wrapped(|ui| {
             for v in View::ALL {
                 ui.selectable_value(&mut self.view, v, v.name());

@@ -122,11 +122,11 @@ pub struct Workbench {
     pub(super) history: History,
     pub(super) preset_file: Option<PathBuf>,
     pub(super) cache: StageCache,
-    pub(super) stage_errors: [Option<String>; 6],
+    pub(super) stage_errors: [Option<String>; crate::pipeline::Stage::COUNT],
     /// Params and group each failed stage failed with (not retried until one of them changes).
-    pub(super) failed_with: [Option<(PipelineParams, usize)>; 6],
-    pub(super) stage_times: [Option<Duration>; 6],
-    pub(super) stage_runs: [u64; 6],
+    pub(super) failed_with: [Option<(PipelineParams, usize)>; crate::pipeline::Stage::COUNT],
+    pub(super) stage_times: [Option<Duration>; crate::pipeline::Stage::COUNT],
+    pub(super) stage_runs: [u64; crate::pipeline::Stage::COUNT],
     pub(super) textures: Textures,
     pub(super) worker: Worker,
     pub(super) generation: u64,
@@ -197,8 +197,8 @@ impl Workbench {
             cache: StageCache::default(),
             stage_errors: Default::default(),
             failed_with: Default::default(),
-            stage_times: [None; 6],
-            stage_runs: [0; 6],
+            stage_times: [None; crate::pipeline::Stage::COUNT],
+            stage_runs: [0; crate::pipeline::Stage::COUNT],
             textures: Textures::default(),
             worker,
             generation: 0,
@@ -364,7 +364,7 @@ impl Workbench {
 
     /// Status of every stage.
     #[must_use]
-    pub fn statuses(&self) -> [StageStatus; 6] {
+    pub fn statuses(&self) -> [StageStatus; crate::pipeline::Stage::COUNT] {
         Stage::ALL.map(|s| self.stage_status(s))
     }
 
@@ -450,8 +450,8 @@ impl Workbench {
         self.cache = StageCache::default();
         self.stage_errors = Default::default();
         self.failed_with = Default::default();
-        self.stage_times = [None; 6];
-        self.stage_runs = [0; 6];
+        self.stage_times = [None; crate::pipeline::Stage::COUNT];
+        self.stage_runs = [0; crate::pipeline::Stage::COUNT];
         self.textures.clear();
         self.recon = None;
         self.clip = None;

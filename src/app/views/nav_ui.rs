@@ -116,8 +116,8 @@ pub fn nav_ui(
 /// The stage list: one `name: status` line per stage, timing, error text and a rerun button.
 pub fn stages_ui(
     ui: &mut Ui,
-    status: &[StageStatus; 6],
-    times: &[Option<Duration>; 6],
+    status: &[StageStatus; Stage::COUNT],
+    times: &[Option<Duration>; Stage::COUNT],
     hide_times: bool,
 ) -> Vec<NavAction> {
     let mut out = Vec::new();

@@ -40,10 +40,9 @@ pub const REPORT_FREQS_HZ: [f64; 4] = [500.0, 1000.0, 2000.0, 5000.0];
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FusionParams {
-    /// Analysis block length (samples, a power of two; shorter clips use the largest power of
-    /// two that fits); default 256.
+    #[doc = knob!("fusion.block_samples")]
     pub block_samples: usize,
-    /// Blocks on each side whose difference spectra are averaged with a block's own; default 4.
+    #[doc = knob!("fusion.smoothing_blocks")]
     pub smoothing_blocks: usize,
 }
 
