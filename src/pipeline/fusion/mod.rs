@@ -9,9 +9,10 @@
 //! 2. A short-time Fourier transform (periodic √Hann windows of `block_samples`, half-overlapping,
 //!    which reconstruct exactly) of both. Each block's noise levels come from the periodogram of
 //!    their difference, averaged over `smoothing_blocks` blocks on each side and fitted by
-//!    [`noise::fit_noise`]: flow noise `b` flat, edge noise `a·ω²` (blocks where more than
+//!    [`noise::fit_noise`]: flow noise `b` flat plus `c·|S|²` following the signal, edge noise
+//!    `a·ω²` (blocks where more than
 //!    [`MAX_FILLED_SHARE`] of the samples were filled from the other method lend no spectrum).
-//! 3. Each bin is the Wiener combination `w·E + (1 − w)·F` with `w = b/(b + a·ω²)`, and the
+//! 3. Each bin is the Wiener combination `w·E + (1 − w)·F` with `w = N_F/(N_F + a·ω²)`, `N_F = b + c·|E_k|²` (the block's own edge periodogram standing for the signal power), and the
 //!    blocks are added back.
 //!
 //! Stereo channels fuse separately (each wall gives its channel). The report lists every block's
@@ -33,7 +34,8 @@ use crate::io::ScanMeta;
 /// Blocks lend their spectrum to the noise estimate only when less than this share of their
 /// samples was filled from the other method.
 pub const MAX_FILLED_SHARE: f64 = 0.1;
-/// Frequencies (Hz) at which the report gives the edge weight.
+/// Frequencies (Hz) at which the report gives the edge weight (away from the signal: the
+/// flat noise levels' weight, without the flow's signal-following error).
 pub const REPORT_FREQS_HZ: [f64; 4] = [500.0, 1000.0, 2000.0, 5000.0];
 
 /// Knobs of the fused decoder.
@@ -258,15 +260,22 @@ fn fuse_channel(
             (fr, fi, er, ei, share)
         })
         .collect();
-    // Difference periodograms of the blocks that may lend one (positive-frequency bins 1..=N/2).
+    // Difference and edge periodograms of the blocks that may lend them (positive-frequency
+    // bins 1..=N/2).
     let half = block / 2;
-    let diff: Vec<Option<Vec<f64>>> = spectra
+    type Periodograms = (Vec<f64>, Vec<f64>);
+    let diff: Vec<Option<Periodograms>> = spectra
         .iter()
         .map(|(fr, fi, er, ei, share)| {
             (*share <= MAX_FILLED_SHARE).then(|| {
                 (1..=half)
-                    .map(|k| (fr[k] - er[k]).powi(2) + (fi[k] - ei[k]).powi(2))
-                    .collect()
+                    .map(|k| {
+                        (
+                            (fr[k] - er[k]).powi(2) + (fi[k] - ei[k]).powi(2),
+                            er[k].powi(2) + ei[k].powi(2),
+                        )
+                    })
+                    .unzip()
             })
         })
         .collect();
@@ -278,20 +287,23 @@ fn fuse_channel(
             let lo = b.saturating_sub(smoothing);
             let hi = (b + smoothing + 1).min(diff.len());
             let mut acc = vec![0.0; half];
+            let mut sig = vec![0.0; half];
             let mut count = 0usize;
-            for d in diff[lo..hi].iter().flatten() {
-                for (a, v) in acc.iter_mut().zip(d) {
+            for (d, e) in diff[lo..hi].iter().flatten() {
+                for ((a, v), (sa, sv)) in acc.iter_mut().zip(d).zip(sig.iter_mut().zip(e)) {
                     *a += v;
+                    *sa += sv;
                 }
                 count += 1;
             }
             if count == 0 {
                 return None;
             }
-            for a in &mut acc {
+            for (a, sa) in acc.iter_mut().zip(&mut sig) {
                 *a /= count as f64;
+                *sa /= count as f64;
             }
-            fit_noise(&omega, &acc)
+            fit_noise(&omega, &acc, &sig)
         })
         .collect();
     // A block with no model of its own takes the nearest block's.
@@ -311,7 +323,9 @@ fn fuse_channel(
             // Bin k and its mirror share a frequency.
             let kk = if k <= half { k } else { block - k };
             let omega = 2.0 * PI * kk as f64 / block as f64;
-            let w = model.map_or(0.5, |m| m.edge_weight(omega));
+            // The block's own edge periodogram stands for the signal power at the bin.
+            let signal = er[k].powi(2) + ei[k].powi(2);
+            let w = model.map_or(0.5, |m| m.edge_weight(omega, signal));
             re[k] = w * er[k] + (1.0 - w) * fr[k];
             im[k] = w * ei[k] + (1.0 - w) * fi[k];
         }
@@ -406,7 +420,7 @@ pub fn fuse(
                 crossover_hz: hz(m.crossover_rad()),
                 edge_weights: REPORT_FREQS_HZ
                     .iter()
-                    .map(|f| m.edge_weight(2.0 * PI * f / rate))
+                    .map(|f| m.edge_weight(2.0 * PI * f / rate, 0.0))
                     .collect(),
                 flow_noise_mm_s: rms(&|_| m.flow),
                 edge_noise_mm_s: rms(&|w| m.edge_at(w)),
@@ -498,7 +512,9 @@ fn map_groups(
                 report.edge_weights.push(
                     REPORT_FREQS_HZ
                         .iter()
-                        .map(|f| model.map_or(f64::NAN, |m| m.edge_weight(2.0 * PI * f / rate)))
+                        .map(|f| {
+                            model.map_or(f64::NAN, |m| m.edge_weight(2.0 * PI * f / rate, 0.0))
+                        })
                         .collect(),
                 );
                 let len = (hi - lo) as f64;
