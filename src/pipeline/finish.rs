@@ -83,25 +83,56 @@ fn groove_speed_along(groups: &[GroupSignal], grid: &StitchedSignal) -> Vec<f64>
 }
 
 /// The edge method's velocity over the clip: the border tracks stitched, combined,
-/// differentiated, and scaled by the groove speed at each sample.
+/// differentiated, and scaled by the groove speed at each sample. With it, on the same grid,
+/// each channel's displacement noise in velocity units (`σ_d·Vt·sin α/Δ`, mm/s per radian per
+/// sample: the edge noise power at ω is its square times ω²; NaN where unknown).
 fn edge_velocity(
     borders: &[GroupSignal],
     spacing_um: f64,
     meta: &ScanMeta,
     params: &PipelineParams,
-) -> Result<StitchedSignal, StageError> {
+) -> Result<(StitchedSignal, StitchedSignal), StageError> {
     let stitched = stitch(borders, spacing_um)?;
-    let mut decoded =
-        decode_border_signal(&stitched, meta.record.cut, 1.0, &params.edges)?.velocity;
-    let speed = groove_speed_along(borders, &decoded);
-    for ch in &mut decoded.channels {
+    let decoded = decode_border_signal(&stitched, meta.record.cut, 1.0, &params.edges)?;
+    let mut velocity = decoded.velocity;
+    let speed = groove_speed_along(borders, &velocity);
+    for ch in &mut velocity.channels {
         for (v, vt) in ch.iter_mut().zip(&speed) {
             #[allow(clippy::cast_possible_truncation)] // velocities are stored as f32
             let scaled = (f64::from(*v) * vt) as f32;
             *v = scaled;
         }
     }
-    Ok(decoded)
+    let sin_a = params.edges.wall_angle_deg.to_radians().sin();
+    let [left, right] = &decoded.combined.walls_se_um;
+    #[allow(clippy::cast_possible_truncation)] // noise levels are stored as f32
+    let sigma = |se: &[f64], gain: f64| -> Vec<f32> {
+        se.iter()
+            .zip(&speed)
+            .map(|(&e, &vt)| (e * gain * vt * sin_a / spacing_um) as f32)
+            .collect()
+    };
+    // Stereo: each wall its channel; mono cuts: √2 times a wall's (the walls share d).
+    let channels = if velocity.channels.len() == 2 {
+        vec![sigma(left, 1.0), sigma(right, 1.0)]
+    } else {
+        let se: Vec<f64> = left
+            .iter()
+            .zip(right)
+            .map(|(&l, &r)| match (l.is_finite(), r.is_finite()) {
+                (true, true) => l.max(r),
+                (true, false) => l,
+                (false, _) => r,
+            })
+            .collect();
+        vec![sigma(&se, std::f64::consts::SQRT_2)]
+    };
+    let noise = StitchedSignal {
+        channels,
+        gaps: Vec::new(),
+        ..velocity.clone()
+    };
+    Ok((velocity, noise))
 }
 
 /// Finishes a clip by `params.method` (see the module docs), then as [`finish_clip`] does:
@@ -120,13 +151,13 @@ pub fn finish_method_clip(
     match params.method {
         Method::Flow => finish_clip(signals.flow, spacing_um, params),
         Method::Edges => {
-            let velocity = edge_velocity(signals.borders, spacing_um, meta, params)?;
+            let (velocity, _) = edge_velocity(signals.borders, spacing_um, meta, params)?;
             finish_stitched(velocity, params)
         }
         Method::Fused => {
-            let velocity = edge_velocity(signals.borders, spacing_um, meta, params)?;
+            let (velocity, noise) = edge_velocity(signals.borders, spacing_um, meta, params)?;
             let flow = stitch(signals.flow, spacing_um)?;
-            let fused = fuse(&flow, &velocity, meta, &params.fusion)?;
+            let fused = fuse(&flow, &velocity, Some(&noise), meta, &params.fusion)?;
             let mut clip = finish_stitched(fused.signal, params)?;
             clip.fusion = Some(FusionReport {
                 groups: fused.groups,

@@ -206,11 +206,43 @@ struct ChannelFusion {
     blocks: Vec<(i64, Option<NoiseModel>)>,
 }
 
+/// Each analysis block's edge noise level `a` (its power at ω is `a·ω²`) from per-sample
+/// displacement noise `sigma` (velocity units per radian per sample): `Σ w_k²·σ_k²` over the
+/// block's window, the missing samples taking the mean of the others. None where none is known.
+fn block_edge_levels(
+    sigma: &[f64],
+    known: &[bool],
+    starts: &[i64],
+    window: &[f64],
+) -> Vec<Option<f64>> {
+    starts
+        .iter()
+        .map(|&s| {
+            let (mut sum, mut w_known, mut w_all) = (0.0, 0.0, 0.0);
+            for (k, &w) in window.iter().enumerate() {
+                let Ok(i) = usize::try_from(s + k as i64) else {
+                    continue;
+                };
+                if i >= sigma.len() {
+                    continue;
+                }
+                w_all += w * w;
+                if known[i] {
+                    sum += w * w * sigma[i] * sigma[i];
+                    w_known += w * w;
+                }
+            }
+            (w_known > 0.0).then(|| sum * w_all / w_known)
+        })
+        .collect()
+}
+
 fn fuse_channel(
     flow: &[f64],
     flow_ok: &[bool],
     edges: &[f64],
     edges_ok: &[bool],
+    edge_sigma: Option<(&[f64], &[bool])>,
     block: usize,
     smoothing: usize,
 ) -> ChannelFusion {
@@ -282,10 +314,16 @@ fn fuse_channel(
     let omega: Vec<f64> = (1..=half)
         .map(|k| 2.0 * PI * k as f64 / block as f64)
         .collect();
+    let edge_levels = edge_sigma.map(|(sigma, known)| block_edge_levels(sigma, known, &starts, &window));
     let models: Vec<Option<NoiseModel>> = (0..spectra.len())
         .map(|b| {
             let lo = b.saturating_sub(smoothing);
             let hi = (b + smoothing + 1).min(diff.len());
+            // The known edge level, averaged over the same blocks as the spectra.
+            let edge = edge_levels.as_ref().and_then(|levels| {
+                let known: Vec<f64> = levels[lo..hi].iter().flatten().copied().collect();
+                (!known.is_empty()).then(|| known.iter().sum::<f64>() / known.len() as f64)
+            });
             let mut acc = vec![0.0; half];
             let mut sig = vec![0.0; half];
             let mut count = 0usize;
@@ -303,7 +341,7 @@ fn fuse_channel(
                 *a /= count as f64;
                 *sa /= count as f64;
             }
-            fit_noise(&omega, &acc, &sig)
+            fit_noise(&omega, &acc, &sig, edge)
         })
         .collect();
     // A block with no model of its own takes the nearest block's.
@@ -345,7 +383,10 @@ fn fuse_channel(
 }
 
 /// Fuses the flow method's and the edge method's stitched velocity (mm/s, same spacing and
-/// channel count; any start on the scan's grid) — see the module docs.
+/// channel count; any start on the scan's grid) — see the module docs. `edge_noise`, on the edge
+/// signal's grid, gives each channel's displacement noise per sample in velocity units (mm/s
+/// per radian per sample, from the border fits' standard errors); with it the edge noise level
+/// is known and only the flow's is fitted.
 ///
 /// # Errors
 /// [`StageError::InvalidParam`] for bad params, [`StageError::BadInput`] when the signals'
@@ -353,6 +394,7 @@ fn fuse_channel(
 pub fn fuse(
     flow: &StitchedSignal,
     edges: &StitchedSignal,
+    edge_noise: Option<&StitchedSignal>,
     meta: &ScanMeta,
     params: &FusionParams,
 ) -> Result<Fused, StageError> {
@@ -394,7 +436,16 @@ pub fn fuse(
     for ch in 0..flow.channels.len() {
         let (fv, fok) = place(flow, ch, origin, n);
         let (ev, eok) = place(edges, ch, origin, n);
-        let fused = fuse_channel(&fv, &fok, &ev, &eok, block, params.smoothing_blocks);
+        let sigma = edge_noise.map(|s| place(s, ch, origin, n));
+        let fused = fuse_channel(
+            &fv,
+            &fok,
+            &ev,
+            &eok,
+            sigma.as_ref().map(|(v, ok)| (v.as_slice(), ok.as_slice())),
+            block,
+            params.smoothing_blocks,
+        );
         let any: Vec<bool> = fok.iter().zip(&eok).map(|(a, b)| *a || *b).collect();
         #[allow(clippy::cast_possible_truncation)] // velocities are stored as f32
         let samples: Vec<f32> = fused

@@ -103,12 +103,16 @@ fn solve(rows: &[([f64; 3], f64, f64)], active: [bool; 3]) -> Option<[f64; 3]> {
     Some(out)
 }
 
-/// The best non-negative levels: every subset of levels tried, the feasible fit with the least
+/// The best non-negative levels: every subset of the free levels tried (`fixed` ones held at
+/// zero; the caller took their part out of the powers), the feasible fit with the least
 /// weighted squared residual kept.
-fn fit_levels(rows: &[([f64; 3], f64, f64)]) -> [f64; 3] {
+fn fit_levels(rows: &[([f64; 3], f64, f64)], fixed: [bool; 3]) -> [f64; 3] {
     let mut best: Option<([f64; 3], f64)> = None;
     for mask in 1..8u8 {
         let active = [mask & 1 != 0, mask & 2 != 0, mask & 4 != 0];
+        if (0..3).any(|k| active[k] && fixed[k]) {
+            continue;
+        }
         let Some(levels) = solve(rows, active) else {
             continue;
         };
@@ -130,10 +134,18 @@ fn fit_levels(rows: &[([f64; 3], f64, f64)]) -> [f64; 3] {
 }
 
 /// Fits the model to a difference power spectrum `power[k]` at `omega[k]`, with the edge
-/// estimate's power `signal[k]` there (bins with a zero or non-finite power are skipped). None
-/// when fewer than three bins are usable.
+/// estimate's power `signal[k]` there (bins with a zero or non-finite power are skipped). With
+/// `edge` given (the edge noise level `a`, known from the border fits' standard errors) only the
+/// flow's levels are fitted, to what the edge noise leaves of the difference: a rising
+/// difference is then the flow's. None when fewer than three bins are usable.
 #[must_use]
-pub fn fit_noise(omega: &[f64], power: &[f64], signal: &[f64]) -> Option<NoiseModel> {
+pub fn fit_noise(
+    omega: &[f64],
+    power: &[f64],
+    signal: &[f64],
+    edge: Option<f64>,
+) -> Option<NoiseModel> {
+    let known = edge.filter(|a| a.is_finite() && *a >= 0.0);
     let bins: Vec<([f64; 3], f64)> = omega
         .iter()
         .zip(power)
@@ -157,7 +169,17 @@ pub fn fit_noise(omega: &[f64], power: &[f64], signal: &[f64]) -> Option<NoiseMo
             .zip(&weights)
             .map(|(&(b, p), &w)| (b, p, w))
             .collect();
-        let [b, a, c] = fit_levels(&rows);
+        let [b, a, c] = match known {
+            Some(a) => {
+                let rest: Vec<([f64; 3], f64, f64)> = rows
+                    .iter()
+                    .map(|&(basis, p, w)| (basis, p - a * basis[1], w))
+                    .collect();
+                let [b, _, c] = fit_levels(&rest, [false, true, false]);
+                [b, a, c]
+            }
+            None => fit_levels(&rows, [false; 3]),
+        };
         model = NoiseModel {
             flow: b,
             edge: a,
@@ -198,7 +220,7 @@ mod tests {
             .collect();
         power[20] *= 500.0; // a stray bin
         let signal = vec![0.0; omega.len()];
-        let m = fit_noise(&omega, &power, &signal).unwrap();
+        let m = fit_noise(&omega, &power, &signal, None).unwrap();
         assert!((m.flow - 2.0).abs() < 0.4, "{m:?}");
         assert!((m.edge - 8.0).abs() < 1.6, "{m:?}");
         let wc = m.crossover_rad();
@@ -222,12 +244,18 @@ mod tests {
             .zip(&signal)
             .map(|(w, s)| 2.0 + 8.0 * w * w + 0.01 * s)
             .collect();
-        let m = fit_noise(&omega, &power, &signal).unwrap();
+        let m = fit_noise(&omega, &power, &signal, None).unwrap();
         assert!((m.flow_gain - 0.01).abs() < 1e-3, "{m:?}");
         assert!((m.flow - 2.0).abs() < 0.3 && (m.edge - 8.0).abs() < 1.0, "{m:?}");
         // At the tone the edges win outright; away from it the flat levels decide.
         assert!(m.edge_weight(omega[20], signal[20]) > 0.999);
         assert!(m.edge_weight(3.0, signal[100]) < 0.2);
+        // With the edge level known, a difference that rises is the flow's.
+        let rising: Vec<f64> = omega.iter().map(|w| 0.1 * w * w + 5.0 * w * w).collect();
+        let none = vec![0.0; omega.len()];
+        let k = fit_noise(&omega, &rising, &none, Some(0.1)).unwrap();
+        assert!((k.edge - 0.1).abs() < 1e-12 && k.flow > 1.0, "{k:?}");
+        assert!(k.edge_weight(3.0, 0.0) > 0.7, "{k:?}");
     }
 
     #[test]
@@ -235,9 +263,9 @@ mod tests {
         let omega: Vec<f64> = (1..64).map(|k| k as f64 * 0.05).collect();
         let flat: Vec<f64> = omega.iter().map(|_| 3.0).collect();
         let none = vec![0.0; omega.len()];
-        let m = fit_noise(&omega, &flat, &none).unwrap();
+        let m = fit_noise(&omega, &flat, &none, None).unwrap();
         assert!(m.edge < 1e-6 && (m.flow - 3.0).abs() < 1e-6, "{m:?}");
         assert_eq!(m.crossover_rad(), std::f64::consts::PI);
-        assert!(fit_noise(&omega[..2], &flat[..2], &none[..2]).is_none());
+        assert!(fit_noise(&omega[..2], &flat[..2], &none[..2], None).is_none());
     }
 }
