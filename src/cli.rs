@@ -8,8 +8,8 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::io::wav::{WavBits, read_wav};
-use crate::pipeline::{Method, PathChoice};
 use crate::pipeline::PipelineParams;
+use crate::pipeline::{Method, PathChoice};
 pub use crate::side::cli::{Report, make_report, run_reconstruct};
 
 /// Plays gramophone records from microscope image sequences (Tian & Barron's optical-flow method).
@@ -98,6 +98,10 @@ pub enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Decode a still image of grooves seen from above (micrograph, stitched strip, scan) to a WAV file.
+    Still(crate::still::cli::StillArgs),
+    /// Render a top-view still of neighbouring grooves with known wall tones and its truth.
+    SynthStill(crate::still::cli::SynthStillArgs),
     /// Cut a scan into shards for several machines (Slurm job arrays and the like).
     Plan(crate::side::cli::PlanArgs),
     /// Merge the parts of every shard of a plan into the side's WAV.
@@ -524,6 +528,8 @@ pub fn run(command: Command) -> Result<()> {
             }
             Ok(())
         }
+        Command::Still(args) => crate::still::cli::run_still(&args),
+        Command::SynthStill(args) => crate::still::cli::run_synth_still(&args),
         Command::ImportVideo(args) => crate::video_cli::run_import_video(&args),
         Command::Gui { scan } => run_gui(scan),
     }

@@ -12,11 +12,13 @@ pub mod engine;
 pub mod image;
 pub mod inspect;
 pub mod io;
+pub mod meta;
 pub mod pack_cli;
 pub mod pipeline;
 #[cfg(feature = "gui")]
 pub mod playback;
 pub mod side;
+pub mod still;
 pub mod synth;
 pub mod video_cli;
 pub mod viz;

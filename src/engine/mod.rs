@@ -13,8 +13,8 @@ use crate::io::wav::{Audio, read_wav};
 use crate::io::{LoadError, Scan, ScanMeta};
 use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample};
 use crate::pipeline::eval::{Scores, evaluate};
-use crate::pipeline::finish::{ClipSignals, FusionReport, finish_method_clip};
 pub use crate::pipeline::finish::{BRIDGE_GAP_SAMPLES, bridge_short_gaps};
+use crate::pipeline::finish::{ClipSignals, FusionReport, finish_method_clip};
 use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
 use crate::pipeline::walls::WallSide;
 use crate::pipeline::{

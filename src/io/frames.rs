@@ -197,8 +197,8 @@ fn check_undecoded_frame(path: &Path) -> Result<(usize, usize), LoadError> {
 }
 
 /// Checks a frame without decoding it and returns its size: a PNG's chunks must match their
-/// checksums ([`check_png_chunks`]), a TIFF's image data must lie inside the file
-/// ([`check_tiff_extent`]), any other file's header must read, and the size must be within
+/// checksums (`check_png_chunks`), a TIFF's image data must lie inside the file
+/// (`check_tiff_extent`), any other file's header must read, and the size must be within
 /// the limits. `path` names the frame in errors.
 ///
 /// # Errors

@@ -6,6 +6,7 @@ pub mod frames;
 pub mod limits;
 pub mod lock;
 pub mod scan;
+pub mod still;
 #[cfg(feature = "video")]
 pub mod video;
 pub mod wav;

@@ -18,7 +18,7 @@ use super::optical_flow::FlowField;
 use super::slope_reference::SlopeReference;
 use super::{PipelineParams, StageError};
 use crate::image::Image;
-use crate::io::ScanMeta;
+use crate::meta::ScanMeta;
 
 /// What a group's stages run on.
 #[derive(Clone, Debug)]
@@ -486,7 +486,10 @@ mod tests {
         // A rerun of flow: its readers go stale with it; running from there brings all back.
         let runs = std::cell::RefCell::new(Vec::new());
         cache.invalidate(Stage::Flow);
-        assert_eq!(fresh(&cache, &p), [true, false, false, false, false, false, true]);
+        assert_eq!(
+            fresh(&cache, &p),
+            [true, false, false, false, false, false, true]
+        );
         let before = cache.output_id(Stage::Derivatives);
         cache
             .run_from(Stage::Flow, &input, &p, &mut |s, _| {

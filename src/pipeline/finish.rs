@@ -15,7 +15,7 @@ use super::dsp::apply_dsp;
 use super::edges::decode_border_signal;
 use super::fusion::{FusionBlock, GroupFusion, fuse};
 use super::{Method, PipelineParams, StageError};
-use crate::io::ScanMeta;
+use crate::meta::ScanMeta;
 
 /// Gaps up to this many native samples are bridged by linear interpolation; longer ones stay silent.
 pub const BRIDGE_GAP_SAMPLES: usize = 4;

@@ -25,7 +25,7 @@ use super::sampling::{SampleGrid, sample_grid};
 use super::slope_reference::check_against;
 use super::walls::{WallLine, WallSide, find_walls};
 use super::{PipelineParams, StageError, median};
-use crate::io::ScanMeta;
+use crate::meta::ScanMeta;
 
 /// The per-group stages, in the order they run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]

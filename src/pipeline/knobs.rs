@@ -185,6 +185,40 @@ knob_docs! {
         => "analysis block length (samples, a power of two; shorter clips use the largest power of two that fits); default 256",
     "fusion.smoothing_blocks"
         => "blocks on each side whose difference spectra are averaged with a block's own; default 4",
+    "still.block_lines"
+        => "still images: lines per detection block (its median cross profile finds the grooves)",
+    "still.max_groove_width_um"
+        => "widest groove looked for, µm (sets the window of the local light levels)",
+    "still.min_wall_width_um"
+        => "narrowest wall looked for, µm (never under 1.5 px)",
+    "still.walls"
+        => "dark (walls darker than the land) or bright",
+    "still.min_contrast"
+        => "smallest wall contrast, as a share of the local bright level",
+    "still.max_gap_blocks"
+        => "blocks a groove may be lost for (text, damage) and still be followed",
+    "still.min_track_blocks"
+        => "fewest blocks a groove must be found in",
+    "still.search_share"
+        => "half-width of each border's search about its prediction, as a share of its wall's width",
+    "still.outlier_sigmas"
+        => "a border this many robust σ from what the other borders say is an outlier",
+    "still.path_window_um"
+        => "groove length over which the slow path (skew, curvature, drift) is fitted as a quadratic and taken out, µm",
+    "still.wall_angle_deg"
+        => "wall angle from the record plane (stereo: border motion × sin of it = channel)",
+    "still.border.fit_half_window_px"
+        => "half-width of the profile stretch the edge-spread fit reads, px",
+    "still.border.min_width_px"
+        => "smallest edge-spread σ the fit may take, px",
+    "still.border.max_width_px"
+        => "largest edge-spread σ, px",
+    "still.border.min_contrast"
+        => "smallest step between the fitted levels (grey level, 1 = full scale)",
+    "still.border.max_iterations"
+        => "iteration cap of the fit",
+    "still.border.tolerance_px"
+        => "the fit stops when the position moves by less than this, px",
 }
 
 /// The documentation line of `key` (`table.key`), if any.

@@ -20,6 +20,7 @@ pub mod orientation;
 pub mod sampling;
 pub mod simd;
 pub mod slope_reference;
+pub mod still;
 pub mod walls;
 
 /// Why a stage could not produce its output.
@@ -71,7 +72,7 @@ pub fn check_range(name: &str, value: f64, lo: f64, hi: f64) -> Result<(), Stage
 
 use serde::{Deserialize, Serialize};
 
-use crate::io::ScanMeta;
+use crate::meta::ScanMeta;
 use audio_signal::SoundParams;
 use depth::DepthParams;
 use derivatives::DerivativeParams;
@@ -171,6 +172,8 @@ pub struct PipelineParams {
     pub edges: EdgeParams,
     /// Fused decoder (the `fused` method).
     pub fusion: FusionParams,
+    /// The still-image decoder (`groovescope still`; scans do not read it).
+    pub still: still::StillParams,
 }
 
 impl PipelineParams {
@@ -224,7 +227,8 @@ impl PipelineParams {
         self.dsp.validate()?;
         self.edges.validate()?;
         self.fusion.validate()?;
-        self.hough.validate()
+        self.hough.validate()?;
+        self.still.validate()
     }
 }
 

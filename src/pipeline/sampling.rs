@@ -1,6 +1,6 @@
 //! Where a group's output samples fall: the scan's global sample grid placed on the columns of one frame.
 
-use crate::io::ScanMeta;
+use crate::meta::ScanMeta;
 
 use super::audio_signal::SoundParams;
 

@@ -35,6 +35,7 @@ pub mod noise;
 pub mod render;
 pub mod scene;
 pub mod sounds;
+pub mod still;
 pub mod track;
 
 #[cfg(test)]

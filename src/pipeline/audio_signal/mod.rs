@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use super::orientation::{Orientation, OrientationSample};
 use super::walls::WallSide;
 use super::{StageError, check_range};
-use crate::io::Cut;
+use crate::meta::Cut;
 
 mod resample;
 mod stitch;

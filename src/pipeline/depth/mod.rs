@@ -39,7 +39,7 @@ use serde::{Deserialize, Serialize};
 use super::optical_flow::FlowField;
 use super::{StageError, check_range, median_in_place};
 use crate::image::{Image, zeros_par};
-use crate::io::Geometry;
+use crate::meta::Geometry;
 use crate::pipeline::simd::{Compiled, Isa};
 
 mod average;

@@ -4,8 +4,8 @@
 //! Each sample's strip (its columns at the land, every `coarse_column_step`-th one) is averaged
 //! into one profile down the whole frame. The walls are the bright bands between the dark land
 //! and the dark bottom: the profile is cut at the midpoint between its 10th and 90th
-//! percentiles, runs above it closer than [`MERGE_GAP_ROWS`] are joined (texture dips), and the
-//! two longest runs of at least [`MIN_RUN_ROWS`] rows are the left (upper) and right (lower)
+//! percentiles, runs above it closer than `MERGE_GAP_ROWS` are joined (texture dips), and the
+//! two longest runs of at least `MIN_RUN_ROWS` rows are the left (upper) and right (lower)
 //! wall. Their ends are the borders: left land (rising), left bottom (falling), right bottom
 //! (rising), right land (falling), each refined by the border model on the profile.
 

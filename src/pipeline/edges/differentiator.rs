@@ -5,7 +5,7 @@
 //! (ω in radians per sample). It is designed to approach `D(ω) = iω / A(ω)` over the band
 //! `0 < ω ≤ band·π`, where `A(ω) = sin(ωq/2)/(ωq/2)` is the response of the box average over
 //! `q` samples that each border sample already is (`aperture_samples`; 0 = none): weighted least
-//! squares of `|H − D|²/ω` over [`DESIGN_POINTS`] frequencies (the `1/ω` weight spends the taps
+//! squares of `|H − D|²/ω` over `DESIGN_POINTS` frequencies (the `1/ω` weight spends the taps
 //! on the relative error, which is what a dB bar measures), with a small ridge `ridge·Σc²`,
 //! subject to `Σc = 0` and `Σn·c_n = 1` (no response to a constant, the exact slope of a
 //! ramp). With `a = b` the solution is antisymmetric: a pure, zero-delay differentiator. A

@@ -9,8 +9,8 @@
 //! index `n` a ray is displaced toward the axis as if the surface were `d·(1 − 1/n)` nearer
 //! (paraxially), so rows on the glass side use that shorter distance.
 
-use crate::io::ScanMeta;
-use crate::io::scan::GlassSide;
+use crate::meta::GlassSide;
+use crate::meta::ScanMeta;
 
 /// Pixel ↔ groove mapping of one group's frames.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -53,7 +53,7 @@ use super::sampling::native_spacing_um;
 use super::walls::WallSide;
 use super::{StageError, check_range};
 use crate::image::Image;
-use crate::io::{Cut, ScanMeta};
+use crate::meta::{Cut, ScanMeta};
 
 pub use signal::{BorderChannels, DecodedEdges, decode_border_signal};
 

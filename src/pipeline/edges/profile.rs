@@ -415,7 +415,7 @@ pub fn fit_sample(
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
-    use crate::io::ScanMeta;
+    use crate::meta::ScanMeta;
 
     fn meta() -> ScanMeta {
         ScanMeta::from_toml_str(

@@ -15,7 +15,7 @@
 //! position, knots every half sample, is fitted to them by weighted least squares — weights
 //! `1/(slope²/12 + crossing_sigma²)` — together with `spline_smoothness·Σ(Δ³c)²`, which lets it
 //! bend between crossings only as a smooth curve would, and each sample's own box average from
-//! the border model (`anchor_sigma_px`) where no crossing lies within [`ANCHOR_REACH`] samples (a
+//! the border model (`anchor_sigma_px`) where no crossing lies within `ANCHOR_REACH` samples (a
 //! border that crosses no row at all): elsewhere that average is biased toward the middle of the
 //! rows the sample steps in, and the crossings place it better. (A border that only wobbles
 //! about one row centre, by less than a pixel, crosses the same row both ways and shows nothing

@@ -10,7 +10,7 @@
 //! squares over its borders (weights `1/se²`, the standard error floored at
 //! `border_floor_um`), reweighted by the Lorentzian `1/(1 + r²/(2σ²))` of each border's residual
 //! (σ = `border_sigma_um`) from a median start; the constants are the weighted means of
-//! `y_β − d − k_β·e`, and the two steps alternate [`ROUNDS`] times. The constants' common
+//! `y_β − d − k_β·e`, and the two steps alternate `ROUNDS` times. The constants' common
 //! offset is fixed so that the lands (else the bottom corners) are symmetric about `d`, so `d`
 //! is the groove's centre line; `e`'s offset (which the tracks cannot tell from the lands'
 //! constants) so that its median is zero.
@@ -23,7 +23,7 @@
 use std::ops::Range;
 
 use super::profile::lorentzian_weight;
-use crate::io::Cut;
+use crate::meta::Cut;
 
 /// Alternations of the per-sample solve and the constants.
 const ROUNDS: usize = 3;

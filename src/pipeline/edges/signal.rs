@@ -18,7 +18,7 @@ use std::ops::Range;
 use super::differentiator::differentiate;
 use super::robust::{CombineParams, Combined, combine_borders, nan_runs};
 use super::{EdgeParams, Edges};
-use crate::io::Cut;
+use crate::meta::Cut;
 use crate::pipeline::StageError;
 use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal};
 

@@ -29,7 +29,7 @@ use self::noise::{NoiseModel, fit_noise};
 use super::audio_signal::StitchedSignal;
 use super::dsp::fft_in_place;
 use super::{StageError, check_range};
-use crate::io::ScanMeta;
+use crate::meta::ScanMeta;
 
 /// Blocks lend their spectrum to the noise estimate only when less than this share of their
 /// samples was filled from the other method.
@@ -314,7 +314,8 @@ fn fuse_channel(
     let omega: Vec<f64> = (1..=half)
         .map(|k| 2.0 * PI * k as f64 / block as f64)
         .collect();
-    let edge_levels = edge_sigma.map(|(sigma, known)| block_edge_levels(sigma, known, &starts, &window));
+    let edge_levels =
+        edge_sigma.map(|(sigma, known)| block_edge_levels(sigma, known, &starts, &window));
     let models: Vec<Option<NoiseModel>> = (0..spectra.len())
         .map(|b| {
             let lo = b.saturating_sub(smoothing);

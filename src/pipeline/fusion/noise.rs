@@ -246,7 +246,10 @@ mod tests {
             .collect();
         let m = fit_noise(&omega, &power, &signal, None).unwrap();
         assert!((m.flow_gain - 0.01).abs() < 1e-3, "{m:?}");
-        assert!((m.flow - 2.0).abs() < 0.3 && (m.edge - 8.0).abs() < 1.0, "{m:?}");
+        assert!(
+            (m.flow - 2.0).abs() < 0.3 && (m.edge - 8.0).abs() < 1.0,
+            "{m:?}"
+        );
         // At the tone the edges win outright; away from it the flat levels decide.
         assert!(m.edge_weight(omega[20], signal[20]) > 0.999);
         assert!(m.edge_weight(3.0, signal[100]) < 0.2);

@@ -2,7 +2,7 @@
 //! agreeing inputs exactly, fills each method's gaps from the other and checks its inputs.
 
 use super::*;
-use crate::io::ScanMeta;
+use crate::meta::ScanMeta;
 use crate::synth::noise::Rng;
 
 fn meta() -> ScanMeta {

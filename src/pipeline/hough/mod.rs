@@ -39,7 +39,7 @@ use super::optical_flow::FlowField;
 use super::walls::{WallLine, WallSide};
 use super::{StageError, check_range, median_in_place};
 use crate::image::Image;
-use crate::io::scan::{DualFocusMeta, GlassSide};
+use crate::meta::{DualFocusMeta, GlassSide};
 
 mod lines;
 mod peaks;

@@ -7,7 +7,7 @@ use super::depth::DepthMap;
 use super::walls::{WallLine, WallSide};
 use super::{StageError, check_range};
 use crate::image::Image;
-use crate::io::Geometry;
+use crate::meta::Geometry;
 use crate::pipeline::simd::Isa;
 
 mod irls;

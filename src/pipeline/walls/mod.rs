@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::depth::DepthMap;
 use super::{StageError, check_range, median_in_place, sampled_quantiles};
-use crate::io::Geometry;
+use crate::meta::Geometry;
 
 mod levels;
 mod line;

@@ -2,7 +2,7 @@
 
 use super::{DepthMap, WallSide};
 use crate::image::Image;
-use crate::io::Geometry;
+use crate::meta::Geometry;
 
 /// The paper's optics: 0.39 µm/px, 4 mm working distance, 0.78 µm frame step.
 pub(crate) fn paper_geometry() -> Geometry {

@@ -1,0 +1,262 @@
+//! What a scan's metadata says, as plain data: the record, camera, motion and dual-focus tables of `scan.toml` and the geometry the stages derive from them (read and written by `io::scan`).
+
+use serde::{Deserialize, Serialize};
+
+/// The scan format version this build reads and writes.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// How the sound was cut into the groove.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Cut {
+    /// Lateral (mono) modulation: both walls move together across the groove.
+    #[default]
+    Lateral,
+    /// 45/45 stereo: each wall carries one channel along its normal.
+    Stereo,
+    /// Vertical (hill-and-dale): the groove moves up and down.
+    Vertical,
+}
+
+/// The `[record]` table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordMeta {
+    /// Turntable speed the disc was cut at.
+    pub rpm: f64,
+    /// Groove radius at the first group.
+    pub radius_mm: f64,
+    /// Cut type.
+    #[serde(default)]
+    pub cut: Cut,
+    /// Optional radius of every group (spiral groove); overrides `radius_mm` where given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub group_radius_mm: Option<Vec<f64>>,
+}
+
+/// The `[camera]` table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraMeta {
+    /// Size of one pixel on the land (record surface) plane.
+    pub pixel_pitch_um: f64,
+    /// Optical centre to the land plane.
+    pub working_distance_mm: f64,
+}
+
+/// The `[motion]` table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionMeta {
+    /// Record travel between consecutive frames of a group (content moves toward -x).
+    pub frame_step_um: f64,
+    /// Travel between the first frames of consecutive groups.
+    pub group_step_um: f64,
+}
+
+/// Which part of the field of view the cover glass covers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum GlassSide {
+    /// Rows above `glass_edge_row` (smaller y) lie under the glass.
+    #[default]
+    Top,
+    /// Rows below `glass_edge_row` (larger y) lie under the glass.
+    Bottom,
+}
+
+/// The optional `[dual_focus]` table: a cover glass over part of the view gives a second focal depth.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DualFocusMeta {
+    /// Distance from the optical centre to the focal plane without glass.
+    pub focus_distance_mm: f64,
+    /// Cover glass thickness.
+    pub glass_thickness_mm: f64,
+    /// Cover glass refractive index.
+    pub glass_index: f64,
+    /// Which side of the edge the glass covers.
+    #[serde(default)]
+    pub glass_side: GlassSide,
+    /// Image row of the glass edge.
+    pub glass_edge_row: f64,
+}
+
+impl DualFocusMeta {
+    /// Focus shift of the glass, δv = d·(1 − 1/n), in mm (paper §9).
+    #[must_use]
+    pub fn focus_shift_mm(&self) -> f64 {
+        self.glass_thickness_mm * (1.0 - 1.0 / self.glass_index)
+    }
+
+    /// The two focal distances (without glass, under glass), in mm from the optical centre.
+    #[must_use]
+    pub fn focal_distances_mm(&self) -> (f64, f64) {
+        (
+            self.focus_distance_mm,
+            self.focus_distance_mm + self.focus_shift_mm(),
+        )
+    }
+}
+
+/// Everything `scan.toml` says. Unknown top-level tables (for example `[synth]`) are kept, not rejected.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ScanMeta {
+    /// Format version; must equal [`FORMAT_VERSION`].
+    pub format: u32,
+    /// `[record]`.
+    pub record: RecordMeta,
+    /// `[camera]`.
+    pub camera: CameraMeta,
+    /// `[motion]`.
+    pub motion: MotionMeta,
+    /// `[dual_focus]`, when the scan was made through a cover glass.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dual_focus: Option<DualFocusMeta>,
+    /// Any other tables, kept verbatim (the generator writes `[synth]`).
+    #[serde(flatten)]
+    pub extra: toml::Table,
+}
+
+impl ScanMeta {
+    /// Checks every value for sense; returns the first problem found.
+    ///
+    /// # Errors
+    /// A sentence naming the key and the problem.
+    pub fn validate(&self) -> Result<(), String> {
+        fn positive(name: &str, v: f64) -> Result<(), String> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("{name} must be a positive number, got {v}"))
+            }
+        }
+        if self.format != FORMAT_VERSION {
+            return Err(format!(
+                "format = {} is not supported (this build reads format {FORMAT_VERSION})",
+                self.format
+            ));
+        }
+        positive("record.rpm", self.record.rpm)?;
+        positive("record.radius_mm", self.record.radius_mm)?;
+        if let Some(radii) = &self.record.group_radius_mm {
+            for (i, r) in radii.iter().enumerate() {
+                positive(&format!("record.group_radius_mm[{i}]"), *r)?;
+            }
+        }
+        positive("camera.pixel_pitch_um", self.camera.pixel_pitch_um)?;
+        positive(
+            "camera.working_distance_mm",
+            self.camera.working_distance_mm,
+        )?;
+        positive("motion.frame_step_um", self.motion.frame_step_um)?;
+        positive("motion.group_step_um", self.motion.group_step_um)?;
+        if let Some(df) = &self.dual_focus {
+            positive("dual_focus.focus_distance_mm", df.focus_distance_mm)?;
+            positive("dual_focus.glass_thickness_mm", df.glass_thickness_mm)?;
+            if !(df.glass_index.is_finite() && df.glass_index >= 1.0) {
+                return Err(format!(
+                    "dual_focus.glass_index must be at least 1 (a real glass), got {}",
+                    df.glass_index
+                ));
+            }
+            if !df.glass_edge_row.is_finite() || df.glass_edge_row < 0.0 {
+                return Err(format!(
+                    "dual_focus.glass_edge_row must be a row number, got {}",
+                    df.glass_edge_row
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks the metadata against what the scan folder holds: `groups` group folders whose
+    /// first frame is `frame_size` (width, height) px. A per-group list must have one entry a
+    /// group, the glass edge must lie inside the frame, and the group step must be at most the
+    /// stretch of groove a group's samples cover (its width less the stitcher's margins), or
+    /// consecutive groups would leave gaps in the sound.
+    ///
+    /// # Errors
+    /// A sentence naming the key and both numbers.
+    pub fn check_against_scan(
+        &self,
+        groups: usize,
+        frame_size: (usize, usize),
+    ) -> Result<(), String> {
+        if let Some(radii) = &self.record.group_radius_mm
+            && radii.len() != groups
+        {
+            return Err(format!(
+                "record.group_radius_mm has {} entries but the scan has {groups} groups",
+                radii.len()
+            ));
+        }
+        let (width, height) = frame_size;
+        if let Some(df) = &self.dual_focus {
+            let last_row = height.saturating_sub(1) as f64;
+            if df.glass_edge_row > last_row {
+                return Err(format!(
+                    "dual_focus.glass_edge_row = {} lies outside the frame, whose last row is {last_row} ({height} rows)",
+                    df.glass_edge_row
+                ));
+            }
+        }
+        let margin_px = crate::pipeline::sampling::SAMPLE_MARGIN_PX;
+        let view_um = (width as f64 - 1.0 - 2.0 * margin_px) * self.camera.pixel_pitch_um;
+        if groups > 1 && self.motion.group_step_um > view_um {
+            return Err(format!(
+                "motion.group_step_um = {} µm is longer than the {view_um:.2} µm a group's frames are sampled over ({width} px of {} µm less the stitcher's {margin_px} px margin each side), so consecutive groups would not overlap and the sound would have gaps",
+                self.motion.group_step_um, self.camera.pixel_pitch_um
+            ));
+        }
+        Ok(())
+    }
+
+    /// Camera geometry derived from the metadata, for the stages.
+    #[must_use]
+    pub fn geometry(&self) -> Geometry {
+        Geometry {
+            focal_px: self.camera.working_distance_mm * 1000.0 / self.camera.pixel_pitch_um,
+            pixel_pitch_um: self.camera.pixel_pitch_um,
+            working_distance_um: self.camera.working_distance_mm * 1000.0,
+            frame_step_um: self.motion.frame_step_um,
+        }
+    }
+
+    /// Groove radius at group `group`, in mm.
+    #[must_use]
+    pub fn radius_mm(&self, group: usize) -> f64 {
+        self.record
+            .group_radius_mm
+            .as_ref()
+            .and_then(|r| r.get(group).copied())
+            .unwrap_or(self.record.radius_mm)
+    }
+
+    /// Groove (tangential) speed Vt = 2π·rpm/60·R at group `group`, in mm/s.
+    #[must_use]
+    pub fn groove_speed_mm_s(&self, group: usize) -> f64 {
+        std::f64::consts::TAU * self.record.rpm / 60.0 * self.radius_mm(group)
+    }
+}
+
+/// Camera and motion geometry in the units the stages use.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Geometry {
+    /// Focal length in pixels = working distance / pixel pitch.
+    pub focal_px: f64,
+    /// Pixel size on the land plane.
+    pub pixel_pitch_um: f64,
+    /// Optical centre to the land plane.
+    pub working_distance_um: f64,
+    /// Record travel between consecutive frames (the camera translation U).
+    pub frame_step_um: f64,
+}
+
+impl Geometry {
+    /// Image motion of the land plane between frames, in pixels (content moves toward -x).
+    #[must_use]
+    pub fn land_flow_px(&self) -> f64 {
+        -self.frame_step_um / self.pixel_pitch_um
+    }
+}

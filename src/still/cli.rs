@@ -1,0 +1,423 @@
+//! The `synth-still` and `still` subcommands: generate a top-view still with its truth, and
+//! decode a still image of a record into a WAV file.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+
+use crate::io::Cut;
+use crate::pipeline::still::Axis;
+use crate::synth::still::{StillConfig, StillScene, write_still};
+
+/// Arguments of `synth-still`.
+#[derive(Debug, clap::Args)]
+pub struct SynthStillArgs {
+    /// Sound to cut into every groove (WAV; the middle groove from `start_secs`, each turn further
+    /// in one revolution later); without it, or --melody, each wall gets a built-in tone.
+    pub sound: Option<PathBuf>,
+    /// Output folder (must not exist or be empty): still.png|tif, grooveN.wav, truth.toml.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Still settings TOML (the `[still]` keys; missing keys take the preset's values).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Starting settings: test (1000×4000 px, 7 grooves) or demo (the bundled 80 000 px strip).
+    #[arg(long, value_parser = ["test", "demo"], default_value = "test")]
+    pub preset: String,
+    /// Grooves run down (vertical) or across (horizontal) the image (overrides the config).
+    #[arg(long, value_parser = ["vertical", "horizontal"])]
+    pub axis: Option<String>,
+    /// lateral or stereo (overrides the config).
+    #[arg(long, value_parser = ["lateral", "stereo"])]
+    pub cut: Option<String>,
+    /// The built-in melody (C5 E5 G5 C6) in every groove instead of tones.
+    #[arg(long, conflicts_with = "sound")]
+    pub melody: bool,
+    /// Duration of the melody (s).
+    #[arg(long, default_value_t = 1.0)]
+    pub duration: f64,
+    /// Seed of texture, levels, rims, dust and noise (overrides the config).
+    #[arg(long)]
+    pub seed: Option<u32>,
+    /// No summary line.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `base` with the keys of the TOML file `path` (optionally under a `[table]`) laid over it.
+///
+/// # Errors
+/// When the file cannot be read or a key or value is invalid (the message names the file).
+pub fn overlay_toml<T>(base: &T, path: &Path, table: &str, what: &str) -> Result<T>
+where
+    T: serde::Serialize + serde::de::DeserializeOwned,
+{
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read {what}: {}", path.display()))?;
+    let mut merged: toml::Table = toml::to_string(base)
+        .ok()
+        .and_then(|t| toml::from_str(&t).ok())
+        .unwrap_or_default();
+    let user: toml::Table = toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("invalid {what}: {}: {}", e.message(), path.display()))?;
+    let user = match user.get(table) {
+        Some(toml::Value::Table(t)) => t.clone(),
+        _ => user,
+    };
+    merged.extend(user);
+    toml::Value::Table(merged)
+        .try_into::<T>()
+        .map_err(|e| anyhow::anyhow!("invalid {what}: {}: {}", e.message(), path.display()))
+}
+
+/// Runs `synth-still`.
+///
+/// # Errors
+/// Invalid settings, an unusable sound, an output folder that is not empty, write failures.
+pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
+    let base = if args.preset == "demo" {
+        StillConfig::demo()
+    } else {
+        StillConfig::default()
+    };
+    let mut cfg = match &args.config {
+        Some(p) => overlay_toml(&base, p, "still", "still settings")?,
+        None => base,
+    };
+    match args.axis.as_deref() {
+        Some("vertical") => cfg.axis = Axis::Vertical,
+        Some("horizontal") => cfg.axis = Axis::Horizontal,
+        _ => {}
+    }
+    match args.cut.as_deref() {
+        Some("lateral") => cfg.cut = Cut::Lateral,
+        Some("stereo") => cfg.cut = Cut::Stereo,
+        _ => {}
+    }
+    if let Some(seed) = args.seed {
+        cfg.seed = seed;
+    }
+    if !(args.duration.is_finite() && args.duration > 0.0) {
+        bail!(
+            "--duration must be a positive number of seconds, got {}",
+            args.duration
+        );
+    }
+    let sound = if args.melody {
+        Some(crate::synth::arpeggio(
+            args.duration / 4.0,
+            crate::synth::BUILTIN_RATE_HZ,
+        ))
+    } else if let Some(p) = &args.sound {
+        Some(crate::io::wav::read_wav(p)?)
+    } else {
+        None
+    };
+    let scene = StillScene::new(&cfg, sound.as_ref()).map_err(|e| match (&args.sound, e) {
+        (Some(p), crate::synth::SynthError::Sound { problem }) => {
+            anyhow::anyhow!("unusable sound: {problem}: {}", p.display())
+        }
+        (_, e) => e.into(),
+    })?;
+    let summary = write_still(&scene, &args.out)?;
+    if !args.quiet {
+        let t = &summary.truth;
+        println!(
+            "wrote {} ({} × {} px, {} grooves, {:?} axis); decode groove N with: groovescope still {} \
+             --um-per-px {} --rpm {:.4} --radius-mm <grooves[N].radius_mm in truth.toml> --axis {} --groove N",
+            summary.image.display(),
+            t.width_px,
+            t.height_px,
+            t.grooves.len(),
+            t.axis,
+            summary.image.display(),
+            t.um_per_px,
+            t.rpm,
+            match t.axis {
+                Axis::Vertical => "vertical",
+                Axis::Horizontal => "horizontal",
+            }
+        );
+    }
+    Ok(())
+}
+
+/// Arguments of `still`.
+#[derive(Debug, clap::Args)]
+pub struct StillArgs {
+    /// The still: a PNG or TIFF (8/16 bit, grey or colour) of grooves seen from above.
+    pub image: PathBuf,
+    /// Pixel size on the record, µm.
+    #[arg(long)]
+    pub um_per_px: f64,
+    /// Turntable speed the disc was cut at.
+    #[arg(long)]
+    pub rpm: f64,
+    /// Radius of the groove decoded, mm.
+    #[arg(long)]
+    pub radius_mm: f64,
+    /// Grooves run down the image (vertical: time runs down) or across it (horizontal:
+    /// time runs rightward).
+    #[arg(long, value_parser = ["vertical", "horizontal"], default_value = "vertical")]
+    pub axis: String,
+    /// lateral (mono) or stereo (45/45: two channels, the left wall first).
+    #[arg(long, value_parser = ["lateral", "stereo"], default_value = "lateral")]
+    pub cut: String,
+    /// Groove to decode, from 1 at the image's left (vertical) or top (horizontal); default:
+    /// the most complete groove nearest the centre.
+    #[arg(long)]
+    pub groove: Option<usize>,
+    /// Time runs up (vertical) or leftward (horizontal) instead.
+    #[arg(long)]
+    pub reverse: bool,
+    /// Output WAV file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// JSON report (grooves found, borders, gaps, scores, timings).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// A reference WAV of the groove's sound to score against (r, envelope r, SNR).
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Parameters TOML (see `groovescope params`: the `[still]`, `[sound]` and `[dsp]` tables apply).
+    #[arg(long)]
+    pub params: Option<PathBuf>,
+    /// WAV sample format: 16, 24 or 32f.
+    #[arg(long, default_value = "24")]
+    pub bits: crate::io::wav::WavBits,
+    /// Replace existing output files.
+    #[arg(long)]
+    pub force: bool,
+    /// No summary on stdout.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// One groove in the report.
+#[derive(Debug, serde::Serialize)]
+struct GrooveLine {
+    number: usize,
+    coverage: f64,
+    position_px: f64,
+    width_px: f64,
+}
+
+/// One border in the report.
+#[derive(Debug, serde::Serialize)]
+struct BorderLine {
+    border: &'static str,
+    lines_fitted: usize,
+    screened_out: usize,
+    rejected_outliers: usize,
+}
+
+/// One bridged gap in the report.
+#[derive(Debug, serde::Serialize)]
+struct GapLine {
+    channel: usize,
+    start_line: usize,
+    lines: usize,
+    start_ms: f64,
+    duration_ms: f64,
+}
+
+/// The JSON report of `still`.
+#[derive(Debug, serde::Serialize)]
+struct StillReport<'a> {
+    version: &'static str,
+    image: String,
+    output: String,
+    params_file: Option<String>,
+    image_width_px: usize,
+    image_height_px: usize,
+    axis: &'a str,
+    cut: &'a str,
+    reverse: bool,
+    um_per_px: f64,
+    rpm: f64,
+    radius_mm: f64,
+    groove_speed_mm_s: f64,
+    grooves_found: Vec<GrooveLine>,
+    bottoms_visible: bool,
+    groove: usize,
+    groove_chosen_automatically: bool,
+    left_wall: &'static str,
+    native_rate_hz: f64,
+    sample_rate_hz: u32,
+    channels: usize,
+    duration_secs: f64,
+    gain_per_mm_s: f64,
+    borders: Vec<BorderLine>,
+    gaps: Vec<GapLine>,
+    reference: Option<String>,
+    scores: Option<Vec<Option<crate::pipeline::eval::Scores>>>,
+    timings: super::StillTimings,
+    params: &'a crate::pipeline::PipelineParams,
+    warnings: &'a [String],
+}
+
+/// Runs `still`.
+///
+/// # Errors
+/// Any failure as one line naming the file.
+pub fn run_still(args: &StillArgs) -> Result<()> {
+    for out in std::iter::once(&args.out).chain(args.report.as_ref()) {
+        if out.exists() && !args.force {
+            bail!(
+                "refusing to overwrite an existing file (use --force): {}",
+                out.display()
+            );
+        }
+    }
+    let params = crate::cli::load_params(args.params.as_deref())?;
+    let axis = if args.axis == "horizontal" {
+        Axis::Horizontal
+    } else {
+        Axis::Vertical
+    };
+    let cut = if args.cut == "stereo" {
+        Cut::Stereo
+    } else {
+        Cut::Lateral
+    };
+    let setup = crate::pipeline::still::StillSetup {
+        axis,
+        um_per_px: args.um_per_px,
+        rpm: args.rpm,
+        radius_mm: args.radius_mm,
+        cut,
+        reverse: args.reverse,
+    };
+    setup
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{e}: {}", args.image.display()))?;
+    if args.groove == Some(0) {
+        bail!(
+            "--groove counts from 1 (the image's left or top groove): {}",
+            args.image.display()
+        );
+    }
+    let run = super::decode_still_file(&args.image, &setup, args.groove, &params)?;
+    let scores = args
+        .reference
+        .as_deref()
+        .map(|r| super::score_still(&run.audio, r))
+        .transpose()?;
+    crate::io::wav::write_wav(&args.out, &run.audio, args.bits, args.force)?;
+    let a = &run.analysis;
+    let groove = &a.grooves.grooves[a.chosen];
+    let line_ms = 1000.0 * args.um_per_px / setup.groove_speed_um_s();
+    if let Some(path) = &args.report {
+        let names = ["land|wall", "wall|bottom", "bottom|wall", "wall|land"];
+        let report = StillReport {
+            version: env!("CARGO_PKG_VERSION"),
+            image: args.image.display().to_string(),
+            output: args.out.display().to_string(),
+            params_file: args.params.as_ref().map(|p| p.display().to_string()),
+            image_width_px: run.image_px.0,
+            image_height_px: run.image_px.1,
+            axis: &args.axis,
+            cut: &args.cut,
+            reverse: args.reverse,
+            um_per_px: args.um_per_px,
+            rpm: args.rpm,
+            radius_mm: args.radius_mm,
+            groove_speed_mm_s: setup.groove_speed_um_s() / 1000.0,
+            grooves_found: a
+                .grooves
+                .grooves
+                .iter()
+                .map(|g| GrooveLine {
+                    number: g.number,
+                    coverage: g.coverage,
+                    position_px: g.position_px,
+                    width_px: g.width_px,
+                })
+                .collect(),
+            bottoms_visible: a.grooves.bottoms_visible,
+            groove: groove.number,
+            groove_chosen_automatically: args.groove.is_none(),
+            left_wall: left_wall_text(axis, args.reverse),
+            native_rate_hz: a.signal.native_rate_hz,
+            sample_rate_hz: run.audio.sample_rate_hz,
+            channels: run.audio.channels.len(),
+            duration_secs: run.audio.duration_secs(),
+            gain_per_mm_s: run.gain_per_mm_s,
+            borders: names
+                .iter()
+                .zip(a.signal.border_counts)
+                .map(|(n, c)| BorderLine {
+                    border: n,
+                    lines_fitted: c[0],
+                    screened_out: c[1],
+                    rejected_outliers: c[2],
+                })
+                .collect(),
+            gaps: a
+                .signal
+                .gaps
+                .iter()
+                .map(|g| GapLine {
+                    channel: g.channel,
+                    start_line: g.start_line,
+                    lines: g.lines,
+                    start_ms: g.start_line as f64 * line_ms,
+                    duration_ms: g.lines as f64 * line_ms,
+                })
+                .collect(),
+            reference: args.reference.as_ref().map(|p| p.display().to_string()),
+            scores: scores.clone(),
+            timings: run.timings,
+            params: &params,
+            warnings: &run.warnings,
+        };
+        let json = serde_json::to_vec_pretty(&report)?;
+        crate::io::write_atomic(path, &json, args.force)?;
+    }
+    if !args.quiet {
+        for w in &run.warnings {
+            eprintln!("warning: {w}");
+        }
+        println!(
+            "wrote {} ({:.3} s at {} Hz, {} channel{}) from groove {} of {} found ({:.1} s)",
+            args.out.display(),
+            run.audio.duration_secs(),
+            run.audio.sample_rate_hz,
+            run.audio.channels.len(),
+            if run.audio.channels.len() == 1 {
+                ""
+            } else {
+                "s"
+            },
+            groove.number,
+            a.grooves.grooves.len(),
+            run.timings.total_secs
+        );
+        for (c, s) in scores.iter().flatten().enumerate() {
+            if let Some(s) = s {
+                println!(
+                    "vs reference{}: r = {:.3}, envelope r = {}, SNR = {:.1} dB",
+                    if run.audio.channels.len() > 1 {
+                        format!(" (channel {c})")
+                    } else {
+                        String::new()
+                    },
+                    s.r,
+                    s.envelope_r_text(3),
+                    s.snr_db
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Which wall is the left channel, for the report.
+fn left_wall_text(axis: Axis, reverse: bool) -> &'static str {
+    match (axis, reverse) {
+        (Axis::Vertical, false) => "the right-hand wall (time runs down)",
+        (Axis::Vertical, true) => "the left-hand wall (time runs up)",
+        (Axis::Horizontal, false) => "the upper wall (time runs rightward)",
+        (Axis::Horizontal, true) => "the lower wall (time runs leftward)",
+    }
+}

@@ -1,0 +1,381 @@
+//! Still images end to end: generated stills with a known tone on every wall (7 grooves, both
+//! axes, lateral and 45/45, with dust, text, uneven light, rims, drift and close neighbours)
+//! decoded within 1 % of each wall's tone, stereo walls kept apart, and the `still` command's
+//! answers to bad input (one line naming the file, a failing exit, nothing written).
+#![allow(clippy::unwrap_used)] // tests may panic
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{groovescope, stderr};
+use groovescope::image::Image;
+use groovescope::io::Cut;
+use groovescope::pipeline::PipelineParams;
+use groovescope::pipeline::eval::evaluate;
+use groovescope::pipeline::still::measure::{dominant_frequency_hz, relative_level_db};
+use groovescope::pipeline::still::{Axis, StillParams, StillSetup, analyse_still};
+use groovescope::still::finish_sound;
+use groovescope::synth::still::{
+    StillConfig, StillScene, groove_reference, render_still, write_still,
+};
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn setup(cfg: &StillConfig, scene: &StillScene, k: usize) -> StillSetup {
+    StillSetup {
+        axis: cfg.axis,
+        um_per_px: cfg.um_per_px,
+        rpm: cfg.rpm,
+        radius_mm: scene.grooves[k].radius_mm,
+        cut: cfg.cut,
+        reverse: false,
+    }
+}
+
+/// The finished sound (44.1 kHz, the default DSP) of groove `k` (0-based).
+fn decode(
+    img: &Image,
+    cfg: &StillConfig,
+    scene: &StillScene,
+    k: usize,
+) -> groovescope::io::wav::Audio {
+    let a = analyse_still(
+        img,
+        &setup(cfg, scene, k),
+        Some(k + 1),
+        &StillParams::default(),
+    )
+    .unwrap();
+    assert_eq!(a.grooves.grooves.len(), cfg.grooves, "grooves found");
+    finish_sound(&a.signal, &PipelineParams::default())
+        .unwrap()
+        .0
+}
+
+#[test]
+fn seven_grooves_give_their_tones_on_both_axes() {
+    for axis in [Axis::Vertical, Axis::Horizontal] {
+        let cfg = StillConfig {
+            axis,
+            ..StillConfig::default()
+        };
+        let scene = StillScene::new(&cfg, None).unwrap();
+        let img = render_still(&scene).image;
+        for k in 0..cfg.grooves {
+            let audio = decode(&img, &cfg, &scene, k);
+            let rate = f64::from(audio.sample_rate_hz);
+            let want = scene.grooves[k].tones_hz.unwrap().0;
+            let got = dominant_frequency_hz(&audio.channels[0], rate).unwrap();
+            let reference = groove_reference(&scene, k, audio.sample_rate_hz);
+            let scores = evaluate(
+                &audio.channels[0],
+                &reference.channels[0],
+                40,
+                audio.sample_rate_hz,
+            )
+            .unwrap();
+            eprintln!(
+                "{axis:?} lateral groove {}: {want:.1} Hz → {got:.2} Hz ({:+.3} %), r {:.4}, SNR {:.1} dB",
+                k + 1,
+                100.0 * (got / want - 1.0),
+                scores.r,
+                scores.snr_db
+            );
+            assert!(
+                (got / want - 1.0).abs() < 0.01,
+                "{axis:?} groove {}: {got} vs {want}",
+                k + 1
+            );
+            assert!(scores.r > 0.95, "{axis:?} groove {}: r {}", k + 1, scores.r);
+        }
+    }
+}
+
+#[test]
+fn stereo_walls_keep_their_tones_apart_on_both_axes() {
+    for axis in [Axis::Vertical, Axis::Horizontal] {
+        let cfg = StillConfig {
+            axis,
+            cut: Cut::Stereo,
+            ..StillConfig::default()
+        };
+        let scene = StillScene::new(&cfg, None).unwrap();
+        let img = render_still(&scene).image;
+        for k in 0..cfg.grooves {
+            let audio = decode(&img, &cfg, &scene, k);
+            assert_eq!(audio.channels.len(), 2);
+            let rate = f64::from(audio.sample_rate_hz);
+            let (fl, fr) = scene.grooves[k].tones_hz.unwrap();
+            for (c, (own, other)) in [(fl, fr), (fr, fl)].into_iter().enumerate() {
+                let got = dominant_frequency_hz(&audio.channels[c], rate).unwrap();
+                let crosstalk = relative_level_db(&audio.channels[c], rate, own, other);
+                eprintln!(
+                    "{axis:?} stereo groove {} {}: {own:.1} Hz → {got:.2} Hz ({:+.3} %), the other wall's {other:.0} Hz at {crosstalk:.1} dB",
+                    k + 1,
+                    ["left", "right"][c],
+                    100.0 * (got / own - 1.0)
+                );
+                assert!(
+                    (got / own - 1.0).abs() < 0.01,
+                    "{axis:?} groove {} ch {c}: {got} vs {own}",
+                    k + 1
+                );
+                assert!(
+                    crosstalk < -20.0,
+                    "{axis:?} groove {} ch {c}: crosstalk {crosstalk} dB",
+                    k + 1
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_test_still_holds_the_troubles_it_is_meant_to() {
+    let cfg = StillConfig::default();
+    let scene = StillScene::new(&cfg, None).unwrap();
+    let rendered = render_still(&scene);
+    let truth = groovescope::synth::still::still_truth(&scene, &rendered, "still.png");
+    assert!(truth.dust_particles >= 200, "{}", truth.dust_particles);
+    assert!(truth.text_box.is_some());
+    let rims: Vec<bool> = truth.grooves.iter().flat_map(|g| g.rims).collect();
+    assert!(
+        rims.contains(&true) && rims.contains(&false),
+        "rims on some walls only"
+    );
+    let width_px = cfg.top_width_um / cfg.um_per_px;
+    for g in &truth.grooves {
+        // Drift across the image by more than the groove's own width.
+        assert!((g.centre_px[1] - g.centre_px[0]).abs() > width_px, "{g:?}");
+    }
+    // Close neighbours: the land between grooves is under the groove's width.
+    let land = cfg.pitch_um - cfg.top_width_um;
+    assert!(land < cfg.top_width_um);
+    // Uneven light: the land is at least 20 % brighter in one place than in another.
+    let img = &rendered.image;
+    let land_level = |x0: usize, y0: usize| -> f32 {
+        let mut v: Vec<f32> = (y0..y0 + 200)
+            .flat_map(|y| (x0..x0 + 100).map(move |x| (x, y)))
+            .map(|(x, y)| img.data[y * img.width + x])
+            .collect();
+        v.sort_by(f32::total_cmp);
+        v[v.len() * 3 / 4]
+    };
+    let levels: Vec<f32> = [
+        (0, 100),
+        (880, 100),
+        (0, 3000),
+        (880, 3000),
+        (0, 1800),
+        (880, 1800),
+    ]
+    .iter()
+    .map(|&(x, y)| land_level(x, y))
+    .collect();
+    let (lo, hi) = levels
+        .iter()
+        .fold((f32::MAX, 0.0f32), |(a, b), &v| (a.min(v), b.max(v)));
+    assert!(hi > 1.2 * lo, "{levels:?}");
+}
+
+#[test]
+fn reverse_plays_the_groove_backwards() {
+    let cfg = StillConfig {
+        across_px: 400,
+        grooves: 3,
+        ..StillConfig::default()
+    };
+    let scene = StillScene::new(&cfg, None).unwrap();
+    let img = render_still(&scene).image;
+    let mut st = setup(&cfg, &scene, 1);
+    let params = StillParams::default();
+    let finished = |st: &StillSetup| {
+        let signal = analyse_still(&img, st, Some(2), &params).unwrap().signal;
+        finish_sound(&signal, &PipelineParams::default()).unwrap().0
+    };
+    let reference = groove_reference(&scene, 1, 44_100);
+    let forward = finished(&st);
+    st.reverse = true;
+    let mut backward = finished(&st).channels[0].clone();
+    backward.reverse();
+    for (what, x) in [
+        ("forward", &forward.channels[0]),
+        ("backward, reversed", &backward),
+    ] {
+        let scores = evaluate(x, &reference.channels[0], 40, 44_100).unwrap();
+        eprintln!("{what}: {scores:?}");
+        assert!(scores.r > 0.95, "{what}: {scores:?}");
+    }
+}
+
+/// A small still on disk: (folder, image path, radius of groove 2).
+fn small_still(dir: &Path, axis: Axis, cut: Cut, format: &str) -> (PathBuf, PathBuf, f64) {
+    let cfg = StillConfig {
+        length_px: 1200,
+        across_px: 400,
+        grooves: 3,
+        axis,
+        cut,
+        format: format.into(),
+        bit_depth: if format == "tiff" { 16 } else { 8 },
+        text: "GS".into(),
+        ..StillConfig::default()
+    };
+    let scene = StillScene::new(&cfg, None).unwrap();
+    let out = dir.join(format!("still-{axis:?}-{cut:?}-{format}"));
+    let summary = write_still(&scene, &out).unwrap();
+    (out, summary.image, scene.grooves[1].radius_mm)
+}
+
+fn still_args<'a>(image: &'a str, wav: &'a str, radius: &'a str) -> Vec<&'a str> {
+    vec![
+        "still",
+        image,
+        "--um-per-px",
+        "1",
+        "--rpm",
+        "33.3333333",
+        "--radius-mm",
+        radius,
+        "--out",
+        wav,
+        "--quiet",
+    ]
+}
+
+#[test]
+fn the_still_command_writes_sound_and_a_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let (folder, image, radius) = small_still(dir.path(), Axis::Horizontal, Cut::Stereo, "tiff");
+    let wav = dir.path().join("o.wav");
+    let report = dir.path().join("o.json");
+    let radius = radius.to_string();
+    let mut args = still_args(s(&image), s(&wav), &radius);
+    let reference = folder.join("groove2.wav");
+    args.extend([
+        "--axis",
+        "horizontal",
+        "--cut",
+        "stereo",
+        "--groove",
+        "2",
+        "--report",
+        s(&report),
+        "--reference",
+        s(&reference),
+    ]);
+    let out = groovescope(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let r = hound::WavReader::open(&wav).unwrap();
+    assert_eq!(r.spec().channels, 2);
+    assert_eq!(r.spec().sample_rate, 44_100);
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(json["groove"], 2);
+    assert_eq!(json["grooves_found"].as_array().unwrap().len(), 3);
+    assert_eq!(json["left_wall"], "the upper wall (time runs rightward)");
+    let r0 = json["scores"][0]["r"].as_f64().unwrap();
+    assert!(r0 > 0.9, "{r0}");
+    // Without --force the outputs are not replaced.
+    let again = groovescope(&args);
+    assert!(!again.status.success());
+    assert!(
+        stderr(&again).contains("refusing to overwrite"),
+        "{}",
+        stderr(&again)
+    );
+}
+
+/// Runs `still` with `extra` arguments and returns its one-line error (asserting one line,
+/// a failing exit and no WAV written).
+fn still_error(image: &Path, radius: &str, extra: &[&str]) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let wav = dir.path().join("o.wav");
+    let mut args = still_args(s(image), s(&wav), radius);
+    args.extend(extra);
+    let out = groovescope(&args);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+    assert!(!wav.exists());
+    err
+}
+
+#[test]
+fn bad_stills_get_one_clear_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, image, radius) = small_still(dir.path(), Axis::Vertical, Cut::Lateral, "png");
+    let radius = radius.to_string();
+    let err = still_error(&image, &radius, &["--groove", "9"]);
+    assert!(
+        err.contains("groove 9")
+            && err.contains("3 grooves were found")
+            && err.contains("still.png"),
+        "{err}"
+    );
+    let err = still_error(&image, &radius, &["--axis", "horizontal"]);
+    assert!(
+        err.contains("use --axis vertical") && err.contains("still.png"),
+        "{err}"
+    );
+    let err = still_error(&image, &radius, &["--groove", "0"]);
+    assert!(err.contains("counts from 1"), "{err}");
+    let err = still_error(&image, "0", &[]);
+    assert!(err.contains("radius_mm"), "{err}");
+
+    let flat = dir.path().join("flat.png");
+    groovescope::io::save_grey_png(&Image::filled(300, 200, 0.4), &flat, false, false).unwrap();
+    let err = still_error(&flat, "100", &[]);
+    assert!(
+        err.contains("no groove found: looked for dark walls") && err.contains("columns 0–299"),
+        "{err}"
+    );
+
+    let text = dir.path().join("notes.png");
+    std::fs::write(&text, "these are not pixels").unwrap();
+    let err = still_error(&text, "100", &[]);
+    assert!(
+        err.contains("not a PNG or TIFF") && err.contains("notes.png"),
+        "{err}"
+    );
+
+    let err = still_error(&dir.path().join("missing.png"), "100", &[]);
+    assert!(err.contains("missing.png"), "{err}");
+
+    // A PNG header claiming 5 000 000 × 5 000 000 pixels is refused before any decoding.
+    let huge = dir.path().join("huge.png");
+    std::fs::write(&huge, png_header(5_000_000, 5_000_000)).unwrap();
+    let err = still_error(&huge, "100", &[]);
+    assert!(
+        err.contains("larger than the still limit") && err.contains("huge.png"),
+        "{err}"
+    );
+}
+
+/// The signature and IHDR chunk of an 8-bit grey PNG of `w × h` (no image data).
+fn png_header(w: u32, h: u32) -> Vec<u8> {
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend(w.to_be_bytes());
+    ihdr.extend(h.to_be_bytes());
+    ihdr.extend([8, 0, 0, 0, 0]);
+    let mut out = vec![0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
+    out.extend(13u32.to_be_bytes());
+    out.extend(&ihdr);
+    out.extend(crc32fast::hash(&ihdr).to_be_bytes());
+    out
+}
+
+#[test]
+fn synth_still_refuses_a_folder_that_is_not_empty() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("keep.txt"), "mine").unwrap();
+    let out = groovescope(&["synth-still", "--out", s(dir.path()), "--quiet"]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("not empty"), "{}", stderr(&out));
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("keep.txt")).unwrap(),
+        "mine"
+    );
+}
