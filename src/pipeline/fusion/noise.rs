@@ -90,8 +90,9 @@ fn solve(rows: &[([f64; 3], f64, f64)], active: [bool; 3]) -> Option<[f64; 3]> {
         for row in 0..m {
             if row != col {
                 let f = a[row][col] / a[col][col];
-                for k in col..4 {
-                    a[row][k] -= f * a[col][k];
+                let pivot_row = a[col];
+                for (v, p) in a[row].iter_mut().zip(pivot_row).skip(col) {
+                    *v -= f * p;
                 }
             }
         }
