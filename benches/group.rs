@@ -12,7 +12,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use groovescope::engine::run_group;
 use groovescope::io::{Scan, load_group};
 use groovescope::pipeline::slope_reference::SlopeReference;
-use groovescope::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
+use groovescope::pipeline::{GroupInput, Method, PipelineParams, Stage, StageCache};
 use groovescope::synth::{SynthConfig, render_scan, tone};
 
 /// Renders one group of `cfg` into `dir` and loads it.
@@ -44,7 +44,11 @@ fn bench(c: &mut Criterion) {
     // As the `groovescope` binary does at start-up.
     groovescope::alloc::keep_freed_buffers();
     let tmp = tempfile::tempdir().expect("tempdir");
-    let params = PipelineParams::default();
+    // The flow method's stages (the edge stage has its own bench, benches/edges.rs).
+    let params = PipelineParams {
+        method: Method::Flow,
+        ..PipelineParams::default()
+    };
     let mut g = c.benchmark_group("group_12x1280x1024");
     g.sample_size(10);
     for (name, cfg) in [

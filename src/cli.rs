@@ -8,8 +8,8 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::io::wav::{WavBits, read_wav};
-use crate::pipeline::PathChoice;
 use crate::pipeline::PipelineParams;
+use crate::pipeline::{Method, PathChoice};
 pub use crate::side::cli::{Report, make_report, run_reconstruct};
 
 /// Plays gramophone records from microscope image sequences (Tian & Barron's optical-flow method).
@@ -134,6 +134,9 @@ pub struct ReconstructArgs {
     /// Force a path instead of choosing by the `[dual_focus]` table.
     #[arg(long, value_parser = ["auto", "depth", "dual-focus"], default_value = "auto")]
     pub path: String,
+    /// Decoder, overriding the params' `method`: flow, edges or fused.
+    #[arg(long, value_parser = ["flow", "edges", "fused"])]
+    pub method: Option<String>,
     /// WAV sample format: 16, 24 or 32f.
     #[arg(long, default_value = "24")]
     pub bits: WavBits,
@@ -331,6 +334,11 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
         meta.frames
     );
     Ok(())
+}
+
+/// The method `--method` names, or `default` without one.
+pub(crate) fn method_choice(arg: Option<&str>, default: Method) -> Method {
+    arg.and_then(Method::from_name).unwrap_or(default)
 }
 
 pub(crate) fn path_choice(arg: &str, default: PathChoice) -> PathChoice {

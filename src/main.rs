@@ -52,6 +52,7 @@ fn default_action() -> anyhow::Result<()> {
         params: None,
         report: Some(report.clone()),
         path: "auto".into(),
+        method: None,
         bits: groovescope::io::wav::WavBits::Int24,
         first_group: None,
         groups: None,

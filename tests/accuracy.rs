@@ -9,7 +9,7 @@ use groovescope::accuracy::{
     two_sample_window_px,
 };
 use groovescope::pipeline::walls::WallMethod;
-use groovescope::pipeline::{PathChoice, PipelineParams};
+use groovescope::pipeline::{Method, PathChoice, PipelineParams};
 use groovescope::synth::{SceneConfig, SceneKind, SynthConfig};
 
 #[test]
@@ -60,6 +60,7 @@ fn depth_path_tone_reaches_its_bar() {
     render_tone("1 kHz", 1000.0, &small_lateral(6), &scan).unwrap();
     let params = PipelineParams {
         path: PathChoice::Depth,
+        method: Method::Flow,
         ..PipelineParams::default()
     };
     let (s, _) = score_scan("1 kHz", &scan, &params).unwrap();

@@ -14,7 +14,7 @@ use std::sync::atomic::AtomicBool;
 use groovescope::app::Workbench;
 use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::{Scan, load_group};
-use groovescope::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
+use groovescope::pipeline::{GroupInput, Method, PipelineParams, Stage, StageCache};
 use groovescope::playback::DeviceChoice;
 use gui_common::*;
 
@@ -31,6 +31,7 @@ fn stage_outputs(c: &StageCache) -> Vec<(Stage, String)> {
                 Stage::Stripes => format!("{:?}", c.stripes()),
                 Stage::Orientation => format!("{:?}", c.orientation()),
                 Stage::Sound => format!("{:?}", c.signal()),
+                Stage::Edges => format!("{:?}", c.edges()),
             };
             (s, text)
         })
@@ -95,6 +96,11 @@ fn cache_with(scan: &Path, threads: usize, params: &PipelineParams) -> Vec<(Stag
 
 /// The engine's clip on a rayon pool of `threads` threads.
 fn engine_on_threads(scan: &Path, threads: usize) -> String {
+    engine_with(scan, threads, &PipelineParams::default())
+}
+
+/// The engine's clip with `params` on a rayon pool of `threads` threads.
+fn engine_with(scan: &Path, threads: usize, params: &PipelineParams) -> String {
     let scan = Scan::open(scan).unwrap();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -103,7 +109,10 @@ fn engine_on_threads(scan: &Path, threads: usize) -> String {
     let rec = pool.install(|| {
         reconstruct(
             &scan,
-            &ReconstructOptions::default(),
+            &ReconstructOptions {
+                params: params.clone(),
+                ..ReconstructOptions::default()
+            },
             &mut |_| {},
             &AtomicBool::new(false),
         )
@@ -178,6 +187,18 @@ fn check_scan(scan: &Path) {
         &workbench_outputs(wb(&h)),
     );
 
+    // An edge-stage knob: the edge stage alone reruns, and equals a fresh run.
+    let mut p = params.clone();
+    p.edges.column_sigma_px *= 2.0;
+    p.sound.output_rate_hz = 48_000;
+    wb_mut(&mut h).set_params(p.clone());
+    settle(&mut h);
+    assert_same(
+        "after an edge-knob change",
+        &cache_with(scan, 2, &p),
+        &workbench_outputs(wb(&h)),
+    );
+
     // A clip reconstruction racing the stage worker: started as soon as the scan is open,
     // while the group's first run is still going, with a rerun from the start while it runs.
     let mut h = open();
@@ -203,6 +224,18 @@ fn check_scan(scan: &Path) {
         engine_on_threads(scan, 2) == straight_clip,
         "the engine's clip on two threads differs"
     );
+    // Every method, on 1 and 2 threads.
+    for method in [Method::Flow, Method::Edges, Method::Fused] {
+        let p = PipelineParams {
+            method,
+            ..params.clone()
+        };
+        assert!(
+            engine_with(scan, 1, &p) == engine_with(scan, 2, &p),
+            "the {} clip differs between one and two threads",
+            method.name()
+        );
+    }
 }
 
 #[test]

@@ -209,9 +209,20 @@ fn check_consistent(h: &H) -> Result<(), String> {
                 cache.group()
             ));
         }
-        // What it was made from: every earlier stage the path uses still holds output made
-        // with the current knobs (a superseded job's newer output would make it stale).
-        for input in Stage::ALL.iter().filter(|s| **s <= stage) {
+        // What it was made from: it and every stage it reads (transitively, by the stage
+        // graph) that the path uses still hold output made with the current knobs (a
+        // superseded job's newer output would make it stale).
+        let mut inputs = vec![stage];
+        let mut i = 0;
+        while let Some(&s) = inputs.get(i) {
+            for r in s.spec().reads {
+                if !inputs.contains(r) {
+                    inputs.push(*r);
+                }
+            }
+            i += 1;
+        }
+        for input in &inputs {
             let word = statuses[input.index()].word();
             if *input != unused && !cache.is_fresh(*input, w.params()) {
                 return Err(format!(

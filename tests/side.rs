@@ -122,6 +122,48 @@ fn merged_shards_are_byte_identical_to_one_process_for_1_2_3_and_7_shards() {
     }
 }
 
+/// The default method is `edges`; `flow` (whose shards rebuild the slope history) and `fused`
+/// (both signals per group, fused over the merged clip) merge to the one-process bytes too.
+#[test]
+fn merged_shards_are_byte_identical_to_one_process_for_flow_and_fused() {
+    let (_keep, scan, _) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    for method in ["flow", "fused"] {
+        let params = tmp.path().join(format!("{method}.toml"));
+        std::fs::write(&params, format!("method = \"{method}\"\n")).unwrap();
+        let one = tmp.path().join(format!("{method}-one.wav"));
+        let o = groovescope(&[
+            "reconstruct",
+            s(scan),
+            "--out",
+            s(&one),
+            "--method",
+            method,
+            "--quiet",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let p = tmp.path().join(format!("{method}-plan.json"));
+        plan(scan, 3, &p, &["--params", s(&params)]);
+        let parts: Vec<PathBuf> = (0..3)
+            .map(|k| {
+                let dir = tmp.path().join(format!("{method}-part-{k}"));
+                run_shard(scan, &p, k, &dir);
+                dir
+            })
+            .collect();
+        let out = tmp.path().join(format!("{method}-merged.wav"));
+        let o = merge(&parts, &out);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(
+            std::fs::read(&out).unwrap() == std::fs::read(&one).unwrap(),
+            "{method}: merged WAV differs from the one-process WAV"
+        );
+    }
+    let flow = std::fs::read(tmp.path().join("flow-one.wav")).unwrap();
+    let fused = std::fs::read(tmp.path().join("fused-one.wav")).unwrap();
+    assert!(flow != fused, "--method changes the sound");
+}
+
 #[test]
 fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() {
     let (_keep, scan, _) = shared();

@@ -1,115 +1,58 @@
-//! The decoders side by side on one scan: the flow method (the engine as `reconstruct` runs it),
-//! the edge method (per-group velocity, and border tracks stitched over the clip) and the fused
-//! decoder, each finished and scored the way the engine finishes and scores its own sound.
+//! The decoders side by side on one scan: the flow, edge and fused methods, each run by the
+//! engine as `reconstruct --method` runs it, and scored against the scan's reference.
 
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
 use super::{AccuracyError, case_err};
-use crate::engine::{
-    MAX_EVAL_LAG_SECS, ReconstructOptions, aligned_reference, bridge_short_gaps, reconstruct,
-};
-use crate::io::wav::Audio;
-use crate::io::{Scan, load_group};
-use crate::pipeline::PipelineParams;
-use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample, stitch};
-use crate::pipeline::dsp::apply_dsp;
-use crate::pipeline::edges::{EdgeParams, decode_border_signal, detect_edges};
-use crate::pipeline::eval::{Scores, evaluate};
-use crate::pipeline::fusion::{Fused, FusionParams, fuse};
-use crate::pipeline::sampling::native_spacing_um;
+use crate::engine::{ReconstructOptions, Reconstruction, reconstruct};
+use crate::io::Scan;
+use crate::pipeline::audio_signal::StitchedSignal;
+use crate::pipeline::edges::EdgeParams;
+use crate::pipeline::eval::Scores;
+use crate::pipeline::finish::FusionReport;
+use crate::pipeline::fusion::FusionParams;
+use crate::pipeline::{Method, PipelineParams};
 
 /// Scores of every decoder on one scan.
 #[derive(Clone, Debug)]
 pub struct MethodScores {
-    /// The flow method (`reconstruct`).
+    /// The flow method.
     pub flow: Scores,
-    /// Edges, each group differentiated on its own and stitched as the engine stitches flow.
-    pub edges_per_group: Scores,
-    /// Edges, the border tracks stitched over the clip, then combined and differentiated.
+    /// The edge method (border tracks stitched over the clip, combined, differentiated).
     pub edges: Scores,
-    /// The fused decoder (flow with the clip-stitched edges).
+    /// The fused decoder.
     pub fused: Scores,
     /// What the fusion found (crossovers, weights).
-    pub fusion: Fused,
-    /// Warnings of the edge stage (lost borders, gaps).
+    pub fusion: Option<FusionReport>,
+    /// Warnings of the edge method's run (lost borders, gaps).
     pub edge_warnings: Vec<String>,
     /// Flow, edge and reference velocity (mm/s, mono) on the flow's stitched grid, when the
     /// reference's scale is known (for spectra of each method's error).
     pub debug: Option<(Vec<f64>, Vec<f64>, Vec<f64>)>,
 }
 
-/// Resamples, filters and levels a stitched velocity signal as the engine does, then scores
-/// its mono mix against the scan's reference.
-///
-/// # Errors
-/// A resampling, DSP or reference error, named by `case`.
-pub fn finish_and_score(
-    case: &str,
-    stitched: &StitchedSignal,
-    scan: &Scan,
-    params: &PipelineParams,
-) -> Result<(Audio, Scores), AccuracyError> {
-    let out_rate = params.sound.output_rate_hz;
-    let mut channels = Vec::with_capacity(stitched.channels.len());
-    for ch in &stitched.channels {
-        let mut y =
-            resample(ch, stitched.native_rate_hz, out_rate).map_err(|e| case_err(case, e))?;
-        apply_dsp(&mut y, f64::from(out_rate), &params.dsp).map_err(|e| case_err(case, e))?;
-        channels.push(y);
-    }
-    let peak =
-        channels.iter().flatten().fold(
-            0.0f32,
-            |m, v| if v.is_finite() { m.max(v.abs()) } else { m },
-        );
-    let gain = if peak > 0.0 { 0.89 / peak } else { 1.0 };
-    for v in channels.iter_mut().flatten() {
-        *v = if v.is_finite() { *v * gain } else { 0.0 };
-    }
-    let audio = Audio {
-        sample_rate_hz: out_rate,
-        channels,
-    };
-    let Some(reference) = &scan.reference else {
-        return Err(case_err(
-            case,
-            "the scan has no reference.wav to score against",
-        ));
-    };
-    let aligned = aligned_reference(&audio, stitched, scan.meta.groove_speed_mm_s(0), reference)
-        .map_err(|e| case_err(case, e))?;
-    let max_lag = (MAX_EVAL_LAG_SECS * f64::from(out_rate)) as usize;
-    let scores = evaluate(&audio.mono(), &aligned, max_lag, out_rate)
-        .ok_or_else(|| case_err(case, "too little overlap with reference.wav to score"))?;
-    Ok((audio, scores))
-}
-
-/// Per group: the edge method's velocity and displacement signals, and notes.
-type EdgeSignals = (Vec<GroupSignal>, Vec<GroupSignal>, Vec<String>);
-
-/// The edge method's signals of a whole scan: per-group velocity and border tracks.
-///
-/// # Errors
-/// A load or stage error, named by `case`.
-pub fn edge_signals(
+/// One method's reconstruction of `scan`.
+fn run(
     case: &str,
     scan: &Scan,
     params: &PipelineParams,
-    edges: &EdgeParams,
-) -> Result<EdgeSignals, AccuracyError> {
-    let mut velocity = Vec::new();
-    let mut borders = Vec::new();
-    let mut warnings = Vec::new();
-    for entry in &scan.groups {
-        let frames = load_group(entry).map_err(|e| case_err(case, e))?;
-        let e = detect_edges(&frames, 0, entry.index, &scan.meta, &params.sound, edges)
-            .map_err(|e| case_err(case, e))?;
-        warnings.extend(e.warnings.iter().cloned());
-        velocity.push(e.to_group_signal());
-        borders.push(e.border_signal());
-    }
-    Ok((velocity, borders, warnings))
+    method: Method,
+) -> Result<(Reconstruction, Scores), AccuracyError> {
+    let opts = ReconstructOptions {
+        params: PipelineParams {
+            method,
+            ..params.clone()
+        },
+        groups: None,
+        keep_going: true,
+    };
+    let rec = reconstruct(scan, &opts, &mut |_| {}, &AtomicBool::new(false))
+        .map_err(|e| case_err(case, format!("{}: {e}", method.name())))?;
+    let scores = rec
+        .scores
+        .ok_or_else(|| case_err(case, "the scan has no reference.wav to score against"))?;
+    Ok((rec, scores))
 }
 
 /// Runs every decoder on the scan in `dir` and scores each against its reference.
@@ -124,41 +67,21 @@ pub fn score_methods(
     fusion: &FusionParams,
 ) -> Result<MethodScores, AccuracyError> {
     let scan = Scan::open(dir).map_err(|e| case_err(case, e))?;
-    let opts = ReconstructOptions {
-        params: params.clone(),
-        groups: None,
-        keep_going: true,
+    let params = PipelineParams {
+        edges: edges.clone(),
+        fusion: fusion.clone(),
+        ..params.clone()
     };
-    let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false))
-        .map_err(|e| case_err(case, e))?;
-    let flow = rec
-        .scores
-        .ok_or_else(|| case_err(case, "the scan has no reference.wav to score against"))?;
-    let (velocity, borders, edge_warnings) = edge_signals(case, &scan, params, edges)?;
-    let spacing = native_spacing_um(&scan.meta, &params.sound);
-    let mut per_group = stitch(&velocity, spacing).map_err(|e| case_err(case, e))?;
-    bridge_short_gaps(&mut per_group);
-    let (_, edges_per_group) = finish_and_score(case, &per_group, &scan, params)?;
-    let stitched_borders = stitch(&borders, spacing).map_err(|e| case_err(case, e))?;
-    let decoded = decode_border_signal(
-        &stitched_borders,
-        scan.meta.record.cut,
-        scan.meta.groove_speed_mm_s(0),
-        edges,
-    )
-    .map_err(|e| case_err(case, e))?;
-    let (_, edge_scores) = finish_and_score(case, &decoded.velocity, &scan, params)?;
-    let fused = fuse(&rec.stitched, &decoded.velocity, &scan.meta, fusion)
-        .map_err(|e| case_err(case, e))?;
-    let (_, fused_scores) = finish_and_score(case, &fused.signal, &scan, params)?;
-    let debug = common_grid(&scan, &rec.stitched, &decoded.velocity);
+    let (flow_rec, flow) = run(case, &scan, &params, Method::Flow)?;
+    let (edge_rec, edge_scores) = run(case, &scan, &params, Method::Edges)?;
+    let (fused_rec, fused) = run(case, &scan, &params, Method::Fused)?;
+    let debug = common_grid(&scan, &flow_rec.stitched, &edge_rec.stitched);
     Ok(MethodScores {
         flow,
-        edges_per_group,
         edges: edge_scores,
-        fused: fused_scores,
-        fusion: fused,
-        edge_warnings,
+        fused,
+        fusion: fused_rec.fusion,
+        edge_warnings: edge_rec.warnings,
         debug,
     })
 }
@@ -236,18 +159,13 @@ mod tests {
             &FusionParams::default(),
         )
         .unwrap();
-        for (name, s) in [
-            ("flow", &m.flow),
-            ("edges per group", &m.edges_per_group),
-            ("edges", &m.edges),
-            ("fused", &m.fused),
-        ] {
+        for (name, s) in [("flow", &m.flow), ("edges", &m.edges), ("fused", &m.fused)] {
             eprintln!(
                 "{name:16} r {:.4} SNR {:6.2} dB lag {}",
                 s.r, s.snr_db, s.lag_samples
             );
         }
-        for b in &m.fusion.blocks {
+        for b in m.fusion.iter().flat_map(|f| &f.blocks) {
             eprintln!(
                 "block {:5} ch {} crossover {:7.0} Hz, flow noise {:.3} edge noise {:.3} mm/s, w {:?}",
                 b.start_sample,

@@ -121,10 +121,14 @@ pub fn two_sample_window_px(cfg: &SynthConfig) -> usize {
 }
 
 /// Params of the sound cases: the defaults with the low-pass off (so tones above 3 kHz are
-/// measured, not filtered away), the given orientation window and robust switch.
+/// measured, not filtered away), the given orientation window and robust switch, and the flow
+/// method (the suite's cases measure it; [`methods`] scores the decoders side by side).
 #[must_use]
 pub fn sound_params(window_px: usize, robust: bool) -> PipelineParams {
-    let mut p = PipelineParams::default();
+    let mut p = PipelineParams {
+        method: crate::pipeline::Method::Flow,
+        ..PipelineParams::default()
+    };
     p.dsp.lowpass = false;
     p.orientation.neighbourhood_px = window_px;
     p.orientation.robust = robust;

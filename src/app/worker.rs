@@ -208,7 +208,7 @@ pub fn render_stage(
                 ));
             }
         }
-        Stage::Derivatives | Stage::Sound => {}
+        Stage::Derivatives | Stage::Sound | Stage::Edges => {}
     }
     out
 }

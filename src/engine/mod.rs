@@ -13,12 +13,13 @@ use crate::io::wav::{Audio, read_wav};
 use crate::io::{LoadError, Scan, ScanMeta};
 use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample};
 use crate::pipeline::eval::{Scores, evaluate};
-use crate::pipeline::finish::finish_clip;
 pub use crate::pipeline::finish::{BRIDGE_GAP_SAMPLES, bridge_short_gaps};
-use crate::pipeline::sampling::native_spacing_um;
+use crate::pipeline::finish::{ClipSignals, FusionReport, finish_method_clip};
 use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
 use crate::pipeline::walls::WallSide;
-use crate::pipeline::{FlowDetail, GroupInput, PipelineParams, Stage, StageCache, StageError};
+use crate::pipeline::{
+    FlowDetail, GroupInput, Method, PipelineParams, Stage, StageCache, StageError,
+};
 pub use stream::{GroupOutcome, GroupStream, SlopeMode, run_groups};
 
 /// What one group adds to the clip's slope history: per wall, its own median |b| from its fits
@@ -117,10 +118,14 @@ pub struct Reconstruction {
     pub scores: Option<Scores>,
     /// Warnings worth showing (gaps, failed groups).
     pub warnings: Vec<String>,
+    /// The method that made the sound.
+    pub method: Method,
+    /// How the `fused` method weighed the decoders, per group and block (None otherwise).
+    pub fusion: Option<FusionReport>,
 }
 
-/// Runs one group through every stage for its sound (used by the engine and by benchmarks):
-/// on the dual-focus path the flow stage gives only the in-focus map ([`FlowDetail::InFocusMap`]),
+/// Runs one group through the stages its method's sound needs (used by the engine and by
+/// benchmarks; [`StageCache::sound_only`]): on the dual-focus path the flow stage gives only the in-focus map ([`FlowDetail::InFocusMap`]),
 /// which is all the stripes read. `reference` is the clip's wall-slope reference for this group
 /// (the default: none).
 ///
@@ -131,7 +136,7 @@ pub fn run_group(
     params: &PipelineParams,
     reference: &SlopeReference,
 ) -> Result<(StageCache, Vec<Duration>), StageError> {
-    let mut cache = StageCache::new(FlowDetail::InFocusMap);
+    let mut cache = StageCache::new(FlowDetail::InFocusMap).sound_only();
     cache.set_slope_reference(reference.clone());
     let mut times = vec![Duration::ZERO; Stage::ALL.len()];
     let mut t0 = Instant::now();
@@ -204,6 +209,9 @@ pub fn reconstruct(
 pub struct ClipGroups {
     /// The signals of the groups that produced sound, in group order.
     pub signals: Vec<GroupSignal>,
+    /// The edge stage's border tracks of those groups, in group order (methods that read the
+    /// edges).
+    pub borders: Vec<GroupSignal>,
     /// Report rows in group order.
     pub reports: Vec<GroupReport>,
     /// Per-group warnings (failed groups), in group order.
@@ -244,6 +252,9 @@ impl ClipGroups {
         if let Some(sig) = outcome.signal {
             self.signals.push(Arc::unwrap_or_clone(sig));
         }
+        if let Some(b) = outcome.borders {
+            self.borders.push(Arc::unwrap_or_clone(b));
+        }
     }
 }
 
@@ -263,13 +274,19 @@ pub fn finish_reconstruction(
 ) -> Result<Reconstruction, EngineError> {
     let ClipGroups {
         signals,
+        borders,
         reports,
         mut warnings,
         load_secs,
         stage_secs,
         ..
     } = clip;
-    if signals.is_empty() {
+    let empty = match params.method {
+        Method::Flow => signals.is_empty(),
+        Method::Edges => borders.is_empty(),
+        Method::Fused => signals.is_empty() || borders.is_empty(),
+    };
+    if empty {
         return Err(EngineError::NoSound {
             path: scan_dir.to_path_buf(),
             warnings,
@@ -291,7 +308,14 @@ pub fn finish_reconstruction(
             "{rejected} orientation fits rejected for an implausible wall slope (left as gaps)"
         ));
     }
-    let finished = finish_clip(&signals, native_spacing_um(meta, &params.sound), params)?;
+    let finished = finish_method_clip(
+        ClipSignals {
+            flow: &signals,
+            borders: &borders,
+        },
+        meta,
+        params,
+    )?;
     warnings.extend(finished.warnings);
     let audio = Audio {
         sample_rate_hz: finished.sample_rate_hz,
@@ -317,6 +341,8 @@ pub fn finish_reconstruction(
         gain_per_mm_s: finished.gain_per_mm_s,
         scores,
         warnings,
+        method: params.method,
+        fusion: finished.fusion,
     })
 }
 

@@ -30,8 +30,13 @@ pub struct GroupOutcome {
     pub group: usize,
     /// Its report row (None only if the stages ran but left no signal, which they do not).
     pub report: Option<GroupReport>,
-    /// Its sound (None when it failed and became a gap).
+    /// Its sound (None when it failed and became a gap): the flow method's velocity, or for
+    /// the `edges` method the edge stage's own per-group velocity (for display; the clip's
+    /// sound comes from `borders`).
     pub signal: Option<Arc<GroupSignal>>,
+    /// The edge stage's border tracks ([`crate::pipeline::edges::Edges::border_signal`]) for
+    /// the methods that read the edges (None otherwise, or when it failed).
+    pub borders: Option<Arc<GroupSignal>>,
     /// What it added to the slope reference.
     pub slopes: Vec<SlopeEntry>,
     /// Seconds decoding its frames.
@@ -52,6 +57,7 @@ impl GroupOutcome {
                 warning: Some(warning),
             }),
             signal: None,
+            borders: None,
             slopes: Vec::new(),
             load_secs,
             stage_secs: vec![0.0; Stage::ALL.len()],
@@ -196,17 +202,28 @@ fn process_group(
         .unwrap_or_default();
     slopes.push(&entries);
     let orientation = cache.orientation().map(|o| &o.orientation);
-    let report = cache.signal().map(|sig| GroupReport {
+    let edges = cache.edges();
+    let signal = if params.method.reads_flow() {
+        cache.signal().cloned()
+    } else {
+        edges.map(|e| Arc::new(e.to_group_signal()))
+    };
+    // A border lost over the group is a gap marked in the report, not a failure.
+    let edge_warnings: Vec<&str> = edges
+        .map(|e| e.warnings.iter().map(String::as_str).collect())
+        .unwrap_or_default();
+    let report = signal.as_ref().map(|sig| GroupReport {
         group: input.group,
         outlier_fraction: orientation.map(|o| o.outlier_fraction),
         rejected_fits: orientation.map_or(0, |o| o.rejected_fits),
         samples: sig.positions_um.len(),
-        warning: None,
+        warning: (!edge_warnings.is_empty()).then(|| edge_warnings.join("; ")),
     });
     Ok(GroupOutcome {
         group: input.group,
         report,
-        signal: cache.signal().cloned(),
+        signal,
+        borders: edges.map(|e| Arc::new(e.border_signal())),
         slopes: entries,
         load_secs: 0.0,
         stage_secs: times.iter().map(std::time::Duration::as_secs_f64).collect(),

@@ -11,6 +11,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::audio_signal::GroupSignal;
 use super::derivatives::Derivatives;
+use super::edges::Edges;
 use super::graph::{DepthOutput, FlowDetail, OrientationOutput, Stage, StageOutput, StageRun};
 use super::hough::Stripes;
 use super::optical_flow::FlowField;
@@ -57,6 +58,8 @@ struct Slot {
 #[derive(Clone, Debug, Default)]
 pub struct StageCache {
     flow_detail: FlowDetail,
+    /// Run only the stages the method's sound needs ([`StageSpec::needed`](super::graph::StageSpec::needed)).
+    sound_only: bool,
     /// The clip's slope reference, an input of the orientation stage.
     slope_reference: SlopeReference,
     /// The group and metadata the slots belong to.
@@ -72,6 +75,21 @@ impl StageCache {
             flow_detail,
             ..Self::default()
         }
+    }
+
+    /// This cache, running only the stages the method's sound needs (whole-scan
+    /// reconstruction): the others are skipped and hold no output. The workbench runs them all.
+    #[must_use]
+    pub fn sound_only(mut self) -> Self {
+        self.sound_only = true;
+        self
+    }
+
+    /// True when a stage runs for `params`: every stage, or in a [`StageCache::sound_only`]
+    /// cache those the method's sound needs.
+    #[must_use]
+    pub fn runs(&self, stage: Stage, params: &PipelineParams) -> bool {
+        !self.sound_only || (stage.spec().needed)(params)
     }
 
     /// How much the flow stage computes on the dual-focus path.
@@ -155,6 +173,15 @@ impl StageCache {
         }
     }
 
+    /// [`Stage::Edges`] (methods that read the edges only).
+    #[must_use]
+    pub fn edges(&self) -> Option<&Arc<Edges>> {
+        match self.output(Stage::Edges)? {
+            StageOutput::Edges(e) => e.as_ref(),
+            _ => None,
+        }
+    }
+
     /// A unique identity of the output `stage` holds (0 when none): equal identities mean the
     /// same output, in this cache or a copy of it.
     #[must_use]
@@ -181,6 +208,10 @@ impl StageCache {
     #[must_use]
     pub fn is_fresh(&self, stage: Stage, params: &PipelineParams) -> bool {
         let spec = stage.spec();
+        if !self.runs(stage, params) {
+            // A skipped stage holds nothing, and nothing that runs reads it.
+            return true;
+        }
         let Some(slot) = &self.slots[stage.index()] else {
             return false;
         };
@@ -235,6 +266,10 @@ impl StageCache {
             self.owner = owner;
         }
         for stage in Stage::ALL.into_iter().filter(|s| *s >= from) {
+            if !self.runs(stage, params) {
+                self.slots[stage.index()] = None;
+                continue;
+            }
             if stage > from && self.is_fresh(stage, params) {
                 continue;
             }
@@ -432,13 +467,13 @@ mod tests {
         assert_eq!(cache.first_stale(&hough), Some(Stage::Stripes));
         assert_eq!(
             fresh(&cache, &hough),
-            [true, true, true, false, false, false]
+            [true, true, true, false, false, false, true]
         );
         let mut lambda = p.clone();
         lambda.flow.lambda *= 2.0;
         assert_eq!(
             fresh(&cache, &lambda),
-            [true, false, false, false, false, false]
+            [true, false, false, false, false, false, true]
         );
         let mut rate = p.clone();
         rate.sound.output_rate_hz = 48_000;
@@ -451,7 +486,10 @@ mod tests {
         // A rerun of flow: its readers go stale with it; running from there brings all back.
         let runs = std::cell::RefCell::new(Vec::new());
         cache.invalidate(Stage::Flow);
-        assert_eq!(fresh(&cache, &p), [true, false, false, false, false, false]);
+        assert_eq!(
+            fresh(&cache, &p),
+            [true, false, false, false, false, false, true]
+        );
         let before = cache.output_id(Stage::Derivatives);
         cache
             .run_from(Stage::Flow, &input, &p, &mut |s, _| {
@@ -459,7 +497,7 @@ mod tests {
                 true
             })
             .unwrap();
-        assert_eq!(runs.into_inner(), &Stage::ALL[1..]);
+        assert_eq!(runs.into_inner(), &Stage::ALL[1..6], "edges read no flow");
         assert_eq!(
             cache.output_id(Stage::Derivatives),
             before,

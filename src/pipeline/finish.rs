@@ -3,10 +3,19 @@
 //! Whole-scan reconstruction (`engine`) and the merge of shard parts (`side::merge`) both end
 //! here, so a merged side is the same sound, bit for bit, as a one-process run: the input is
 //! the ordered list of group signals, nothing else.
+//!
+//! [`finish_method_clip`] finishes by the params' method: the flow signals as they are; the
+//! edges' border tracks stitched over the clip, then combined and differentiated
+//! ([`decode_border_signal`]); or both fused per band ([`fuse`]).
+
+use serde::Serialize;
 
 use super::audio_signal::{GroupSignal, StitchedSignal, resample, stitch};
 use super::dsp::apply_dsp;
-use super::{PipelineParams, StageError};
+use super::edges::decode_border_signal;
+use super::fusion::{FusionBlock, GroupFusion, fuse};
+use super::{Method, PipelineParams, StageError};
+use crate::meta::ScanMeta;
 
 /// Gaps up to this many native samples are bridged by linear interpolation; longer ones stay silent.
 pub const BRIDGE_GAP_SAMPLES: usize = 4;
@@ -24,6 +33,139 @@ pub struct FinishedClip {
     pub gain_per_mm_s: f64,
     /// Short gaps bridged, long gaps left silent: one line each.
     pub warnings: Vec<String>,
+    /// How the `fused` method weighed the two decoders (None for the others).
+    pub fusion: Option<FusionReport>,
+}
+
+/// What the fused decoder found: every analysis block, and the blocks mapped onto the groups.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FusionReport {
+    /// Per group (and channel): the crossover, the edge weights, the shares one method alone had.
+    pub groups: Vec<GroupFusion>,
+    /// Every analysis block of every channel.
+    pub blocks: Vec<FusionBlock>,
+}
+
+/// A clip's group signals as the method needs them, in group order.
+#[derive(Clone, Copy, Debug)]
+pub struct ClipSignals<'a> {
+    /// The flow method's velocity per group (read by `flow` and `fused`).
+    pub flow: &'a [GroupSignal],
+    /// The edge stage's border tracks per group ([`super::edges::Edges::border_signal`]; read
+    /// by `edges` and `fused`).
+    pub borders: &'a [GroupSignal],
+}
+
+/// Groove speed (mm/s) at each sample of `grid` from the groups' speeds at their middles,
+/// linearly between them and constant beyond the ends.
+fn groove_speed_along(groups: &[GroupSignal], grid: &StitchedSignal) -> Vec<f64> {
+    let mids: Vec<(f64, f64)> = groups
+        .iter()
+        .filter_map(|g| {
+            let (a, b) = (g.positions_um.first()?, g.positions_um.last()?);
+            Some((0.5 * (a + b), g.groove_speed_mm_s))
+        })
+        .collect();
+    let n = grid.channels.first().map_or(0, Vec::len);
+    (0..n)
+        .map(|i| {
+            let s = grid.start_um + i as f64 * grid.spacing_um;
+            let k = mids.partition_point(|m| m.0 <= s);
+            match (k.checked_sub(1).and_then(|j| mids.get(j)), mids.get(k)) {
+                (Some(&(s0, v0)), Some(&(s1, v1))) if s1 > s0 => {
+                    v0 + (v1 - v0) * (s - s0) / (s1 - s0)
+                }
+                (Some(&(_, v)), _) | (None, Some(&(_, v))) => v,
+                (None, None) => 0.0,
+            }
+        })
+        .collect()
+}
+
+/// The edge method's velocity over the clip: the border tracks stitched, combined,
+/// differentiated, and scaled by the groove speed at each sample. With it, on the same grid,
+/// each channel's displacement noise in velocity units (`σ_d·Vt·sin α/Δ`, mm/s per radian per
+/// sample: the edge noise power at ω is its square times ω²; NaN where unknown).
+fn edge_velocity(
+    borders: &[GroupSignal],
+    spacing_um: f64,
+    meta: &ScanMeta,
+    params: &PipelineParams,
+) -> Result<(StitchedSignal, StitchedSignal), StageError> {
+    let stitched = stitch(borders, spacing_um)?;
+    let decoded = decode_border_signal(&stitched, meta.record.cut, 1.0, &params.edges)?;
+    let mut velocity = decoded.velocity;
+    let speed = groove_speed_along(borders, &velocity);
+    for ch in &mut velocity.channels {
+        for (v, vt) in ch.iter_mut().zip(&speed) {
+            #[allow(clippy::cast_possible_truncation)] // velocities are stored as f32
+            let scaled = (f64::from(*v) * vt) as f32;
+            *v = scaled;
+        }
+    }
+    let sin_a = params.edges.wall_angle_deg.to_radians().sin();
+    let [left, right] = &decoded.combined.walls_se_um;
+    #[allow(clippy::cast_possible_truncation)] // noise levels are stored as f32
+    let sigma = |se: &[f64], gain: f64| -> Vec<f32> {
+        se.iter()
+            .zip(&speed)
+            .map(|(&e, &vt)| (e * gain * vt * sin_a / spacing_um) as f32)
+            .collect()
+    };
+    // Stereo: each wall its channel; mono cuts: √2 times a wall's (the walls share d).
+    let channels = if velocity.channels.len() == 2 {
+        vec![sigma(left, 1.0), sigma(right, 1.0)]
+    } else {
+        let se: Vec<f64> = left
+            .iter()
+            .zip(right)
+            .map(|(&l, &r)| match (l.is_finite(), r.is_finite()) {
+                (true, true) => l.max(r),
+                (true, false) => l,
+                (false, _) => r,
+            })
+            .collect();
+        vec![sigma(&se, std::f64::consts::SQRT_2)]
+    };
+    let noise = StitchedSignal {
+        channels,
+        gaps: Vec::new(),
+        ..velocity.clone()
+    };
+    Ok((velocity, noise))
+}
+
+/// Finishes a clip by `params.method` (see the module docs), then as [`finish_clip`] does:
+/// bridge short gaps, resample, DSP, normalise. `flow` signals give `flow`'s sound exactly as
+/// [`finish_clip`] would.
+///
+/// # Errors
+/// [`StageError`] when the signals the method reads are missing or do not stitch, or the
+/// resampling or DSP fails.
+pub fn finish_method_clip(
+    signals: ClipSignals<'_>,
+    meta: &ScanMeta,
+    params: &PipelineParams,
+) -> Result<FinishedClip, StageError> {
+    let spacing_um = super::sampling::native_spacing_um(meta, &params.sound);
+    match params.method {
+        Method::Flow => finish_clip(signals.flow, spacing_um, params),
+        Method::Edges => {
+            let (velocity, _) = edge_velocity(signals.borders, spacing_um, meta, params)?;
+            finish_stitched(velocity, params)
+        }
+        Method::Fused => {
+            let (velocity, noise) = edge_velocity(signals.borders, spacing_um, meta, params)?;
+            let flow = stitch(signals.flow, spacing_um)?;
+            let fused = fuse(&flow, &velocity, Some(&noise), meta, &params.fusion)?;
+            let mut clip = finish_stitched(fused.signal, params)?;
+            clip.fusion = Some(FusionReport {
+                groups: fused.groups,
+                blocks: fused.blocks,
+            });
+            Ok(clip)
+        }
+    }
 }
 
 /// Finishes a clip from its group signals (in group order) on a native grid of `spacing_um`:
@@ -39,7 +181,14 @@ pub fn finish_clip(
     spacing_um: f64,
     params: &PipelineParams,
 ) -> Result<FinishedClip, StageError> {
-    let mut stitched = stitch(signals, spacing_um)?;
+    finish_stitched(stitch(signals, spacing_um)?, params)
+}
+
+/// A stitched velocity signal finished: short gaps bridged, resampled, DSP, normalised.
+fn finish_stitched(
+    mut stitched: StitchedSignal,
+    params: &PipelineParams,
+) -> Result<FinishedClip, StageError> {
     let mut warnings = Vec::new();
     let bridged = bridge_short_gaps(&mut stitched);
     if bridged > 0 {
@@ -88,6 +237,7 @@ pub fn finish_clip(
         stitched,
         gain_per_mm_s,
         warnings,
+        fusion: None,
     })
 }
 

@@ -17,6 +17,7 @@ use super::depth::{DepthMap, estimate_depth};
 use super::derivatives::{
     DerivativeMode, Derivatives, SIMONCELLI_WINDOW_FRAMES, compute_derivatives,
 };
+use super::edges::{Edges, detect_edges};
 use super::hough::{Stripes, segment_stripes};
 use super::optical_flow::{FlowField, compute_flow, flow_confidence_only, flows_of_group};
 use super::orientation::{Orientation, median_wall_slope, orient_from_depth, orient_from_lines};
@@ -43,17 +44,21 @@ pub enum Stage {
     Orientation,
     /// Velocity samples of the group.
     Sound,
+    /// Sub-pixel wall borders of every frame, as displacement and velocity (the `edges` and
+    /// `fused` methods; it reads the frames alone).
+    Edges,
 }
 
 impl Stage {
     /// Every stage in run order (each reads only stages before it).
-    pub const ALL: [Stage; 6] = [
+    pub const ALL: [Stage; 7] = [
         Stage::Derivatives,
         Stage::Flow,
         Stage::Depth,
         Stage::Stripes,
         Stage::Orientation,
         Stage::Sound,
+        Stage::Edges,
     ];
 
     /// Number of stages.
@@ -75,6 +80,7 @@ impl Stage {
             Stage::Stripes => "stripes",
             Stage::Orientation => "orientation",
             Stage::Sound => "sound",
+            Stage::Edges => "edges",
         }
     }
 
@@ -121,6 +127,8 @@ pub enum StageOutput {
     Orientation(Arc<OrientationOutput>),
     /// [`Stage::Sound`].
     Sound(Arc<GroupSignal>),
+    /// [`Stage::Edges`] (None when the method does not read the edges).
+    Edges(Option<Arc<Edges>>),
 }
 
 /// How much the flow stage computes on the dual-focus path (the depth path always needs the
@@ -157,6 +165,10 @@ pub struct StageSpec {
     pub knobs_changed: fn(&PipelineParams, &PipelineParams) -> bool,
     /// True when the stage reads the clip's [`SlopeReference`](super::slope_reference::SlopeReference).
     pub reads_slope_reference: bool,
+    /// True when the method's sound needs the stage: a cache made
+    /// [`StageCache::sound_only`] runs only these (reconstruction skips the flow stages for
+    /// the `edges` method).
+    pub needed: fn(&PipelineParams) -> bool,
     /// Runs the stage.
     pub run: fn(&StageRun<'_>) -> Result<StageOutput, StageError>,
 }
@@ -169,6 +181,7 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
         // The path decides which frames are derived.
         knobs_changed: |a, b| a.path != b.path || a.derivatives != b.derivatives,
         reads_slope_reference: false,
+        needed: reads_flow,
         run: run_derivatives,
     },
     StageSpec {
@@ -176,6 +189,7 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
         reads: &[Stage::Derivatives],
         knobs_changed: |a, b| a.path != b.path || a.flow != b.flow,
         reads_slope_reference: false,
+        needed: reads_flow,
         run: run_flow,
     },
     StageSpec {
@@ -183,6 +197,7 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
         reads: &[Stage::Flow],
         knobs_changed: |a, b| a.path != b.path || a.depth != b.depth || a.walls != b.walls,
         reads_slope_reference: false,
+        needed: reads_flow,
         run: run_depth,
     },
     StageSpec {
@@ -190,6 +205,7 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
         reads: &[Stage::Derivatives, Stage::Flow],
         knobs_changed: |a, b| a.path != b.path || a.hough != b.hough,
         reads_slope_reference: false,
+        needed: reads_flow,
         run: run_stripes,
     },
     StageSpec {
@@ -200,6 +216,7 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
             a.path != b.path || a.orientation != b.orientation || a.sound != b.sound
         },
         reads_slope_reference: true,
+        needed: reads_flow,
         run: run_orientation,
     },
     StageSpec {
@@ -207,9 +224,27 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
         reads: &[Stage::Orientation],
         knobs_changed: |_, _| false,
         reads_slope_reference: false,
+        needed: reads_flow,
         run: run_sound,
     },
+    StageSpec {
+        stage: Stage::Edges,
+        reads: &[],
+        // The sample grid follows the sound table (output rate, native spacing).
+        knobs_changed: |a, b| {
+            a.method.reads_edges() != b.method.reads_edges()
+                || a.edges != b.edges
+                || a.sound != b.sound
+        },
+        reads_slope_reference: false,
+        needed: |p| p.method.reads_edges(),
+        run: run_edges,
+    },
 ];
+
+fn reads_flow(p: &PipelineParams) -> bool {
+    p.method.reads_flow()
+}
 
 fn missing(stage: Stage) -> StageError {
     StageError::BadInput {
@@ -222,7 +257,7 @@ fn run_derivatives(r: &StageRun<'_>) -> Result<StageOutput, StageError> {
     let (input, params) = (r.input, r.params);
     let meta = &input.meta;
     // The dual-focus path reads only the middle window: derive just its frames.
-    let range = frames_read(input.frames.len(), meta, params);
+    let range = flow_frames(input.frames.len(), meta, params);
     let first = range.start;
     let frames = input.frames.get(range).unwrap_or(&input.frames[..]);
     let mut d = compute_derivatives(frames, meta.geometry().land_flow_px(), &params.derivatives)?;
@@ -369,6 +404,22 @@ fn run_sound(r: &StageRun<'_>) -> Result<StageOutput, StageError> {
     Ok(StageOutput::Sound(Arc::new(signal)))
 }
 
+fn run_edges(r: &StageRun<'_>) -> Result<StageOutput, StageError> {
+    if !r.params.method.reads_edges() {
+        return Ok(StageOutput::Edges(None));
+    }
+    let input = r.input;
+    let edges = detect_edges(
+        &input.frames,
+        input.first_frame,
+        input.group,
+        &input.meta,
+        &r.params.sound,
+        &r.params.edges,
+    )?;
+    Ok(StageOutput::Edges(Some(Arc::new(edges))))
+}
+
 /// Median depth along the wall lines (µm); the scale of the sample grid for the depth path.
 fn wall_depth_um(depth: &DepthMap, walls: &[WallLine]) -> Option<f64> {
     let mut zs = Vec::new();
@@ -386,11 +437,22 @@ fn wall_depth_um(depth: &DepthMap, walls: &[WallLine]) -> Option<f64> {
     median(zs)
 }
 
-/// The frames of a group of `n` that its stages read: the middle derivative window on the
-/// dual-focus path (its stripes come from that window alone), all of them on the depth path.
+/// The frames of a group of `n` that its stages read: all of them for a method that reads the
+/// edges (the edge stage fits every frame); else the flow stages' ([`flow_frames`]).
 /// Reconstruction decodes only these.
 #[must_use]
 pub fn frames_read(n: usize, meta: &ScanMeta, params: &PipelineParams) -> std::ops::Range<usize> {
+    if params.method.reads_edges() {
+        0..n
+    } else {
+        flow_frames(n, meta, params)
+    }
+}
+
+/// The frames of a group of `n` the flow stages read: the middle derivative window on the
+/// dual-focus path (its stripes come from that window alone), all of them on the depth path.
+#[must_use]
+pub fn flow_frames(n: usize, meta: &ScanMeta, params: &PipelineParams) -> std::ops::Range<usize> {
     if params.uses_dual_focus(meta) {
         middle_window_range(n, params.derivatives.mode)
     } else {

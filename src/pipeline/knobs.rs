@@ -19,6 +19,8 @@ macro_rules! knob_docs {
 knob_docs! {
     "path"
         => "reconstruction path: auto (dual focus when scan.toml has [dual_focus]), depth, dual_focus",
+    "method"
+        => "decoder: edges (the walls' sub-pixel borders, the best measured: docs/ACCURACY.md), flow (wall tilt by optical flow), fused (both, weighted per frequency band)",
     "derivatives.mode"
         => "simoncelli: 7-frame pre-blur + p5/d5 filters; two_frame: simple differences of frame pairs",
     "derivatives.prewarp"
@@ -127,6 +129,62 @@ knob_docs! {
         => "apply a first-order DC-blocking high-pass first (per-group tilt bias becomes DC)",
     "dsp.dc_block_hz"
         => "its −3 dB corner, Hz",
+    "edges.wall_angle_deg"
+        => "wall angle from the record plane (°); default 45 (the standard cutter, and the 45/45 stereo cut). Sets the bottom depth from the walls' widths and a wall's velocity scale",
+    "edges.band_half_height_px"
+        => "rows read on each side of the predicted border (px); default 8",
+    "edges.bin_px"
+        => "width of the sub-pixel bins of the straightened profiles (px); default 0.25",
+    "edges.coarse_column_step"
+        => "the coarse strips read every this many columns; default 4",
+    "edges.column_sigma_px"
+        => "lorentzian σ of a column's offset from its sample's border (px); default 1",
+    "edges.column_rounds"
+        => "most fits per border and sample while rejecting dust columns; default 3",
+    "edges.border_sigma_um"
+        => "lorentzian σ of a border's disagreement with the others (µm); default 0.3",
+    "edges.border_floor_um"
+        => "floor of a border's standard error when weighting the borders (µm); default 0.02",
+    "edges.max_bridge_samples"
+        => "longest run of missing samples bridged by interpolation; default 3",
+    "edges.refine"
+        => "refine each border with one smooth curve over the group (edges::refine); default true",
+    "edges.hard_width_px"
+        => "edge spread (σ, px) of the group's sharpest samples below which a border counts as sharp: the refinement then reads where it crosses rows, not each column's crossing; default 0.45",
+    "edges.crossing_sigma_px"
+        => "standard error of one row crossing beyond its column gap (px); default 0.05",
+    "edges.anchor_sigma_px"
+        => "standard error given each sample's own fit in the refinement, per frame read (px); default 2 (it only holds borders that cross no row)",
+    "edges.spline_smoothness"
+        => "weight of the refined curve's third differences (1/px²); default 3",
+    "edges.spline_frames"
+        => "frames (spread over the group, the reference among them) the refinement reads; default 3",
+    "edges.border.fit_half_window_px"
+        => "half-width of the stretch of profile around the seed that the fit reads (px); default 6",
+    "edges.border.min_width_px"
+        => "smallest edge-spread σ the fit may take (px); default 0.3 (a pixel's own aperture)",
+    "edges.border.max_width_px"
+        => "largest edge-spread σ (px); default 4",
+    "edges.border.min_contrast"
+        => "smallest |high − low| for a border (grey level, 1 = full scale); default 0.02",
+    "edges.border.max_iterations"
+        => "iteration cap of the fit; default 30",
+    "edges.border.tolerance_px"
+        => "the fit stops when the position moves by less than this (px); default 1e-5",
+    "edges.differentiator.half_taps"
+        => "taps on each side of the centred filter; default 6 (13 taps)",
+    "edges.differentiator.band"
+        => "upper end of the design band as a share of Nyquist; default 0.8",
+    "edges.differentiator.aperture_samples"
+        => "box average (samples) the input already carries, compensated over the band; default 1",
+    "edges.differentiator.ridge"
+        => "ridge weight on Σc² (relative to the band's weight of 1 per design point); default 1e-4",
+    "edges.differentiator.min_run"
+        => "fewest samples in a run for any velocity there (shorter runs are gaps); default 3",
+    "fusion.block_samples"
+        => "analysis block length (samples, a power of two; shorter clips use the largest power of two that fits); default 256",
+    "fusion.smoothing_blocks"
+        => "blocks on each side whose difference spectra are averaged with a block's own; default 4",
     "still.block_lines"
         => "still images: lines per detection block (its median cross profile finds the grooves)",
     "still.max_groove_width_um"

@@ -77,6 +77,8 @@ use audio_signal::SoundParams;
 use depth::DepthParams;
 use derivatives::DerivativeParams;
 use dsp::DspParams;
+use edges::EdgeParams;
+use fusion::FusionParams;
 use hough::HoughParams;
 use optical_flow::FlowParams;
 use orientation::OrientationParams;
@@ -95,6 +97,51 @@ pub enum PathChoice {
     DualFocus,
 }
 
+/// Which decoder makes the sound.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// The wall tilt by optical flow (the path's stages, then the sound stage).
+    Flow,
+    /// The walls' sub-pixel borders ([`edges`]), differentiated: the best measured method.
+    #[default]
+    Edges,
+    /// Both, combined per frequency band ([`fusion`]).
+    Fused,
+}
+
+impl Method {
+    /// True when the method's sound reads the flow method's stages.
+    #[must_use]
+    pub fn reads_flow(self) -> bool {
+        self != Method::Edges
+    }
+
+    /// True when the method's sound reads the edge stage.
+    #[must_use]
+    pub fn reads_edges(self) -> bool {
+        self != Method::Flow
+    }
+
+    /// The name as in params.toml and `--method`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Flow => "flow",
+            Method::Edges => "edges",
+            Method::Fused => "fused",
+        }
+    }
+
+    /// The method of a `--method` word.
+    #[must_use]
+    pub fn from_name(name: &str) -> Option<Self> {
+        [Method::Flow, Method::Edges, Method::Fused]
+            .into_iter()
+            .find(|m| m.name() == name)
+    }
+}
+
 /// Every knob of the pipeline, one table per stage (the `groovescope params` TOML).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]
@@ -103,6 +150,8 @@ pub struct PipelineParams {
     #[allow(rustdoc::broken_intra_doc_links)]
     #[doc = knob!("path")]
     pub path: PathChoice,
+    #[doc = knob!("method")]
+    pub method: Method,
     /// Derivative stage.
     pub derivatives: DerivativeParams,
     /// Flow stage.
@@ -119,6 +168,10 @@ pub struct PipelineParams {
     pub sound: SoundParams,
     /// Post-processing of the whole clip.
     pub dsp: DspParams,
+    /// Edge stage (the `edges` and `fused` methods).
+    pub edges: EdgeParams,
+    /// Fused decoder (the `fused` method).
+    pub fusion: FusionParams,
     /// The still-image decoder (`groovescope still`; scans do not read it).
     pub still: still::StillParams,
 }
@@ -172,6 +225,8 @@ impl PipelineParams {
         self.orientation.validate()?;
         self.sound.validate()?;
         self.dsp.validate()?;
+        self.edges.validate()?;
+        self.fusion.validate()?;
         self.hough.validate()?;
         self.still.validate()
     }

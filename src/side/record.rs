@@ -113,25 +113,7 @@ pub fn encode(record: &Record) -> Vec<u8> {
                 }
                 None => b.push(0),
             }
-            match &o.signal {
-                Some(s) => {
-                    b.push(1);
-                    put_u64(&mut b, s.group as u64);
-                    b.extend_from_slice(&s.groove_speed_mm_s.to_bits().to_le_bytes());
-                    put_u64(&mut b, s.positions_um.len() as u64);
-                    for p in &s.positions_um {
-                        b.extend_from_slice(&p.to_bits().to_le_bytes());
-                    }
-                    put_u64(&mut b, s.channels.len() as u64);
-                    for ch in &s.channels {
-                        put_u64(&mut b, ch.len() as u64);
-                        for v in ch {
-                            b.extend_from_slice(&v.to_bits().to_le_bytes());
-                        }
-                    }
-                }
-                None => b.push(0),
-            }
+            put_signal(&mut b, o.signal.as_deref());
             put_u64(&mut b, o.slopes.len() as u64);
             for &(side, m) in &o.slopes {
                 b.push(side_code(side));
@@ -142,6 +124,8 @@ pub fn encode(record: &Record) -> Vec<u8> {
             for t in &o.stage_secs {
                 b.extend_from_slice(&t.to_bits().to_le_bytes());
             }
+            // Last, so records written before the edge stage read back with none.
+            put_signal(&mut b, o.borders.as_deref());
         }
         Record::Seed(history) => {
             b.push(TAG_SEED);
@@ -188,27 +172,7 @@ pub fn decode(payload: &[u8]) -> Result<Record, String> {
                     },
                 }),
             };
-            let signal = match r.u8()? {
-                0 => None,
-                _ => {
-                    let sig_group = r.usize()?;
-                    let groove_speed_mm_s = r.f64()?;
-                    let n = r.count(8)?;
-                    let positions_um = (0..n).map(|_| r.f64()).collect::<Result<_, _>>()?;
-                    let n_ch = r.count(8)?;
-                    let mut channels = Vec::with_capacity(n_ch);
-                    for _ in 0..n_ch {
-                        let len = r.count(4)?;
-                        channels.push((0..len).map(|_| r.f32()).collect::<Result<_, _>>()?);
-                    }
-                    Some(std::sync::Arc::new(GroupSignal {
-                        group: sig_group,
-                        positions_um,
-                        channels,
-                        groove_speed_mm_s,
-                    }))
-                }
-            };
+            let signal = r.signal()?;
             let n = r.count(9)?;
             let mut slopes: Vec<SlopeEntry> = Vec::with_capacity(n);
             for _ in 0..n {
@@ -219,10 +183,16 @@ pub fn decode(payload: &[u8]) -> Result<Record, String> {
             let n = r.count(8)?;
             let mut stage_secs: Vec<f64> = (0..n).map(|_| r.f64()).collect::<Result<_, _>>()?;
             stage_secs.resize(Stage::ALL.len(), 0.0);
+            let borders = if r.at < payload.len() {
+                r.signal()?
+            } else {
+                None
+            };
             Record::Group(GroupOutcome {
                 group,
                 report,
                 signal,
+                borders,
                 slopes,
                 load_secs,
                 stage_secs,
@@ -248,6 +218,28 @@ pub fn decode(payload: &[u8]) -> Result<Record, String> {
         return Err("a record has trailing bytes".into());
     }
     Ok(record)
+}
+
+/// A flag byte, then the signal with exact bits: group, speed, positions, channels.
+fn put_signal(b: &mut Vec<u8>, signal: Option<&GroupSignal>) {
+    let Some(s) = signal else {
+        b.push(0);
+        return;
+    };
+    b.push(1);
+    put_u64(b, s.group as u64);
+    b.extend_from_slice(&s.groove_speed_mm_s.to_bits().to_le_bytes());
+    put_u64(b, s.positions_um.len() as u64);
+    for p in &s.positions_um {
+        b.extend_from_slice(&p.to_bits().to_le_bytes());
+    }
+    put_u64(b, s.channels.len() as u64);
+    for ch in &s.channels {
+        put_u64(b, ch.len() as u64);
+        for v in ch {
+            b.extend_from_slice(&v.to_bits().to_le_bytes());
+        }
+    }
 }
 
 fn put_u64(b: &mut Vec<u8>, v: u64) {
@@ -324,6 +316,29 @@ impl Reader<'_> {
         }
     }
 
+    /// A signal as [`put_signal`] writes it.
+    fn signal(&mut self) -> Result<Option<std::sync::Arc<GroupSignal>>, String> {
+        if self.u8()? == 0 {
+            return Ok(None);
+        }
+        let group = self.usize()?;
+        let groove_speed_mm_s = self.f64()?;
+        let n = self.count(8)?;
+        let positions_um = (0..n).map(|_| self.f64()).collect::<Result<_, _>>()?;
+        let n_ch = self.count(8)?;
+        let mut channels = Vec::with_capacity(n_ch);
+        for _ in 0..n_ch {
+            let len = self.count(4)?;
+            channels.push((0..len).map(|_| self.f32()).collect::<Result<_, _>>()?);
+        }
+        Ok(Some(std::sync::Arc::new(GroupSignal {
+            group,
+            positions_um,
+            channels,
+            groove_speed_mm_s,
+        })))
+    }
+
     fn side(&mut self) -> Result<WallSide, String> {
         match self.u8()? {
             0 => Ok(WallSide::Left),
@@ -359,6 +374,12 @@ mod tests {
                 channels: vec![vec![f32::NAN, -0.1]],
                 groove_speed_mm_s: 939.3,
             })),
+            borders: Some(std::sync::Arc::new(GroupSignal {
+                group: 7,
+                positions_um: vec![2.5],
+                channels: vec![vec![3.25]; 8],
+                groove_speed_mm_s: 939.3,
+            })),
             slopes: vec![(WallSide::Left, 0.38), (WallSide::Right, 0.41)],
             load_secs: 0.01,
             stage_secs: vec![0.5; Stage::ALL.len()],
@@ -373,10 +394,21 @@ mod tests {
         };
         assert_eq!(back.report, o.report);
         assert_eq!(back.slopes, o.slopes);
-        let (a, b) = (back.signal.unwrap(), o.signal.unwrap());
+        let (a, b) = (back.signal.clone().unwrap(), o.signal.clone().unwrap());
         assert_eq!(a.positions_um, b.positions_um);
         assert_eq!(a.channels[0][0].to_bits(), b.channels[0][0].to_bits());
         assert_eq!(a.channels[0][1], b.channels[0][1]);
+        assert_eq!(back.borders, o.borders);
+        // A record written before the edge stage (no border field) reads back with none.
+        let mut old = encode(&Record::Group(GroupOutcome {
+            borders: None,
+            ..o.clone()
+        }));
+        assert_eq!(old.pop(), Some(0));
+        let Record::Group(back) = decode(&old).unwrap() else {
+            panic!("not a group record");
+        };
+        assert!(back.borders.is_none() && back.signal.is_some());
         let seed = vec![(WallSide::Right, vec![0.3, 0.31])];
         let Record::Seed(s) = decode(&encode(&Record::Seed(seed.clone()))).unwrap() else {
             panic!("not a seed");

@@ -47,17 +47,17 @@ pub enum Polarity {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct BorderParams {
-    /// Half-width of the stretch of profile around the seed that the fit reads (px); default 6.
+    #[doc = knob!("edges.border.fit_half_window_px")]
     pub fit_half_window_px: f64,
-    /// Smallest edge-spread σ the fit may take (px); default 0.3 (a pixel's own aperture).
+    #[doc = knob!("edges.border.min_width_px")]
     pub min_width_px: f64,
-    /// Largest edge-spread σ (px); default 4.
+    #[doc = knob!("edges.border.max_width_px")]
     pub max_width_px: f64,
-    /// Smallest |high − low| for a border (grey level, 1 = full scale); default 0.02.
+    #[doc = knob!("edges.border.min_contrast")]
     pub min_contrast: f64,
-    /// Iteration cap of the fit; default 30.
+    #[doc = knob!("edges.border.max_iterations")]
     pub max_iterations: u32,
-    /// The fit stops when the position moves by less than this (px); default 1e-5.
+    #[doc = knob!("edges.border.tolerance_px")]
     pub tolerance_px: f64,
 }
 

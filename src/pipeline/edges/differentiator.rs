@@ -25,15 +25,15 @@ const DESIGN_POINTS: usize = 160;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DifferentiatorParams {
-    /// Taps on each side of the centred filter; default 6 (13 taps).
+    #[doc = knob!("edges.differentiator.half_taps")]
     pub half_taps: usize,
-    /// Upper end of the design band as a share of Nyquist; default 0.8.
+    #[doc = knob!("edges.differentiator.band")]
     pub band: f64,
-    /// Box average (samples) the input already carries, compensated over the band; default 1.
+    #[doc = knob!("edges.differentiator.aperture_samples")]
     pub aperture_samples: f64,
-    /// Ridge weight on Σc² (relative to the band's weight of 1 per design point); default 1e-4.
+    #[doc = knob!("edges.differentiator.ridge")]
     pub ridge: f64,
-    /// Fewest samples in a run for any velocity there (shorter runs are gaps); default 3.
+    #[doc = knob!("edges.differentiator.min_run")]
     pub min_run: usize,
 }
 

@@ -118,39 +118,35 @@ pub struct EdgeParams {
     pub border: BorderParams,
     /// The displacement-to-velocity filter.
     pub differentiator: DifferentiatorParams,
-    /// Wall angle from the record plane (°); default 45 (the standard cutter, and the 45/45
-    /// stereo cut). Sets the bottom depth from the walls' widths and a wall's velocity scale.
+    #[doc = knob!("edges.wall_angle_deg")]
     pub wall_angle_deg: f64,
-    /// Rows read on each side of the predicted border (px); default 8.
+    #[doc = knob!("edges.band_half_height_px")]
     pub band_half_height_px: f64,
-    /// Width of the sub-pixel bins of the straightened profiles (px); default 0.25.
+    #[doc = knob!("edges.bin_px")]
     pub bin_px: f64,
-    /// The coarse strips read every this many columns; default 4.
+    #[doc = knob!("edges.coarse_column_step")]
     pub coarse_column_step: usize,
-    /// Lorentzian σ of a column's offset from its sample's border (px); default 1.
+    #[doc = knob!("edges.column_sigma_px")]
     pub column_sigma_px: f64,
-    /// Most fits per border and sample while rejecting dust columns; default 3.
+    #[doc = knob!("edges.column_rounds")]
     pub column_rounds: u32,
-    /// Lorentzian σ of a border's disagreement with the others (µm); default 0.3.
+    #[doc = knob!("edges.border_sigma_um")]
     pub border_sigma_um: f64,
-    /// Floor of a border's standard error when weighting the borders (µm); default 0.02.
+    #[doc = knob!("edges.border_floor_um")]
     pub border_floor_um: f64,
-    /// Longest run of missing samples bridged by interpolation; default 3.
+    #[doc = knob!("edges.max_bridge_samples")]
     pub max_bridge_samples: usize,
-    /// Refine each border with one smooth curve over the group ([`refine`]); default true.
+    #[doc = knob!("edges.refine")]
     pub refine: bool,
-    /// Edge spread (σ, px) of the group's sharpest samples below which a border counts as
-    /// sharp: the refinement then reads where it crosses rows, not each column's crossing;
-    /// default 0.45.
+    #[doc = knob!("edges.hard_width_px")]
     pub hard_width_px: f64,
-    /// Standard error of one row crossing beyond its column gap (px); default 0.05.
+    #[doc = knob!("edges.crossing_sigma_px")]
     pub crossing_sigma_px: f64,
-    /// Standard error given each sample's own fit in the refinement, per frame read (px);
-    /// default 2 (it only holds borders that cross no row).
+    #[doc = knob!("edges.anchor_sigma_px")]
     pub anchor_sigma_px: f64,
-    /// Weight of the refined curve's third differences (1/px²); default 3.
+    #[doc = knob!("edges.spline_smoothness")]
     pub spline_smoothness: f64,
-    /// Frames (spread over the group, the reference among them) the refinement reads; default 3.
+    #[doc = knob!("edges.spline_frames")]
     pub spline_frames: usize,
 }
 

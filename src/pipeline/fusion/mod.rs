@@ -9,9 +9,10 @@
 //! 2. A short-time Fourier transform (periodic √Hann windows of `block_samples`, half-overlapping,
 //!    which reconstruct exactly) of both. Each block's noise levels come from the periodogram of
 //!    their difference, averaged over `smoothing_blocks` blocks on each side and fitted by
-//!    [`noise::fit_noise`]: flow noise `b` flat, edge noise `a·ω²` (blocks where more than
+//!    [`noise::fit_noise`]: flow noise `b` flat plus `c·|S|²` following the signal, edge noise
+//!    `a·ω²` (blocks where more than
 //!    [`MAX_FILLED_SHARE`] of the samples were filled from the other method lend no spectrum).
-//! 3. Each bin is the Wiener combination `w·E + (1 − w)·F` with `w = b/(b + a·ω²)`, and the
+//! 3. Each bin is the Wiener combination `w·E + (1 − w)·F` with `w = N_F/(N_F + a·ω²)`, `N_F = b + c·|E_k|²` (the block's own edge periodogram standing for the signal power), and the
 //!    blocks are added back.
 //!
 //! Stereo channels fuse separately (each wall gives its channel). The report lists every block's
@@ -33,17 +34,17 @@ use crate::meta::ScanMeta;
 /// Blocks lend their spectrum to the noise estimate only when less than this share of their
 /// samples was filled from the other method.
 pub const MAX_FILLED_SHARE: f64 = 0.1;
-/// Frequencies (Hz) at which the report gives the edge weight.
+/// Frequencies (Hz) at which the report gives the edge weight (away from the signal: the
+/// flat noise levels' weight, without the flow's signal-following error).
 pub const REPORT_FREQS_HZ: [f64; 4] = [500.0, 1000.0, 2000.0, 5000.0];
 
 /// Knobs of the fused decoder.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FusionParams {
-    /// Analysis block length (samples, a power of two; shorter clips use the largest power of
-    /// two that fits); default 256.
+    #[doc = knob!("fusion.block_samples")]
     pub block_samples: usize,
-    /// Blocks on each side whose difference spectra are averaged with a block's own; default 4.
+    #[doc = knob!("fusion.smoothing_blocks")]
     pub smoothing_blocks: usize,
 }
 
@@ -205,11 +206,43 @@ struct ChannelFusion {
     blocks: Vec<(i64, Option<NoiseModel>)>,
 }
 
+/// Each analysis block's edge noise level `a` (its power at ω is `a·ω²`) from per-sample
+/// displacement noise `sigma` (velocity units per radian per sample): `Σ w_k²·σ_k²` over the
+/// block's window, the missing samples taking the mean of the others. None where none is known.
+fn block_edge_levels(
+    sigma: &[f64],
+    known: &[bool],
+    starts: &[i64],
+    window: &[f64],
+) -> Vec<Option<f64>> {
+    starts
+        .iter()
+        .map(|&s| {
+            let (mut sum, mut w_known, mut w_all) = (0.0, 0.0, 0.0);
+            for (k, &w) in window.iter().enumerate() {
+                let Ok(i) = usize::try_from(s + k as i64) else {
+                    continue;
+                };
+                if i >= sigma.len() {
+                    continue;
+                }
+                w_all += w * w;
+                if known[i] {
+                    sum += w * w * sigma[i] * sigma[i];
+                    w_known += w * w;
+                }
+            }
+            (w_known > 0.0).then(|| sum * w_all / w_known)
+        })
+        .collect()
+}
+
 fn fuse_channel(
     flow: &[f64],
     flow_ok: &[bool],
     edges: &[f64],
     edges_ok: &[bool],
+    edge_sigma: Option<(&[f64], &[bool])>,
     block: usize,
     smoothing: usize,
 ) -> ChannelFusion {
@@ -259,40 +292,57 @@ fn fuse_channel(
             (fr, fi, er, ei, share)
         })
         .collect();
-    // Difference periodograms of the blocks that may lend one (positive-frequency bins 1..=N/2).
+    // Difference and edge periodograms of the blocks that may lend them (positive-frequency
+    // bins 1..=N/2).
     let half = block / 2;
-    let diff: Vec<Option<Vec<f64>>> = spectra
+    type Periodograms = (Vec<f64>, Vec<f64>);
+    let diff: Vec<Option<Periodograms>> = spectra
         .iter()
         .map(|(fr, fi, er, ei, share)| {
             (*share <= MAX_FILLED_SHARE).then(|| {
                 (1..=half)
-                    .map(|k| (fr[k] - er[k]).powi(2) + (fi[k] - ei[k]).powi(2))
-                    .collect()
+                    .map(|k| {
+                        (
+                            (fr[k] - er[k]).powi(2) + (fi[k] - ei[k]).powi(2),
+                            er[k].powi(2) + ei[k].powi(2),
+                        )
+                    })
+                    .unzip()
             })
         })
         .collect();
     let omega: Vec<f64> = (1..=half)
         .map(|k| 2.0 * PI * k as f64 / block as f64)
         .collect();
+    let edge_levels =
+        edge_sigma.map(|(sigma, known)| block_edge_levels(sigma, known, &starts, &window));
     let models: Vec<Option<NoiseModel>> = (0..spectra.len())
         .map(|b| {
             let lo = b.saturating_sub(smoothing);
             let hi = (b + smoothing + 1).min(diff.len());
+            // The known edge level, averaged over the same blocks as the spectra.
+            let edge = edge_levels.as_ref().and_then(|levels| {
+                let known: Vec<f64> = levels[lo..hi].iter().flatten().copied().collect();
+                (!known.is_empty()).then(|| known.iter().sum::<f64>() / known.len() as f64)
+            });
             let mut acc = vec![0.0; half];
+            let mut sig = vec![0.0; half];
             let mut count = 0usize;
-            for d in diff[lo..hi].iter().flatten() {
-                for (a, v) in acc.iter_mut().zip(d) {
+            for (d, e) in diff[lo..hi].iter().flatten() {
+                for ((a, v), (sa, sv)) in acc.iter_mut().zip(d).zip(sig.iter_mut().zip(e)) {
                     *a += v;
+                    *sa += sv;
                 }
                 count += 1;
             }
             if count == 0 {
                 return None;
             }
-            for a in &mut acc {
+            for (a, sa) in acc.iter_mut().zip(&mut sig) {
                 *a /= count as f64;
+                *sa /= count as f64;
             }
-            fit_noise(&omega, &acc)
+            fit_noise(&omega, &acc, &sig, edge)
         })
         .collect();
     // A block with no model of its own takes the nearest block's.
@@ -312,7 +362,9 @@ fn fuse_channel(
             // Bin k and its mirror share a frequency.
             let kk = if k <= half { k } else { block - k };
             let omega = 2.0 * PI * kk as f64 / block as f64;
-            let w = model.map_or(0.5, |m| m.edge_weight(omega));
+            // The block's own edge periodogram stands for the signal power at the bin.
+            let signal = er[k].powi(2) + ei[k].powi(2);
+            let w = model.map_or(0.5, |m| m.edge_weight(omega, signal));
             re[k] = w * er[k] + (1.0 - w) * fr[k];
             im[k] = w * ei[k] + (1.0 - w) * fi[k];
         }
@@ -332,7 +384,10 @@ fn fuse_channel(
 }
 
 /// Fuses the flow method's and the edge method's stitched velocity (mm/s, same spacing and
-/// channel count; any start on the scan's grid) — see the module docs.
+/// channel count; any start on the scan's grid) — see the module docs. `edge_noise`, on the edge
+/// signal's grid, gives each channel's displacement noise per sample in velocity units (mm/s
+/// per radian per sample, from the border fits' standard errors); with it the edge noise level
+/// is known and only the flow's is fitted.
 ///
 /// # Errors
 /// [`StageError::InvalidParam`] for bad params, [`StageError::BadInput`] when the signals'
@@ -340,6 +395,7 @@ fn fuse_channel(
 pub fn fuse(
     flow: &StitchedSignal,
     edges: &StitchedSignal,
+    edge_noise: Option<&StitchedSignal>,
     meta: &ScanMeta,
     params: &FusionParams,
 ) -> Result<Fused, StageError> {
@@ -381,7 +437,16 @@ pub fn fuse(
     for ch in 0..flow.channels.len() {
         let (fv, fok) = place(flow, ch, origin, n);
         let (ev, eok) = place(edges, ch, origin, n);
-        let fused = fuse_channel(&fv, &fok, &ev, &eok, block, params.smoothing_blocks);
+        let sigma = edge_noise.map(|s| place(s, ch, origin, n));
+        let fused = fuse_channel(
+            &fv,
+            &fok,
+            &ev,
+            &eok,
+            sigma.as_ref().map(|(v, ok)| (v.as_slice(), ok.as_slice())),
+            block,
+            params.smoothing_blocks,
+        );
         let any: Vec<bool> = fok.iter().zip(&eok).map(|(a, b)| *a || *b).collect();
         #[allow(clippy::cast_possible_truncation)] // velocities are stored as f32
         let samples: Vec<f32> = fused
@@ -407,7 +472,7 @@ pub fn fuse(
                 crossover_hz: hz(m.crossover_rad()),
                 edge_weights: REPORT_FREQS_HZ
                     .iter()
-                    .map(|f| m.edge_weight(2.0 * PI * f / rate))
+                    .map(|f| m.edge_weight(2.0 * PI * f / rate, 0.0))
                     .collect(),
                 flow_noise_mm_s: rms(&|_| m.flow),
                 edge_noise_mm_s: rms(&|w| m.edge_at(w)),
@@ -499,7 +564,9 @@ fn map_groups(
                 report.edge_weights.push(
                     REPORT_FREQS_HZ
                         .iter()
-                        .map(|f| model.map_or(f64::NAN, |m| m.edge_weight(2.0 * PI * f / rate)))
+                        .map(|f| {
+                            model.map_or(f64::NAN, |m| m.edge_weight(2.0 * PI * f / rate, 0.0))
+                        })
                         .collect(),
                 );
                 let len = (hi - lo) as f64;

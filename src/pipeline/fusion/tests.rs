@@ -67,6 +67,7 @@ fn fusion_beats_both_inputs() {
     let fused = fuse(
         &signal(100, vec![flow.clone()]),
         &signal(100, vec![edges.clone()]),
+        None,
         &meta(),
         &FusionParams::default(),
     )
@@ -100,6 +101,7 @@ fn agreeing_inputs_come_back_unchanged() {
     let fused = fuse(
         &signal(7, vec![x.clone()]),
         &signal(7, vec![x.clone()]),
+        None,
         &meta(),
         &FusionParams::default(),
     )
@@ -127,7 +129,7 @@ fn each_method_fills_the_others_gaps() {
         gaps: vec![2990..3090],
         ..e
     };
-    let fused = fuse(&f, &e_late, &meta(), &FusionParams::default()).unwrap();
+    let fused = fuse(&f, &e_late, None, &meta(), &FusionParams::default()).unwrap();
     let out = &fused.signal.channels[0];
     assert_eq!(out.len(), n);
     // Deep inside the flow's gap the output is the edge signal.
@@ -146,13 +148,13 @@ fn each_method_fills_the_others_gaps() {
 fn mismatched_inputs_are_refused() {
     let a = signal(0, vec![vec![0.0; 100]]);
     let two = signal(0, vec![vec![0.0; 100], vec![0.0; 100]]);
-    assert!(fuse(&a, &two, &meta(), &FusionParams::default()).is_err());
+    assert!(fuse(&a, &two, None, &meta(), &FusionParams::default()).is_err());
     let mut other = a.clone();
     other.spacing_um = 20.0;
-    assert!(fuse(&a, &other, &meta(), &FusionParams::default()).is_err());
+    assert!(fuse(&a, &other, None, &meta(), &FusionParams::default()).is_err());
     let bad = FusionParams {
         block_samples: 100,
         ..FusionParams::default()
     };
-    assert!(fuse(&a, &a, &meta(), &bad).is_err());
+    assert!(fuse(&a, &a, None, &meta(), &bad).is_err());
 }

@@ -9,7 +9,7 @@ use anyhow::{Result, bail};
 use indicatif::ProgressBar;
 use serde::Serialize;
 
-use crate::cli::{ReconstructArgs, load_params, path_choice, progress_bar};
+use crate::cli::{ReconstructArgs, load_params, method_choice, path_choice, progress_bar};
 use crate::engine::{ClipGroups, Reconstruction, StageTimings, finish_reconstruction};
 use crate::io::wav::write_wav;
 use crate::io::{Scan, ScanMeta, write_atomic};
@@ -71,6 +71,10 @@ pub struct Report<'a> {
     pub params: &'a PipelineParams,
     /// Reconstruction path that ran.
     pub path: &'static str,
+    /// The decoder that made the sound: flow, edges or fused.
+    pub method: &'static str,
+    /// For `fused`: the crossover and edge weights per group and analysis block.
+    pub fusion: Option<&'a crate::pipeline::finish::FusionReport>,
     /// Output duration.
     pub duration_secs: f64,
     /// Output sample rate.
@@ -112,6 +116,8 @@ pub fn make_report<'a>(
         } else {
             "depth"
         },
+        method: rec.method.name(),
+        fusion: rec.fusion.as_ref(),
         duration_secs: rec.audio.duration_secs(),
         sample_rate_hz: rec.audio.sample_rate_hz,
         native_rate_hz: rec.stitched.native_rate_hz,
@@ -314,6 +320,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
     refuse_existing(&outputs, args.force)?;
     let mut params = load_params(args.params.as_deref())?;
     params.path = path_choice(&args.path, params.path);
+    params.method = method_choice(args.method.as_deref(), params.method);
     let scan = Scan::open(&args.scan)?;
     check_hough(&params, &scan, args.params.as_deref())?;
     let first = args.first_group.unwrap_or(0);
@@ -433,14 +440,15 @@ struct ShardReport<'a> {
 
 fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<()> {
     let plan = Plan::load(plan_path)?;
-    let params = if args.params.is_none() && args.path == "auto" {
+    let params = if args.params.is_none() && args.path == "auto" && args.method.is_none() {
         plan.params.clone()
     } else {
         let mut p = load_params(args.params.as_deref())?;
         p.path = path_choice(&args.path, plan.params.path);
+        p.method = method_choice(args.method.as_deref(), plan.params.method);
         if params_fingerprint(&p) != plan.params_fingerprint {
             bail!(
-                "--params/--path give other params than the plan's (leave them out to run the plan's): {}",
+                "--params/--path/--method give other params than the plan's (leave them out to run the plan's): {}",
                 plan_path.display()
             );
         }
