@@ -2,7 +2,8 @@
 //! 1280×1024 group through the shared stage cache, and UI frame times while the worker runs.
 //!
 //! `cargo bench --bench gui` (add `-- --quick` for a short run). Targets (issue 5): flow onward
-//! ≤ 0.5 s, Hough or orientation onward ≤ 100 ms, no UI frame over 50 ms while the worker runs.
+//! ≤ 0.5 s, Hough or orientation onward ≤ 100 ms, no UI frame over 50 ms while the worker runs;
+//! (issue 20) the clip health strip redraws in ≤ 2 ms for 10,000 groups.
 //! The groups are rendered by the synth generator (the paper's camera) into a temporary folder.
 
 use std::path::{Path, PathBuf};
@@ -160,10 +161,68 @@ fn ui_frame_times(scan: PathBuf) {
     );
 }
 
+/// One frame of a side panel holding only the health strip of a 10,000-group clip: layout,
+/// painting and tessellation (what a redraw of the strip costs the UI thread).
+fn health_strip(c: &mut Criterion) {
+    use groovescope::app::health::{ClipHealth, GroupTrack};
+    use groovescope::app::views::health_ui::health_strip_ui;
+    use groovescope::engine::GroupReport;
+
+    const GROUPS: usize = 10_000;
+    // A clip with scattered damage: some gaps, rejected fits, outlier outliers, failed groups.
+    let tracks: Vec<GroupTrack> = (0..GROUPS)
+        .map(|g| GroupTrack {
+            group: g,
+            span_um: (g as f64 * 460.0, g as f64 * 460.0 + 450.0),
+            samples: 22,
+            gap_samples: if g % 37 == 0 { g % 23 } else { 0 },
+            failed: g % 997 == 0,
+        })
+        .collect();
+    let reports: Vec<GroupReport> = (0..GROUPS)
+        .map(|g| GroupReport {
+            group: g,
+            outlier_fraction: (g % 997 != 0).then_some(0.9 + 0.1 * ((g % 13) as f64 / 13.0)),
+            rejected_fits: usize::from(g % 101 == 0),
+            samples: 22,
+            warning: None,
+        })
+        .collect();
+    let health = ClipHealth::new(GROUPS, &tracks, &reports);
+    let ctx = egui::Context::default();
+    let input = egui::RawInput {
+        screen_rect: Some(egui::Rect::from_min_size(
+            egui::Pos2::ZERO,
+            egui::vec2(1600.0, 1000.0),
+        )),
+        ..Default::default()
+    };
+    c.bench_function(
+        "health strip: 10,000 groups, one frame (layout, paint, tessellate)",
+        |b| {
+            b.iter(|| {
+                let mut out = ctx.run_ui(input.clone(), |ui| {
+                    egui::Panel::left("side")
+                        .default_size(330.0)
+                        .show(ui, |ui| health_strip_ui(ui, &health, GROUPS / 2));
+                });
+                // No GPU here: the font atlas upload is not the strip's work.
+                out.textures_delta.clear();
+                ctx.tessellate(out.shapes, out.pixels_per_point)
+            });
+        },
+    );
+}
+
 fn main() {
     // As the `groovescope` binary does at start-up (the workbench included).
     groovescope::alloc::keep_freed_buffers();
     let mut c = Criterion::default().sample_size(10).configure_from_args();
+    health_strip(&mut c);
+    if std::env::args().any(|a| a == "health") {
+        c.final_summary();
+        return;
+    }
     let tmp = tempfile::tempdir().expect("tempdir");
     let params = PipelineParams::default();
 

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Runs the workbench for real in an X window under Xvfb and saves a screenshot of each view
-# into screenshots/ (the app captures itself: GROOVESCOPE_SCREENSHOT, then closes).
+# into screenshots/ (the app captures itself: GROOVESCOPE_SCREENSHOT, then closes). Every view
+# is taken after the clip is reconstructed, so the health strip is filled; the waveform after a
+# second reconstruction with the "noisy" symptom preset, so it shows the A/B pair.
 #
 # usage: scripts/screenshots.sh [SCAN] [DEPTH_SCAN]
 #   SCAN        scan for overview, flow, hough, stripes and waveform (default assets/demo, a
@@ -45,12 +47,16 @@ for view in ${VIEWS:-overview flow hough stripes depth waveform}; do
     fi
     out="$outdir/$view.png"
     echo "== $view ($s) -> $out"
-    # The overview and the waveform show the reconstructed clip.
-    case "$view" in overview|waveform) recon=1 ;; *) recon=0 ;; esac
-    if ! GROOVESCOPE_RECONSTRUCT="$recon" GROOVESCOPE_VIEW="$view" GROOVESCOPE_SCREENSHOT="$out" \
-        timeout 900 "$bin" gui "$s"; then
+    compare=()
+    if [ "$view" = waveform ]; then compare=(GROOVESCOPE_COMPARE=noisy); fi
+    if ! env "${compare[@]}" GROOVESCOPE_RECONSTRUCT=1 GROOVESCOPE_VIEW="$view" \
+        GROOVESCOPE_SCREENSHOT="$out" timeout 900 "$bin" gui "$s"; then
         echo "screenshot of $view failed" >&2
         status=1
     fi
 done
+# Export WAV… on a machine with no file dialog (no zenity, no portal): the in-app path field.
+if [ -z "${VIEWS:-}" ]; then
+    OUT_DIR="$outdir" XVFB_DISPLAY=98 bash scripts/dialog-fallback.sh "$scan" || status=1
+fi
 exit "$status"

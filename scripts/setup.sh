@@ -6,6 +6,8 @@ PKGS=(pkg-config libasound2-dev
       mesa-vulkan-drivers libvulkan1 libegl1 libegl-mesa0 libgl1-mesa-dri
       libx11-6 libxcursor1 libxi6 libxrandr2 libxkbcommon-x11-0 libfontconfig1
       xvfb xauth imagemagick
+      # The workbench's file dialogs where no desktop portal answers (rfd falls back to it).
+      zenity
       # Speech for `groovescope accuracy` (skipped there when missing).
       espeak-ng
       # FFmpeg and libclang (bindgen) for the `video` feature (import-video, Import video…).

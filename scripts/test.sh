@@ -26,3 +26,5 @@ shot_dir="$(mktemp -d)"
 SCREENSHOT_DIR="$shot_dir" VIEWS=overview bash scripts/screenshots.sh
 test -s "$shot_dir/overview.png"
 echo "workbench screenshot under Xvfb: $(wc -c <"$shot_dir/overview.png") bytes"
+# And with no zenity and no desktop portal, Export WAV… shows the in-app path field.
+OUT_DIR="$shot_dir" bash scripts/dialog-fallback.sh

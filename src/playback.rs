@@ -1,8 +1,10 @@
-//! Audio output through cpal: plays a prepared buffer (recovered or reference) from a callback that
-//! never blocks; play/pause/stop/seek, loop a selection, A/B switch and volume. Audio is optional:
-//! without a usable device the player says why and everything else keeps working.
+//! Audio output through cpal: plays a prepared buffer from a callback that never blocks, with
+//! several sources of the same length and rate to switch between while playing (the clip, the
+//! previous clip, the reference: A/B listening); play/pause/stop/seek, loop a selection and
+//! volume. Audio is optional: without a usable device the player says why and everything else
+//! keeps working.
 
-use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use cpal::traits::{DeviceTrait, HostTrait, StreamTrait};
@@ -39,32 +41,35 @@ impl DeviceChoice {
     }
 }
 
-/// Sound prepared for playback: source A (recovered) and optionally B (reference), same rate.
+/// Sound prepared for playback: sources at one rate, one buffer per channel each; source 0 is
+/// the clip itself (its length is the player's), the others are laid on its time axis.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PlayBuffers {
-    /// Sample rate of both sources (Hz).
+    /// Sample rate of every source (Hz).
     pub rate_hz: u32,
-    /// Source A, one buffer per channel.
-    pub a: Vec<Vec<f32>>,
-    /// Source B, one buffer per channel.
-    pub b: Option<Vec<Vec<f32>>>,
+    /// The sources, each one buffer per channel (an empty source plays as silence).
+    pub sources: Vec<Vec<Vec<f32>>>,
 }
 
 impl PlayBuffers {
-    fn source(&self, use_b: bool) -> &[Vec<f32>] {
-        match (&self.b, use_b) {
-            (Some(b), true) => b,
-            _ => &self.a,
-        }
+    /// Source `i` (source 0 when there is no such source).
+    fn source(&self, i: usize) -> &[Vec<f32>] {
+        self.sources
+            .get(i)
+            .or_else(|| self.sources.first())
+            .map_or(&[], Vec::as_slice)
     }
 
-    /// Frames of source A.
+    /// Frames of source 0.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.a.first().map_or(0, Vec::len)
+        self.sources
+            .first()
+            .and_then(|s| s.first())
+            .map_or(0, Vec::len)
     }
 
-    /// True when source A is empty.
+    /// True when source 0 is empty.
     #[must_use]
     pub fn is_empty(&self) -> bool {
         self.len() == 0
@@ -93,7 +98,7 @@ struct Shared {
     slot: Mutex<Option<Arc<PlayBuffers>>>,
     version: AtomicU64,
     playing: AtomicBool,
-    use_b: AtomicBool,
+    source: AtomicUsize,
     volume_bits: AtomicU32,
     position: AtomicU64,
     seek_to: AtomicU64,
@@ -110,7 +115,7 @@ impl Default for Shared {
             slot: Mutex::new(None),
             version: AtomicU64::new(0),
             playing: AtomicBool::new(false),
-            use_b: AtomicBool::new(false),
+            source: AtomicUsize::new(0),
             volume_bits: AtomicU32::new(1.0_f32.to_bits()),
             position: AtomicU64::new(0),
             seek_to: AtomicU64::new(NONE),
@@ -154,8 +159,10 @@ impl Cursor {
             out.fill(silence);
             return;
         };
-        let src = buf.source(sh.use_b.load(Ordering::Relaxed));
-        let len = src.first().map_or(0, Vec::len);
+        let src = buf.source(sh.source.load(Ordering::Relaxed));
+        // Source 0 sets the length; the others are read where they have samples (silence
+        // elsewhere), so a switch never ends playback or reads out of bounds.
+        let len = buf.len();
         let step = f64::from(buf.rate_hz) / f64::from(self.device_rate_hz.max(1));
         let vol = f32::from_bits(sh.volume_bits.load(Ordering::Relaxed));
         let (ls, le) = (
@@ -168,7 +175,7 @@ impl Cursor {
             if looping && (self.pos >= le as f64 || self.pos < ls as f64) {
                 self.pos = ls as f64;
             }
-            if ended || self.pos >= (len.saturating_sub(1)) as f64 || src.is_empty() {
+            if ended || self.pos >= (len.saturating_sub(1)) as f64 {
                 ended = true;
                 frame.fill(silence);
                 continue;
@@ -176,8 +183,9 @@ impl Cursor {
             let i = self.pos as usize;
             let f = (self.pos - i as f64) as f32;
             for (c, o) in frame.iter_mut().enumerate() {
-                let ch = &src[c.min(src.len() - 1)];
-                let (a, b) = (ch[i], ch[i + 1]);
+                let ch = src.get(c.min(src.len().saturating_sub(1)));
+                let at = |k: usize| ch.and_then(|ch| ch.get(k)).copied().unwrap_or(0.0);
+                let (a, b) = (at(i), at(i + 1));
                 let v = (a + (b - a) * f) * vol;
                 *o = T::from_sample(if v.is_finite() {
                     v.clamp(-1.0, 1.0)
@@ -441,15 +449,16 @@ impl Player {
         f32::from_bits(self.shared.volume_bits.load(Ordering::Relaxed))
     }
 
-    /// Plays source B (the reference) instead of A when `b` and B exists.
-    pub fn set_source_b(&self, b: bool) {
-        self.shared.use_b.store(b, Ordering::Relaxed);
+    /// Plays source `i` of the loaded buffers (source 0 when there is no such source); the
+    /// position stays, so the switch is heard at once.
+    pub fn set_source(&self, i: usize) {
+        self.shared.source.store(i, Ordering::Relaxed);
     }
 
-    /// True when source B is selected.
+    /// The source selected.
     #[must_use]
-    pub fn source_b(&self) -> bool {
-        self.shared.use_b.load(Ordering::Relaxed)
+    pub fn source(&self) -> usize {
+        self.shared.source.load(Ordering::Relaxed)
     }
 
     /// Loops `[start, end)` seconds, or clears the loop.
@@ -494,8 +503,7 @@ mod tests {
             &c,
             PlayBuffers {
                 rate_hz: 1,
-                a: vec![vec![0.0, 1.0, 0.0, -1.0, 0.0]],
-                b: Some(vec![vec![0.5; 5]]),
+                sources: vec![vec![vec![0.0, 1.0, 0.0, -1.0, 0.0]], vec![vec![0.5; 5]]],
             },
         );
         let mut out = vec![9.0_f32; 4];
@@ -506,14 +514,14 @@ mod tests {
         c.fill(&mut out);
         // Device at twice the source rate: linear interpolation, mono copied to both channels.
         assert_eq!(out, vec![0.0, 0.0, 0.5, 0.5, 1.0, 1.0, 0.5, 0.5]);
-        c.shared.use_b.store(true, Ordering::Relaxed);
+        c.shared.source.store(1, Ordering::Relaxed);
         c.shared
             .volume_bits
             .store(0.5_f32.to_bits(), Ordering::Relaxed);
         let mut out = vec![0.0_f32; 2];
         c.fill(&mut out);
         assert_eq!(out, vec![0.25, 0.25]);
-        c.shared.use_b.store(false, Ordering::Relaxed);
+        c.shared.source.store(0, Ordering::Relaxed);
         c.shared
             .volume_bits
             .store(1.0_f32.to_bits(), Ordering::Relaxed);
@@ -534,6 +542,36 @@ mod tests {
     }
 
     #[test]
+    fn switching_to_a_shorter_or_missing_source_plays_silence_there() {
+        let mut c = cursor(1, 1);
+        load(
+            &c,
+            PlayBuffers {
+                rate_hz: 1,
+                sources: vec![vec![vec![0.5; 6]], vec![vec![0.25; 2]], vec![]],
+            },
+        );
+        c.shared.playing.store(true, Ordering::Release);
+        c.shared.source.store(1, Ordering::Relaxed);
+        let mut out = vec![9.0_f32; 4];
+        c.fill(&mut out);
+        assert_eq!(
+            out,
+            vec![0.25, 0.25, 0.0, 0.0],
+            "B ends; A's length goes on"
+        );
+        assert!(c.shared.playing.load(Ordering::Acquire));
+        c.shared.source.store(2, Ordering::Relaxed);
+        c.fill(&mut out);
+        assert_eq!(out[0], 0.0, "an empty source is silence");
+        c.shared.source.store(7, Ordering::Relaxed);
+        c.shared.playing.store(true, Ordering::Release);
+        let mut out = vec![9.0_f32; 1];
+        c.fill(&mut out);
+        assert_eq!(out, vec![0.5], "no such source: A");
+    }
+
+    #[test]
     fn a_device_that_vanishes_mid_playback_stops_it_with_a_message_and_keeps_the_clip() {
         let mut p = Player {
             shared: Arc::new(Shared::default()),
@@ -548,8 +586,7 @@ mod tests {
         };
         p.load(PlayBuffers {
             rate_hz: 48_000,
-            a: vec![vec![0.1; 4800]],
-            b: None,
+            sources: vec![vec![vec![0.1; 4800]]],
         });
         p.play().unwrap();
         // A glitch keeps playing.

@@ -232,13 +232,13 @@ fn two_windows_saving_one_preset_or_exporting_one_file_do_not_interleave() {
     let preset = dir.path().join("preset.toml");
     let params = groovescope::pipeline::PipelineParams::default();
     let held = OutputLock::acquire(&preset).unwrap();
-    let msg = groovescope::app::export::save_preset(&params, &preset, true).unwrap_err();
+    let msg = groovescope::app::tuning::save_preset(&params, &preset, true).unwrap_err();
     assert!(
         msg.contains("another groovescope") && msg.contains("preset.toml"),
         "{msg}"
     );
     assert!(!preset.exists());
     drop(held);
-    groovescope::app::export::save_preset(&params, &preset, false).unwrap();
+    groovescope::app::tuning::save_preset(&params, &preset, false).unwrap();
     assert_eq!(names(dir.path()), vec!["preset.toml".to_string()]);
 }

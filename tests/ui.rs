@@ -401,3 +401,323 @@ fn per_disc_preset_loads_on_open_and_metadata_saves_back() {
         back.meta.camera.pixel_pitch_um
     );
 }
+
+/// Stage outputs a scan's group 0 ends with, as text (`{:?}` reads floats back to the same bits).
+fn group_outputs(h: &H) -> String {
+    let c = wb(h).cache();
+    format!("{:?}|{:?}|{:?}", c.depth(), c.orientation(), c.signal())
+}
+
+/// Issue 20: settings never leak from one disc into the next.
+#[test]
+fn a_second_scan_without_a_preset_runs_on_the_defaults_and_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let a = rendered_scan(
+        "with-preset",
+        SynthConfig {
+            frames_per_group: 8,
+            max_groups: Some(2),
+            ..SynthConfig::quick_test()
+        },
+    );
+    let mut preset = groovescope::pipeline::PipelineParams::default();
+    preset.flow.lambda = 0.2;
+    std::fs::write(a.join("preset.toml"), preset.to_toml_string().unwrap()).unwrap();
+    let b = lateral_scan();
+    let mut h = harness(options(tmp.path(), Some(a.clone()), DeviceChoice::Off));
+    settle(&mut h);
+    assert_eq!(
+        wb(&h).params().flow.lambda,
+        0.2,
+        "scan A runs on its preset"
+    );
+    wb_mut(&mut h).open_scan(&b).unwrap();
+    settle(&mut h);
+    assert_eq!(wb(&h).scan().unwrap().dir, b);
+    assert_eq!(
+        wb(&h).params(),
+        &groovescope::pipeline::PipelineParams::default(),
+        "scan B has no preset: the defaults"
+    );
+    h.get_by_label("parameters: defaults");
+    assert_eq!(wb(&h).can_undo_redo(), (false, false), "no history from A");
+    assert!(
+        wb(&h)
+            .messages()
+            .iter()
+            .any(|m| m.text.contains("running on the defaults")),
+        "it says which"
+    );
+    // B gives what a fresh launch on B gives.
+    let switched = group_outputs(&h);
+    let tmp2 = tempfile::tempdir().unwrap();
+    let mut fresh = harness(options(tmp2.path(), Some(b), DeviceChoice::Off));
+    settle(&mut fresh);
+    assert!(
+        switched == group_outputs(&fresh),
+        "scan B after scan A differs from a fresh launch on B"
+    );
+    // And back to A: its preset again, said so.
+    wb_mut(&mut h).open_scan(&a).unwrap();
+    settle(&mut h);
+    assert_eq!(wb(&h).params().flow.lambda, 0.2);
+    h.get_by_label_contains("parameters: preset");
+}
+
+/// Issue 20: with changed knobs, opening another scan asks once; "Cancel" keeps everything.
+#[test]
+fn switching_scans_with_unsaved_knobs_asks_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let a = lateral_scan();
+    let b = tmp.path().join("other");
+    write_scan(&b, 2);
+    let mut h = harness(options(tmp.path(), Some(a.clone()), DeviceChoice::Off));
+    settle(&mut h);
+    let mut p = wb(&h).params().clone();
+    p.flow.lambda *= 2.0;
+    wb_mut(&mut h).set_params(p.clone());
+    settle(&mut h);
+    h.get_by_label("parameters: modified from the defaults");
+    wb_mut(&mut h).open_scan(&b).unwrap();
+    h.run_ok();
+    assert!(matches!(
+        wb(&h).confirm(),
+        Some(groovescope::app::files::Confirm::SwitchScan(_))
+    ));
+    h.get_by_label("Cancel").click();
+    settle(&mut h);
+    assert_eq!(wb(&h).scan().unwrap().dir, a);
+    assert_eq!(wb(&h).params(), &p);
+    wb_mut(&mut h).open_scan(&b).unwrap();
+    h.run_ok();
+    h.get_by_label("Open anyway").click();
+    settle(&mut h);
+    assert_eq!(wb(&h).scan().unwrap().dir, b);
+    assert!(wb(&h).confirm().is_none(), "asked once");
+}
+
+/// Issue 20: where no native dialog can open (no portal, no zenity: the test process is such a
+/// machine), the app says so and offers its own path field, which works.
+#[test]
+fn a_dialog_failure_shows_a_message_and_the_path_field() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scan = lateral_scan();
+    let mut h = harness(options(tmp.path(), Some(scan.clone()), DeviceChoice::Off));
+    settle(&mut h);
+    h.get_by_label("File").click();
+    h.run_ok();
+    h.get_by_label("Save preset…").click();
+    h.run_ok();
+    assert!(
+        last_message(&h).contains("no file dialog can open here"),
+        "{}",
+        last_message(&h)
+    );
+    assert!(
+        h.get_all_by_label_contains("no file dialog can open here")
+            .count()
+            >= 1
+    );
+    let prompt = wb(&h).path_prompt().expect("the path field");
+    assert_eq!(
+        prompt.text,
+        scan.join("preset.toml").display().to_string(),
+        "it starts in the scan's folder with the scan's preset name"
+    );
+    let target = tmp.path().join("typed.toml");
+    let field = h.get_by_label("type the file's path:");
+    field.focus();
+    h.run_ok();
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+    h.get_by_label("type the file's path:")
+        .type_text(&target.display().to_string());
+    h.run_ok();
+    h.get_by_label("OK").click();
+    h.run_ok();
+    assert!(target.is_file(), "{}", last_message(&h));
+    assert!(wb(&h).path_prompt().is_none());
+    h.get_by_label_contains("parameters: preset");
+}
+
+/// Issue 20: a drag that starts on a Hough window's edge resizes the window (and does not
+/// pan the plot), although egui reports the drag only once the pointer has left the edge.
+#[test]
+fn a_drag_that_starts_on_a_hough_edge_resizes_the_window() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
+    settle(&mut h);
+    wb_mut(&mut h).set_view(View::Hough);
+    h.run_ok();
+    let before = wb(&h)
+        .hough_window_rects()
+        .first()
+        .copied()
+        .expect("a window");
+    let theta = wb(&h).params().hough.window_theta_deg;
+    let start = egui::pos2(before.right(), before.center().y);
+    h.hover_at(start);
+    h.step();
+    h.drag_at(start);
+    h.step();
+    for dx in [3.0, 8.0, 14.0, 20.0] {
+        h.hover_at(start + egui::vec2(dx, 0.0));
+        h.step();
+    }
+    h.drop_at(start + egui::vec2(20.0, 0.0));
+    h.step();
+    settle(&mut h);
+    let after = wb(&h).hough_window_rects().first().copied().unwrap();
+    assert!(
+        wb(&h).params().hough.window_theta_deg > theta,
+        "the window grew: {} → {}",
+        theta,
+        wb(&h).params().hough.window_theta_deg
+    );
+    assert!(
+        (after.center().x - before.center().x).abs() < 1.0,
+        "the plot did not pan: {before:?} → {after:?}"
+    );
+    assert!(
+        (after.right() - (start.x + 20.0)).abs() < 2.0,
+        "the edge followed the pointer: {before:?} → {after:?}"
+    );
+}
+
+/// Issue 20: saving a preset does not move the parameter list (the next click would hit the
+/// wrong knob); neither does loading one or changing a knob.
+#[test]
+fn the_parameter_list_does_not_move_when_a_preset_is_saved() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(tmp.path(), Some(lateral_scan()), DeviceChoice::Off));
+    settle(&mut h);
+    let place = |h: &H| h.get_by_label("λ (smoothness)").rect();
+    let before = place(&h);
+    let preset = tmp
+        .path()
+        .join("a-rather-long-folder-name")
+        .join("disc-preset.toml");
+    std::fs::create_dir_all(preset.parent().unwrap()).unwrap();
+    wb_mut(&mut h).save_preset_to(&preset, false).unwrap();
+    h.run_ok();
+    assert_eq!(place(&h), before, "saving moved the list");
+    h.get_by_label_contains("parameters: preset");
+    let mut p = wb(&h).params().clone();
+    p.hough.window_rho_px += 1.0;
+    wb_mut(&mut h).set_params(p);
+    settle(&mut h);
+    h.get_by_label_contains("parameters: modified since preset");
+    assert_eq!(place(&h), before, "a change moved the list");
+    wb_mut(&mut h).load_preset_from(&preset).unwrap();
+    settle(&mut h);
+    assert_eq!(place(&h), before, "loading moved the list");
+}
+
+/// Issue 20: the health strip has one cell per group, filled by the reconstruction, and a
+/// click on a cell shows that group; the waveform's time axis maps to the same groups.
+#[test]
+fn the_health_strip_has_one_cell_per_group_and_a_click_navigates() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
+    settle(&mut h);
+    let groups = wb(&h).scan().unwrap().groups.len();
+    let cells = |h: &H| h.get_all_by_label_contains("health of group ").count();
+    assert_eq!(cells(&h), groups, "one cell per group before a clip");
+    wb_mut(&mut h).reconstruct(None);
+    settle(&mut h);
+    assert_eq!(cells(&h), groups);
+    let health = wb(&h).health().clone();
+    assert!((0..groups).all(|g| health.cell(g).is_some_and(|c| c.ran)));
+    let target = groups / 2;
+    h.get_by_label(&format!("health of group {target}")).click();
+    settle(&mut h);
+    assert_eq!(wb(&h).group(), target);
+    let clip = wb(&h).clip().unwrap();
+    for g in 0..groups {
+        let (a, b) = clip.group_span_secs(g).expect("each group has a span");
+        assert!(a <= b && a >= -1e-9, "group {g}: {a}..{b}");
+        assert_eq!(clip.group_at_secs((a + b) / 2.0), Some(g));
+    }
+}
+
+/// Issue 20: after a change, the previous clip stays for A/B; "reconstruct around" runs only
+/// the groups near the one shown; the plain 16-bit export writes 16-bit 44.1 kHz.
+#[test]
+fn the_previous_clip_stays_for_ab_and_a_range_around_the_group_reconstructs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
+    settle(&mut h);
+    wb_mut(&mut h).reconstruct(None);
+    settle(&mut h);
+    let first = wb(&h).clip().unwrap().recovered.clone();
+    wb_mut(&mut h).set_group(4);
+    settle(&mut h);
+    let mut p = wb(&h).params().clone();
+    p.dsp.lowpass_hz = 2000.0;
+    wb_mut(&mut h).set_params(p);
+    settle(&mut h);
+    wb_mut(&mut h).reconstruct_around(1);
+    settle(&mut h);
+    let clip = wb(&h).clip().unwrap();
+    assert_eq!(clip.groups, 3..6);
+    let buffers = wb(&h).player().buffers().unwrap();
+    assert_eq!(buffers.sources.len(), 3, "clip, previous clip, reference");
+    let laid = &buffers.sources[1][0];
+    assert_eq!(laid.len(), clip.recovered.len());
+    // The previous clip is the first one, laid on the new clip's time axis.
+    assert!(laid.iter().any(|v| *v != 0.0));
+    assert!(laid.iter().all(|v| first.contains(v) || *v == 0.0));
+    let plain = &groovescope::app::export::EXPORT_FORMATS[1];
+    wb_mut(&mut h).set_export_format(plain);
+    let wav = tmp.path().join("plain.wav");
+    wb_mut(&mut h).request_export_wav(wav.clone(), false);
+    h.run_ok();
+    let spec = hound::WavReader::open(&wav).unwrap().spec();
+    assert_eq!((spec.bits_per_sample, spec.sample_rate), (16, 44_100));
+    let sidecar = std::fs::read_to_string(wav.with_extension("json")).unwrap();
+    assert!(sidecar.contains("\"params_state\""), "{sidecar}");
+    assert!(sidecar.contains("\"modified\": true"), "{sidecar}");
+}
+
+/// Issue 20: the arrow keys step through the group's frames.
+#[test]
+fn arrow_keys_step_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(tmp.path(), Some(lateral_scan()), DeviceChoice::Off));
+    settle(&mut h);
+    let f = wb(&h).frame();
+    h.key_press(egui::Key::ArrowRight);
+    h.run_ok();
+    assert_eq!(wb(&h).frame(), f + 1);
+    h.key_press(egui::Key::ArrowLeft);
+    h.key_press(egui::Key::ArrowLeft);
+    h.run_ok();
+    assert_eq!(wb(&h).frame(), f - 1);
+}
+
+/// Issue 20: while a reconstruction runs, "play so far" hands the player the groups finished
+/// so far; the whole clip replaces them when it is done.
+#[test]
+fn the_groups_finished_so_far_can_be_played_while_reconstructing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
+    settle(&mut h);
+    wb_mut(&mut h).reconstruct(None);
+    wb_mut(&mut h).play_so_far();
+    let mut partial_len = None;
+    let t0 = Instant::now();
+    while wb(&h).is_reconstructing() || !wb(&h).is_idle() {
+        h.step();
+        if wb(&h).clip().is_none()
+            && let Some(b) = wb(&h).player().buffers().filter(|b| !b.is_empty())
+        {
+            partial_len = partial_len.or(Some(b.len()));
+        }
+        assert!(t0.elapsed() < TIMEOUT);
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    h.run_ok();
+    let full = wb(&h).clip().unwrap().recon.audio.len();
+    let partial = partial_len.expect("the groups so far reached the player");
+    assert!(partial > 0 && partial < full, "{partial} of {full}");
+    assert_eq!(wb(&h).player().buffers().unwrap().len(), full);
+}

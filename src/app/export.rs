@@ -1,17 +1,55 @@
 //! Exports from the workbench: the clip (or a selection) as WAV with a JSON sidecar that records
-//! the preset, presets as TOML, and views as PNG. Nothing is overwritten unless the caller says so.
+//! the params it was made with, and views as PNG. Nothing is overwritten unless the caller says
+//! so. (Presets are saved and loaded by [`super::tuning`].)
 
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
 use super::recon::Clip;
+use super::tuning::ParamState;
 use crate::engine::GroupReport;
 use crate::io::lock::OutputLock;
 use crate::io::wav::{Audio, WavBits, write_wav};
 use crate::io::write_atomic;
-use crate::pipeline::PipelineParams;
+use crate::pipeline::audio_signal::resample;
 use crate::pipeline::eval::Scores;
+
+/// A way to write the clip, as the export menu offers it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ExportFormat {
+    /// Name in the menu.
+    pub name: &'static str,
+    /// Sample encoding.
+    pub bits: WavBits,
+    /// Sample rate written (None: the clip's own).
+    pub rate_hz: Option<u32>,
+    /// What it is for, in one line.
+    pub reason: &'static str,
+}
+
+/// The export formats offered, the first the default.
+pub const EXPORT_FORMATS: [ExportFormat; 3] = [
+    ExportFormat {
+        name: "archive (24-bit)",
+        bits: WavBits::Int24,
+        rate_hz: None,
+        reason: "24-bit at the reconstruction's rate: keeps all the detail the clip holds",
+    },
+    ExportFormat {
+        name: "plain 16-bit 44.1 kHz",
+        bits: WavBits::Int16,
+        rate_hz: Some(44_100),
+        reason: "16-bit at 44.1 kHz, as on a CD: plays in any software or player (resampled \
+                 when the clip has another rate)",
+    },
+    ExportFormat {
+        name: "32-bit float",
+        bits: WavBits::Float32,
+        rate_hz: None,
+        reason: "32-bit float at the reconstruction's rate: for further processing, no rounding",
+    },
+];
 
 /// The sidecar report written beside an exported WAV (`NAME.wav` → `NAME.json`).
 #[derive(Debug, Serialize)]
@@ -24,13 +62,18 @@ pub struct Sidecar {
     pub groups: [usize; 2],
     /// Exported stretch (seconds from the clip start).
     pub selection_secs: [f64; 2],
-    /// Sample rate (Hz).
+    /// Sample rate written (Hz).
     pub sample_rate_hz: u32,
+    /// The clip's own rate when the export was resampled to another (Hz).
+    pub resampled_from_hz: Option<u32>,
     /// Sample encoding.
     pub bits: WavBits,
-    /// Preset file the params came from, if one was loaded.
+    /// Where the params came from when the clip was reconstructed: `defaults` or a preset file,
+    /// and whether they had been changed since (then `preset` below, not the file, is what ran).
+    pub params_state: ParamState,
+    /// Preset file the params came from, if any.
     pub preset_file: Option<PathBuf>,
-    /// The full preset (`PipelineParams` TOML).
+    /// The params the clip was made with, in full (`PipelineParams` TOML).
     pub preset: String,
     /// Scores against the reference, if any.
     pub scores: Option<Scores>,
@@ -67,7 +110,8 @@ pub fn selection_samples(clip: &Clip, selection_secs: Option<(f64, f64)>) -> (us
     }
 }
 
-/// Writes the clip (or the selection) as WAV plus its sidecar report.
+/// Writes the clip (or the selection) as WAV, at `rate_hz` when given (resampled), plus its
+/// sidecar report, which records the params the clip was made with and where they came from.
 ///
 /// # Errors
 /// A message naming the file when it exists and `overwrite` is false, the selection is empty,
@@ -76,8 +120,8 @@ pub fn export_wav(
     clip: &Clip,
     path: &Path,
     bits: WavBits,
+    rate_hz: Option<u32>,
     selection_secs: Option<(f64, f64)>,
-    preset_file: Option<&Path>,
     overwrite: bool,
 ) -> Result<(), String> {
     // Another window exporting to the same file is refused, so a WAV and its sidecar always
@@ -93,15 +137,29 @@ pub fn export_wav(
     if e <= s {
         return Err(format!("the selection is empty: {}", path.display()));
     }
+    let rate_out = rate_hz.unwrap_or(clip.rate_hz());
+    let channels = clip
+        .recon
+        .audio
+        .channels
+        .iter()
+        .map(|c| {
+            let part = c.get(s..e).unwrap_or(&[]);
+            if rate_out == clip.rate_hz() {
+                Ok(part.to_vec())
+            } else {
+                resample(part, f64::from(clip.rate_hz()), rate_out).map_err(|err| {
+                    format!(
+                        "cannot resample to {rate_out} Hz: {err}: {}",
+                        path.display()
+                    )
+                })
+            }
+        })
+        .collect::<Result<Vec<_>, String>>()?;
     let audio = Audio {
-        sample_rate_hz: clip.rate_hz(),
-        channels: clip
-            .recon
-            .audio
-            .channels
-            .iter()
-            .map(|c| c[s..e].to_vec())
-            .collect(),
+        sample_rate_hz: rate_out,
+        channels,
     };
     let preset = clip.params.to_toml_string().map_err(|e| e.to_string())?;
     let rate = f64::from(clip.rate_hz());
@@ -110,9 +168,11 @@ pub fn export_wav(
         scan: clip.scan_dir.clone(),
         groups: [clip.groups.start, clip.groups.end],
         selection_secs: [s as f64 / rate, e as f64 / rate],
-        sample_rate_hz: clip.rate_hz(),
+        sample_rate_hz: rate_out,
+        resampled_from_hz: (rate_out != clip.rate_hz()).then_some(clip.rate_hz()),
         bits,
-        preset_file: preset_file.map(Path::to_path_buf),
+        params_state: clip.param_state.clone(),
+        preset_file: clip.param_state.preset_file().map(Path::to_path_buf),
         preset,
         scores: clip.recon.scores,
         group_reports: clip.recon.groups.clone(),
@@ -121,30 +181,6 @@ pub fn export_wav(
     let json = serde_json::to_string_pretty(&sidecar).map_err(|e| e.to_string())?;
     write_wav(path, &audio, bits, overwrite).map_err(|e| e.to_string())?;
     write_atomic(&sidecar_path(path), json.as_bytes(), overwrite).map_err(|e| e.to_string())
-}
-
-/// Saves `params` as a TOML preset.
-///
-/// # Errors
-/// A message naming the file when it exists and `overwrite` is false, or the write fails.
-pub fn save_preset(params: &PipelineParams, path: &Path, overwrite: bool) -> Result<(), String> {
-    let text = params.to_toml_string().map_err(|e| e.to_string())?;
-    let _lock = OutputLock::acquire(path).map_err(|e| e.to_string())?;
-    write_atomic(path, text.as_bytes(), overwrite).map_err(|e| e.to_string())
-}
-
-/// Reads and validates a TOML preset.
-///
-/// # Errors
-/// A message naming the file and the bad key or value.
-pub fn load_preset(path: &Path) -> Result<PipelineParams, String> {
-    let text = crate::io::limits::read_toml_text(path, "preset").map_err(|e| e.to_string())?;
-    let params = PipelineParams::from_toml_str(&text)
-        .map_err(|e| format!("invalid preset: {e}: {}", path.display()))?;
-    params
-        .validate()
-        .map_err(|e| format!("invalid preset: {e}: {}", path.display()))?;
-    Ok(params)
 }
 
 /// Saves a screen capture as PNG.
@@ -175,27 +211,6 @@ pub fn save_color_image(
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
-
-    #[test]
-    fn preset_round_trips_and_bad_presets_name_the_key() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("disc.toml");
-        let mut params = PipelineParams::default();
-        params.flow.lambda = 0.25;
-        params.hough.theta_min_deg = -30.0;
-        save_preset(&params, &p, false).unwrap();
-        assert!(
-            save_preset(&params, &p, false).is_err(),
-            "no silent overwrite"
-        );
-        assert_eq!(load_preset(&p).unwrap(), params);
-        std::fs::write(&p, "[flow]\nlamda = 3\n").unwrap();
-        let err = load_preset(&p).unwrap_err();
-        assert!(err.contains("lamda") && err.contains("disc.toml"), "{err}");
-        std::fs::write(&p, "[flow]\nlambda = -3.0\n").unwrap();
-        let err = load_preset(&p).unwrap_err();
-        assert!(err.contains("flow.lambda"), "{err}");
-    }
 
     #[test]
     fn png_capture_is_written_once() {

@@ -10,7 +10,6 @@ use std::thread::JoinHandle;
 use egui::{Color32, Grid, Ui};
 
 use super::dialogs::DialogKind;
-use super::workbench::Workbench;
 use crate::io::Cut;
 use crate::io::video::{ClipMeta, GroupLayout, ImportSummary, import_video};
 
@@ -348,28 +347,30 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
     action
 }
 
-impl Workbench {
-    /// Opens the "Import video" window.
-    pub fn open_import_video(&mut self) {
-        if self.video_import.form.is_none() {
-            self.video_import.form = Some(ImportForm::default());
+/// What the import window asks of the workbench.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ImportEvent {
+    /// A note for the status bar.
+    Info(String),
+    /// An error for the status bar.
+    Error(String),
+    /// Open the imported scan.
+    Open(PathBuf),
+    /// Show this file dialog.
+    Dialog(DialogKind),
+}
+
+impl VideoImport {
+    /// Opens the window.
+    pub fn open(&mut self) {
+        if self.form.is_none() {
+            self.form = Some(ImportForm::default());
         }
     }
 
-    /// The open import form, for tests and scripting.
-    pub fn import_video_form_mut(&mut self) -> Option<&mut ImportForm> {
-        self.video_import.form.as_mut()
-    }
-
-    /// Whether an import runs.
-    #[must_use]
-    pub fn is_importing_video(&self) -> bool {
-        self.video_import.run.is_some()
-    }
-
-    /// Handles a picked clip or output folder.
-    pub(super) fn video_dialog_answer(&mut self, kind: &DialogKind, path: PathBuf) {
-        let Some(form) = self.video_import.form.as_mut() else {
+    /// Takes a picked clip or output folder.
+    pub fn dialog_answer(&mut self, kind: &DialogKind, path: PathBuf) {
+        let Some(form) = self.form.as_mut() else {
             return;
         };
         match kind {
@@ -379,36 +380,37 @@ impl Workbench {
         }
     }
 
-    /// Draws the window, polls the running import and opens its scan when it finishes.
-    pub(super) fn import_video_step(&mut self, ctx: &egui::Context) {
-        if let Some(run) = self.video_import.run.as_mut()
+    /// Draws the window and polls the running import; returns what the workbench must do.
+    pub fn step(&mut self, ctx: &egui::Context) -> Vec<ImportEvent> {
+        let mut events = Vec::new();
+        if let Some(run) = self.run.as_mut()
             && let Some(outcome) = run.poll()
         {
-            self.video_import.run = None;
+            self.run = None;
             match outcome {
                 Ok(s) => {
                     let stale = match s.removed_stale.len() {
                         0 => String::new(),
                         n => format!(" (removed {n} unfinished import(s) left by killed runs)"),
                     };
-                    self.info(format!(
+                    events.push(ImportEvent::Info(format!(
                         "imported {} groups of {} frames into {}{stale}",
                         s.groups,
                         s.frames_per_group,
                         s.out_dir.display()
-                    ));
-                    self.video_import.form = None;
-                    self.video_import.problem = None;
-                    let _ = self.open_scan(&s.out_dir);
+                    )));
+                    self.form = None;
+                    self.problem = None;
+                    events.push(ImportEvent::Open(s.out_dir));
                 }
                 Err(e) => {
-                    self.error(format!("video import failed: {e}"));
-                    self.video_import.problem = Some(e);
+                    events.push(ImportEvent::Error(format!("video import failed: {e}")));
+                    self.problem = Some(e);
                 }
             }
         }
-        if self.video_import.form.is_none() && self.video_import.run.is_none() {
-            return;
+        if self.form.is_none() && self.run.is_none() {
+            return events;
         }
         let mut open = true;
         let mut action = None;
@@ -416,40 +418,41 @@ impl Workbench {
             .open(&mut open)
             .collapsible(false)
             .resizable(false)
-            .show(ctx, |ui| {
-                action = import_video_ui(ui, &mut self.video_import)
-            });
+            .show(ctx, |ui| action = import_video_ui(ui, self));
         if !open {
             action = Some(ImportAction::Close);
         }
         match action {
-            Some(ImportAction::PickClip) => self.show_dialog(DialogKind::VideoClip, None),
-            Some(ImportAction::PickOut) => self.show_dialog(DialogKind::VideoOut, None),
+            Some(ImportAction::PickClip) => events.push(ImportEvent::Dialog(DialogKind::VideoClip)),
+            Some(ImportAction::PickOut) => events.push(ImportEvent::Dialog(DialogKind::VideoOut)),
             Some(ImportAction::Start(req)) => {
-                self.video_import.problem = None;
-                let ctx = self.ctx.clone();
-                match ImportRun::start(req, Box::new(move || ctx.request_repaint())) {
-                    Ok(run) => self.video_import.run = Some(run),
-                    Err(e) => self.error(format!("cannot start the import: {e}")),
+                self.problem = None;
+                let c = ctx.clone();
+                match ImportRun::start(req, Box::new(move || c.request_repaint())) {
+                    Ok(run) => self.run = Some(run),
+                    Err(e) => {
+                        events.push(ImportEvent::Error(format!("cannot start the import: {e}")))
+                    }
                 }
             }
             Some(ImportAction::Cancel) => {
-                if let Some(run) = &self.video_import.run {
+                if let Some(run) = &self.run {
                     run.cancel();
                 }
             }
             Some(ImportAction::Close) => {
-                if let Some(run) = &self.video_import.run {
+                if let Some(run) = &self.run {
                     run.cancel();
                 } else {
-                    self.video_import.form = None;
+                    self.form = None;
                 }
             }
             None => {}
         }
-        if self.video_import.run.is_some() {
+        if self.run.is_some() {
             ctx.request_repaint_after(std::time::Duration::from_millis(100));
         }
+        events
     }
 }
 

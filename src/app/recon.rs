@@ -9,6 +9,9 @@ use std::sync::mpsc::{self, Receiver};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use super::health::GroupTrack;
+use super::partial::partial_sound;
+use super::tuning::ParamState;
 use crate::engine::{Progress, ReconstructOptions, Reconstruction, aligned_reference, reconstruct};
 use crate::io::Scan;
 use crate::pipeline::PipelineParams;
@@ -53,8 +56,12 @@ pub struct Clip {
     pub reference_spectrum: Option<Spectrum>,
     /// Params the clip was made with (recorded in exports).
     pub params: PipelineParams,
+    /// Where those params came from when the reconstruction started (recorded in exports).
+    pub param_state: ParamState,
     /// Groups it covers.
     pub groups: Range<usize>,
+    /// Where each of them lies on the groove and how much of it is gaps, in group order.
+    pub tracks: Vec<GroupTrack>,
     /// Scan folder.
     pub scan_dir: PathBuf,
     /// Why the reference is missing, when `scan.reference` exists but could not be read.
@@ -66,6 +73,73 @@ impl Clip {
     #[must_use]
     pub fn rate_hz(&self) -> u32 {
         self.recon.audio.sample_rate_hz
+    }
+
+    /// Seconds into the clip of the groove position `pos_um` (sample 0 of the stitched signal
+    /// is the clip's start; its native rate is Vt over its spacing).
+    #[must_use]
+    pub fn secs_at_um(&self, pos_um: f64) -> f64 {
+        let s = &self.recon.stitched;
+        let um_per_sec = s.spacing_um * s.native_rate_hz;
+        if um_per_sec > 0.0 {
+            (pos_um - s.start_um) / um_per_sec
+        } else {
+            f64::NAN
+        }
+    }
+
+    /// Where group `g` lies in the clip (seconds), when it produced sound.
+    #[must_use]
+    pub fn group_span_secs(&self, g: usize) -> Option<(f64, f64)> {
+        let t = self.tracks.iter().find(|t| t.group == g)?;
+        let (a, b) = (self.secs_at_um(t.span_um.0), self.secs_at_um(t.span_um.1));
+        (a.is_finite() && b.is_finite()).then_some((a, b))
+    }
+
+    /// The group heard at `secs` into the clip: the one whose span holds it, else the nearest.
+    #[must_use]
+    pub fn group_at_secs(&self, secs: f64) -> Option<usize> {
+        self.tracks
+            .iter()
+            .filter_map(|t| Some((t.group, self.group_span_secs(t.group)?)))
+            .min_by(|(_, a), (_, b)| {
+                let d = |(s, e): (f64, f64)| {
+                    if secs < s {
+                        s - secs
+                    } else if secs > e {
+                        secs - e
+                    } else {
+                        0.0
+                    }
+                };
+                d(*a).total_cmp(&d(*b))
+            })
+            .map(|(g, _)| g)
+    }
+
+    /// `other`'s recovered sound (mono) laid on this clip's time axis by groove position, as
+    /// long as this clip: silence where `other` has none. None when the rates differ.
+    #[must_use]
+    pub fn lay_on(&self, other: &Clip) -> Option<Vec<f32>> {
+        if other.rate_hz() != self.rate_hz() {
+            return None;
+        }
+        let offset_secs = self.secs_at_um(other.recon.stitched.start_um);
+        if !offset_secs.is_finite() {
+            return None;
+        }
+        let offset = (offset_secs * f64::from(self.rate_hz())).round() as i64;
+        Some(
+            (0..self.recovered.len())
+                .map(|i| {
+                    usize::try_from(i as i64 - offset)
+                        .ok()
+                        .and_then(|k| other.recovered.get(k))
+                        .copied()
+                        .unwrap_or(0.0)
+                })
+                .collect(),
+        )
     }
 }
 
@@ -89,7 +163,9 @@ pub fn make_clip(
     scan: &Scan,
     recon: Reconstruction,
     params: PipelineParams,
+    param_state: ParamState,
     groups: Range<usize>,
+    tracks: Vec<GroupTrack>,
 ) -> Clip {
     let rate = recon.audio.sample_rate_hz;
     let recovered = recon.audio.mono();
@@ -121,7 +197,9 @@ pub fn make_clip(
         envelope_block: block,
         recon,
         params,
+        param_state,
         groups,
+        tracks,
         scan_dir: scan.dir.clone(),
         reference_problem,
     }
@@ -131,13 +209,25 @@ pub fn make_clip(
 #[derive(Debug)]
 enum ReconEvent {
     Progress(Progress),
+    /// The sound of the groups finished so far (asked for with [`ReconRun::request_partial`]).
+    Partial(Result<PartialClip, String>),
     Finished(Result<Box<Clip>, String>),
+}
+
+/// The sound of the groups a running reconstruction finished so far.
+#[derive(Clone, Debug)]
+pub struct PartialClip {
+    /// Groups it holds.
+    pub groups: usize,
+    /// The sound.
+    pub audio: crate::io::wav::Audio,
 }
 
 /// A reconstruction running in the background.
 #[derive(Debug)]
 pub struct ReconRun {
     cancel: Arc<AtomicBool>,
+    partial_wanted: Arc<AtomicBool>,
     rx: Receiver<ReconEvent>,
     thread: Option<JoinHandle<()>>,
     /// When it started.
@@ -148,36 +238,66 @@ pub struct ReconRun {
     pub total: usize,
     /// Signals of the groups finished so far (for the live waveform).
     pub partial: Vec<Arc<GroupSignal>>,
+    /// Tracks of the groups finished so far (for the live health strip).
+    pub tracks: Vec<GroupTrack>,
+    /// First group of the run.
+    pub first_group: usize,
+    /// The latest partial sound that arrived (taken by [`ReconRun::take_partial`]).
+    partial_sound: Option<Result<PartialClip, String>>,
+}
+
+/// The group a progress report is about: groups run in order from `first`.
+fn reported_group(first: usize, p: &Progress) -> usize {
+    first + p.done.saturating_sub(1)
 }
 
 impl ReconRun {
-    /// Starts reconstructing `scan` with `opts` on a named thread; `repaint` wakes the UI.
+    /// Starts reconstructing `scan` with `opts` (whose params are in `param_state`) on a named
+    /// thread; `repaint` wakes the UI.
     ///
     /// # Errors
     /// When the thread cannot be started.
     pub fn start(
         scan: Scan,
         opts: ReconstructOptions,
+        param_state: ParamState,
         repaint: Box<dyn Fn() + Send + Sync>,
     ) -> std::io::Result<Self> {
         let cancel = Arc::new(AtomicBool::new(false));
+        let partial_wanted = Arc::new(AtomicBool::new(false));
         let (tx, rx) = mpsc::channel();
         let flag = cancel.clone();
+        let wanted = partial_wanted.clone();
         let groups = opts.groups.clone().unwrap_or(0..scan.groups.len());
         let total = groups
             .end
             .min(scan.groups.len())
             .saturating_sub(groups.start);
+        let first_group = groups.start;
         let thread = std::thread::Builder::new()
             .name("groovescope-reconstruct".into())
             .spawn(move || {
                 let ptx = tx.clone();
+                let mut tracks = Vec::new();
+                let mut signals = Vec::new();
                 let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                     reconstruct(
                         &scan,
                         &opts,
                         &mut |p| {
+                            let g = reported_group(first_group, p);
+                            tracks.push(GroupTrack::new(g, p.signal.as_deref()));
+                            signals.extend(p.signal.clone());
                             let _ = ptx.send(ReconEvent::Progress(p.clone()));
+                            if wanted.swap(false, Ordering::AcqRel) {
+                                let sound = partial_sound(&signals, &scan.meta, &opts.params).map(
+                                    |audio| PartialClip {
+                                        groups: signals.len(),
+                                        audio,
+                                    },
+                                );
+                                let _ = ptx.send(ReconEvent::Partial(sound));
+                            }
                             repaint();
                         },
                         &flag,
@@ -188,7 +308,9 @@ impl ReconRun {
                         &scan,
                         recon,
                         opts.params.clone(),
+                        param_state,
                         groups,
+                        tracks,
                     ))),
                     Ok(Err(e)) => Err(e.to_string()),
                     Err(_) => Err("the reconstruction panicked (see the log)".into()),
@@ -198,18 +320,39 @@ impl ReconRun {
             })?;
         Ok(Self {
             cancel,
+            partial_wanted,
             rx,
             thread: Some(thread),
             started: Instant::now(),
             done: 0,
             total,
             partial: Vec::new(),
+            tracks: Vec::new(),
+            first_group,
+            partial_sound: None,
         })
     }
 
     /// Asks the run to stop after the current group.
     pub fn cancel(&self) {
         self.cancel.store(true, Ordering::Relaxed);
+    }
+
+    /// Asks for the sound of the groups finished so far; it arrives after the group running
+    /// now ([`ReconRun::take_partial`]).
+    pub fn request_partial(&self) {
+        self.partial_wanted.store(true, Ordering::Release);
+    }
+
+    /// True while a requested partial sound has not arrived yet.
+    #[must_use]
+    pub fn partial_pending(&self) -> bool {
+        self.partial_wanted.load(Ordering::Acquire)
+    }
+
+    /// The partial sound that arrived, if any.
+    pub fn take_partial(&mut self) -> Option<Result<PartialClip, String>> {
+        self.partial_sound.take()
     }
 
     /// True once cancel was asked for.
@@ -225,10 +368,13 @@ impl ReconRun {
                 ReconEvent::Progress(p) => {
                     self.done = p.done;
                     self.total = p.total;
+                    let g = reported_group(self.first_group, &p);
+                    self.tracks.push(GroupTrack::new(g, p.signal.as_deref()));
                     if let Some(s) = p.signal {
                         self.partial.push(s);
                     }
                 }
+                ReconEvent::Partial(sound) => self.partial_sound = Some(sound),
                 ReconEvent::Finished(outcome) => {
                     if let Some(t) = self.thread.take() {
                         let _ = t.join();

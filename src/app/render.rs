@@ -88,6 +88,24 @@ pub fn heat(img: &Image, range: Option<(f32, f32)>) -> Rendered {
     rendered(&viz::heat_map(img, Some((lo, hi)), HEAT_MAP), lo, hi)
 }
 
+/// Colour of pixels in no robust fit in the weight map (outliers, weight 0, are the heat map's
+/// black; trusted pixels are bright).
+pub const NO_FIT_COLOUR: Color32 = Color32::from_rgb(70, 95, 125);
+
+/// The robust fits' weight map: weights 0–1 as a heat map, pixels in no fit (NaN) in
+/// [`NO_FIT_COLOUR`], so they do not read as outliers.
+#[must_use]
+pub fn weights(map: &Image) -> Rendered {
+    let mut r = heat(map, Some((0.0, 1.0)));
+    let img = Arc::make_mut(&mut r.image);
+    for (p, v) in img.pixels.iter_mut().zip(&map.data) {
+        if !v.is_finite() {
+            *p = NO_FIT_COLOUR;
+        }
+    }
+    r
+}
+
 /// Residual magnitudes above this quantile saturate the flow colours (a few wild pixels would
 /// otherwise wash the rest out).
 pub const FLOW_SATURATION_QUANTILE: f64 = 0.98;
@@ -154,6 +172,16 @@ mod tests {
         assert_eq!(r.image.pixels[1].a(), 0, "NaN is transparent");
         assert_eq!(r.image.pixels[2], heat_colour(1.0));
         assert_ne!(r.image.pixels[0], r.image.pixels[2]);
+    }
+
+    #[test]
+    fn weights_keep_no_fit_apart_from_outliers() {
+        let map = Image::from_vec(3, 1, vec![0.0, f32::NAN, 1.0]).unwrap();
+        let r = weights(&map);
+        assert_eq!(r.image.pixels[1], NO_FIT_COLOUR);
+        assert_eq!(r.image.pixels[0], heat_colour(0.0));
+        assert_ne!(r.image.pixels[0], r.image.pixels[1]);
+        assert_eq!(r.image.pixels[2], heat_colour(1.0));
     }
 
     #[test]

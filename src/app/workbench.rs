@@ -1,38 +1,35 @@
-//! The workbench's state and the operator's actions: open a scan, navigate, tune params with
-//! undo/redo, rerun stale stages on the worker, reconstruct, play and export.
+//! The workbench: its state, one part per concern (navigation, stage results and the jobs that
+//! make them, the knobs, the clip, playback, files, messages, views), and the operator's actions
+//! that span them: open a scan, navigate, tune with undo/redo, rerun stale stages on the worker,
+//! reconstruct, play and export.
+//!
+//! Everything that belongs to one scan (place, results, knobs and their history, clip, view
+//! read-outs) is rebuilt when another scan opens, so nothing of one disc carries into the next.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::mpsc::{Receiver, Sender};
 use std::time::{Duration, Instant};
 
-use super::dialogs::Dialogs;
-use super::export;
-use super::history::History;
+use super::clip_state::ClipState;
+use super::dialogs::DialogKind;
+use super::files::{Confirm, Files, PathPrompt};
+use super::jobs::Jobs;
+use super::messages::{Message, Messages};
+use super::nav::{Navigation, Opening};
 use super::recent::RecentScans;
-use super::recon::{Clip, ReconRun};
-use super::textures::Textures;
-use super::views::StageStatus;
-use super::views::View;
-use super::views::depth_ui::DepthViewState;
-use super::views::flow_ui::FlowViewState;
-use super::views::frame_ui::FrameViewState;
-use super::views::hough_ui::HoughViewState;
-use super::views::meta_ui::MetaForm;
-use super::views::nav_ui::NavState;
-use super::views::orientation_ui::OrientationViewState;
-use super::views::stripes_ui::StripesViewState;
-use super::views::waveform_ui::WaveViewState;
-use super::worker::{Job, JobInput, Outcome, StageDone, Worker, WorkerEvent};
-use crate::engine::ReconstructOptions;
+use super::recon::Clip;
+use super::screenshot::Capture;
+use super::stages::StageState;
+use super::tuning::{ParamState, Tuning};
+use super::views::states::ViewStates;
+use super::views::{StageStatus, View};
+use super::worker::{Job, JobInput, Outcome, StageDone, WorkerEvent};
 use crate::image::Image;
-use crate::io::wav::WavBits;
-use crate::io::{Scan, ScanMeta};
+use crate::io::Scan;
 use crate::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
 use crate::playback::{DeviceChoice, PlayBuffers, Player};
 
-/// Name of the per-disc preset loaded automatically from a scan folder.
-pub const SCAN_PRESET_FILE: &str = "preset.toml";
+pub use super::tuning::SCAN_PRESET_FILE;
 
 /// How the workbench starts.
 #[derive(Clone, Debug, Default)]
@@ -52,107 +49,54 @@ pub struct WorkbenchOptions {
     /// Show a fixed "– ms" instead of each stage's measured time, so that nothing on screen
     /// depends on the machine or its load (snapshot tests).
     pub hide_timings: bool,
+    /// Open this file dialog once the work settled (scripts: see [`super::DIALOG_ENV`]).
+    pub open_dialog: Option<DialogKind>,
+    /// Once the clip is made, apply this symptom preset and reconstruct again (scripts: see
+    /// [`super::COMPARE_ENV`]).
+    pub compare: Option<super::symptoms::SymptomPreset>,
 }
 
-/// A question waiting for the operator.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Confirm {
-    /// Replace an existing WAV (and sidecar).
-    ExportWav {
-        /// Target.
-        path: PathBuf,
-        /// Selection only.
-        selection: bool,
-    },
-    /// Replace an existing preset file.
-    SavePreset(PathBuf),
-    /// Replace an existing PNG.
-    ExportPng(PathBuf, View),
-}
-
-/// One line in the status bar.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Message {
-    /// The text.
-    pub text: String,
-    /// True for errors.
-    pub error: bool,
-}
-
-/// The job the worker is on.
-#[derive(Clone, Debug)]
-pub(super) struct Running {
-    pub generation: u64,
-    /// Stage running now (None while frames load).
-    pub current: Option<Stage>,
-}
-
-/// A scan waiting for its first group to load before it replaces the open one.
-#[derive(Debug)]
-pub(super) struct PendingOpen {
-    pub scan: Scan,
-    pub generation: u64,
-}
-
-/// Per-view UI state.
-#[derive(Debug, Default)]
-pub(super) struct ViewStates {
-    pub frame: FrameViewState,
-    pub flow: FlowViewState,
-    pub hough: HoughViewState,
-    pub stripes: StripesViewState,
-    pub depth: DepthViewState,
-    pub orientation: OrientationViewState,
-    pub wave: WaveViewState,
-    pub nav: NavState,
-    pub toml: super::views::params_ui::TomlEditor,
+/// Settings that hold for the whole session.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Settings {
+    /// See [`WorkbenchOptions::reconstruct_on_open`].
+    pub reconstruct_on_open: bool,
+    /// See [`WorkbenchOptions::hide_timings`].
+    pub hide_timings: bool,
 }
 
 /// The workbench.
 pub struct Workbench {
     pub(super) ctx: egui::Context,
-    pub(super) scan: Option<Scan>,
-    pub(super) meta: Option<Arc<ScanMeta>>,
-    pub(super) pending_open: Option<PendingOpen>,
-    pub(super) group: usize,
-    pub(super) frame: usize,
-    pub(super) frames: Option<(usize, Arc<Vec<Image>>)>,
-    pub(super) load_error: Option<String>,
-    pub(super) params: PipelineParams,
-    pub(super) history: History,
-    pub(super) preset_file: Option<PathBuf>,
-    pub(super) cache: StageCache,
-    pub(super) stage_errors: [Option<String>; 6],
-    /// Params and group each failed stage failed with (not retried until one of them changes).
-    pub(super) failed_with: [Option<(PipelineParams, usize)>; 6],
-    pub(super) stage_times: [Option<Duration>; 6],
-    pub(super) stage_runs: [u64; 6],
-    pub(super) textures: Textures,
-    pub(super) worker: Worker,
-    pub(super) generation: u64,
-    pub(super) pending_job: Option<Box<Job>>,
-    pub(super) running: Option<Running>,
-    pub(super) recon: Option<ReconRun>,
-    pub(super) clip: Option<Arc<Clip>>,
+    pub(super) settings: Settings,
+    /// The open scan and the place in it.
+    pub(super) nav: Navigation,
+    /// The current group's stage results.
+    pub(super) stages: StageState,
+    /// The stage worker's jobs.
+    pub(super) jobs: Jobs,
+    /// The knobs of the open scan.
+    pub(super) tuning: Tuning,
+    /// The open scan's clip.
+    pub(super) clip: ClipState,
+    /// Audio output.
     pub(super) player: Player,
+    /// Dialogs, questions, recent scans.
+    pub(super) files: Files,
+    /// Status-bar messages.
+    pub(super) messages: Messages,
+    /// The view on screen.
     pub(super) view: View,
+    /// Per-view state of the open scan.
     pub(super) views: ViewStates,
-    pub(super) meta_form: Option<MetaForm>,
-    pub(super) messages: Vec<Message>,
-    pub(super) confirm: Option<Confirm>,
-    pub(super) dialogs: Dialogs,
-    pub(super) recent: RecentScans,
-    pub(super) screenshot: Option<super::shell::ScreenshotPlan>,
-    pub(super) capture: (
-        Sender<Arc<egui::ColorImage>>,
-        Receiver<Arc<egui::ColorImage>>,
-    ),
-    pub(super) pending_capture: Option<(PathBuf, egui::Rect, bool)>,
-    pub(super) view_rect: egui::Rect,
-    pub(super) reconstruct_on_open: bool,
-    /// See [`WorkbenchOptions::hide_timings`].
-    pub(super) hide_timings: bool,
+    /// View exports and the screenshot mode.
+    pub(super) capture: Capture,
+    /// Longest UI frame while the worker was busy.
     pub(super) max_busy_frame: Duration,
+    /// A dialog to open once the work settled ([`WorkbenchOptions::open_dialog`]).
+    pub(super) open_dialog: Option<DialogKind>,
+    /// A second reconstruction to make for A/B ([`WorkbenchOptions::compare`]).
+    pub(super) compare: Option<super::symptoms::SymptomPreset>,
     /// The "Import video" window and its running import.
     #[cfg(feature = "video")]
     pub(super) video_import: super::import_video::VideoImport,
@@ -161,14 +105,14 @@ pub struct Workbench {
 impl std::fmt::Debug for Workbench {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Workbench")
-            .field("scan", &self.scan.as_ref().map(|s| &s.dir))
-            .field("group", &self.group)
-            .field("generation", &self.generation)
+            .field("scan", &self.nav.dir())
+            .field("group", &self.nav.group)
+            .field("generation", &self.jobs.generation())
             .finish_non_exhaustive()
     }
 }
 
-fn repaint_fn(ctx: &egui::Context) -> Box<dyn Fn() + Send + Sync> {
+pub(super) fn repaint_fn(ctx: &egui::Context) -> Box<dyn Fn() + Send + Sync> {
     let ctx = ctx.clone();
     Box::new(move || ctx.request_repaint())
 }
@@ -179,48 +123,32 @@ impl Workbench {
     /// # Errors
     /// When the worker thread cannot be started.
     pub fn new(ctx: &egui::Context, opts: WorkbenchOptions) -> std::io::Result<Self> {
-        let worker = Worker::spawn(repaint_fn(ctx))?;
+        let jobs = Jobs::start(repaint_fn(ctx))?;
         let mut recent = RecentScans::load(opts.config_dir.as_deref());
         recent.prune();
         let mut wb = Self {
             ctx: ctx.clone(),
-            scan: None,
-            meta: None,
-            pending_open: None,
-            group: 0,
-            frame: 0,
-            frames: None,
-            load_error: None,
-            params: PipelineParams::default(),
-            history: History::default(),
-            preset_file: None,
-            cache: StageCache::default(),
-            stage_errors: Default::default(),
-            failed_with: Default::default(),
-            stage_times: [None; 6],
-            stage_runs: [0; 6],
-            textures: Textures::default(),
-            worker,
-            generation: 0,
-            pending_job: None,
-            running: None,
-            recon: None,
-            clip: None,
+            settings: Settings {
+                reconstruct_on_open: opts.reconstruct_on_open,
+                hide_timings: opts.hide_timings,
+            },
+            nav: Navigation::default(),
+            stages: StageState::default(),
+            jobs,
+            tuning: Tuning::default(),
+            clip: ClipState::default(),
             player: Player::open(&opts.audio),
+            files: Files {
+                recent,
+                ..Files::default()
+            },
+            messages: Messages::default(),
             view: opts.view.unwrap_or(View::Overview),
             views: ViewStates::default(),
-            meta_form: None,
-            messages: Vec::new(),
-            confirm: None,
-            dialogs: Dialogs::default(),
-            recent,
-            screenshot: opts.screenshot.map(super::shell::ScreenshotPlan::new),
-            capture: std::sync::mpsc::channel(),
-            pending_capture: None,
-            view_rect: egui::Rect::NOTHING,
-            reconstruct_on_open: opts.reconstruct_on_open,
-            hide_timings: opts.hide_timings,
+            capture: Capture::new(opts.screenshot),
             max_busy_frame: Duration::ZERO,
+            open_dialog: opts.open_dialog,
+            compare: opts.compare,
             #[cfg(feature = "video")]
             video_import: super::import_video::VideoImport::default(),
         };
@@ -235,43 +163,55 @@ impl Workbench {
     /// The open scan.
     #[must_use]
     pub fn scan(&self) -> Option<&Scan> {
-        self.scan.as_ref()
+        self.nav.scan.as_ref()
     }
 
     /// Current group index.
     #[must_use]
     pub fn group(&self) -> usize {
-        self.group
+        self.nav.group
     }
 
     /// Current frame index within the group.
     #[must_use]
     pub fn frame(&self) -> usize {
-        self.frame
+        self.nav.frame
+    }
+
+    /// The current group's frames, once loaded.
+    #[must_use]
+    pub fn frames(&self) -> Option<&Arc<Vec<Image>>> {
+        self.nav.frames()
     }
 
     /// The params in force.
     #[must_use]
     pub fn params(&self) -> &PipelineParams {
-        &self.params
+        self.tuning.params()
+    }
+
+    /// Where the params in force came from (defaults or a preset) and whether they changed since.
+    #[must_use]
+    pub fn param_state(&self) -> ParamState {
+        self.tuning.state()
     }
 
     /// The stage results on screen.
     #[must_use]
     pub fn cache(&self) -> &StageCache {
-        &self.cache
+        &self.stages.cache
     }
 
     /// How often `stage` finished for the current scan (counts reruns).
     #[must_use]
     pub fn stage_runs(&self, stage: Stage) -> u64 {
-        self.stage_runs[stage.index()]
+        self.stages.runs(stage)
     }
 
     /// The finished clip.
     #[must_use]
     pub fn clip(&self) -> Option<&Clip> {
-        self.clip.as_deref()
+        self.clip.clip.as_deref()
     }
 
     /// The audio player.
@@ -294,31 +234,43 @@ impl Workbench {
     /// Status-bar messages, oldest first.
     #[must_use]
     pub fn messages(&self) -> &[Message] {
-        &self.messages
+        self.messages.all()
     }
 
     /// The question waiting for the operator.
     #[must_use]
     pub fn confirm(&self) -> Option<&Confirm> {
-        self.confirm.as_ref()
+        self.files.confirm.as_ref()
+    }
+
+    /// The in-app path field, when shown (no native dialog could open).
+    #[must_use]
+    pub fn path_prompt(&self) -> Option<&PathPrompt> {
+        self.files.prompt.as_ref()
+    }
+
+    /// Where the Hough view drew each peak's window last frame (screen points).
+    #[must_use]
+    pub fn hough_window_rects(&self) -> &[egui::Rect] {
+        &self.views.hough.windows_on_screen
     }
 
     /// The recent scans.
     #[must_use]
     pub fn recent(&self) -> &[PathBuf] {
-        &self.recent.scans
+        &self.files.recent.scans
     }
 
     /// True when no stage work or scan opening is under way.
     #[must_use]
     pub fn is_idle(&self) -> bool {
-        self.running.is_none() && self.pending_job.is_none() && self.pending_open.is_none()
+        self.jobs.is_idle() && self.nav.opening.is_none()
     }
 
     /// True while the clip reconstructs.
     #[must_use]
     pub fn is_reconstructing(&self) -> bool {
-        self.recon.is_some()
+        self.clip.is_running()
     }
 
     /// Longest UI frame (time spent in `ui`) seen while the worker was busy.
@@ -327,70 +279,60 @@ impl Workbench {
         self.max_busy_frame
     }
 
-    fn uses_dual(&self) -> bool {
-        self.meta
-            .as_ref()
-            .is_some_and(|m| self.params.uses_dual_focus(m))
-    }
-
     /// Status of `stage` for the current group.
     #[must_use]
     pub fn stage_status(&self, stage: Stage) -> StageStatus {
-        let i = stage.index();
-        if let Some(e) = &self.stage_errors[i] {
-            return StageStatus::Failed(e.clone());
-        }
-        if self
-            .running
-            .as_ref()
-            .is_some_and(|r| r.current == Some(stage))
-        {
-            return StageStatus::Running;
-        }
-        if self.cache.group() == Some(self.group) && self.cache.is_fresh(stage, &self.params) {
-            let unused = if self.uses_dual() {
-                stage == Stage::Depth
-            } else {
-                stage == Stage::Stripes
-            };
-            return if unused {
-                StageStatus::Unused
-            } else {
-                StageStatus::Fresh
-            };
-        }
-        StageStatus::Stale
+        let params = self.tuning.params();
+        self.stages.status(
+            stage,
+            self.nav.group,
+            params,
+            self.nav.uses_dual(params),
+            self.jobs.running_stage(),
+        )
     }
 
     /// Status of every stage.
     #[must_use]
-    pub fn statuses(&self) -> [StageStatus; 6] {
+    pub fn statuses(&self) -> [StageStatus; super::stages::STAGES] {
         Stage::ALL.map(|s| self.stage_status(s))
     }
 
-    // ----- messages -----
-
     pub(super) fn info(&mut self, text: impl Into<String>) {
-        self.messages.push(Message {
-            text: text.into(),
-            error: false,
-        });
+        self.messages.info(text);
     }
 
     pub(super) fn error(&mut self, text: impl Into<String>) {
-        let text = text.into();
-        eprintln!("groovescope: {text}");
-        self.messages.push(Message { text, error: true });
+        self.messages.error(text);
     }
 
     // ----- scan -----
 
     /// Starts opening the scan in `dir`. It replaces the open scan once its first group has
-    /// loaded; if the folder is not a scan or a frame is broken, the open scan stays.
+    /// loaded, with that scan's `preset.toml` (or the defaults); if the folder is not a scan or
+    /// a frame is broken, the open scan stays. When the knobs were changed since their preset
+    /// (or the defaults), it asks first ([`Confirm::SwitchScan`]).
     ///
     /// # Errors
     /// The message shown when `dir` is not a scan.
     pub fn open_scan(&mut self, dir: &Path) -> Result<(), String> {
+        let scan = self.read_scan(dir)?;
+        if self.nav.scan.is_some() && self.tuning.is_modified() {
+            self.files.confirm = Some(Confirm::SwitchScan(scan.dir));
+            return Ok(());
+        }
+        self.start_opening(scan);
+        Ok(())
+    }
+
+    /// Opens `dir` without asking about unsaved knobs (the answer to [`Confirm::SwitchScan`]).
+    pub(super) fn open_scan_anyway(&mut self, dir: &Path) {
+        if let Ok(scan) = self.read_scan(dir) {
+            self.start_opening(scan);
+        }
+    }
+
+    fn read_scan(&mut self, dir: &Path) -> Result<Scan, String> {
         let scan = match Scan::open(dir) {
             Ok(s) => s,
             Err(e) => {
@@ -399,39 +341,48 @@ impl Workbench {
                 return Err(msg);
             }
         };
-        let Some(entry) = scan.groups.first().cloned() else {
+        if scan.groups.is_empty() {
             let msg = format!("the scan holds no groups: {}", dir.display());
             self.error(msg.clone());
             return Err(msg);
-        };
-        self.generation += 1;
-        self.worker.supersede(self.generation);
-        let job = Job {
-            from: Stage::Derivatives,
-            params: self.params.clone(),
-            generation: self.generation,
-            input: JobInput::Load {
-                entry,
-                meta: Arc::new(scan.meta.clone()),
-            },
-            cache: StageCache::default(),
-        };
-        self.pending_job = Some(Box::new(job));
-        self.running = Some(Running {
-            generation: self.generation,
-            current: None,
-        });
-        self.pending_open = Some(PendingOpen {
-            scan,
-            generation: self.generation,
-        });
-        self.submit_pending();
-        Ok(())
+        }
+        Ok(scan)
     }
 
-    fn install_scan(&mut self, scan: Scan, frames: Arc<Vec<Image>>) {
+    fn start_opening(&mut self, scan: Scan) {
+        let Some(entry) = scan.groups.first().cloned() else {
+            return;
+        };
+        let tuning = Tuning::for_scan(&scan.dir);
+        let generation = self.jobs.next_generation();
+        self.jobs.submit(
+            Job {
+                from: Stage::Derivatives,
+                params: tuning.0.params().clone(),
+                generation,
+                input: JobInput::Load {
+                    entry,
+                    meta: Arc::new(scan.meta.clone()),
+                },
+                cache: StageCache::default(),
+            },
+            None,
+        );
+        self.nav.opening = Some(Opening {
+            scan,
+            tuning,
+            generation,
+        });
+    }
+
+    /// The opened scan's first group loaded: everything of the old scan gives way.
+    fn install_scan(&mut self, opening: Opening, frames: Arc<Vec<Image>>) {
+        let Opening {
+            scan,
+            tuning: (tuning, note),
+            ..
+        } = opening;
         let dir = scan.dir.clone();
-        self.meta = Some(Arc::new(scan.meta.clone()));
         self.info(format!(
             "opened {} ({} groups{})",
             dir.display(),
@@ -442,70 +393,41 @@ impl Workbench {
                 ""
             }
         ));
-        self.scan = Some(scan);
-        self.group = 0;
-        self.frame = frames.len() / 2;
-        self.frames = Some((0, frames));
-        self.load_error = None;
-        self.cache = StageCache::default();
-        self.stage_errors = Default::default();
-        self.failed_with = Default::default();
-        self.stage_times = [None; 6];
-        self.stage_runs = [0; 6];
-        self.textures.clear();
-        self.recon = None;
-        self.clip = None;
+        let groups = scan.groups.len();
+        self.nav = Navigation::opened(scan, frames);
+        self.stages = StageState::default();
+        self.tuning = tuning;
+        self.clip = ClipState::for_scan(groups);
         self.player.load(PlayBuffers::default());
-        self.views.wave.selection = None;
-        self.meta_form = None;
-        if let Err(e) = self.recent.push(&dir) {
+        self.views = ViewStates::default();
+        self.files.confirm = None;
+        self.files.prompt = None;
+        if let Err(e) = self.files.recent.push(&dir) {
             self.error(format!("cannot remember the scan: {e}"));
         }
-        let preset = dir.join(SCAN_PRESET_FILE);
-        if preset.is_file() {
-            match export::load_preset(&preset) {
-                Ok(p) => {
-                    self.info(format!("loaded the scan's preset {}", preset.display()));
-                    self.preset_file = Some(preset);
-                    self.replace_params(p);
-                }
-                Err(e) => self.error(e),
-            }
+        match note {
+            Ok(m) => self.info(m),
+            Err(e) => self.error(e),
         }
-        if self.reconstruct_on_open {
+        if self.settings.reconstruct_on_open {
             self.reconstruct(None);
         }
     }
 
     /// Shows group `g` (clamped), loading it and rerunning its stages in the background.
     pub fn set_group(&mut self, g: usize) {
-        let Some(scan) = &self.scan else { return };
-        let g = g.min(scan.groups.len().saturating_sub(1));
-        if g == self.group && self.frames.as_ref().is_some_and(|(fg, _)| *fg == g) {
+        if !self.nav.go_to_group(g) {
             return;
         }
-        self.group = g;
-        self.views.nav.jump = g;
-        self.cache.clear();
-        self.stage_errors = Default::default();
-        self.failed_with = Default::default();
-        self.load_error = None;
+        self.views.nav.jump = self.nav.group;
+        self.views.clear_readouts();
+        self.stages.clear_for_group();
         self.schedule();
     }
 
     /// Shows frame `f` of the current group (clamped).
     pub fn set_frame(&mut self, f: usize) {
-        let n = self.frames.as_ref().map_or(1, |(_, fr)| fr.len());
-        self.frame = f.min(n.saturating_sub(1));
-    }
-
-    /// The current group's frames, once loaded.
-    #[must_use]
-    pub fn frames(&self) -> Option<&Arc<Vec<Image>>> {
-        self.frames
-            .as_ref()
-            .filter(|(g, _)| *g == self.group)
-            .map(|(_, f)| f)
+        self.nav.set_frame(f);
     }
 
     // ----- params -----
@@ -513,34 +435,28 @@ impl Workbench {
     /// Applies `new` as one undoable change (edits in a burst to one stage merge) and reruns
     /// the stages it makes stale.
     pub fn set_params(&mut self, new: PipelineParams) {
-        if new == self.params {
-            return;
+        if self.tuning.set(new, Instant::now()) {
+            self.schedule();
         }
-        let stage = self.params.first_changed_stage(&new);
-        self.history.record(&self.params, stage, Instant::now());
-        self.params = new;
-        self.schedule();
     }
 
-    /// Replaces the params as a separate undo step (preset load).
-    fn replace_params(&mut self, new: PipelineParams) {
-        self.history.seal();
-        self.set_params(new);
-        self.history.seal();
+    /// Applies `new` as an undo step of its own (a TOML apply, a symptom preset).
+    pub fn replace_params(&mut self, new: PipelineParams) {
+        if self.tuning.replace(new, Instant::now()) {
+            self.schedule();
+        }
     }
 
     /// Undoes the last parameter change.
     pub fn undo(&mut self) {
-        if let Some(p) = self.history.undo(&self.params) {
-            self.params = p;
+        if self.tuning.undo() {
             self.schedule();
         }
     }
 
     /// Redoes the last undone change.
     pub fn redo(&mut self) {
-        if let Some(p) = self.history.redo(&self.params) {
-            self.params = p;
+        if self.tuning.redo() {
             self.schedule();
         }
     }
@@ -548,211 +464,105 @@ impl Workbench {
     /// True when there is something to undo / redo.
     #[must_use]
     pub fn can_undo_redo(&self) -> (bool, bool) {
-        (self.history.can_undo(), self.history.can_redo())
+        self.tuning.can_undo_redo()
     }
 
     /// Reruns `stage` and every later stage of the current group.
     pub fn rerun(&mut self, stage: Stage) {
-        self.cache.invalidate(stage);
-        for f in &mut self.failed_with[stage.index()..] {
-            *f = None;
-        }
+        self.stages.invalidate_from(stage);
         if stage == Stage::Derivatives {
-            self.frames = None;
-            self.load_error = None;
+            self.nav.forget_frames();
         }
         self.schedule();
-    }
-
-    /// Loads a preset (an undoable change); on error the params stay as they are.
-    ///
-    /// # Errors
-    /// The message shown.
-    pub fn load_preset_from(&mut self, path: &Path) -> Result<(), String> {
-        match export::load_preset(path) {
-            Ok(p) => {
-                self.preset_file = Some(path.to_path_buf());
-                self.replace_params(p);
-                self.info(format!("loaded preset {}", path.display()));
-                Ok(())
-            }
-            Err(e) => {
-                self.error(e.clone());
-                Err(e)
-            }
-        }
-    }
-
-    /// Saves the params as a preset.
-    ///
-    /// # Errors
-    /// The message shown (an existing file without `overwrite`, a failed write).
-    pub fn save_preset_to(&mut self, path: &Path, overwrite: bool) -> Result<(), String> {
-        match export::save_preset(&self.params, path, overwrite) {
-            Ok(()) => {
-                self.preset_file = Some(path.to_path_buf());
-                self.info(format!("saved preset {}", path.display()));
-                Ok(())
-            }
-            Err(e) => {
-                self.error(e.clone());
-                Err(e)
-            }
-        }
-    }
-
-    /// Writes `meta` to the scan's `scan.toml` (atomically) and reruns the group with it.
-    ///
-    /// # Errors
-    /// The message shown (invalid metadata, failed write).
-    pub fn save_meta(&mut self, meta: ScanMeta) -> Result<(), String> {
-        let Some(scan) = &mut self.scan else {
-            return Err("no scan open".into());
-        };
-        let path = scan.dir.join("scan.toml");
-        let first_frame = scan.groups.first().and_then(|g| g.frames.first());
-        let result = meta
-            .validate()
-            .and_then(|()| match first_frame {
-                // What the scan folder holds must agree too (the next open checks it).
-                Some(f) => crate::io::frames::frame_dimensions(f)
-                    .map_err(|e| e.to_string())
-                    .and_then(|size| meta.check_against_scan(scan.groups.len(), size)),
-                None => Ok(()),
-            })
-            .and_then(|()| meta.to_toml_string().map_err(|e| e.to_string()))
-            .and_then(|text| {
-                let _lock =
-                    crate::io::lock::OutputLock::acquire(&path).map_err(|e| e.to_string())?;
-                crate::io::write_atomic(&path, text.as_bytes(), true).map_err(|e| e.to_string())
-            });
-        match result {
-            Ok(()) => {
-                scan.meta = meta.clone();
-                self.meta = Some(Arc::new(meta));
-                self.meta_form = None;
-                self.info(format!("saved {}", path.display()));
-                self.rerun(Stage::Derivatives);
-                Ok(())
-            }
-            Err(e) => {
-                let msg = format!("cannot save the metadata: {e}: {}", path.display());
-                self.error(msg.clone());
-                Err(msg)
-            }
-        }
     }
 
     // ----- the worker -----
 
     /// Sends the worker a job for whatever is stale (nothing when everything is fresh).
     pub(super) fn schedule(&mut self) {
-        if self.pending_open.is_some() {
+        if self.nav.opening.is_some() {
             return;
         }
-        let (Some(scan), Some(meta)) = (&self.scan, &self.meta) else {
+        let (Some(scan), Some(meta)) = (&self.nav.scan, &self.nav.meta) else {
             return;
         };
-        let Some(entry) = scan.groups.get(self.group).cloned() else {
+        let group = self.nav.group;
+        let Some(entry) = scan.groups.get(group).cloned() else {
             return;
         };
-        let loaded = self.frames().cloned();
+        let meta = meta.clone();
+        let loaded = self.nav.frames().cloned();
+        let params = self.tuning.params();
         let from = if loaded.is_some() {
-            self.cache.first_stale(&self.params)
+            self.stages.cache.first_stale(params)
         } else {
             Some(Stage::Derivatives)
         };
         let Some(from) = from else {
             return;
         };
-        if loaded.is_none() && self.load_error.is_some() {
+        if loaded.is_none() && self.nav.load_error.is_some() {
             return; // the group's frames cannot be read: nothing to retry until a rerun
         }
-        if let Some((p, g)) = &self.failed_with[from.index()]
-            && *g == self.group
-            && p.first_changed_stage(&self.params).is_none_or(|s| s > from)
-        {
+        if self.stages.failed_with_these(from, group, params) {
             return; // it failed with these very inputs: wait for a change or a rerun
         }
-        self.generation += 1;
-        self.worker.supersede(self.generation);
-        for e in &mut self.stage_errors[from.index()..] {
-            *e = None;
-        }
+        let params = params.clone();
+        let generation = self.jobs.next_generation();
+        self.stages.clear_errors_from(from);
         let input = match loaded {
             Some(frames) => JobInput::Ready(GroupInput {
-                group: self.group,
+                group,
                 frames,
                 first_frame: 0,
-                meta: meta.clone(),
+                meta,
             }),
-            None => JobInput::Load {
-                entry,
-                meta: meta.clone(),
-            },
+            None => JobInput::Load { entry, meta },
         };
-        let current = matches!(input, JobInput::Ready(_)).then_some(from);
-        self.pending_job = Some(Box::new(Job {
-            from,
-            params: self.params.clone(),
-            generation: self.generation,
-            input,
-            cache: self.cache.clone(),
-        }));
-        self.running = Some(Running {
-            generation: self.generation,
-            current,
-        });
-        self.submit_pending();
-    }
-
-    fn submit_pending(&mut self) {
-        if let Some(job) = self.pending_job.take()
-            && let Err(job) = self.worker.try_submit(job)
-        {
-            self.pending_job = Some(job);
-        }
+        let starts_at = matches!(input, JobInput::Ready(_)).then_some(from);
+        self.jobs.submit(
+            Job {
+                from,
+                params,
+                generation,
+                input,
+                cache: self.stages.cache.clone(),
+            },
+            starts_at,
+        );
     }
 
     fn on_stage_done(&mut self, done: StageDone) {
-        let current = done.generation == self.generation;
+        let current = done.generation == self.jobs.generation();
         match done.result {
             Ok(res) => {
-                let usable = res.cache.group() == Some(self.group)
-                    && res.cache.is_fresh(done.stage, &self.params);
-                if !usable {
-                    return;
-                }
-                self.cache.adopt(done.stage, &res.cache);
-                let i = done.stage.index();
-                self.stage_errors[i] = None;
-                self.stage_times[i] = Some(done.elapsed);
-                self.stage_runs[i] += 1;
-                let source = self.cache.output_id(done.stage);
-                for (key, r) in res.renders {
-                    self.textures.set(&self.ctx, key, r, source);
-                }
-                if current && let Some(r) = &mut self.running {
-                    r.current = Stage::ALL.get(i + 1).copied();
+                let adopted = self.stages.adopt(
+                    &self.ctx,
+                    done.stage,
+                    res,
+                    done.elapsed,
+                    self.nav.group,
+                    self.tuning.params(),
+                );
+                if adopted && current {
+                    let next = Stage::ALL.get(done.stage.index() + 1).copied();
+                    self.jobs.advance(done.generation, next);
                 }
             }
             Err(msg) if current => {
-                self.error(format!(
-                    "group {}: {}: {msg}",
-                    self.group,
-                    done.stage.name()
-                ));
-                self.stage_errors[done.stage.index()] = Some(msg);
-                self.failed_with[done.stage.index()] = Some((self.params.clone(), self.group));
+                let group = self.nav.group;
+                self.error(format!("group {group}: {}: {msg}", done.stage.name()));
+                self.stages
+                    .fail(done.stage, msg, self.tuning.params(), group);
             }
             Err(_) => {}
         }
     }
 
-    /// Handles everything the worker, the reconstruction, dialogs and captures reported.
+    /// Handles everything the worker and the reconstruction reported.
     pub fn poll(&mut self) {
-        self.submit_pending();
-        for ev in self.worker.poll() {
+        self.jobs.submit_pending();
+        for ev in self.jobs.poll() {
             match ev {
                 WorkerEvent::Loaded {
                     generation,
@@ -765,30 +575,36 @@ impl Workbench {
                     generation,
                     outcome,
                 } => {
-                    if self
-                        .running
-                        .as_ref()
-                        .is_some_and(|r| r.generation == generation)
+                    if self.jobs.finished(generation)
+                        && let Outcome::Failed(stage, _) = outcome
                     {
-                        self.running = None;
-                        if let Outcome::Failed(stage, _) = outcome
-                            && let Some(r) = self.stage_errors.get_mut(stage.index())
-                            && r.is_none()
-                        {
-                            *r = Some("failed".into());
-                        }
+                        self.stages.fail_unexplained(stage);
                     }
                 }
             }
         }
-        if let Some(run) = &mut self.recon
-            && let Some(outcome) = run.poll()
-        {
-            self.recon = None;
-            match outcome {
-                Ok(clip) => self.set_clip(*clip),
-                Err(e) => self.error(format!("reconstruction: {e}")),
+        match self.clip.poll() {
+            Some(Ok(clip)) => self.set_clip(*clip),
+            Some(Err(e)) => self.error(format!("reconstruction: {e}")),
+            None => {}
+        }
+        match self.clip.partial_arrived.take() {
+            Some(Ok(p)) => {
+                self.player.load(PlayBuffers {
+                    rate_hz: p.audio.sample_rate_hz,
+                    sources: vec![p.audio.channels],
+                });
+                match self.player.play() {
+                    Ok(()) => self.info(format!(
+                        "playing the {} groups finished so far (the whole clip follows when \
+                         the reconstruction ends)",
+                        p.groups
+                    )),
+                    Err(e) => self.error(e),
+                }
             }
+            Some(Err(e)) => self.error(format!("cannot play the groups so far: {e}")),
+            None => {}
         }
     }
 
@@ -799,166 +615,55 @@ impl Workbench {
         frames: Result<Arc<Vec<Image>>, String>,
         textures: Vec<Arc<egui::ColorImage>>,
     ) {
-        let upload = |wb: &mut Self, f: &Arc<Vec<Image>>| {
-            wb.textures.set_frames(group, f, textures.clone());
-        };
         if self
-            .pending_open
+            .nav
+            .opening
             .as_ref()
             .is_some_and(|p| p.generation == generation)
         {
-            let Some(pending) = self.pending_open.take() else {
+            let Some(opening) = self.nav.opening.take() else {
                 return;
             };
             match frames {
                 Ok(frames) => {
-                    let job_params = self.params.clone();
-                    self.install_scan(pending.scan, frames.clone());
-                    upload(self, &frames);
-                    if self.params != job_params {
-                        self.schedule();
-                    }
+                    self.install_scan(opening, frames.clone());
+                    self.stages.textures.set_frames(group, &frames, textures);
+                    self.jobs.advance(generation, Some(Stage::Derivatives));
                 }
                 Err(e) => {
-                    self.running = None;
-                    let keep = self.scan.as_ref().map_or("no scan stays open".into(), |s| {
-                        format!("{} stays open", s.dir.display())
+                    self.jobs.drop_running();
+                    let keep = self.nav.dir().map_or("no scan stays open".into(), |d| {
+                        format!("{} stays open", d.display())
                     });
                     self.error(format!(
                         "cannot open {}: group 0: {e} ({keep})",
-                        pending.scan.dir.display()
+                        opening.scan.dir.display()
                     ));
                     self.schedule();
                 }
             }
             return;
         }
-        if group != self.group {
+        if group != self.nav.group {
             return;
         }
-        let current = generation == self.generation;
+        let current = generation == self.jobs.generation();
         match frames {
             Ok(f) => {
                 // Frames of the current group are good whichever job loaded them.
-                if self.frames().is_none() {
-                    self.frame = self.frame.min(f.len().saturating_sub(1));
-                    upload(self, &f);
-                    self.frames = Some((group, f));
-                    self.load_error = None;
+                if self.nav.frames_loaded(group, f.clone()) {
+                    self.stages.textures.set_frames(group, &f, textures);
                 }
-                if let (true, Some(r)) = (current, &mut self.running) {
-                    r.current = Some(Stage::Derivatives);
+                if current {
+                    self.jobs.advance(generation, Some(Stage::Derivatives));
                 }
             }
             Err(e) if current => {
                 self.error(format!("group {group}: {e}"));
-                self.load_error = Some(e);
-                self.frames = None;
+                self.nav.load_error = Some(e);
+                self.nav.frames = None;
             }
             Err(_) => {}
         }
-    }
-
-    // ----- the clip -----
-
-    /// Reconstructs `groups` (None: all) in the background.
-    pub fn reconstruct(&mut self, groups: Option<std::ops::Range<usize>>) {
-        let Some(scan) = &self.scan else {
-            self.error("open a scan first");
-            return;
-        };
-        let opts = ReconstructOptions {
-            params: self.params.clone(),
-            groups,
-            keep_going: true,
-        };
-        match ReconRun::start(scan.clone(), opts, repaint_fn(&self.ctx)) {
-            Ok(run) => self.recon = Some(run),
-            Err(e) => self.error(format!("cannot start the reconstruction: {e}")),
-        }
-    }
-
-    /// Stops the running reconstruction after its current group.
-    pub fn cancel_reconstruction(&mut self) {
-        if let Some(r) = &self.recon {
-            r.cancel();
-        }
-    }
-
-    /// Shows and loads a finished clip for playback.
-    pub fn set_clip(&mut self, clip: Clip) {
-        let reference = clip.reference.as_ref().map(|r| vec![r.to_vec()]);
-        self.player.load(PlayBuffers {
-            rate_hz: clip.rate_hz(),
-            a: clip.recon.audio.channels.clone(),
-            b: reference,
-        });
-        self.info(format!(
-            "clip ready: {:.1} ms from {} groups",
-            clip.recon.audio.duration_secs() * 1000.0,
-            clip.groups.len()
-        ));
-        self.views.wave.selection = None;
-        self.clip = Some(Arc::new(clip));
-    }
-
-    /// Exports the clip (or the selection) as WAV plus sidecar.
-    ///
-    /// # Errors
-    /// The message shown (no clip, an existing file without `overwrite`, a failed write).
-    pub fn export_wav_to(
-        &mut self,
-        path: &Path,
-        bits: WavBits,
-        selection: bool,
-        overwrite: bool,
-    ) -> Result<(), String> {
-        let Some(clip) = self.clip.clone() else {
-            let msg = "nothing to export: reconstruct the clip first".to_string();
-            self.error(msg.clone());
-            return Err(msg);
-        };
-        let sel = if selection {
-            self.views.wave.selection
-        } else {
-            None
-        };
-        match export::export_wav(
-            &clip,
-            path,
-            bits,
-            sel,
-            self.preset_file.as_deref(),
-            overwrite,
-        ) {
-            Ok(()) => {
-                self.info(format!("exported {}", path.display()));
-                Ok(())
-            }
-            Err(e) => {
-                self.error(e.clone());
-                Err(e)
-            }
-        }
-    }
-
-    /// Exports to `path`, asking first when it would replace a file.
-    pub fn request_export_wav(&mut self, path: PathBuf, selection: bool) {
-        if export::would_overwrite(&path) {
-            self.confirm = Some(Confirm::ExportWav { path, selection });
-        } else {
-            let bits = self.views.wave.bits;
-            let _ = self.export_wav_to(&path, bits, selection, false);
-        }
-    }
-
-    /// Selects `[a, b]` seconds of the clip.
-    pub fn set_selection(&mut self, selection: Option<(f64, f64)>) {
-        self.views.wave.selection = selection;
-    }
-
-    /// Sets the export encoding.
-    pub fn set_export_bits(&mut self, bits: WavBits) {
-        self.views.wave.bits = bits;
     }
 }

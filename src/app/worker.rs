@@ -204,7 +204,7 @@ pub fn render_stage(
             if let Some(o) = cache.orientation() {
                 out.push((
                     ViewImage::Weights,
-                    Arc::new(render::heat(&o.orientation.weight_map, Some((0.0, 1.0)))),
+                    Arc::new(render::weights(&o.orientation.weight_map)),
                 ));
             }
         }

@@ -26,17 +26,37 @@ pub const SIZE: [f32; 2] = [1280.0, 800.0];
 
 static ALSA: Once = Once::new();
 
-/// Points ALSA at a silent null sink (no sound card here; never assert on timing).
+/// Points ALSA at a silent null sink (no sound card here; never assert on timing), and makes
+/// the process a bare desktop-less machine for file dialogs: no session bus (so no desktop
+/// portal) and a `PATH` without `zenity`, so no test ever opens a real dialog and every dialog
+/// takes the path a bare Debian install takes.
 pub fn quiet_audio() {
     ALSA.call_once(|| {
-        let conf = Path::new(env!("CARGO_TARGET_TMPDIR")).join("alsa-null.conf");
+        let tmp = Path::new(env!("CARGO_TARGET_TMPDIR"));
+        let conf = tmp.join("alsa-null.conf");
         std::fs::write(
             &conf,
             "</usr/share/alsa/alsa.conf>\npcm.!default { type null }\n",
         )
         .unwrap();
-        // SAFETY: runs once, before any test touches ALSA or reads the environment.
-        unsafe { std::env::set_var("ALSA_CONFIG_PATH", &conf) };
+        let no_tools = tmp.join("no-tools");
+        std::fs::create_dir_all(&no_tools).unwrap();
+        // A runtime folder of our own: no session bus socket in it.
+        let runtime = tmp.join(format!("runtime-{}", std::process::id()));
+        std::fs::create_dir_all(&runtime).unwrap();
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            std::fs::set_permissions(&runtime, std::fs::Permissions::from_mode(0o700)).unwrap();
+        }
+        // SAFETY: runs once, before any test touches ALSA, dialogs or reads the environment
+        // (every test calls it before building a workbench).
+        unsafe {
+            std::env::set_var("ALSA_CONFIG_PATH", &conf);
+            std::env::set_var("PATH", &no_tools);
+            std::env::remove_var("DBUS_SESSION_BUS_ADDRESS");
+            std::env::set_var("XDG_RUNTIME_DIR", &runtime);
+        }
     });
 }
 

@@ -116,12 +116,7 @@ pub fn depth_ui(
             .as_deref()
             .unwrap_or("hover the map for a read-out"),
     );
-    if !depth.map.warnings.is_empty() {
-        ui.colored_label(
-            Color32::from_rgb(220, 170, 60),
-            format!("warnings: {}", depth.map.warnings.join("; ")),
-        );
-    }
+    super::guidance::warnings_ui(ui, &depth.map.warnings, 2);
     let section: Vec<[f64; 2]> = (0..z.height)
         .filter_map(|y| {
             let v = z.get(column, y)?;

@@ -6,6 +6,9 @@ use super::frame_ui::{ArrowOptions, StageData, arrow_controls, flow_arrows};
 use super::{empty_note, hovered_pixel, image_item, image_plot, stage_banner};
 use crate::app::textures::Textures;
 use crate::pipeline::Stage;
+use crate::pipeline::optical_flow::{
+    FlowField, FlowMethod, FlowParams, WALL_PRESOLVE_MAX_ITERATIONS, WALL_PRESOLVE_TOLERANCE_PX,
+};
 
 /// State of the flow view.
 #[derive(Clone, Debug, Default)]
@@ -18,6 +21,69 @@ pub struct FlowViewState {
     pub arrows: ArrowOptions,
     /// Last read-out.
     pub readout: Option<String>,
+}
+
+/// The iteration read-out of one field and its explanation. Where the groove method finds the
+/// wall sides itself it runs a plain pass first (to its own tolerance, within at least
+/// [`WALL_PRESOLVE_MAX_ITERATIONS`]) and then the groove pass, which the cap and τ apply to;
+/// the field's count holds both, so it can exceed the cap.
+#[must_use]
+pub fn iterations_text(f: &FlowField, p: &FlowParams) -> (String, String) {
+    let state = if f.converged {
+        "converged"
+    } else {
+        "stopped at the cap"
+    };
+    let cap = p.max_iterations;
+    if p.method != FlowMethod::GrooveHornSchunck {
+        return (
+            format!("{} of at most {cap} iterations, {state}", f.iterations),
+            format!(
+                "Stops when the mean change per iteration falls below τ = {} px, or at the cap.",
+                p.tolerance_px
+            ),
+        );
+    }
+    let hover = format!(
+        "Where the wall sides are found in this window, a plain pass runs first (to \
+         {WALL_PRESOLVE_TOLERANCE_PX:e} px, within at least {} iterations), then the groove \
+         pass, which the cap of {cap} and τ = {} px apply to; the count holds both passes.",
+        WALL_PRESOLVE_MAX_ITERATIONS.max(cap),
+        p.tolerance_px
+    );
+    let text = if f.iterations > cap {
+        format!(
+            "{} iterations: wall pass + groove pass (the cap of {cap} is the groove pass's), {state}",
+            f.iterations
+        )
+    } else {
+        format!("{} iterations, {state}", f.iterations)
+    };
+    (text, hover)
+}
+
+/// The colour key of the flow image: a swatch for each direction in the very colours the
+/// image uses, and the magnitude at full colour.
+pub fn flow_legend(ui: &mut Ui, hi_px: f32) {
+    let swatch = |u: f32, v: f32| {
+        let [r, g, b, _] = crate::viz::flow_color(u, v);
+        egui::Color32::from_rgb(r, g, b)
+    };
+    ui.horizontal(|ui| {
+        ui.weak("direction:");
+        for (name, u, v) in [
+            ("+x", 1.0, 0.0),
+            ("−x", -1.0, 0.0),
+            ("+y (down)", 0.0, 1.0),
+            ("−y", 0.0, -1.0),
+        ] {
+            super::guidance::swatch(ui, swatch(u, v));
+            ui.weak(name);
+        }
+        ui.weak(format!(
+            "· full colour at {hi_px:.3} px/frame, white = moves with the record surface"
+        ));
+    });
 }
 
 /// The flow view.
@@ -59,15 +125,8 @@ pub fn flow_ui(
         ui.selectable_value(&mut state.arrows_over_frame, true, "arrows over frame");
         if let Some(f) = flows.get(window) {
             ui.separator();
-            ui.label(format!(
-                "{} iterations{}",
-                f.iterations,
-                if f.converged {
-                    ", converged"
-                } else {
-                    ", not converged"
-                }
-            ));
+            let (text, hover) = iterations_text(f, &data.params.flow);
+            ui.label(text).on_hover_text(hover);
         }
     });
     state.window = Some(window);
@@ -104,9 +163,7 @@ pub fn flow_ui(
         (t.handle.clone(), Some(t.rendered.hi))
     };
     if let Some(hi) = hi {
-        ui.weak(format!(
-            "hue = direction (red: +x, cyan: −x), saturation = magnitude up to {hi:.3} px/frame; black = no confidence"
-        ));
+        flow_legend(ui, hi);
     }
     let resp = image_plot("flow_view", height).show(ui, |plot_ui| {
         plot_ui.image(image_item("flow", &tex, dim));

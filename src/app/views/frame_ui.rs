@@ -32,7 +32,7 @@ pub struct StageData<'a> {
     /// Frame index within the group.
     pub frame: usize,
     /// Status per stage (index = `Stage::index`).
-    pub status: &'a [StageStatus; 6],
+    pub status: &'a [StageStatus; Stage::ALL.len()],
     /// Current params.
     pub params: &'a PipelineParams,
     /// The scan's metadata.

@@ -12,7 +12,7 @@ use crate::pipeline::Stage;
 use crate::pipeline::hough::HoughParams;
 
 /// Pointer distance (screen points) that grabs a window edge.
-const GRAB_PT: f32 = 6.0;
+pub const GRAB_PT: f32 = 6.0;
 
 /// Which window size an edge drag changes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -32,6 +32,33 @@ pub struct HoughViewState {
     pub dragging: Option<Edge>,
     /// Last read-out.
     pub readout: Option<String>,
+    /// Where each peak's window was drawn last frame (screen points).
+    pub windows_on_screen: Vec<egui::Rect>,
+}
+
+/// The window edge of one of `peaks` (θ°, ρ px) with half-sizes `(±θ°, ±ρ px)` within
+/// [`GRAB_PT`] of the screen point `p`; `to_screen` maps plot values to the screen.
+pub fn edge_near(
+    peaks: &[(f64, f64)],
+    (wt, wr): (f64, f64),
+    p: egui::Pos2,
+    to_screen: impl Fn(PlotPoint) -> egui::Pos2,
+) -> Option<Edge> {
+    peaks.iter().enumerate().find_map(|(i, &(t, r))| {
+        let a = to_screen(PlotPoint::new(t - wt, r - wr));
+        let b = to_screen(PlotPoint::new(t + wt, r + wr));
+        let rect = egui::Rect::from_two_pos(a, b).expand(GRAB_PT);
+        if !rect.contains(p) {
+            return None;
+        }
+        if (p.x - a.x).abs() < GRAB_PT || (p.x - b.x).abs() < GRAB_PT {
+            Some(Edge::Theta(i))
+        } else if (p.y - a.y).abs() < GRAB_PT || (p.y - b.y).abs() < GRAB_PT {
+            Some(Edge::Rho(i))
+        } else {
+            None
+        }
+    })
 }
 
 /// Number controls of the windows and ranges; edits `draft`.
@@ -185,31 +212,28 @@ pub fn hough_ui(
                 );
             }
         });
-    // Edge hover and drag, in screen space.
+    // Edge hover and drag, in screen space. The edge a drag moves is the one under the point
+    // where the button went down: egui reports the drag only once the pointer has moved past
+    // its click distance, by when it may have left the edge.
     let tr = resp.transform;
     let pointer = resp
         .response
         .hover_pos()
         .or(resp.response.interact_pointer_pos());
-    let near = pointer.and_then(|p| {
-        peaks.iter().enumerate().find_map(|(i, &(t, r))| {
-            let a = tr.position_from_point(&PlotPoint::new(t - wt, r - wr));
-            let b = tr.position_from_point(&PlotPoint::new(t + wt, r + wr));
-            let rect = egui::Rect::from_two_pos(a, b).expand(GRAB_PT);
-            if !rect.contains(p) {
-                return None;
-            }
-            if (p.x - a.x).abs() < GRAB_PT || (p.x - b.x).abs() < GRAB_PT {
-                Some(Edge::Theta(i))
-            } else if (p.y - a.y).abs() < GRAB_PT || (p.y - b.y).abs() < GRAB_PT {
-                Some(Edge::Rho(i))
-            } else {
-                None
-            }
+    state.windows_on_screen = peaks
+        .iter()
+        .map(|&(t, r)| {
+            egui::Rect::from_two_pos(
+                tr.position_from_point(&PlotPoint::new(t - wt, r - wr)),
+                tr.position_from_point(&PlotPoint::new(t + wt, r + wr)),
+            )
         })
-    });
+        .collect();
+    let edge_at = |p: egui::Pos2| edge_near(&peaks, (wt, wr), p, |pt| tr.position_from_point(&pt));
+    let near = pointer.and_then(edge_at);
     if resp.response.drag_started() {
-        state.dragging = near;
+        let origin = ui.input(|i| i.pointer.press_origin());
+        state.dragging = origin.and_then(edge_at);
     }
     if let (Some(edge), Some(p)) = (state.dragging, pointer) {
         let v = tr.value_from_position(p);

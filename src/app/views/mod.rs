@@ -3,13 +3,17 @@
 pub mod depth_ui;
 pub mod flow_ui;
 pub mod frame_ui;
+pub mod guidance;
+pub mod health_ui;
 pub mod hough_ui;
 pub mod meta_ui;
 pub mod nav_ui;
 pub mod orientation_ui;
 pub mod overview_ui;
 pub mod params_ui;
+pub mod states;
 pub mod stripes_ui;
+pub mod transport_ui;
 pub mod waveform_ui;
 
 use egui::{Color32, TextureHandle, Ui};

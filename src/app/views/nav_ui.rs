@@ -7,15 +7,13 @@ use egui::Ui;
 use super::StageStatus;
 use crate::pipeline::Stage;
 
-/// Seconds per frame when playing a group as a movie.
-const MOVIE_FRAME_SECS: f64 = 0.12;
-
 /// State of the navigation panel.
 #[derive(Clone, Debug, Default)]
 pub struct NavState {
     /// The group number typed into "jump".
     pub jump: usize,
-    /// Playing the frames as a movie.
+    /// Playing the frames as a movie (the frame loop steps it before drawing, so every panel
+    /// shows the same frame).
     pub movie: bool,
     /// Time (egui clock) of the last movie step.
     pub last_step: f64,
@@ -100,15 +98,6 @@ pub fn nav_ui(
                 state.last_step = ui.input(|i| i.time);
             }
         });
-        if state.movie {
-            let now = ui.input(|i| i.time);
-            if now - state.last_step >= MOVIE_FRAME_SECS {
-                state.last_step = now;
-                out.push(NavAction::Frame((frame + 1) % frames));
-            }
-            ui.ctx()
-                .request_repaint_after(Duration::from_secs_f64(MOVIE_FRAME_SECS));
-        }
     }
     out
 }
@@ -116,8 +105,8 @@ pub fn nav_ui(
 /// The stage list: one `name: status` line per stage, timing, error text and a rerun button.
 pub fn stages_ui(
     ui: &mut Ui,
-    status: &[StageStatus; 6],
-    times: &[Option<Duration>; 6],
+    status: &[StageStatus; Stage::ALL.len()],
+    times: &[Option<Duration>; Stage::ALL.len()],
     hide_times: bool,
 ) -> Vec<NavAction> {
     let mut out = Vec::new();

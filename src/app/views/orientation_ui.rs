@@ -7,7 +7,7 @@ use super::frame_ui::StageData;
 use super::{
     AXIS_WIDTH_PT, empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines,
 };
-use crate::app::render::region_colour;
+use crate::app::render::{NO_FIT_COLOUR, region_colour};
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
 use crate::pipeline::Stage;
@@ -38,6 +38,20 @@ pub fn tan_segments(wall: &WallOrientation) -> Vec<Vec<[f64; 2]>> {
     out
 }
 
+/// What the outlier share means, for the hover of its read-out.
+#[must_use]
+pub fn outlier_note(p: &crate::pipeline::PipelineParams) -> String {
+    let o = &p.orientation;
+    format!(
+        "Points further than {:.1} σ from their fitted wall plane, with σ the fit's final scale \
+         (it shrinks each round, but not below σ min = {} µm). On a clean scan the residuals \
+         are often larger than that floor, so most points count and a share near 90 % can go \
+         with a very good sound. What marks damage is a group whose share stands well above \
+         the others: the health strip colours those.",
+        o.outlier_sigmas, o.sigma_min_um
+    )
+}
+
 /// The orientation view.
 pub fn orientation_ui(
     ui: &mut Ui,
@@ -53,13 +67,20 @@ pub fn orientation_ui(
         return;
     };
     let o = &out.orientation;
-    ui.label(format!(
-        "{} walls  ·  {} sample columns  ·  mean outlier fraction {:.1} %  ·  {:.4} µm per column",
-        o.walls.len(),
-        out.grid.columns.len(),
-        100.0 * o.outlier_fraction,
-        out.grid.um_per_px
-    ));
+    let walls = o.walls.len();
+    ui.horizontal(|ui| {
+        ui.label(format!(
+            "{walls} wall{}  ·  {} sample columns  ·  {:.4} µm per column  ·  ",
+            if walls == 1 { "" } else { "s" },
+            out.grid.columns.len(),
+            out.grid.um_per_px
+        ));
+        ui.label(format!(
+            "outliers {:.1} % of fit points (what?)",
+            100.0 * o.outlier_fraction
+        ))
+        .on_hover_text(outlier_note(data.params));
+    });
     let plot_h = height * 0.4;
     Plot::new("orientation_plot")
         .y_axis_min_width(AXIS_WIDTH_PT)
@@ -84,7 +105,11 @@ pub fn orientation_ui(
         empty_note(ui, "weight map not rendered yet");
         return;
     };
-    ui.weak("robust-fit weight per pixel (dark = outlier, bright = trusted, clear = not in any fit); lines: walls");
+    ui.horizontal(|ui| {
+        ui.weak("robust-fit weight per pixel: bright = trusted, dark = outlier,");
+        super::guidance::swatch(ui, NO_FIT_COLOUR);
+        ui.weak("not in any fit; lines: walls");
+    });
     let handle = tex.handle.clone();
     let dim = status.dim();
     let lines = data
@@ -102,7 +127,10 @@ pub fn orientation_ui(
         },
     );
     if let Some((x, y)) = hovered_pixel(&resp, handle.size()) {
-        let w = o.weight_map.get(x, y).unwrap_or(f32::NAN);
+        let weight = match o.weight_map.get(x, y) {
+            Some(w) if w.is_finite() => format!("weight {w:.3}"),
+            _ => "not in any fit".into(),
+        };
         let near = o.walls.iter().filter_map(|wall| {
             wall.samples
                 .iter()
@@ -113,7 +141,7 @@ pub fn orientation_ui(
                 })
                 .map(|s| (wall.side, s))
         });
-        let mut text = format!("x {x}  y {y}  ·  weight {w:.3}");
+        let mut text = format!("x {x}  y {y}  ·  {weight}");
         for (side, s) in near {
             text += &format!("  ·  {side:?}: tan θ {:+.5}", s.tan_theta);
             if let Some(f) = s.fit {

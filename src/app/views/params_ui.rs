@@ -114,7 +114,7 @@ fn section(
 }
 
 /// The parameter panel. Edits `p` in place; the caller compares it with the applied params.
-pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; 6]) {
+pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Stage::ALL.len()]) {
     let st = |s: Stage| Some(&status[s.index()]);
     section(ui, "path", None, false, |ui| {
         choice(

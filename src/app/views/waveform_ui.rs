@@ -1,16 +1,19 @@
-//! Waveform view: the recovered clip (filling in while it reconstructs), the reference, envelopes,
-//! spectrum and scores, with the transport (play, A/B, loop, volume) and export controls.
+//! Waveform view: the recovered clip (filling in while it reconstructs), the previous clip (A/B
+//! after a change), the reference, envelopes, spectrum and scores, with the transport (play,
+//! A/B/reference, loop, volume), reconstruct (all, a range, around the current group) and export
+//! controls. Its time axis is tied to the groups: the current group's stretch is marked, and a
+//! click goes to the group heard there.
 
 use std::sync::Arc;
 
 use egui::{Color32, Ui};
 use egui_plot::{Legend, Line, LineStyle, Plot, PlotPoints, Span, VLine};
 
+use super::transport_ui::{WaveAction, WaveViewState, clip_controls_ui, transport_ui};
 use super::{AXIS_WIDTH_PT, empty_note};
-use crate::app::recon::{Clip, ReconRun};
-use crate::io::wav::WavBits;
+use crate::app::clip_state::ClipState;
 use crate::pipeline::audio_signal::GroupSignal;
-use crate::playback::{AudioStatus, Player};
+use crate::playback::Player;
 
 /// Most points per drawn line (min/max pairs per screen column beyond this).
 const MAX_DRAWN_POINTS: usize = 4000;
@@ -21,55 +24,10 @@ const MIN_SELECTION_SECS: f64 = 1e-3;
 pub const RECOVERED_COLOUR: Color32 = Color32::from_rgb(110, 190, 255);
 /// Colour of the reference sound.
 pub const REFERENCE_COLOUR: Color32 = Color32::from_rgb(255, 160, 70);
-
-/// What the operator asked for in the waveform view.
-#[derive(Clone, Debug, PartialEq)]
-pub enum WaveAction {
-    /// Reconstruct these groups (None: all).
-    Reconstruct(Option<std::ops::Range<usize>>),
-    /// Cancel the running reconstruction.
-    Cancel,
-    /// Export WAV (the selection only when true).
-    ExportWav(bool),
-    /// Show a message.
-    Message(String),
-}
-
-/// State of the waveform view.
-#[derive(Clone, Debug)]
-pub struct WaveViewState {
-    /// Selected stretch (seconds).
-    pub selection: Option<(f64, f64)>,
-    /// Where the current drag started.
-    pub drag_from: Option<f64>,
-    /// Loop the selection while playing.
-    pub loop_selection: bool,
-    /// Draw the reference.
-    pub show_reference: bool,
-    /// Draw the envelopes.
-    pub show_envelopes: bool,
-    /// WAV encoding for export.
-    pub bits: WavBits,
-    /// Reconstruct a range of groups only.
-    pub use_range: bool,
-    /// That range (start, end inclusive).
-    pub range: (usize, usize),
-}
-
-impl Default for WaveViewState {
-    fn default() -> Self {
-        Self {
-            selection: None,
-            drag_from: None,
-            loop_selection: true,
-            show_reference: true,
-            show_envelopes: true,
-            bits: WavBits::Int24,
-            use_range: false,
-            range: (0, 0),
-        }
-    }
-}
+/// Colour of the previous clip.
+pub const PREVIOUS_COLOUR: Color32 = Color32::from_rgb(200, 140, 255);
+/// Colour of the current group's stretch.
+pub const GROUP_SPAN_COLOUR: Color32 = Color32::from_rgba_premultiplied(12, 30, 12, 30);
 
 /// Min/max decimation of `samples` (at `rate_hz`) over the visible `[t0, t1]` seconds.
 #[must_use]
@@ -173,168 +131,25 @@ fn envelope_lines(
     (up, down)
 }
 
-fn transport_ui(
-    ui: &mut Ui,
-    player: &mut Player,
-    clip: Option<&Clip>,
-    state: &mut WaveViewState,
-    actions: &mut Vec<WaveAction>,
-) {
-    ui.horizontal(|ui| {
-        if let AudioStatus::Unavailable(why) = player.status() {
-            ui.colored_label(
-                Color32::from_rgb(235, 150, 60),
-                format!("audio unavailable: {why}"),
-            );
-            return;
-        }
-        let ready = clip.is_some();
-        if player.is_playing() {
-            if ui.button("Pause").clicked() {
-                player.pause();
-            }
-        } else if ui.add_enabled(ready, egui::Button::new("Play")).clicked()
-            && let Err(e) = player.play()
-        {
-            actions.push(WaveAction::Message(e));
-        }
-        if ui.add_enabled(ready, egui::Button::new("Stop")).clicked() {
-            player.stop();
-        }
-        let has_ref = clip.is_some_and(|c| c.reference.is_some());
-        let mut b = player.source_b() && has_ref;
-        ui.separator();
-        ui.selectable_value(&mut b, false, "A: recovered");
-        ui.add_enabled_ui(has_ref, |ui| {
-            ui.selectable_value(&mut b, true, "B: reference")
-        });
-        player.set_source_b(b);
-        ui.separator();
-        if ui
-            .checkbox(&mut state.loop_selection, "loop selection")
-            .changed()
-            || ready
-        {
-            player.set_loop(state.selection.filter(|_| state.loop_selection));
-        }
-        let mut vol = player.volume();
-        if ui
-            .add(egui::Slider::new(&mut vol, 0.0..=2.0).text("volume"))
-            .changed()
-        {
-            player.set_volume(vol);
-        }
-        if let Some(c) = clip {
-            ui.label(format!(
-                "{:.2} / {:.2} s",
-                player.position_secs(),
-                c.recon.audio.duration_secs()
-            ));
-        }
-        if let Some(e) = player.stream_error() {
-            ui.colored_label(Color32::from_rgb(235, 150, 60), format!("audio: {e}"));
-        }
-    });
-}
-
-fn clip_controls_ui(
-    ui: &mut Ui,
-    run: Option<&ReconRun>,
-    groups: usize,
-    clip: Option<&Clip>,
-    state: &mut WaveViewState,
-    actions: &mut Vec<WaveAction>,
-) {
-    ui.horizontal(|ui| {
-        if let Some(r) = run {
-            let eta = r
-                .eta()
-                .map_or("…".into(), |d| format!("{:.0} s left", d.as_secs_f64()));
-            ui.add(
-                egui::ProgressBar::new(r.fraction())
-                    .desired_width(240.0)
-                    .text(format!("group {} / {} · {eta}", r.done, r.total)),
-            );
-            let label = if r.cancelling() {
-                "cancelling…"
-            } else {
-                "Cancel"
-            };
-            if ui
-                .add_enabled(!r.cancelling(), egui::Button::new(label))
-                .clicked()
-            {
-                actions.push(WaveAction::Cancel);
-            }
-        } else {
-            if ui.button("Reconstruct clip").clicked() {
-                let range = state.use_range.then(|| {
-                    state.range.0.min(state.range.1)..state.range.1.max(state.range.0) + 1
-                });
-                actions.push(WaveAction::Reconstruct(range));
-            }
-            ui.checkbox(&mut state.use_range, "only groups");
-            let last = groups.saturating_sub(1);
-            let from = ui.label("from");
-            ui.add_enabled(
-                state.use_range,
-                egui::DragValue::new(&mut state.range.0).range(0..=last),
-            )
-            .labelled_by(from.id);
-            let to = ui.label("to");
-            ui.add_enabled(
-                state.use_range,
-                egui::DragValue::new(&mut state.range.1).range(0..=last),
-            )
-            .labelled_by(to.id);
-        }
-        ui.separator();
-        let wav = ui.label("WAV");
-        egui::ComboBox::from_id_salt("wav_bits")
-            .selected_text(match state.bits {
-                WavBits::Int16 => "16-bit",
-                WavBits::Int24 => "24-bit",
-                WavBits::Float32 => "32-bit float",
-            })
-            .show_ui(ui, |ui| {
-                ui.selectable_value(&mut state.bits, WavBits::Int16, "16-bit");
-                ui.selectable_value(&mut state.bits, WavBits::Int24, "24-bit");
-                ui.selectable_value(&mut state.bits, WavBits::Float32, "32-bit float");
-            })
-            .response
-            .labelled_by(wav.id);
-        let ready = clip.is_some();
-        if ui
-            .add_enabled(ready, egui::Button::new("Export WAV…"))
-            .clicked()
-        {
-            actions.push(WaveAction::ExportWav(false));
-        }
-        if ui
-            .add_enabled(
-                ready && state.selection.is_some(),
-                egui::Button::new("Export selection…"),
-            )
-            .clicked()
-        {
-            actions.push(WaveAction::ExportWav(true));
-        }
-    });
-}
-
 /// The waveform view; returns what the operator asked for.
 pub fn waveform_ui(
     ui: &mut Ui,
-    clip: Option<&Clip>,
-    run: Option<&ReconRun>,
+    clips: &ClipState,
     groups: usize,
+    current_group: usize,
     player: &mut Player,
     state: &mut WaveViewState,
     height: f32,
 ) -> Vec<WaveAction> {
     let mut actions = Vec::new();
-    clip_controls_ui(ui, run, groups, clip, state, &mut actions);
-    transport_ui(ui, player, clip, state, &mut actions);
+    let clip = clips.clip.as_deref();
+    let previous = clips
+        .previous
+        .as_ref()
+        .and_then(|(_, laid)| laid.as_deref())
+        .filter(|_| state.show_previous);
+    clip_controls_ui(ui, clips, groups, current_group, state, &mut actions);
+    transport_ui(ui, player, clips, state, &mut actions);
     if let Some(c) = clip {
         ui.horizontal(|ui| {
             match &c.recon.scores {
@@ -354,6 +169,9 @@ pub fn waveform_ui(
             ui.separator();
             ui.checkbox(&mut state.show_reference, "reference");
             ui.checkbox(&mut state.show_envelopes, "envelopes");
+            if clips.previous.is_some() {
+                ui.checkbox(&mut state.show_previous, "previous clip");
+            }
             if let Some((a, b)) = state.selection {
                 ui.label(format!("selection {a:.3}–{b:.3} s"));
                 if ui.small_button("clear").clicked() {
@@ -362,11 +180,11 @@ pub fn waveform_ui(
                 }
             }
         });
-        for w in c.recon.warnings.iter().take(3) {
-            ui.colored_label(Color32::from_rgb(220, 170, 60), w);
-        }
+        super::guidance::warnings_ui(ui, &c.recon.warnings, 3);
     }
-    let partial = run
+    let partial = clips
+        .run
+        .as_ref()
         .map(|r| partial_points(&r.partial))
         .filter(|p| !p.is_empty());
     if clip.is_none() && partial.is_none() {
@@ -379,6 +197,7 @@ pub fn waveform_ui(
     let wave_h = height * 0.58;
     let playhead = player.position_secs();
     let playing = player.is_playing();
+    let group_span = clip.and_then(|c| c.group_span_secs(current_group));
     let resp = Plot::new("waveform")
         .y_axis_min_width(AXIS_WIDTH_PT)
         .height(wave_h)
@@ -401,6 +220,11 @@ pub fn waveform_ui(
                 }
             } else if let Some(c) = clip {
                 let rate = f64::from(c.rate_hz());
+                if let Some((a, b)) = group_span {
+                    plot_ui.span(
+                        Span::new(format!("group {current_group}"), a..=b).fill(GROUP_SPAN_COLOUR),
+                    );
+                }
                 if state.show_reference
                     && let Some(r) = &c.reference
                 {
@@ -410,6 +234,15 @@ pub fn waveform_ui(
                             PlotPoints::from(decimate(r, rate, t0, t1, cols)),
                         )
                         .color(REFERENCE_COLOUR.gamma_multiply(0.7)),
+                    );
+                }
+                if let Some(p) = previous {
+                    plot_ui.line(
+                        Line::new(
+                            "previous clip",
+                            PlotPoints::from(decimate(p, rate, t0, t1, cols)),
+                        )
+                        .color(PREVIOUS_COLOUR.gamma_multiply(0.8)),
                     );
                 }
                 plot_ui.line(
@@ -459,7 +292,7 @@ pub fn waveform_ui(
             }
             plot_ui.pointer_coordinate()
         });
-    if let (Some(_), Some(p)) = (clip, resp.inner) {
+    if let (Some(c), Some(p)) = (clip, resp.inner) {
         let r = &resp.response;
         if r.drag_started() {
             state.drag_from = Some(p.x.max(0.0));
@@ -479,7 +312,11 @@ pub fn waveform_ui(
             player.set_loop(state.selection.filter(|_| state.loop_selection));
         }
         if r.clicked() {
-            player.seek_secs(p.x.max(0.0));
+            let t = p.x.max(0.0);
+            player.seek_secs(t);
+            if let Some(g) = c.group_at_secs(t) {
+                actions.push(WaveAction::Group(g));
+            }
         }
     }
     if playing {
@@ -487,7 +324,7 @@ pub fn waveform_ui(
             .request_repaint_after(std::time::Duration::from_millis(40));
     }
     if let Some(c) = clip {
-        ui.weak("drag: select (loops while playing)  ·  click: seek  ·  scroll: pan  ·  ctrl+scroll: zoom  ·  double-click: reset");
+        ui.weak("drag: select (loops while playing)  ·  click: seek and show that group  ·  scroll: pan  ·  ctrl+scroll: zoom  ·  double-click: reset");
         Plot::new("spectrum")
             .y_axis_min_width(AXIS_WIDTH_PT)
             .height((height - wave_h - 90.0).max(80.0))

@@ -1,0 +1,380 @@
+//! The workbench's actions on presets, the scan's metadata, the clip and files: save and load
+//! presets, save `scan.toml`, reconstruct, play, export, dialogs, captures and video import.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use super::dialogs::DialogKind;
+use super::export;
+use super::files::{Confirm, PathPrompt};
+use super::recon::{Clip, ReconRun};
+use super::views::View;
+use super::workbench::{Workbench, repaint_fn};
+use crate::engine::ReconstructOptions;
+use crate::io::ScanMeta;
+use crate::io::wav::WavBits;
+use crate::pipeline::Stage;
+
+impl Workbench {
+    // ----- presets and metadata -----
+
+    /// Loads a preset (an undoable change); on error the params stay as they are.
+    ///
+    /// # Errors
+    /// The message shown.
+    pub fn load_preset_from(&mut self, path: &Path) -> Result<(), String> {
+        match super::tuning::load_preset(path) {
+            Ok(p) => {
+                if self.tuning.load_preset(path, p, Instant::now()) {
+                    self.schedule();
+                }
+                self.info(format!("loaded preset {}", path.display()));
+                Ok(())
+            }
+            Err(e) => {
+                self.error(e.clone());
+                Err(e)
+            }
+        }
+    }
+
+    /// Saves the params as a preset.
+    ///
+    /// # Errors
+    /// The message shown (an existing file without `overwrite`, a failed write).
+    pub fn save_preset_to(&mut self, path: &Path, overwrite: bool) -> Result<(), String> {
+        match super::tuning::save_preset(self.tuning.params(), path, overwrite) {
+            Ok(()) => {
+                self.tuning.saved_as(path);
+                self.info(format!("saved preset {}", path.display()));
+                Ok(())
+            }
+            Err(e) => {
+                self.error(e.clone());
+                Err(e)
+            }
+        }
+    }
+
+    /// Writes `meta` to the scan's `scan.toml` (atomically) and reruns the group with it.
+    ///
+    /// # Errors
+    /// The message shown (invalid metadata, failed write).
+    pub fn save_meta(&mut self, meta: ScanMeta) -> Result<(), String> {
+        let Some(scan) = &mut self.nav.scan else {
+            return Err("no scan open".into());
+        };
+        let path = scan.dir.join("scan.toml");
+        let first_frame = scan.groups.first().and_then(|g| g.frames.first());
+        let result = meta
+            .validate()
+            .and_then(|()| match first_frame {
+                // What the scan folder holds must agree too (the next open checks it).
+                Some(f) => crate::io::frames::frame_dimensions(f)
+                    .map_err(|e| e.to_string())
+                    .and_then(|size| meta.check_against_scan(scan.groups.len(), size)),
+                None => Ok(()),
+            })
+            .and_then(|()| meta.to_toml_string().map_err(|e| e.to_string()))
+            .and_then(|text| {
+                let _lock =
+                    crate::io::lock::OutputLock::acquire(&path).map_err(|e| e.to_string())?;
+                crate::io::write_atomic(&path, text.as_bytes(), true).map_err(|e| e.to_string())
+            });
+        match result {
+            Ok(()) => {
+                scan.meta = meta.clone();
+                self.nav.meta = Some(Arc::new(meta));
+                self.views.meta_form = None;
+                self.info(format!("saved {}", path.display()));
+                self.rerun(Stage::Derivatives);
+                Ok(())
+            }
+            Err(e) => {
+                let msg = format!("cannot save the metadata: {e}: {}", path.display());
+                self.error(msg.clone());
+                Err(msg)
+            }
+        }
+    }
+
+    // ----- the clip -----
+
+    /// Reconstructs `groups` (None: all) in the background.
+    pub fn reconstruct(&mut self, groups: Option<std::ops::Range<usize>>) {
+        let Some(scan) = &self.nav.scan else {
+            self.error("open a scan first");
+            return;
+        };
+        let opts = ReconstructOptions {
+            params: self.tuning.params().clone(),
+            groups,
+            keep_going: true,
+        };
+        match ReconRun::start(
+            scan.clone(),
+            opts,
+            self.tuning.state(),
+            repaint_fn(&self.ctx),
+        ) {
+            Ok(run) => {
+                self.clip.run = Some(run);
+                self.clip.refresh_health();
+            }
+            Err(e) => self.error(format!("cannot start the reconstruction: {e}")),
+        }
+    }
+
+    /// Stops the running reconstruction after its current group.
+    pub fn cancel_reconstruction(&mut self) {
+        self.clip.cancel();
+    }
+
+    /// Shows and loads a finished clip for playback; the clip before it stays beside it for
+    /// A/B listening.
+    pub fn set_clip(&mut self, clip: Clip) {
+        self.info(format!(
+            "clip ready: {:.1} ms from {} groups",
+            clip.recon.audio.duration_secs() * 1000.0,
+            clip.groups.len()
+        ));
+        self.clip.finish(clip);
+        self.player.load(self.clip.play_buffers());
+        self.views.wave.selection = None;
+    }
+
+    /// Applies a symptom preset on top of the knobs in force (one undoable step).
+    pub fn apply_symptom(&mut self, preset: &super::symptoms::SymptomPreset) {
+        match preset.apply(self.tuning.params()) {
+            Ok(params) => {
+                self.replace_params(params);
+                self.info(format!(
+                    "symptom preset \"{}\": {} (undo to go back)",
+                    preset.name,
+                    preset.settings().join(", ")
+                ));
+            }
+            Err(e) => self.error(e),
+        }
+    }
+
+    /// Plays the groups the running reconstruction has finished so far (they arrive after the
+    /// group running now).
+    pub fn play_so_far(&mut self) {
+        if self.clip.is_running() {
+            self.clip.request_partial();
+        } else {
+            self.error("no reconstruction is running");
+        }
+    }
+
+    /// Reconstructs the groups within `radius` of the current one.
+    pub fn reconstruct_around(&mut self, radius: usize) {
+        let g = self.nav.group;
+        let end = (g + radius + 1).min(self.nav.groups());
+        self.reconstruct(Some(g.saturating_sub(radius)..end));
+    }
+
+    /// The health of every group of the open scan.
+    #[must_use]
+    pub fn health(&self) -> &super::health::ClipHealth {
+        &self.clip.health
+    }
+
+    /// Exports the clip (or the selection) as WAV plus sidecar.
+    ///
+    /// # Errors
+    /// The message shown (no clip, an existing file without `overwrite`, a failed write).
+    pub fn export_wav_to(
+        &mut self,
+        path: &Path,
+        bits: WavBits,
+        selection: bool,
+        overwrite: bool,
+    ) -> Result<(), String> {
+        let Some(clip) = self.clip.clip.clone() else {
+            let msg = "nothing to export: reconstruct the clip first".to_string();
+            self.error(msg.clone());
+            return Err(msg);
+        };
+        let sel = if selection {
+            self.views.wave.selection
+        } else {
+            None
+        };
+        let rate = self.views.wave.export_rate_hz;
+        match export::export_wav(&clip, path, bits, rate, sel, overwrite) {
+            Ok(()) => {
+                self.info(format!("exported {}", path.display()));
+                Ok(())
+            }
+            Err(e) => {
+                self.error(e.clone());
+                Err(e)
+            }
+        }
+    }
+
+    /// Exports to `path`, asking first when it would replace a file.
+    pub fn request_export_wav(&mut self, path: PathBuf, selection: bool) {
+        if export::would_overwrite(&path) {
+            self.files.confirm = Some(Confirm::ExportWav { path, selection });
+        } else {
+            let bits = self.views.wave.bits;
+            let _ = self.export_wav_to(&path, bits, selection, false);
+        }
+    }
+
+    /// Selects `[a, b]` seconds of the clip.
+    pub fn set_selection(&mut self, selection: Option<(f64, f64)>) {
+        self.views.wave.selection = selection;
+    }
+
+    /// Sets the export encoding (at the clip's own rate).
+    pub fn set_export_bits(&mut self, bits: WavBits) {
+        self.views.wave.bits = bits;
+        self.views.wave.export_rate_hz = None;
+    }
+
+    /// Sets the export format (encoding and rate).
+    pub fn set_export_format(&mut self, format: &export::ExportFormat) {
+        self.views.wave.bits = format.bits;
+        self.views.wave.export_rate_hz = format.rate_hz;
+    }
+
+    // ----- files -----
+
+    /// The name of the reconstruction path the scan is on with the params in force.
+    fn path_name(&self) -> &'static str {
+        if self.nav.uses_dual(self.tuning.params()) {
+            "dual-focus"
+        } else {
+            "depth"
+        }
+    }
+
+    /// Opens the dialog `kind`, starting in the scan's folder with a name made from the scan.
+    pub fn show_dialog(&mut self, kind: DialogKind) {
+        let start = self.nav.dir().map(Path::to_path_buf);
+        let name = super::files::suggested_name(&kind, start.as_deref(), self.path_name());
+        let ctx = self.ctx.clone();
+        if let Err(e) = self.files.dialogs.show(
+            kind.clone(),
+            start.clone(),
+            name.clone(),
+            Box::new(move || ctx.request_repaint()),
+        ) {
+            self.offer_path_field(kind, e);
+        }
+    }
+
+    /// Shows the in-app path field for `kind`, saying `reason` (no native dialog opened).
+    pub(super) fn offer_path_field(&mut self, kind: DialogKind, reason: String) {
+        let start = self.nav.dir().map(Path::to_path_buf);
+        let name = super::files::suggested_name(&kind, start.as_deref(), self.path_name());
+        self.error(format!("{}: {reason}; type the path instead", kind.title()));
+        self.files.prompt = Some(PathPrompt {
+            text: super::files::suggested_path(start.as_deref(), name.as_deref()),
+            kind,
+            reason,
+        });
+    }
+
+    /// Acts on a path chosen in a dialog (native or in-app).
+    pub fn use_dialog_path(&mut self, kind: DialogKind, path: PathBuf) {
+        match kind {
+            DialogKind::OpenScan => {
+                let _ = self.open_scan(&path);
+            }
+            DialogKind::ExportWav(sel) => {
+                self.request_export_wav(path.with_extension("wav"), sel);
+            }
+            DialogKind::LoadPreset => {
+                let _ = self.load_preset_from(&path);
+            }
+            DialogKind::SavePreset => {
+                let path = path.with_extension("toml");
+                if path.exists() {
+                    self.files.confirm = Some(Confirm::SavePreset(path));
+                } else {
+                    let _ = self.save_preset_to(&path, false);
+                }
+            }
+            DialogKind::ExportPng(view) => {
+                let path = path.with_extension("png");
+                if path.exists() {
+                    self.files.confirm = Some(Confirm::ExportPng(path, view));
+                } else {
+                    self.capture_view(path, view, false);
+                }
+            }
+            #[cfg(feature = "video")]
+            DialogKind::VideoClip | DialogKind::VideoOut => {
+                self.video_import.dialog_answer(&kind, path);
+            }
+        }
+    }
+
+    /// Answers the open confirmation (tests and keyboard-free use).
+    pub fn answer_confirm(&mut self, yes: bool) {
+        let Some(c) = self.files.confirm.take() else {
+            return;
+        };
+        if !yes {
+            self.info(match c {
+                Confirm::SwitchScan(_) => "the scan stays open",
+                _ => "not replaced",
+            });
+            return;
+        }
+        match c {
+            Confirm::ExportWav { path, selection } => {
+                let bits = self.views.wave.bits;
+                let _ = self.export_wav_to(&path, bits, selection, true);
+            }
+            Confirm::SavePreset(path) => {
+                let _ = self.save_preset_to(&path, true);
+            }
+            Confirm::ExportPng(path, view) => self.capture_view(path, view, true),
+            Confirm::SwitchScan(dir) => self.open_scan_anyway(&dir),
+        }
+    }
+
+    /// Saves what `view` shows as PNG (a capture of its area on screen).
+    pub fn capture_view(&mut self, path: PathBuf, view: View, overwrite: bool) {
+        self.view = view;
+        let tx = self.capture.channel.0.clone();
+        let ctx = self.ctx.clone();
+        self.capture.pending = Some(super::screenshot::PendingCapture { path, overwrite });
+        self.ctx.request_screenshot(move |img| {
+            let _ = tx.send(img);
+            ctx.request_repaint();
+        });
+    }
+
+    /// True once a requested screenshot was written.
+    #[must_use]
+    pub fn screenshot_done(&self) -> Option<Result<(), String>> {
+        self.capture.plan.as_ref().and_then(|p| p.outcome())
+    }
+
+    /// Opens the "Import video" window.
+    #[cfg(feature = "video")]
+    pub fn open_import_video(&mut self) {
+        self.video_import.open();
+    }
+
+    /// The open import form, for tests and scripting.
+    #[cfg(feature = "video")]
+    pub fn import_video_form_mut(&mut self) -> Option<&mut super::import_video::ImportForm> {
+        self.video_import.form.as_mut()
+    }
+
+    /// Whether an import runs.
+    #[cfg(feature = "video")]
+    #[must_use]
+    pub fn is_importing_video(&self) -> bool {
+        self.video_import.run.is_some()
+    }
+}
