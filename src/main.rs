@@ -1,21 +1,13 @@
-//! The `groovescope` binary: the workbench with no subcommand (when a display exists), otherwise the command-line tool.
+//! The `groovescope` binary: the workbench with no subcommand (when a display exists; without
+//! one, the bundled still demo decoded to a WAV file), otherwise the command-line tool.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use groovescope::cli::{Cli, ReconstructArgs, run, run_gui, run_reconstruct};
-
-/// The bundled demo scan, relative to the crate root.
-const DEMO_SCAN: &str = "assets/demo";
-
-fn demo_scan() -> PathBuf {
-    let here = Path::new(DEMO_SCAN);
-    if here.join("scan.toml").is_file() {
-        return here.to_path_buf();
-    }
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(DEMO_SCAN)
-}
+use groovescope::cli::{Cli, run, run_gui};
+use groovescope::still::cli::run_still;
+use groovescope::still::demo::{demo_still_dir, read_generated_still};
 
 fn display_available() -> bool {
     ["DISPLAY", "WAYLAND_DISPLAY"]
@@ -41,27 +33,14 @@ fn default_action() -> anyhow::Result<()> {
     }
     let out = fresh_name("groovescope-demo", "wav");
     let report = out.with_extension("report.json");
+    let demo = read_generated_still(&demo_still_dir())?;
     println!(
-        "no display: reconstructing the demo scan {} to {}",
-        demo_scan().display(),
+        "no display: decoding groove {} of the demo still {} to {}",
+        demo.groove,
+        demo.image.display(),
         out.display()
     );
-    let args = ReconstructArgs {
-        scan: demo_scan(),
-        out,
-        params: None,
-        report: Some(report.clone()),
-        path: "auto".into(),
-        method: None,
-        bits: groovescope::io::wav::WavBits::Int24,
-        first_group: None,
-        groups: None,
-        keep_going: false,
-        force: false,
-        quiet: false,
-        side: Default::default(),
-    };
-    run_reconstruct(&args)?;
+    run_still(&demo.still_args(out, Some(report.clone())))?;
     println!("report: {}", report.display());
     Ok(())
 }

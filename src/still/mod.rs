@@ -3,6 +3,7 @@
 //! [`crate::pipeline::still`], then resampled, filtered and normalised as the engine does.
 
 pub mod cli;
+pub mod demo;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -1,0 +1,109 @@
+//! The bundled still demo (assets/demo-still): it decodes to at least 3 s of speech that matches
+//! its reference, `groovescope` with no subcommand and no display writes that WAV and its report
+//! in the current folder, and `synth-still` with the committed config remakes it byte for byte.
+#![allow(clippy::unwrap_used)] // tests may panic
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use groovescope::io::wav::read_wav;
+use groovescope::pipeline::PipelineParams;
+use groovescope::still::demo::{DEMO_STILL, read_generated_still};
+use groovescope::still::{decode_still_file, score_still};
+
+fn demo_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(DEMO_STILL)
+}
+
+/// Measured on the committed still (1 Dec 2026): r 0.903, envelope r 0.906, SNR 7.3 dB.
+const MIN_R: f64 = 0.85;
+const MIN_ENVELOPE_R: f64 = 0.85;
+const MIN_SNR_DB: f64 = 5.0;
+
+#[test]
+fn demo_still_decodes_to_three_seconds_of_its_speech() {
+    let demo = read_generated_still(&demo_dir()).unwrap();
+    assert_eq!(
+        demo.groove, 2,
+        "the speech is cut into the middle of three turns"
+    );
+    let reference = read_wav(&demo.reference).unwrap();
+    assert!(reference.duration_secs() >= 3.0);
+    let run = decode_still_file(
+        &demo.image,
+        &demo.setup,
+        Some(demo.groove),
+        &PipelineParams::default(),
+    )
+    .unwrap();
+    let secs = run.audio.duration_secs();
+    assert!(secs >= 3.0, "the demo plays {secs:.3} s");
+    assert!(run.warnings.is_empty(), "{:?}", run.warnings);
+    let scores = score_still(&run.audio, &demo.reference).unwrap();
+    let s = scores[0].as_ref().unwrap();
+    let env = s.envelope_r.unwrap();
+    assert!(
+        s.r >= MIN_R && env >= MIN_ENVELOPE_R && s.snr_db >= MIN_SNR_DB,
+        "r {:.3}, envelope r {env:.3}, SNR {:.1} dB",
+        s.r,
+        s.snr_db
+    );
+}
+
+#[test]
+fn no_subcommand_without_a_display_writes_the_demo_wav_and_report_here() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+        .current_dir(dir.path())
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let wav = dir.path().join("groovescope-demo.wav");
+    let report = dir.path().join("groovescope-demo.report.json");
+    assert!(stdout.contains("groovescope-demo.wav"), "{stdout}");
+    assert!(stdout.contains("groovescope-demo.report.json"), "{stdout}");
+    assert!(stdout.contains("vs reference: r = "), "{stdout}");
+    assert!(read_wav(&wav).unwrap().duration_secs() >= 3.0);
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(json["groove"], 2);
+    assert!(json["scores"][0]["r"].as_f64().unwrap() >= MIN_R, "{json}");
+}
+
+#[test]
+fn synth_still_with_the_committed_config_remakes_the_demo_byte_for_byte() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let remade = dir.path().join("demo-still");
+    let out = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+        .arg("synth-still")
+        .arg(root.join("assets/demo-speech.wav"))
+        .args(["--preset", "demo", "--quiet", "--config"])
+        .arg(root.join("assets/demo-still.toml"))
+        .arg("--out")
+        .arg(&remade)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut names: Vec<_> = std::fs::read_dir(demo_dir())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    names.sort();
+    assert_eq!(names.len(), 5, "{names:?}");
+    for name in names {
+        let a = std::fs::read(demo_dir().join(&name)).unwrap();
+        let b = std::fs::read(remade.join(&name)).unwrap();
+        assert!(a == b, "{name:?} differs from the committed one");
+    }
+}
