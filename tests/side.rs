@@ -122,13 +122,13 @@ fn merged_shards_are_byte_identical_to_one_process_for_1_2_3_and_7_shards() {
     }
 }
 
-/// The default method is `edges`; `flow` (whose shards rebuild the slope history) and `fused`
-/// (both signals per group, fused over the merged clip) merge to the one-process bytes too.
+/// The default method is `fused` (both signals per group, fused over the merged clip); `flow`
+/// (whose shards rebuild the slope history) and `edges` merge to the one-process bytes too.
 #[test]
-fn merged_shards_are_byte_identical_to_one_process_for_flow_and_fused() {
+fn merged_shards_are_byte_identical_to_one_process_for_flow_and_edges() {
     let (_keep, scan, _) = shared();
     let tmp = tempfile::tempdir().unwrap();
-    for method in ["flow", "fused"] {
+    for method in ["flow", "edges"] {
         let params = tmp.path().join(format!("{method}.toml"));
         std::fs::write(&params, format!("method = \"{method}\"\n")).unwrap();
         let one = tmp.path().join(format!("{method}-one.wav"));
