@@ -160,8 +160,8 @@ fn merged_shards_are_byte_identical_to_one_process_for_flow_and_edges() {
         );
     }
     let flow = std::fs::read(tmp.path().join("flow-one.wav")).unwrap();
-    let fused = std::fs::read(tmp.path().join("fused-one.wav")).unwrap();
-    assert!(flow != fused, "--method changes the sound");
+    let edges = std::fs::read(tmp.path().join("edges-one.wav")).unwrap();
+    assert!(flow != edges, "--method changes the sound");
 }
 
 #[test]

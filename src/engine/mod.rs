@@ -258,7 +258,7 @@ impl ClipGroups {
     }
 }
 
-/// Finishes gathered groups into a reconstruction ([`finish_clip`]) and scores it against
+/// Finishes gathered groups into a reconstruction (`pipeline::finish`) and scores it against
 /// `reference` when given. `scan_dir` names the scan in errors. `total_secs` is left for the
 /// caller to set.
 ///
