@@ -1,18 +1,14 @@
 //! The sound of the groups a running reconstruction has finished so far, to listen to while a
 //! long one goes on: their signals stitched, short gaps bridged, resampled, filtered and
-//! normalised as the engine finishes a whole clip.
-//!
-//! The steps are the engine's; once the clip finishing is one pipeline function (issue 16,
-//! item 6: `pipeline::finish::finish_clip`), this calls it instead.
+//! normalised by `pipeline::finish::finish_clip`, as the engine finishes a whole clip.
 
 use std::sync::Arc;
 
-use crate::engine::bridge_short_gaps;
 use crate::io::ScanMeta;
 use crate::io::wav::Audio;
 use crate::pipeline::PipelineParams;
-use crate::pipeline::audio_signal::{GroupSignal, resample, stitch};
-use crate::pipeline::dsp::apply_dsp;
+use crate::pipeline::audio_signal::GroupSignal;
+use crate::pipeline::finish::finish_clip;
 use crate::pipeline::sampling::native_spacing_um;
 
 /// The sound of `signals` (in group order) at the output rate, after the DSP chain, scaled as
@@ -30,41 +26,10 @@ pub fn partial_sound(
     }
     let owned: Vec<GroupSignal> = signals.iter().map(|s| (**s).clone()).collect();
     let spacing = native_spacing_um(meta, &params.sound);
-    let mut stitched = stitch(&owned, spacing).map_err(|e| e.to_string())?;
-    bridge_short_gaps(&mut stitched);
-    let rate = params.sound.output_rate_hz;
-    let mut channels = Vec::with_capacity(stitched.channels.len());
-    for ch in &stitched.channels {
-        let mut y = resample(ch, stitched.native_rate_hz, rate).map_err(|e| e.to_string())?;
-        apply_dsp(&mut y, f64::from(rate), &params.dsp).map_err(|e| e.to_string())?;
-        channels.push(y);
-    }
-    let peak =
-        channels.iter().flatten().fold(
-            0.0_f32,
-            |m, v| {
-                if v.is_finite() { m.max(v.abs()) } else { m }
-            },
-        );
-    let gain = if params.sound.normalize_peak > 0.0 {
-        if peak > 0.0 {
-            f64::from(params.sound.normalize_peak / peak)
-        } else {
-            1.0
-        }
-    } else {
-        1.0 / params.sound.full_scale_mm_s
-    };
-    for v in channels.iter_mut().flatten() {
-        *v = if v.is_finite() {
-            (f64::from(*v) * gain) as f32
-        } else {
-            0.0
-        };
-    }
+    let clip = finish_clip(&owned, spacing, params).map_err(|e| e.to_string())?;
     Ok(Audio {
-        sample_rate_hz: rate,
-        channels,
+        sample_rate_hz: clip.sample_rate_hz,
+        channels: clip.channels,
     })
 }
 

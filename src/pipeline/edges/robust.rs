@@ -253,13 +253,20 @@ pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams)
     }
 }
 
-/// Runs of NaN in `v`.
+/// Runs of non-finite samples (NaN gaps) in `v`.
 #[must_use]
 pub fn nan_runs(v: &[f64]) -> Vec<Range<usize>> {
+    false_runs(v.iter().map(|x| x.is_finite()))
+}
+
+/// The index ranges where `ok` yields false.
+pub fn false_runs(ok: impl IntoIterator<Item = bool>) -> Vec<Range<usize>> {
     let mut out = Vec::new();
     let mut start = None;
-    for (i, x) in v.iter().enumerate() {
-        match (x.is_finite(), start) {
+    let mut n = 0;
+    for (i, o) in ok.into_iter().enumerate() {
+        n = i + 1;
+        match (o, start) {
             (false, None) => start = Some(i),
             (true, Some(s)) => {
                 out.push(s..i);
@@ -269,7 +276,7 @@ pub fn nan_runs(v: &[f64]) -> Vec<Range<usize>> {
         }
     }
     if let Some(s) = start {
-        out.push(s..v.len());
+        out.push(s..n);
     }
     out
 }

@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 use self::noise::{NoiseModel, fit_noise};
 use super::audio_signal::StitchedSignal;
 use super::dsp::fft_in_place;
+use super::edges::robust::false_runs;
 use super::{StageError, check_range};
 use crate::meta::ScanMeta;
 
@@ -178,26 +179,6 @@ fn ifft_in_place(re: &mut [f64], im: &mut [f64]) {
         *r /= n;
         *i = -*i / n;
     }
-}
-
-/// Ranges where `ok` is false.
-fn false_runs(ok: &[bool]) -> Vec<Range<usize>> {
-    let mut out = Vec::new();
-    let mut start = None;
-    for (i, &o) in ok.iter().enumerate() {
-        match (o, start) {
-            (false, None) => start = Some(i),
-            (true, Some(s)) => {
-                out.push(s..i);
-                start = None;
-            }
-            _ => {}
-        }
-    }
-    if let Some(s) = start {
-        out.push(s..ok.len());
-    }
-    out
 }
 
 /// One channel fused: the output samples, the blocks' models.
@@ -483,7 +464,7 @@ pub fn fuse(
     }
     let mut gaps: Vec<Range<usize>> = Vec::new();
     for (_, _, any) in &masks {
-        gaps.extend(false_runs(any));
+        gaps.extend(false_runs(any.iter().copied()));
     }
     gaps.sort_by_key(|r| r.start);
     let mut merged: Vec<Range<usize>> = Vec::new();
