@@ -24,7 +24,7 @@ mod tests;
 use biquad::*;
 pub use biquad::{Biquad, butterworth_lowpass, dc_blocker};
 pub(crate) use spectrum::cross_correlation;
-pub use spectrum::{fft_in_place, magnitude_spectrum};
+pub use spectrum::{ComplexFft, fft_in_place, magnitude_spectrum};
 
 /// Playback equalisation curve.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]

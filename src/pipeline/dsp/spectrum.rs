@@ -17,23 +17,44 @@ fn real_spectrum(planner: &mut RealFftPlanner<f64>, x: &mut [f64]) -> Vec<Comple
     spectrum
 }
 
-/// Forward complex FFT in place (unnormalised, natural order in and out), by `rustfft`.
-/// `re` and `im` must have the same length; otherwise they are left untouched.
+/// A forward complex FFT of one length, planned once (`rustfft`) and run on many blocks.
+pub struct ComplexFft {
+    fft: std::sync::Arc<dyn rustfft::Fft<f64>>,
+}
+
+impl ComplexFft {
+    /// Plans the transform of `len` samples.
+    #[must_use]
+    pub fn new(len: usize) -> Self {
+        Self {
+            fft: rustfft::FftPlanner::<f64>::new().plan_fft_forward(len),
+        }
+    }
+
+    /// Forward transform of (`re`, `im`) in place (unnormalised, natural order in and out).
+    /// Slices of another length than the plan's are left untouched.
+    pub fn forward(&self, re: &mut [f64], im: &mut [f64]) {
+        let n = self.fft.len();
+        if re.len() != n || im.len() != n || n < 2 {
+            return;
+        }
+        let mut buffer: Vec<Complex<f64>> = re
+            .iter()
+            .zip(im.iter())
+            .map(|(&r, &i)| Complex::new(r, i))
+            .collect();
+        self.fft.process(&mut buffer);
+        for ((r, i), c) in re.iter_mut().zip(im.iter_mut()).zip(&buffer) {
+            *r = c.re;
+            *i = c.im;
+        }
+    }
+}
+
+/// Forward complex FFT in place (unnormalised, natural order in and out), planned for this one
+/// call. `re` and `im` must have the same length; otherwise they are left untouched.
 pub fn fft_in_place(re: &mut [f64], im: &mut [f64]) {
-    if re.len() != im.len() || re.len() < 2 {
-        return;
-    }
-    let fft = rustfft::FftPlanner::<f64>::new().plan_fft_forward(re.len());
-    let mut buffer: Vec<Complex<f64>> = re
-        .iter()
-        .zip(im.iter())
-        .map(|(&r, &i)| Complex::new(r, i))
-        .collect();
-    fft.process(&mut buffer);
-    for ((r, i), c) in re.iter_mut().zip(im.iter_mut()).zip(&buffer) {
-        *r = c.re;
-        *i = c.im;
-    }
+    ComplexFft::new(re.len()).forward(re, im);
 }
 
 /// Circular cross-correlation c[m] = Σ_i a[i]·b[i + m] (indices mod n) of two real signals

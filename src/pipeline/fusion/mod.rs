@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 
 use self::noise::{NoiseModel, fit_noise};
 use super::audio_signal::StitchedSignal;
-use super::dsp::fft_in_place;
+use super::dsp::ComplexFft;
 use super::edges::robust::false_runs;
 use super::{StageError, check_range};
 use crate::meta::ScanMeta;
@@ -169,11 +169,11 @@ fn sqrt_hann(n: usize) -> Vec<f64> {
 type BlockSpectra = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, f64);
 
 /// Inverse FFT (normalised) by the conjugate trick.
-fn ifft_in_place(re: &mut [f64], im: &mut [f64]) {
+fn ifft_in_place(fft: &ComplexFft, re: &mut [f64], im: &mut [f64]) {
     for v in im.iter_mut() {
         *v = -*v;
     }
-    fft_in_place(re, im);
+    fft.forward(re, im);
     let n = re.len() as f64;
     for (r, i) in re.iter_mut().zip(im.iter_mut()) {
         *r /= n;
@@ -237,6 +237,8 @@ fn fuse_channel(
         .collect();
     let hop = block / 2;
     let window = sqrt_hann(block);
+    // One plan for every block's forward and inverse transform.
+    let fft = ComplexFft::new(block);
     // Blocks start every hop from −hop so that every sample is covered by two blocks.
     let starts: Vec<i64> = (0..)
         .map(|k: i64| k * hop as i64 - hop as i64)
@@ -263,8 +265,8 @@ fn fuse_channel(
                 fr[k] = w * f[i];
                 er[k] = w * e[i];
             }
-            fft_in_place(&mut fr, &mut fi);
-            fft_in_place(&mut er, &mut ei);
+            fft.forward(&mut fr, &mut fi);
+            fft.forward(&mut er, &mut ei);
             let share = if inside > 0 {
                 filled as f64 / inside as f64
             } else {
@@ -349,7 +351,7 @@ fn fuse_channel(
             re[k] = w * er[k] + (1.0 - w) * fr[k];
             im[k] = w * ei[k] + (1.0 - w) * fi[k];
         }
-        ifft_in_place(&mut re, &mut im);
+        ifft_in_place(&fft, &mut re, &mut im);
         for (k, (&v, &w)) in re.iter().zip(&window).enumerate() {
             if let Ok(i) = usize::try_from(s + k as i64)
                 && i < n
