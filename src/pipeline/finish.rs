@@ -203,42 +203,38 @@ fn finish_stitched(
             gap.start
         ));
     }
-    let out_rate = params.sound.output_rate_hz;
-    let mut channels = Vec::with_capacity(stitched.channels.len());
-    for ch in &stitched.channels {
-        let mut y = resample(ch, stitched.native_rate_hz, out_rate)?;
-        apply_dsp(&mut y, f64::from(out_rate), &params.dsp)?;
-        channels.push(y);
-    }
-    let peak =
-        channels.iter().flatten().fold(
-            0.0_f32,
-            |m, v| if v.is_finite() { m.max(v.abs()) } else { m },
-        );
-    let gain_per_mm_s = if params.sound.normalize_peak > 0.0 {
-        if peak > 0.0 {
-            f64::from(params.sound.normalize_peak / peak)
-        } else {
-            1.0
-        }
-    } else {
-        1.0 / params.sound.full_scale_mm_s
-    };
-    for ch in &mut channels {
-        for v in ch.iter_mut() {
-            #[allow(clippy::cast_possible_truncation)] // output samples are f32
-            let scaled = (f64::from(*v) * gain_per_mm_s) as f32;
-            *v = if v.is_finite() { scaled } else { 0.0 };
-        }
-    }
+    let (channels, gain_per_mm_s) =
+        channels_to_output(&stitched.channels, stitched.native_rate_hz, params)?;
     Ok(FinishedClip {
-        sample_rate_hz: out_rate,
+        sample_rate_hz: params.sound.output_rate_hz,
         channels,
         stitched,
         gain_per_mm_s,
         warnings,
         fusion: None,
     })
+}
+
+/// Native-rate channels to output sound: each resampled to `sound.output_rate_hz`, through the
+/// DSP chain, then scaled to output level by `SoundParams::scale_to_output`. Returns the
+/// channels and the gain per mm/s. The still decoder finishes its sound through it too.
+///
+/// # Errors
+/// [`StageError`] for an unusable rate, filter or scale setting.
+pub fn channels_to_output(
+    channels: &[Vec<f32>],
+    native_rate_hz: f64,
+    params: &PipelineParams,
+) -> Result<(Vec<Vec<f32>>, f64), StageError> {
+    let out_rate = params.sound.output_rate_hz;
+    let mut out = Vec::with_capacity(channels.len());
+    for ch in channels {
+        let mut y = resample(ch, native_rate_hz, out_rate)?;
+        apply_dsp(&mut y, f64::from(out_rate), &params.dsp)?;
+        out.push(y);
+    }
+    let gain_per_mm_s = params.sound.scale_to_output(&mut out)?;
+    Ok((out, gain_per_mm_s))
 }
 
 /// Bridges gaps of at most [`BRIDGE_GAP_SAMPLES`] with data on both sides by linear

@@ -14,8 +14,8 @@ use crate::io::LoadError;
 use crate::io::still::StillReader;
 use crate::io::wav::{Audio, read_wav};
 use crate::pipeline::audio_signal::resample;
-use crate::pipeline::dsp::apply_dsp;
 use crate::pipeline::eval::{Scores, evaluate};
+use crate::pipeline::finish::channels_to_output;
 use crate::pipeline::still::{
     ProfileBuilder, RibbonBuilder, StillAnalysis, StillError, StillSetup, StillSignal,
     choose_groove, decode_borders, detect_grooves, track_borders,
@@ -102,17 +102,10 @@ pub fn finish_sound(
     signal: &StillSignal,
     params: &PipelineParams,
 ) -> Result<(Audio, f64), StageError> {
-    let out_rate = params.sound.output_rate_hz;
-    let mut channels = Vec::with_capacity(signal.channels.len());
-    for ch in &signal.channels {
-        let mut y = resample(ch, signal.native_rate_hz, out_rate)?;
-        apply_dsp(&mut y, f64::from(out_rate), &params.dsp)?;
-        channels.push(y);
-    }
-    let gain = params.sound.scale_to_output(&mut channels)?;
+    let (channels, gain) = channels_to_output(&signal.channels, signal.native_rate_hz, params)?;
     Ok((
         Audio {
-            sample_rate_hz: out_rate,
+            sample_rate_hz: params.sound.output_rate_hz,
             channels,
         },
         gain,
