@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::io::wav::{Audio, read_wav};
 use crate::io::{LoadError, Scan, ScanMeta};
-use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, resample};
+use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, read_from, resample};
 use crate::pipeline::eval::{Scores, evaluate};
 pub use crate::pipeline::finish::{BRIDGE_GAP_SAMPLES, bridge_short_gaps};
 use crate::pipeline::finish::{ClipSignals, FusionReport, finish_method_clip};
@@ -360,17 +360,17 @@ pub fn aligned_reference(
     let mono = reference.mono();
     let rate = f64::from(reference.sample_rate_hz);
     let start_secs = stitched.start_um / (groove_speed_mm_s * 1000.0);
-    let skip = (start_secs * rate).round().max(0.0) as usize;
-    let tail = mono.get(skip..).unwrap_or(&[]);
-    let resampled = if reference.sample_rate_hz == recovered.sample_rate_hz {
-        tail.to_vec()
-    } else {
-        resample(tail, rate, recovered.sample_rate_hz).map_err(|e| LoadError::Sound {
-            problem: format!("cannot resample the reference: {e}"),
-            path: path.to_path_buf(),
-        })?
-    };
-    Ok(resampled)
+    // The whole reference at the recovered rate, read from the clip's start, which may fall
+    // between samples (rounding it to a reference sample misaligned the scores by up to half a
+    // sample: up to 10 µs at 48 kHz, −18 dB of error at 2 kHz).
+    let resampled = resample(&mono, rate, recovered.sample_rate_hz).map_err(|e| LoadError::Sound {
+        problem: format!("cannot resample the reference: {e}"),
+        path: path.to_path_buf(),
+    })?;
+    Ok(read_from(
+        &resampled,
+        (start_secs * f64::from(recovered.sample_rate_hz)).max(0.0),
+    ))
 }
 
 fn score_against_reference(

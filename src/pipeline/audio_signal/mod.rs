@@ -31,7 +31,7 @@ mod stitch;
 #[allow(clippy::unwrap_used)] // tests unwrap known-good results
 mod tests;
 
-pub use resample::resample;
+pub use resample::{read_from, resample};
 pub use stitch::{StitchedSignal, stitch};
 
 /// Two sample columns closer than this (px) are the same column when the walls are combined.

@@ -1,5 +1,7 @@
 //! Band-limited resampling to the output rate (rubato's windowed sinc) with its delay removed exactly.
 
+use std::f64::consts::PI;
+
 use super::*;
 
 /// Sinc length of the resampler (input samples) when upsampling; scaled by the ratio when
@@ -135,4 +137,53 @@ pub fn resample(samples: &[f32], from_hz: f64, to_hz: u32) -> Result<Vec<f32>, S
         .map(|&v| v as f32)
         .collect();
     Ok(result)
+}
+
+/// Taps on each side of [`read_from`]'s fractional-delay interpolator.
+const DELAY_HALF_TAPS: usize = 32;
+
+/// `samples` read from position `start` (in samples, ≥ 0, may be fractional) on: output `k` is
+/// the band-limited value at `start + k` — a whole `start` is an exact slice, a fractional one
+/// is interpolated by a Blackman-windowed sinc of 2·32 taps (samples beyond either end count as
+/// 0). Used to align a reference sound to a clip that starts between its samples.
+#[must_use]
+pub fn read_from(samples: &[f32], start: f64) -> Vec<f32> {
+    if !start.is_finite() || start < 0.0 {
+        return samples.to_vec();
+    }
+    let whole = start.floor();
+    let frac = start - whole;
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // checked ≥ 0 above
+    let first = whole as usize;
+    let tail = samples.get(first..).unwrap_or(&[]);
+    if frac < 1e-9 {
+        return tail.to_vec();
+    }
+    // Taps for offsets m = −(H−1)..=H from the integer position: sinc(m − frac)·window.
+    let half = DELAY_HALF_TAPS as f64;
+    let taps: Vec<(isize, f64)> = (1 - DELAY_HALF_TAPS as isize..=DELAY_HALF_TAPS as isize)
+        .map(|m| {
+            #[allow(clippy::cast_precision_loss)] // |m| ≤ 32
+            let t = m as f64 - frac;
+            let sinc = (PI * t).sin() / (PI * t);
+            // Blackman window over (−H, H).
+            let u = (t + half) / (2.0 * half);
+            let w = 0.42 - 0.5 * (2.0 * PI * u).cos() + 0.08 * (4.0 * PI * u).cos();
+            (m, sinc * w)
+        })
+        .collect();
+    (0..tail.len())
+        .map(|k| {
+            let acc: f64 = taps
+                .iter()
+                .filter_map(|&(m, w)| {
+                    let i = first.checked_add_signed(k as isize + m)?;
+                    samples.get(i).map(|&v| w * f64::from(v))
+                })
+                .sum();
+            #[allow(clippy::cast_possible_truncation)] // audio samples are f32
+            let v = acc as f32;
+            v
+        })
+        .collect()
 }
