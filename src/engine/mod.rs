@@ -363,10 +363,11 @@ pub fn aligned_reference(
     // The whole reference at the recovered rate, read from the clip's start, which may fall
     // between samples (rounding it to a reference sample misaligned the scores by up to half a
     // sample: up to 10 µs at 48 kHz, −18 dB of error at 2 kHz).
-    let resampled = resample(&mono, rate, recovered.sample_rate_hz).map_err(|e| LoadError::Sound {
-        problem: format!("cannot resample the reference: {e}"),
-        path: path.to_path_buf(),
-    })?;
+    let resampled =
+        resample(&mono, rate, recovered.sample_rate_hz).map_err(|e| LoadError::Sound {
+            problem: format!("cannot resample the reference: {e}"),
+            path: path.to_path_buf(),
+        })?;
     Ok(read_from(
         &resampled,
         (start_secs * f64::from(recovered.sample_rate_hz)).max(0.0),

@@ -6,12 +6,15 @@
 //!
 //! [`finish_method_clip`] finishes by the params' method: the flow signals as they are; the
 //! edges' border tracks stitched over the clip, then combined and differentiated
-//! ([`decode_border_signal`]); or both fused per band ([`fuse`]).
+//! ([`decode_border_signal`]); or both fused per band ([`fuse`]). The edges and fused sound
+//! runs the DC block zero-phase (forward and backward over the clip, [`DcBlockPhase`]), so the
+//! audio keeps its phase through it; the flow method keeps the causal DC block (its output as
+//! before).
 
 use serde::Serialize;
 
 use super::audio_signal::{GroupSignal, StitchedSignal, resample, stitch};
-use super::dsp::apply_dsp;
+use super::dsp::{DcBlockPhase, apply_dsp_with};
 use super::edges::decode_border_signal;
 use super::fusion::{FusionBlock, GroupFusion, fuse};
 use super::{Method, PipelineParams, StageError};
@@ -152,13 +155,13 @@ pub fn finish_method_clip(
         Method::Flow => finish_clip(signals.flow, spacing_um, params),
         Method::Edges => {
             let (velocity, _) = edge_velocity(signals.borders, spacing_um, meta, params)?;
-            finish_stitched(velocity, params)
+            finish_stitched(velocity, params, DcBlockPhase::ZeroPhase)
         }
         Method::Fused => {
             let (velocity, noise) = edge_velocity(signals.borders, spacing_um, meta, params)?;
             let flow = stitch(signals.flow, spacing_um)?;
             let fused = fuse(&flow, &velocity, Some(&noise), meta, &params.fusion)?;
-            let mut clip = finish_stitched(fused.signal, params)?;
+            let mut clip = finish_stitched(fused.signal, params, DcBlockPhase::ZeroPhase)?;
             clip.fusion = Some(FusionReport {
                 groups: fused.groups,
                 blocks: fused.blocks,
@@ -181,13 +184,15 @@ pub fn finish_clip(
     spacing_um: f64,
     params: &PipelineParams,
 ) -> Result<FinishedClip, StageError> {
-    finish_stitched(stitch(signals, spacing_um)?, params)
+    finish_stitched(stitch(signals, spacing_um)?, params, DcBlockPhase::Causal)
 }
 
-/// A stitched velocity signal finished: short gaps bridged, resampled, DSP, normalised.
+/// A stitched velocity signal finished: short gaps bridged, resampled, DSP (the DC block run as
+/// `dc_phase` says), normalised.
 fn finish_stitched(
     mut stitched: StitchedSignal,
     params: &PipelineParams,
+    dc_phase: DcBlockPhase,
 ) -> Result<FinishedClip, StageError> {
     let mut warnings = Vec::new();
     let bridged = bridge_short_gaps(&mut stitched);
@@ -203,8 +208,12 @@ fn finish_stitched(
             gap.start
         ));
     }
-    let (channels, gain_per_mm_s) =
-        channels_to_output(&stitched.channels, stitched.native_rate_hz, params)?;
+    let (channels, gain_per_mm_s) = channels_to_output_with(
+        &stitched.channels,
+        stitched.native_rate_hz,
+        params,
+        dc_phase,
+    )?;
     Ok(FinishedClip {
         sample_rate_hz: params.sound.output_rate_hz,
         channels,
@@ -226,11 +235,21 @@ pub fn channels_to_output(
     native_rate_hz: f64,
     params: &PipelineParams,
 ) -> Result<(Vec<Vec<f32>>, f64), StageError> {
+    channels_to_output_with(channels, native_rate_hz, params, DcBlockPhase::Causal)
+}
+
+/// [`channels_to_output`] with the DC block run as `dc_phase` says.
+fn channels_to_output_with(
+    channels: &[Vec<f32>],
+    native_rate_hz: f64,
+    params: &PipelineParams,
+    dc_phase: DcBlockPhase,
+) -> Result<(Vec<Vec<f32>>, f64), StageError> {
     let out_rate = params.sound.output_rate_hz;
     let mut out = Vec::with_capacity(channels.len());
     for ch in channels {
         let mut y = resample(ch, native_rate_hz, out_rate)?;
-        apply_dsp(&mut y, f64::from(out_rate), &params.dsp)?;
+        apply_dsp_with(&mut y, f64::from(out_rate), &params.dsp, dc_phase)?;
         out.push(y);
     }
     let gain_per_mm_s = params.sound.scale_to_output(&mut out)?;

@@ -420,7 +420,11 @@ fn read_from_a_fractional_start_is_the_band_limited_value_there() {
         err += (f64::from(v) - truth).powi(2);
         sig += truth * truth;
     }
-    assert!(10.0 * (sig / err).log10() > 60.0, "{} dB", 10.0 * (sig / err).log10());
+    assert!(
+        10.0 * (sig / err).log10() > 60.0,
+        "{} dB",
+        10.0 * (sig / err).log10()
+    );
     assert_eq!(read_from(&x, 7.0), x[7..].to_vec());
     assert!(read_from(&x, 5000.0).is_empty());
 }

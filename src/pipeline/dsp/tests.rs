@@ -156,6 +156,40 @@ fn dc_block_starts_settled_on_the_mean_level_not_the_first_sample() {
 }
 
 #[test]
+fn the_zero_phase_dc_block_kills_dc_without_shifting_the_tone() {
+    // A DC offset plus a 500 Hz tone over 1 s: the causal DC block leads the tone by
+    // atan(10/500) = 0.02 rad; forward and backward, the phase stays (< 1e-3 rad) and the
+    // offset still goes.
+    let n = 44_100;
+    let w = 2.0 * PI * 500.0 / FS;
+    let x: Vec<f32> = (0..n)
+        .map(|i| (0.3 + (w * i as f64).sin()) as f32)
+        .collect();
+    let phase_of = |y: &[f32]| {
+        let (mut s, mut c) = (0.0, 0.0);
+        for (i, &v) in y.iter().enumerate().take(3 * n / 4).skip(n / 4) {
+            s += f64::from(v) * (w * i as f64).sin();
+            c += f64::from(v) * (w * i as f64).cos();
+        }
+        c.atan2(s)
+    };
+    let params = only(false, EqCurve::Flat, true);
+    let mut causal = x.clone();
+    apply_dsp(&mut causal, FS, &params).unwrap();
+    let mut zero = x.clone();
+    apply_dsp_with(&mut zero, FS, &params, DcBlockPhase::ZeroPhase).unwrap();
+    assert!(
+        (phase_of(&causal) - 0.02).abs() < 2e-3,
+        "{}",
+        phase_of(&causal)
+    );
+    assert!(phase_of(&zero).abs() < 1e-3, "{}", phase_of(&zero));
+    let mid = &zero[n / 4..3 * n / 4];
+    let mean = mid.iter().map(|&v| f64::from(v)).sum::<f64>() / mid.len() as f64;
+    assert!(mean.abs() < 1e-3, "{mean}");
+}
+
+#[test]
 fn invalid_params_are_rejected() {
     let mut x = vec![0.0f32; 16];
     let bad = |p: DspParams, fs: f64| {
