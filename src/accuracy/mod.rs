@@ -4,10 +4,12 @@
 //! reference sound of a scan (r, envelope r, SNR from [`crate::pipeline::eval`]) or the true
 //! depth map of a scene (the paper's Table 2 error bands). Nothing is typed in by hand.
 
+mod kept;
 pub mod methods;
 mod scenes;
 mod suite;
 
+pub use kept::{KEPT_BEGIN, KEPT_END, kept_blocks, with_kept};
 pub use scenes::{DepthErrors, SceneDepthRow, depth_errors, scene_depth_table};
 pub use suite::run_suite;
 
@@ -245,7 +247,8 @@ pub struct AccuracyOptions {
 }
 
 /// Runs the suite and writes the report to `out` atomically; refuses an existing file unless
-/// `force`. The check comes first, so nothing runs for a refused report.
+/// `force`. The check comes first, so nothing runs for a refused report. A replaced report's
+/// hand-run sections (between [`KEPT_BEGIN`] and [`KEPT_END`]) are kept verbatim ([`with_kept`]).
 ///
 /// # Errors
 /// [`AccuracyError::ReportExists`], or the suite's or the write's error.
@@ -259,6 +262,18 @@ pub fn write_report(
         return Err(AccuracyError::ReportExists(out.to_path_buf()));
     }
     let md = run_suite(opts, log)?;
+    let md = match std::fs::read_to_string(out) {
+        Ok(old) => with_kept(&md, &old),
+        Err(e) => {
+            if out.exists() {
+                log(&format!(
+                    "kept no section of {} (unreadable: {e})",
+                    out.display()
+                ));
+            }
+            md
+        }
+    };
     write_atomic(out, md.as_bytes(), force)?;
     Ok(())
 }
