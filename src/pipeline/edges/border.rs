@@ -171,27 +171,35 @@ impl Border {
 /// Model parameters: low, high, position, width.
 type Theta = [f64; 4];
 
-/// Weighted cost Σ w·r² of `theta` over `points`.
-fn cost(points: &[ProfilePoint], theta: &Theta) -> f64 {
+/// Weighted cost Σ w·r² of `theta` over `points`; `cdf` receives each point's Φ((x − μ)/w),
+/// which [`normal_equations`] at the same `theta` reuses.
+fn cost(points: &[ProfilePoint], theta: &Theta, cdf: &mut Vec<f64>) -> f64 {
     let [lo, hi, mu, w] = *theta;
+    cdf.clear();
     points
         .iter()
         .map(|p| {
-            let r = p.value - (lo + (hi - lo) * normal_cdf((p.x_px - mu) / w));
+            let phi = normal_cdf((p.x_px - mu) / w);
+            cdf.push(phi);
+            let r = p.value - (lo + (hi - lo) * phi);
             p.weight * r * r
         })
         .sum()
 }
 
-/// JᵀWJ (upper triangle used) and JᵀW·r of `theta`.
-fn normal_equations(points: &[ProfilePoint], theta: &Theta) -> ([[f64; 4]; 4], [f64; 4]) {
+/// JᵀWJ (upper triangle used) and JᵀW·r of `theta`, given each point's Φ from [`cost`] at the
+/// same `theta`.
+fn normal_equations(
+    points: &[ProfilePoint],
+    theta: &Theta,
+    cdfs: &[f64],
+) -> ([[f64; 4]; 4], [f64; 4]) {
     let [lo, hi, mu, w] = *theta;
     let c = hi - lo;
     let mut a = [[0.0; 4]; 4];
     let mut g = [0.0; 4];
-    for p in points {
+    for (p, &cdf) in points.iter().zip(cdfs) {
         let z = (p.x_px - mu) / w;
-        let cdf = normal_cdf(z);
         let pdf = normal_pdf(z);
         let r = p.value - (lo + c * cdf);
         let j = [1.0 - cdf, cdf, -c * pdf / w, -c * pdf * z / w];
@@ -312,10 +320,11 @@ fn fit_usable(points: &[ProfilePoint], seed: BorderSeed, params: &BorderParams) 
     });
     let (lo0, hi0) = linear_levels(points, seed.position_px, w0)?;
     let mut theta: Theta = [lo0, hi0, seed.position_px, w0];
-    let mut current = cost(points, &theta);
+    let (mut cdf, mut trial_cdf) = (Vec::new(), Vec::new());
+    let mut current = cost(points, &theta, &mut cdf);
     let mut damping = LM_DAMPING_START;
     let mut iterations = 0;
-    let mut normal = normal_equations(points, &theta);
+    let mut normal = normal_equations(points, &theta, &cdf);
     while iterations < params.max_iterations {
         iterations += 1;
         let (a, g) = &normal;
@@ -335,7 +344,7 @@ fn fit_usable(points: &[ProfilePoint], seed: BorderSeed, params: &BorderParams) 
             *t += s;
         }
         next[3] = clamp_w(next[3]);
-        let trial = cost(points, &next);
+        let trial = cost(points, &next, &mut trial_cdf);
         if trial.is_finite() && trial <= current {
             // Position and width both settled (the levels follow them linearly).
             let moved = (next[2] - theta[2]).abs().max((next[3] - theta[3]).abs());
@@ -343,7 +352,8 @@ fn fit_usable(points: &[ProfilePoint], seed: BorderSeed, params: &BorderParams) 
             let settled = current - trial <= 1e-12 * current.max(f64::MIN_POSITIVE);
             current = trial;
             damping = (damping / LM_DAMPING_FACTOR).max(1e-12);
-            normal = normal_equations(points, &theta);
+            std::mem::swap(&mut cdf, &mut trial_cdf);
+            normal = normal_equations(points, &theta, &cdf);
             if moved < params.tolerance_px || settled {
                 break;
             }
