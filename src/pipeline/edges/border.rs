@@ -171,20 +171,31 @@ impl Border {
 /// Model parameters: low, high, position, width.
 type Theta = [f64; 4];
 
-/// Weighted cost Σ w·r² of `theta` over `points`; `cdf` receives each point's Φ((x − μ)/w),
-/// which [`normal_equations`] at the same `theta` reuses.
-fn cost(points: &[ProfilePoint], theta: &Theta, cdf: &mut Vec<f64>) -> f64 {
-    let [lo, hi, mu, w] = *theta;
+/// Each point's Φ((x − μ)/w) into `cdf`, which [`cost_at`], [`normal_equations`] and
+/// [`linear_levels`] at the same μ and w share.
+fn cdfs_at(points: &[ProfilePoint], mu: f64, w: f64, cdf: &mut Vec<f64>) {
     cdf.clear();
+    cdf.extend(points.iter().map(|p| normal_cdf((p.x_px - mu) / w)));
+}
+
+/// Weighted cost Σ w·r² of `theta` over `points`, given their Φ at its μ and w.
+fn cost_at(points: &[ProfilePoint], theta: &Theta, cdf: &[f64]) -> f64 {
+    let [lo, hi, _, _] = *theta;
     points
         .iter()
-        .map(|p| {
-            let phi = normal_cdf((p.x_px - mu) / w);
-            cdf.push(phi);
+        .zip(cdf)
+        .map(|(p, &phi)| {
             let r = p.value - (lo + (hi - lo) * phi);
             p.weight * r * r
         })
         .sum()
+}
+
+/// Weighted cost Σ w·r² of `theta` over `points`; `cdf` receives each point's Φ((x − μ)/w),
+/// which [`normal_equations`] at the same `theta` reuses.
+fn cost(points: &[ProfilePoint], theta: &Theta, cdf: &mut Vec<f64>) -> f64 {
+    cdfs_at(points, theta[2], theta[3], cdf);
+    cost_at(points, theta, cdf)
 }
 
 /// JᵀWJ (upper triangle used) and JᵀW·r of `theta`, given each point's Φ from [`cost`] at the
@@ -261,12 +272,12 @@ fn position_variance_factor(a: &[[f64; 4]; 4]) -> Option<f64> {
     solve4(a, &[0.0, 0.0, 1.0, 0.0]).map(|x| x[2])
 }
 
-/// Best `low` and `high` for a fixed position and width: the 2-parameter weighted linear
-/// least squares. None when the points do not straddle the border.
-fn linear_levels(points: &[ProfilePoint], mu: f64, w: f64) -> Option<(f64, f64)> {
+/// Best `low` and `high` for a fixed position and width, given each point's Φ((x − μ)/w) there:
+/// the 2-parameter weighted linear least squares. None when the points do not straddle the
+/// border.
+fn linear_levels(points: &[ProfilePoint], cdfs: &[f64]) -> Option<(f64, f64)> {
     let (mut saa, mut sab, mut sbb, mut sav, mut sbv) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for p in points {
-        let b = normal_cdf((p.x_px - mu) / w);
+    for (p, &b) in points.iter().zip(cdfs) {
         let a = 1.0 - b;
         saa += p.weight * a * a;
         sab += p.weight * a * b;
@@ -318,10 +329,11 @@ fn fit_usable(points: &[ProfilePoint], seed: BorderSeed, params: &BorderParams) 
     } else {
         1.0
     });
-    let (lo0, hi0) = linear_levels(points, seed.position_px, w0)?;
-    let mut theta: Theta = [lo0, hi0, seed.position_px, w0];
     let (mut cdf, mut trial_cdf) = (Vec::new(), Vec::new());
-    let mut current = cost(points, &theta, &mut cdf);
+    cdfs_at(points, seed.position_px, w0, &mut cdf);
+    let (lo0, hi0) = linear_levels(points, &cdf)?;
+    let mut theta: Theta = [lo0, hi0, seed.position_px, w0];
+    let mut current = cost_at(points, &theta, &cdf);
     let mut damping = LM_DAMPING_START;
     let mut iterations = 0;
     let mut normal = normal_equations(points, &theta, &cdf);
