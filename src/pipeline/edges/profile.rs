@@ -22,7 +22,7 @@
 //! Each frame's own position is then one linear least-squares step (levels and position) from
 //! the joint fit on that frame's bins.
 //!
-//! Each frame's band is read from the frame once ([`BandView`]: every column's pixels with
+//! Each frame's band is read from the frame once (a `BandView`: every column's pixels with
 //! their bins and offsets) and every robust round re-weights those; `reference.rs` holds the
 //! plain version that reads the frame pixel by pixel in every round, and the two give the same
 //! bits (the same sums in the same order).

@@ -3,6 +3,7 @@
 
 use std::f64::consts::SQRT_2;
 
+use super::predict::first_after;
 use super::*;
 use crate::pipeline::audio_signal::SoundParams;
 use crate::synth::{Groove, SynthConfig, scan_meta, stereo, tone};
