@@ -556,7 +556,7 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
         [motion]\nframe_step_um = 0.78\ngroup_step_um = 8.0\n";
     writer.finish(scan_toml).map_err(fail)?;
     let damaged = match u.int_in_range(0u8..=7)? {
-        0 | 1 | 2 => false,
+        0..=2 => false,
         3 => {
             let path = dir.join("zarr.json");
             let mut bytes = std::fs::read(&path).map_err(fail)?;
