@@ -212,17 +212,12 @@ pub fn render_frame(groove: &Groove, group: usize, frame: usize) -> Image {
 mod tests {
     use super::*;
     use crate::synth::config::SynthConfig;
+    use crate::synth::test_support::narrow_dual_focus_groove;
     use crate::synth::sounds::tone;
 
     #[test]
     fn glass_shift_matches_snell_for_a_known_angle() {
-        let cfg = SynthConfig {
-            width_px: 64,
-            height_px: 700,
-            group_overlap_px: 10,
-            ..SynthConfig::dual_focus_demo()
-        };
-        let g = Groove::new(&tone(1000.0, 0.01, 48_000), &cfg).unwrap();
+        let g = narrow_dual_focus_groove();
         // 30° incidence through 110 µm of n = 1.515 glass.
         let tan_i = 30f64.to_radians().tan();
         let k = g.glass_shift(tan_i, 0.0);
