@@ -349,10 +349,7 @@ impl SynthConfig {
     pub fn validate(&self) -> Result<(), SynthError> {
         for (key, v) in [("width_px", self.width_px), ("height_px", self.height_px)] {
             if !(16..=MAX_SIDE_PX).contains(&v) {
-                return Err(SYNTH.bad(
-                    key,
-                    format!("must lie in [16, {MAX_SIDE_PX}], got {v}"),
-                ));
+                return Err(SYNTH.bad(key, format!("must lie in [16, {MAX_SIDE_PX}], got {v}")));
             }
         }
         SYNTH.positive("pixel_pitch_um", self.pixel_pitch_um)?;

@@ -212,8 +212,8 @@ pub fn render_frame(groove: &Groove, group: usize, frame: usize) -> Image {
 mod tests {
     use super::*;
     use crate::synth::config::SynthConfig;
-    use crate::synth::test_support::narrow_dual_focus_groove;
     use crate::synth::sounds::tone;
+    use crate::synth::test_support::narrow_dual_focus_groove;
 
     #[test]
     fn glass_shift_matches_snell_for_a_known_angle() {

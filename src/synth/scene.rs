@@ -14,8 +14,8 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::noise::{Rng, hash_seq, marble};
 use super::config::Table;
+use super::noise::{Rng, hash_seq, marble};
 use super::{SynthError, prepare_out_dir};
 use crate::image::Image;
 use crate::io::frames::save_grey_png;

@@ -251,10 +251,7 @@ impl StillConfig {
             ));
         }
         if !(1..=64).contains(&self.grooves) {
-            return Err(STILL.bad(
-                "grooves",
-                format!("must be 1–64, got {}", self.grooves),
-            ));
+            return Err(STILL.bad("grooves", format!("must be 1–64, got {}", self.grooves)));
         }
         STILL.positive("pitch_um", self.pitch_um)?;
         STILL.positive("top_width_um", self.top_width_um)?;
