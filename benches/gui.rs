@@ -16,13 +16,9 @@ use criterion::Criterion;
 use groovescope::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
 use groovescope::synth::SynthConfig;
 
-/// Runs every stage once (printing each stage's time); returns the filled cache and the error
-/// that stopped it, if any.
-fn full_cache(
-    name: &str,
-    input: &GroupInput,
-    params: &PipelineParams,
-) -> (StageCache, Option<String>) {
+/// Runs every stage once (printing each stage's time, and the error that stopped it, if any);
+/// returns the filled cache.
+fn full_cache(name: &str, input: &GroupInput, params: &PipelineParams) -> StageCache {
     let mut cache = StageCache::default();
     let mut t0 = Instant::now();
     let mut times = Vec::new();
@@ -39,7 +35,10 @@ fn full_cache(
         .err()
         .map(|e| e.to_string());
     println!("{name}: one full run: {}", times.join(", "));
-    (cache, err)
+    if let Some(e) = &err {
+        println!("note: the {name} group stops at: {e}");
+    }
+    cache
 }
 
 fn rerun_from(c: &mut Criterion, name: &str, from: Stage, input: &GroupInput, base: &StageCache) {
@@ -200,55 +199,27 @@ fn main() {
 
     let depth_dir = tmp.path().join("depth");
     let (_, depth_input) = render_group(&depth_dir, SynthConfig::default(), 440.0);
-    let (cache, err) = full_cache("depth path", &depth_input, &params);
-    if let Some(e) = &err {
-        println!("note: the depth-path group stops at: {e}");
+    let cache = full_cache("depth path", &depth_input, &params);
+    for (name, from) in [
+        ("depth path: flow onward (12x1280x1024)", Stage::Flow),
+        ("depth path: orientation onward", Stage::Orientation),
+    ] {
+        rerun_from(&mut c, name, from, &depth_input, &cache);
     }
-    rerun_from(
-        &mut c,
-        "depth path: flow onward (12x1280x1024)",
-        Stage::Flow,
-        &depth_input,
-        &cache,
-    );
-    rerun_from(
-        &mut c,
-        "depth path: orientation onward",
-        Stage::Orientation,
-        &depth_input,
-        &cache,
-    );
 
     let (_, dual_input) = render_group(
         &tmp.path().join("dual"),
         SynthConfig::dual_focus_demo(),
         440.0,
     );
-    let (dual_cache, err) = full_cache("dual focus", &dual_input, &params);
-    if let Some(e) = &err {
-        println!("note: the dual-focus group stops at: {e}");
+    let dual_cache = full_cache("dual focus", &dual_input, &params);
+    for (name, from) in [
+        ("dual focus: flow onward (12x1280x1024)", Stage::Flow),
+        ("dual focus: Hough (stripes) onward", Stage::Stripes),
+        ("dual focus: orientation onward", Stage::Orientation),
+    ] {
+        rerun_from(&mut c, name, from, &dual_input, &dual_cache);
     }
-    rerun_from(
-        &mut c,
-        "dual focus: flow onward (12x1280x1024)",
-        Stage::Flow,
-        &dual_input,
-        &dual_cache,
-    );
-    rerun_from(
-        &mut c,
-        "dual focus: Hough (stripes) onward",
-        Stage::Stripes,
-        &dual_input,
-        &dual_cache,
-    );
-    rerun_from(
-        &mut c,
-        "dual focus: orientation onward",
-        Stage::Orientation,
-        &dual_input,
-        &dual_cache,
-    );
 
     ui_frame_times(depth_dir);
     c.final_summary();

@@ -83,8 +83,7 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
 
 #[test]
 fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
-    let scan = lateral_scan();
-    let (_tmp, mut h) = settled_on(&scan);
+    let (_tmp, mut h) = settled_on(&lateral_scan());
     wb_mut(&mut h).set_view(View::Flow);
     h.run_ok();
     for s in [Stage::Derivatives, Stage::Flow] {
@@ -120,8 +119,7 @@ fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
 
 #[test]
 fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
-    let scan = demo_scan();
-    let (_tmp, mut h) = settled_on(&scan);
+    let (_tmp, mut h) = settled_on(&demo_scan());
     let runs = Stage::ALL.map(|s| wb(&h).stage_runs(s));
     let flows = wb(&h).cache().flows().cloned().unwrap();
     let mut p = wb(&h).params().clone();

@@ -562,37 +562,27 @@ mod tests {
 
     #[test]
     fn absurd_geometry_names_the_key() {
-        let c = SynthConfig {
-            groove_depth_um: -3.0,
-            ..SynthConfig::default()
-        };
-        assert_eq!(key_of(c.validate().unwrap_err()), "synth.groove_depth_um");
+        /// One bad value set on the defaults.
+        type Edit = fn(&mut SynthConfig);
+        // (the edit, the key its error names)
+        let cases: [(Edit, &str); 5] = [
+            (|c| c.groove_depth_um = -3.0, "synth.groove_depth_um"),
+            (|c| c.wall_angle_deg = 90.0, "synth.wall_angle_deg"),
+            (|c| c.bit_depth = 12, "synth.bit_depth"),
+            (|c| c.pixel_pitch_um = f64::NAN, "synth.pixel_pitch_um"),
+            (|c| c.bottom_radius_um = 60.0, "synth.bottom_radius_um"),
+        ];
+        for (edit, key) in cases {
+            let mut c = SynthConfig::default();
+            edit(&mut c);
+            assert_eq!(key_of(c.validate().unwrap_err()), key);
+        }
         let c = SynthConfig {
             groove_top_width_um: 500.0,
             ..SynthConfig::default()
         };
         let e = c.validate().unwrap_err();
         assert!(e.to_string().contains("wider than the frame"), "{e}");
-        let c = SynthConfig {
-            wall_angle_deg: 90.0,
-            ..SynthConfig::default()
-        };
-        assert_eq!(key_of(c.validate().unwrap_err()), "synth.wall_angle_deg");
-        let c = SynthConfig {
-            bit_depth: 12,
-            ..SynthConfig::default()
-        };
-        assert_eq!(key_of(c.validate().unwrap_err()), "synth.bit_depth");
-        let c = SynthConfig {
-            pixel_pitch_um: f64::NAN,
-            ..SynthConfig::default()
-        };
-        assert_eq!(key_of(c.validate().unwrap_err()), "synth.pixel_pitch_um");
-        let c = SynthConfig {
-            bottom_radius_um: 60.0,
-            ..SynthConfig::default()
-        };
-        assert_eq!(key_of(c.validate().unwrap_err()), "synth.bottom_radius_um");
         let mut c = SynthConfig::dual_focus_demo();
         c.working_distance_mm = 4.0;
         assert_eq!(
