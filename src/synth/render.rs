@@ -106,10 +106,7 @@ impl Groove {
             .zip(z_map.data.par_chunks_mut(w))
             .enumerate()
             .for_each(|(row, (out, zout))| {
-                let glass = self
-                    .optics
-                    .glass_edge_row
-                    .is_some_and(|edge| (row as f64) < edge);
+                let glass = self.optics.sees_glass(row);
                 let mut guesses = [wd; 16];
                 for (x, (o, zo)) in out.iter_mut().zip(zout.iter_mut()).enumerate() {
                     let mut acc = 0.0f32;
@@ -151,10 +148,7 @@ impl Groove {
                 .zip(z_map.data.par_chunks(w))
                 .enumerate()
                 .for_each(|(row, (srow, zrow))| {
-                    let glass = self
-                        .optics
-                        .glass_edge_row
-                        .is_some_and(|edge| (row as f64) < edge);
+                    let glass = self.optics.sees_glass(row);
                     let focus = if glass {
                         self.optics.focus_glass_um
                     } else {

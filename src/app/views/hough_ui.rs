@@ -77,7 +77,13 @@ fn labelled_drag(
 /// Number controls of the windows and ranges; edits `draft`.
 pub fn hough_controls(ui: &mut Ui, draft: &mut HoughParams) {
     ui.horizontal(|ui| {
-        labelled_drag(ui, "window ±θ°", &mut draft.window_theta_deg, 0.1, 0.1..=90.0);
+        labelled_drag(
+            ui,
+            "window ±θ°",
+            &mut draft.window_theta_deg,
+            0.1,
+            0.1..=90.0,
+        );
         labelled_drag(ui, "±ρ px", &mut draft.window_rho_px, 0.5, 0.5..=2000.0);
         ui.separator();
         labelled_drag(ui, "θ from°", &mut draft.theta_min_deg, 0.5, -90.0..=90.0);
