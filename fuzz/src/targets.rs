@@ -12,9 +12,16 @@ use std::sync::atomic::AtomicBool;
 
 use arbitrary::Unstructured;
 use groovescope::engine::{ReconstructOptions, reconstruct};
+use groovescope::io::frames::{RawFrame, RawSamples, grey_from_raw};
 use groovescope::io::frames::{check_frame_bytes, decode_frame};
+use groovescope::io::still::save_grey_image;
+use groovescope::io::zarr::{SampleType, ZarrWriter};
 use groovescope::io::{Scan, ScanMeta, flo, load_group, wav};
+use groovescope::meta::Cut;
 use groovescope::pipeline::PipelineParams;
+use groovescope::pipeline::still::{Axis, StillSetup};
+use groovescope::still::decode_still_file;
+use groovescope::synth::still::{StillConfig, StillScene, render_still};
 
 /// One fuzz target: its name (the corpus folder and `GROOVESCOPE_FUZZ_TARGET`) and function.
 pub struct Target {
@@ -49,6 +56,14 @@ pub const TARGETS: &[Target] = &[
     Target {
         name: "flo",
         run: flo_file,
+    },
+    Target {
+        name: "still",
+        run: still_image,
+    },
+    Target {
+        name: "zarr_store",
+        run: zarr_store,
     },
 ];
 
@@ -288,9 +303,19 @@ fn frame_bytes(
         (image::ImageFormat::Png, "png")
     };
     let mut out = Cursor::new(Vec::new());
-    dynimg
-        .write_to(&mut out, format)
-        .map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    if format == image::ImageFormat::Png {
+        // Fast, unfiltered PNGs: encoding is input-building, not what is fuzzed.
+        use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+        dynimg
+            .write_with_encoder(PngEncoder::new_with_quality(
+                &mut out,
+                CompressionType::Fast,
+                FilterType::NoFilter,
+            ))
+            .map_err(fail)?;
+    } else {
+        dynimg.write_to(&mut out, format).map_err(fail)?;
+    }
     let mut bytes = out.into_inner();
     if u.ratio(1u8, 24)? {
         damage(u, &mut bytes)?;
@@ -347,4 +372,227 @@ fn damage(u: &mut Unstructured, bytes: &mut Vec<u8>) -> arbitrary::Result<()> {
         }
     }
     Ok(())
+}
+
+/// A still image: a small generated micrograph (grooves, dust, text, rims, blur, noise) saved
+/// as an 8/16-bit PNG or TIFF and sometimes damaged, or the bytes themselves as the file; decoded
+/// with settings that may contradict it. What decodes is finite sound, one or two channels of
+/// one length.
+pub fn still_image(data: &[u8]) {
+    let mut u = Unstructured::new(data);
+    let Ok(dir) = scratch_dir() else {
+        return;
+    };
+    let Ok((path, setup, groove)) = write_still(&mut u, dir.path()) else {
+        return;
+    };
+    let Ok(run) = decode_still_file(&path, &setup, groove, &PipelineParams::default()) else {
+        return;
+    };
+    let channels = &run.audio.channels;
+    assert!(
+        matches!(channels.len(), 1 | 2),
+        "a still decodes to 1 or 2 channels"
+    );
+    assert!(channels.iter().all(|c| c.len() == channels[0].len()));
+    assert!(channels.iter().flatten().all(|v| v.is_finite()));
+}
+
+/// Writes one still into `dir`; returns its path, the decoder's settings and the groove asked for.
+fn write_still(
+    u: &mut Unstructured,
+    dir: &Path,
+) -> arbitrary::Result<(std::path::PathBuf, StillSetup, Option<usize>)> {
+    let ext = *u.choose(&["png", "tif"])?;
+    let path = dir.join(format!("still.{ext}"));
+    let axis = *u.choose(&[Axis::Vertical, Axis::Horizontal])?;
+    let cut = *u.choose(&[Cut::Lateral, Cut::Stereo])?;
+    let cfg = StillConfig {
+        length_px: u.int_in_range(16usize..=192)?,
+        across_px: u.int_in_range(8usize..=128)?,
+        axis,
+        cut,
+        um_per_px: 0.5 + f64::from(u.int_in_range(0u8..=30)?) / 10.0,
+        grooves: u.int_in_range(1usize..=3)?,
+        pitch_um: number(u, 100.0)?,
+        top_width_um: number(u, 56.0)?,
+        bottom_width_um: number(u, 6.0)?,
+        drift_um: number(u, 20.0)?,
+        wander_um: number(u, 12.0)?,
+        dust_per_mpx: number(u, 100.0)?.abs(),
+        text: if u.arbitrary()? {
+            "GS 1".into()
+        } else {
+            String::new()
+        },
+        text_height_px: u.int_in_range(4usize..=16)?,
+        blur_sigma_px: f64::from(u.int_in_range(0u8..=20)?) / 10.0,
+        noise_sigma: f64::from(u.int_in_range(0u8..=20)?) / 200.0,
+        // The noise fields behind texture and uneven light cost more to render than the
+        // decoder takes, so most inputs go without.
+        texture: if u.ratio(1u8, 8)? { 0.08 } else { 0.0 },
+        illumination_unevenness: if u.ratio(1u8, 8)? { 0.35 } else { 0.0 },
+        rim_fraction: f64::from(u.int_in_range(0u8..=10)?) / 10.0,
+        seed: u.arbitrary()?,
+        ..StillConfig::default()
+    };
+    let sixteen = u.arbitrary::<bool>()?;
+    let raw = u.ratio(1u8, 8)?;
+    if !raw {
+        // A configuration the generator refuses is not an input for the decoder.
+        let scene = StillScene::new(&cfg, None).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        let img = render_still(&scene).image;
+        save_grey_image(&img, &path, sixteen, false)
+            .map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        if u.ratio(1u8, 8)? {
+            let mut bytes = std::fs::read(&path).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+            damage(u, &mut bytes)?;
+            std::fs::write(&path, bytes).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        }
+    }
+    // The decoder is told the truth, or a wrong axis, scale, speed or groove.
+    let setup = StillSetup {
+        axis: if u.ratio(1u8, 8)? {
+            match axis {
+                Axis::Vertical => Axis::Horizontal,
+                Axis::Horizontal => Axis::Vertical,
+            }
+        } else {
+            axis
+        },
+        um_per_px: if u.ratio(1u8, 8)? {
+            number(u, 1.0)?
+        } else {
+            cfg.um_per_px
+        },
+        rpm: number(u, cfg.rpm)?,
+        radius_mm: number(u, cfg.radius_mm)?,
+        cut: if u.ratio(1u8, 16)? {
+            Cut::Vertical
+        } else {
+            cut
+        },
+        reverse: u.arbitrary()?,
+    };
+    let groove = if u.arbitrary()? {
+        Some(u.int_in_range(0usize..=4)?)
+    } else {
+        None
+    };
+    if raw {
+        let len = u.len();
+        std::fs::write(&path, u.bytes(len)?).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    }
+    Ok((path, setup, groove))
+}
+
+/// A Zarr scan store: a tiny valid store (uint8, uint16 or float32 samples) made by the writer,
+/// then maybe damaged (its metadata edited, a chunk cut short, overwritten or deleted). Opened
+/// and every group loaded: an intact store gives back exactly the frames written, a damaged one
+/// an error or frames of the store's size.
+pub fn zarr_store(data: &[u8]) {
+    let mut u = Unstructured::new(data);
+    let Ok(dir) = scratch_dir() else {
+        return;
+    };
+    let store = dir.path().join("scan.zarr");
+    let Ok((written, damaged)) = write_zarr(&mut u, &store) else {
+        return;
+    };
+    let Ok(scan) = Scan::open(&store) else {
+        assert!(damaged, "an intact store does not open");
+        return;
+    };
+    for (group, frames) in scan.groups.iter().zip(&written) {
+        match load_group(group) {
+            Ok(loaded) => {
+                assert_eq!(loaded.len(), group.frame_count());
+                if !damaged {
+                    let want: Vec<_> = frames.iter().cloned().map(grey_from_raw).collect();
+                    assert!(loaded == want, "an intact store reads back other frames");
+                }
+            }
+            Err(_) => assert!(damaged, "an intact store's group does not load"),
+        }
+    }
+}
+
+/// Writes a store at `dir` from the bytes; returns the frames written per group and whether
+/// the store was damaged afterwards.
+fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<RawFrame>>, bool)> {
+    let groups = u.int_in_range(1usize..=3)?;
+    let frames = u.int_in_range(7usize..=9)?;
+    let (w, h) = (u.int_in_range(1usize..=24)?, u.int_in_range(1usize..=24)?);
+    let sample_type = *u.choose(&[SampleType::U8, SampleType::U16, SampleType::F32])?;
+    let mut writer = ZarrWriter::create(dir, frames, w, h, sample_type, 1).map_err(fail)?;
+    let mut written = Vec::new();
+    for g in 0..groups {
+        let group: Vec<RawFrame> = (0..frames)
+            .map(|k| {
+                let v = |i: usize| (i * 37 + k * 91 + g * 13) % 251;
+                let samples = match sample_type {
+                    SampleType::U8 => RawSamples::U8((0..w * h).map(|i| v(i) as u8).collect()),
+                    SampleType::U16 => {
+                        RawSamples::U16((0..w * h).map(|i| (v(i) * 257) as u16).collect())
+                    }
+                    SampleType::F32 => {
+                        RawSamples::F32((0..w * h).map(|i| v(i) as f32 / 250.0).collect())
+                    }
+                };
+                RawFrame {
+                    width: w,
+                    height: h,
+                    samples,
+                }
+            })
+            .collect();
+        writer
+            .write_group(&format!("g{g:05}"), group.clone(), dir)
+            .map_err(fail)?;
+        written.push(group);
+    }
+    let scan_toml = "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\ncut = \"lateral\"\n\
+        [camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n\
+        [motion]\nframe_step_um = 0.78\ngroup_step_um = 8.0\n";
+    writer.finish(scan_toml).map_err(fail)?;
+    let damaged = match u.int_in_range(0u8..=7)? {
+        0..=2 => false,
+        3 => {
+            let path = dir.join("zarr.json");
+            let mut bytes = std::fs::read(&path).map_err(fail)?;
+            damage(u, &mut bytes)?;
+            std::fs::write(&path, bytes).map_err(fail)?;
+            true
+        }
+        4 => {
+            let path = dir.join("frames").join("zarr.json");
+            let mut bytes = std::fs::read(&path).map_err(fail)?;
+            damage(u, &mut bytes)?;
+            std::fs::write(&path, bytes).map_err(fail)?;
+            true
+        }
+        5 => {
+            let g = u.int_in_range(0..=groups - 1)?;
+            std::fs::remove_file(chunk(dir, g)).map_err(fail)?;
+            true
+        }
+        _ => {
+            let path = chunk(dir, u.int_in_range(0..=groups - 1)?);
+            let mut bytes = std::fs::read(&path).map_err(fail)?;
+            damage(u, &mut bytes)?;
+            std::fs::write(&path, bytes).map_err(fail)?;
+            true
+        }
+    };
+    Ok((written, damaged))
+}
+
+/// The chunk file of group `g` in the store at `dir`.
+fn chunk(dir: &Path, g: usize) -> std::path::PathBuf {
+    dir.join("frames/c").join(g.to_string()).join("0/0/0")
+}
+
+/// Any failure while building an input: the input is not one this target tries.
+fn fail<E>(_: E) -> arbitrary::Error {
+    arbitrary::Error::IncorrectFormat
 }

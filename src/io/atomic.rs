@@ -95,6 +95,21 @@ pub fn write_atomic(target: &Path, bytes: &[u8], overwrite: bool) -> Result<(), 
     write_atomic_with(target, overwrite, |w| w.write_all(bytes))
 }
 
+/// Writes `value` as pretty JSON to `target` atomically, streamed through the file's buffer
+/// (a whole side's report is never held as one string).
+///
+/// # Errors
+/// As [`write_atomic_with`].
+pub fn write_json_atomic(
+    target: &Path,
+    value: &impl serde::Serialize,
+    overwrite: bool,
+) -> Result<(), LoadError> {
+    write_atomic_with(target, overwrite, |w| {
+        serde_json::to_writer_pretty(w, value).map_err(std::io::Error::from)
+    })
+}
+
 /// Whether `dir` may receive a new scan: it does not exist, or it is an empty folder.
 /// Shared by the generator and the video import, which never write into a non-empty folder.
 ///

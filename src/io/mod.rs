@@ -14,7 +14,7 @@ pub mod zarr;
 
 use std::path::PathBuf;
 
-pub use atomic::{write_atomic, write_atomic_with};
+pub use atomic::{write_atomic, write_atomic_with, write_json_atomic};
 pub use frames::{load_frame, load_group, load_group_frames, save_grey_png};
 pub use scan::{Cut, Geometry, GroupEntry, Scan, ScanMeta};
 

@@ -371,8 +371,7 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
             params: &params,
             warnings: &run.warnings,
         };
-        let json = serde_json::to_vec_pretty(&report)?;
-        crate::io::write_atomic(path, &json, args.force)?;
+        crate::io::write_json_atomic(path, &report, args.force)?;
     }
     if !args.quiet {
         for w in &run.warnings {

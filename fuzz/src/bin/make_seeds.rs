@@ -26,7 +26,8 @@ fn write(dir: &Path, name: &str, bytes: &[u8]) -> std::io::Result<()> {
 
 fn encoded(img: &image::DynamicImage, format: image::ImageFormat) -> Vec<u8> {
     let mut out = Cursor::new(Vec::new());
-    img.write_to(&mut out, format).expect("encoding a small image");
+    img.write_to(&mut out, format)
+        .expect("encoding a small image");
     out.into_inner()
 }
 
@@ -60,22 +61,36 @@ fn main() -> std::io::Result<()> {
     let root = Path::new("fuzz/corpus");
     let d = root.join("scan_toml");
     write(&d, "minimal.toml", SCAN_TOML.as_bytes())?;
-    write(&d, "dual_focus.toml", format!("{SCAN_TOML}{DUAL_FOCUS}").as_bytes())?;
+    write(
+        &d,
+        "dual_focus.toml",
+        format!("{SCAN_TOML}{DUAL_FOCUS}").as_bytes(),
+    )?;
     let spiral = SCAN_TOML.replace(
         "cut = \"lateral\"\n",
         "cut = \"stereo\"\ngroup_radius_mm = [115.0, 114.99, 114.98]\n",
     );
-    write(&d, "spiral_synth.toml", format!("{spiral}[synth]\nseed = 7\nnote = \"x\"\n").as_bytes())?;
+    write(
+        &d,
+        "spiral_synth.toml",
+        format!("{spiral}[synth]\nseed = 7\nnote = \"x\"\n").as_bytes(),
+    )?;
 
     let d = root.join("params_toml");
     let defaults = PipelineParams::default()
         .to_toml_string()
         .expect("default params serialise");
     write(&d, "defaults.toml", defaults.as_bytes())?;
-    write(&d, "preset.toml", b"path = \"dual_focus\"\n[flow]\nlambda = 0.5\n[hough]\ntheta_step_deg = 0.5\n")?;
+    write(
+        &d,
+        "preset.toml",
+        b"path = \"dual_focus\"\n[flow]\nlambda = 0.5\n[hough]\ntheta_step_deg = 0.5\n",
+    )?;
 
     let d = root.join("frame");
-    let grey = image::GrayImage::from_fn(16, 12, |x, y| image::Luma([((x * 37 + y * 91) % 251) as u8]));
+    let grey = image::GrayImage::from_fn(16, 12, |x, y| {
+        image::Luma([((x * 37 + y * 91) % 251) as u8])
+    });
     let l8 = image::DynamicImage::ImageLuma8(grey);
     let l16 = image::DynamicImage::ImageLuma16(l8.to_luma16());
     let rgb8 = image::DynamicImage::ImageRgb8(l8.to_rgb8());
@@ -89,7 +104,11 @@ fn main() -> std::io::Result<()> {
     write(&d, "grey8.tif", &encoded(&l8, tiff))?;
     write(&d, "grey16.tif", &encoded(&l16, tiff))?;
     write(&d, "rgb8.tif", &encoded(&rgb8, tiff))?;
-    write(&d, "huge-header.png", &png_claiming(encoded(&l8, png), 50_000, 50_000))?;
+    write(
+        &d,
+        "huge-header.png",
+        &png_claiming(encoded(&l8, png), 50_000, 50_000),
+    )?;
 
     let d = root.join("scan_folder");
     write(&d, "zeros", &[0u8; 96])?;
@@ -98,6 +117,14 @@ fn main() -> std::io::Result<()> {
     write(&d, "ramp", &ramp)?;
     let mixed: Vec<u8> = (0..512u32).map(|i| (i * 97 % 256) as u8).collect();
     write(&d, "mixed", &mixed)?;
+
+    // The still and Zarr targets build their files from the bytes, like `scan_folder`.
+    for name in ["still", "zarr_store"] {
+        let d = root.join(name);
+        write(&d, "zeros", &[0u8; 96])?;
+        write(&d, "ramp", &ramp)?;
+        write(&d, "mixed", &mixed)?;
+    }
 
     let d = root.join("reference_wav");
     let int = |channels, bits| hound::WavSpec {

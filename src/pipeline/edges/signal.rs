@@ -83,7 +83,9 @@ impl Edges {
         let f = |v: f64| v as f32;
         let mut channels = Vec::with_capacity(BorderChannels::COUNT);
         for b in &self.borders {
-            let (mut y, mut se) = (Vec::new(), Vec::new());
+            // Sized exactly: a whole run keeps every group's tracks until the clip is finished.
+            let n = b.y_um.len();
+            let (mut y, mut se) = (Vec::with_capacity(n), Vec::with_capacity(n));
             for (&yv, &sv) in b.y_um.iter().zip(&b.std_error_um) {
                 let seen = yv.is_finite() && sv.is_finite() && sv > 0.0;
                 y.push(if seen { f(yv) } else { f32::NAN });

@@ -12,7 +12,7 @@ use serde::Serialize;
 use crate::cli::{ReconstructArgs, load_params, method_choice, path_choice, progress_bar};
 use crate::engine::{ClipGroups, Reconstruction, StageTimings, finish_reconstruction};
 use crate::io::wav::write_wav;
-use crate::io::{Scan, ScanMeta, write_atomic};
+use crate::io::{Scan, ScanMeta, write_json_atomic};
 use crate::pipeline::PipelineParams;
 use crate::side::part::{PART_FILE, read_part, write_part};
 use crate::side::plan::Plan;
@@ -369,11 +369,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
             &rec,
         );
         report.progress = Some(run_progress.clone());
-        write_atomic(
-            report_path,
-            &serde_json::to_vec_pretty(&report)?,
-            args.force,
-        )?;
+        write_json_atomic(report_path, &report, args.force)?;
     }
     result.journal.remove()?;
     finish_message(args, &rec, &run_progress);
@@ -514,11 +510,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
             .filter_map(|g| g.report.as_ref().and_then(|r| r.warning.clone()))
             .collect(),
     };
-    write_atomic(
-        &args.out.join("report.json"),
-        &serde_json::to_vec_pretty(&report)?,
-        true,
-    )?;
+    write_json_atomic(&args.out.join("report.json"), &report, true)?;
     result.journal.remove()?;
     let text = format!(
         "wrote {} (shard {index} of {}: groups {}..{}, {} run before them for the slope history, {:.1} s, {:.1} groups/s)",

@@ -10,7 +10,7 @@ use super::{lock_outputs, make_report, refuse_existing};
 use crate::cli::{load_params, path_choice};
 use crate::engine::{GroupOutcome, GroupStream, SlopeMode, run_groups};
 use crate::io::wav::{WavBits, write_wav};
-use crate::io::{Scan, ScanMeta, write_atomic};
+use crate::io::{Scan, ScanMeta, write_atomic, write_json_atomic};
 use crate::pipeline::PipelineParams;
 use crate::pipeline::slope_reference::SlopeHistory;
 use crate::side::merge::merge_parts;
@@ -98,11 +98,7 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
             &merged.identity.params,
             &rec,
         );
-        write_atomic(
-            report_path,
-            &serde_json::to_vec_pretty(&report)?,
-            args.force,
-        )?;
+        write_json_atomic(report_path, &report, args.force)?;
     }
     if !args.quiet {
         for w in &rec.warnings {
