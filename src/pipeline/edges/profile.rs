@@ -533,16 +533,11 @@ pub(super) fn fit_views(
 #[allow(clippy::unwrap_used)] // tests may panic
 pub(super) mod tests {
     use super::*;
+    use crate::io::scan::test_support::scan_meta;
     use crate::meta::ScanMeta;
 
     pub(in crate::pipeline::edges) fn meta() -> ScanMeta {
-        ScanMeta::from_toml_str(
-            "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\ncut = \"lateral\"\n\
-             [camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n\
-             [motion]\nframe_step_um = 0.78\ngroup_step_um = 40.0\n",
-            std::path::Path::new("scan.toml"),
-        )
-        .unwrap()
+        scan_meta(40.0)
     }
 
     /// Frames of a land/wall border at record y(s) = `y0 + slope·s` (µm), blurred by 0.7 px,
