@@ -3,35 +3,15 @@
 //! `cargo bench --no-default-features --bench edges` (add `-- --quick` for a short run). The
 //! groups are rendered by the synth generator (the paper's camera) into a temporary folder.
 
+mod common;
+
 use std::hint::black_box;
-use std::path::Path;
-use std::sync::atomic::AtomicBool;
 
+use common::render_group;
 use criterion::{Criterion, criterion_group, criterion_main};
-use groovescope::image::Image;
-use groovescope::io::{Scan, ScanMeta, load_group};
-use groovescope::pipeline::PipelineParams;
 use groovescope::pipeline::edges::detect_edges;
-use groovescope::synth::{SynthConfig, render_scan, tone};
-
-/// Renders one group of `cfg` into `dir` and loads its frames.
-fn group(dir: &Path, cfg: SynthConfig) -> (ScanMeta, Vec<Image>) {
-    let cfg = SynthConfig {
-        max_groups: Some(1),
-        ..cfg
-    };
-    render_scan(
-        &tone(1000.0, 0.05, 44_100),
-        &cfg,
-        dir,
-        &|_, _| {},
-        &AtomicBool::new(false),
-    )
-    .expect("synthetic scan");
-    let scan = Scan::open(dir).expect("scan");
-    let frames = load_group(&scan.groups[0]).expect("frames");
-    (scan.meta, frames)
-}
+use groovescope::pipeline::{GroupInput, PipelineParams};
+use groovescope::synth::SynthConfig;
 
 fn bench(c: &mut Criterion) {
     // As the `groovescope` binary does at start-up.
@@ -44,7 +24,8 @@ fn bench(c: &mut Criterion) {
         ("depth_camera", SynthConfig::default()),
         ("dual_focus_camera", SynthConfig::dual_focus_demo()),
     ] {
-        let (meta, frames) = group(&tmp.path().join(name), cfg);
+        let (_, GroupInput { frames, meta, .. }) =
+            render_group(&tmp.path().join(name), cfg, 1000.0);
         assert_eq!(frames.len(), 12, "{name}: frames per group");
         assert_eq!(
             (frames[0].width, frames[0].height),

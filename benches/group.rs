@@ -3,42 +3,17 @@
 //! `cargo bench --no-default-features --bench group` (add `-- --quick` for a short run). The
 //! groups are rendered by the synth generator (the paper's camera) into a temporary folder.
 
-use std::hint::black_box;
-use std::path::Path;
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+mod common;
 
+use std::hint::black_box;
+
+use common::render_group;
 use criterion::{Criterion, criterion_group, criterion_main};
 use groovescope::engine::run_group;
-use groovescope::io::{Scan, load_group};
+use groovescope::io::load_group;
 use groovescope::pipeline::slope_reference::SlopeReference;
-use groovescope::pipeline::{GroupInput, Method, PipelineParams, Stage, StageCache};
-use groovescope::synth::{SynthConfig, render_scan, tone};
-
-/// Renders one group of `cfg` into `dir` and loads it.
-fn group(dir: &Path, cfg: SynthConfig) -> (Scan, GroupInput) {
-    let cfg = SynthConfig {
-        max_groups: Some(1),
-        ..cfg
-    };
-    render_scan(
-        &tone(1000.0, 0.05, 44_100),
-        &cfg,
-        dir,
-        &|_, _| {},
-        &AtomicBool::new(false),
-    )
-    .expect("synthetic scan");
-    let scan = Scan::open(dir).expect("scan");
-    let frames = load_group(&scan.groups[0]).expect("frames");
-    let input = GroupInput {
-        group: 0,
-        frames: Arc::new(frames),
-        first_frame: 0,
-        meta: Arc::new(scan.meta.clone()),
-    };
-    (scan, input)
-}
+use groovescope::pipeline::{Method, PipelineParams, Stage, StageCache};
+use groovescope::synth::SynthConfig;
 
 fn bench(c: &mut Criterion) {
     // As the `groovescope` binary does at start-up.
@@ -55,7 +30,7 @@ fn bench(c: &mut Criterion) {
         ("depth_path", SynthConfig::default()),
         ("dual_focus", SynthConfig::dual_focus_demo()),
     ] {
-        let (scan, input) = group(&tmp.path().join(name), cfg);
+        let (scan, input) = render_group(&tmp.path().join(name), cfg, 1000.0);
         assert_eq!(input.frames.len(), 12, "{name}: frames per group");
         g.bench_function(format!("{name}: every stage"), |b| {
             b.iter(|| {

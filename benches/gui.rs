@@ -6,51 +6,19 @@
 //! (issue 20) the clip health strip redraws in ≤ 2 ms for 10,000 groups.
 //! The groups are rendered by the synth generator (the paper's camera) into a temporary folder.
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+mod common;
+
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use common::render_group;
 use criterion::Criterion;
-use groovescope::io::{Scan, load_group};
 use groovescope::pipeline::{GroupInput, PipelineParams, Stage, StageCache};
-use groovescope::synth::{SynthConfig, render_scan, tone};
+use groovescope::synth::SynthConfig;
 
-/// Renders one group of `cfg` (12 frames of 1280×1024 by default) into `dir`.
-fn render(dir: &Path, cfg: SynthConfig) -> PathBuf {
-    let cfg = SynthConfig {
-        max_groups: Some(1),
-        ..cfg
-    };
-    render_scan(
-        &tone(440.0, 0.05, 44_100),
-        &cfg,
-        dir,
-        &|_, _| {},
-        &AtomicBool::new(false),
-    )
-    .expect("synthetic scan");
-    dir.to_path_buf()
-}
-
-fn input(dir: &Path) -> GroupInput {
-    let scan = Scan::open(dir).expect("scan");
-    let frames = load_group(&scan.groups[0]).expect("frames");
-    GroupInput {
-        group: 0,
-        frames: Arc::new(frames),
-        first_frame: 0,
-        meta: Arc::new(scan.meta),
-    }
-}
-
-/// Runs every stage once (printing each stage's time); returns the filled cache and the error
-/// that stopped it, if any.
-fn full_cache(
-    name: &str,
-    input: &GroupInput,
-    params: &PipelineParams,
-) -> (StageCache, Option<String>) {
+/// Runs every stage once (printing each stage's time, and the error that stopped it, if any);
+/// returns the filled cache.
+fn full_cache(name: &str, input: &GroupInput, params: &PipelineParams) -> StageCache {
     let mut cache = StageCache::default();
     let mut t0 = Instant::now();
     let mut times = Vec::new();
@@ -67,7 +35,10 @@ fn full_cache(
         .err()
         .map(|e| e.to_string());
     println!("{name}: one full run: {}", times.join(", "));
-    (cache, err)
+    if let Some(e) = &err {
+        println!("note: the {name} group stops at: {e}");
+    }
+    cache
 }
 
 fn rerun_from(c: &mut Criterion, name: &str, from: Stage, input: &GroupInput, base: &StageCache) {
@@ -226,54 +197,29 @@ fn main() {
     let tmp = tempfile::tempdir().expect("tempdir");
     let params = PipelineParams::default();
 
-    let depth_dir = render(&tmp.path().join("depth"), SynthConfig::default());
-    let depth_input = input(&depth_dir);
-    let (cache, err) = full_cache("depth path", &depth_input, &params);
-    if let Some(e) = &err {
-        println!("note: the depth-path group stops at: {e}");
+    let depth_dir = tmp.path().join("depth");
+    let (_, depth_input) = render_group(&depth_dir, SynthConfig::default(), 440.0);
+    let cache = full_cache("depth path", &depth_input, &params);
+    for (name, from) in [
+        ("depth path: flow onward (12x1280x1024)", Stage::Flow),
+        ("depth path: orientation onward", Stage::Orientation),
+    ] {
+        rerun_from(&mut c, name, from, &depth_input, &cache);
     }
-    rerun_from(
-        &mut c,
-        "depth path: flow onward (12x1280x1024)",
-        Stage::Flow,
-        &depth_input,
-        &cache,
-    );
-    rerun_from(
-        &mut c,
-        "depth path: orientation onward",
-        Stage::Orientation,
-        &depth_input,
-        &cache,
-    );
 
-    let dual_dir = render(&tmp.path().join("dual"), SynthConfig::dual_focus_demo());
-    let dual_input = input(&dual_dir);
-    let (dual_cache, err) = full_cache("dual focus", &dual_input, &params);
-    if let Some(e) = &err {
-        println!("note: the dual-focus group stops at: {e}");
+    let (_, dual_input) = render_group(
+        &tmp.path().join("dual"),
+        SynthConfig::dual_focus_demo(),
+        440.0,
+    );
+    let dual_cache = full_cache("dual focus", &dual_input, &params);
+    for (name, from) in [
+        ("dual focus: flow onward (12x1280x1024)", Stage::Flow),
+        ("dual focus: Hough (stripes) onward", Stage::Stripes),
+        ("dual focus: orientation onward", Stage::Orientation),
+    ] {
+        rerun_from(&mut c, name, from, &dual_input, &dual_cache);
     }
-    rerun_from(
-        &mut c,
-        "dual focus: flow onward (12x1280x1024)",
-        Stage::Flow,
-        &dual_input,
-        &dual_cache,
-    );
-    rerun_from(
-        &mut c,
-        "dual focus: Hough (stripes) onward",
-        Stage::Stripes,
-        &dual_input,
-        &dual_cache,
-    );
-    rerun_from(
-        &mut c,
-        "dual focus: orientation onward",
-        Stage::Orientation,
-        &dual_input,
-        &dual_cache,
-    );
 
     ui_frame_times(depth_dir);
     c.final_summary();

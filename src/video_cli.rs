@@ -109,12 +109,9 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
     let zarr = args.zarr || args.out.extension().is_some_and(|e| e == "zarr");
     // A Zarr store: the clip is imported as a scan folder beside it, packed, then removed.
     let folder = if zarr {
-        let name = args
-            .out
-            .file_name()
-            .map_or_else(|| "scan".into(), |n| n.to_string_lossy().into_owned());
-        args.out
-            .with_file_name(format!(".{name}.frames-{}", std::process::id()))
+        crate::io::atomic::beside(&args.out, "scan", |name| {
+            format!(".{name}.frames-{}", std::process::id())
+        })
     } else {
         args.out.clone()
     };

@@ -364,11 +364,7 @@ pub fn stripes_overlay(frame: &Image, stripes: &Stripes) -> Rgba8Image {
     let mut img = Rgba8Image::filled(w, h, [0, 0, 0, 255]);
     for y in 0..h {
         for x in 0..w {
-            let l = stripes
-                .labels
-                .get(y * w + x)
-                .copied()
-                .unwrap_or(label::NONE);
+            let l = stripes.label_at(x, y);
             let c = match l {
                 label::DISCARDED => DISCARDED_RGBA,
                 label::UNASSIGNED => UNASSIGNED_RGBA,

@@ -56,52 +56,36 @@ fn missing_metadata_key_names_key_and_file() {
 fn nan_parameter_names_key_and_file() {
     let dir = tempfile::tempdir().unwrap();
     let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
-    let params = dir.path().join("p.toml");
-    std::fs::write(&params, "[flow]\nlambda = nan\n").unwrap();
     let wav = dir.path().join("o.wav");
-    let out = groovescope(&[
-        "reconstruct",
-        s(&scan),
-        "--out",
-        s(&wav),
-        "--params",
-        s(&params),
-        "--quiet",
-    ]);
-    assert!(!out.status.success());
-    let err = stderr(&out);
-    assert!(
-        err.contains("flow.lambda") && err.contains("p.toml"),
-        "{err}"
-    );
-    let neg = dir.path().join("n.toml");
-    std::fs::write(&neg, "[orientation]\nsigma_start_um = -1.0\n").unwrap();
-    let out = groovescope(&[
-        "reconstruct",
-        s(&scan),
-        "--out",
-        s(&wav),
-        "--params",
-        s(&neg),
-        "--quiet",
-    ]);
-    assert!(
-        stderr(&out).contains("orientation.sigma_start_um"),
-        "{}",
-        stderr(&out)
-    );
-    let unknown = dir.path().join("u.toml");
-    std::fs::write(&unknown, "[flow]\nlamda = 1.0\n").unwrap();
-    let out = groovescope(&[
-        "reconstruct",
-        s(&scan),
-        "--out",
-        s(&wav),
-        "--params",
-        s(&unknown),
-        "--quiet",
-    ]);
-    assert!(stderr(&out).contains("lamda"), "{}", stderr(&out));
+    // (params file, its text, what the error must name)
+    for (name, text, wanted) in [
+        (
+            "p.toml",
+            "[flow]\nlambda = nan\n",
+            &["flow.lambda", "p.toml"][..],
+        ),
+        (
+            "n.toml",
+            "[orientation]\nsigma_start_um = -1.0\n",
+            &["orientation.sigma_start_um"],
+        ),
+        ("u.toml", "[flow]\nlamda = 1.0\n", &["lamda"]),
+    ] {
+        let params = dir.path().join(name);
+        std::fs::write(&params, text).unwrap();
+        let out = groovescope(&[
+            "reconstruct",
+            s(&scan),
+            "--out",
+            s(&wav),
+            "--params",
+            s(&params),
+            "--quiet",
+        ]);
+        assert!(!out.status.success(), "{name}");
+        let err = stderr(&out);
+        assert!(wanted.iter().all(|w| err.contains(w)), "{name}: {err}");
+    }
     assert!(!wav.exists());
 }
 

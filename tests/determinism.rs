@@ -68,6 +68,14 @@ fn assert_same(what: &str, a: &[(Stage, String)], b: &[(Stage, String)]) {
     }
 }
 
+/// Applies `p` in the workbench and, once it settles, compares its group with a fresh run of
+/// group 0 of `scan` with `p` (on 2 threads).
+fn set_and_compare(h: &mut H, scan: &Path, p: &PipelineParams, what: &str) {
+    wb_mut(h).set_params(p.clone());
+    settle(h);
+    assert_same(what, &cache_with(scan, 2, p), &workbench_outputs(wb(h)));
+}
+
 /// Group 0 run straight through a fresh cache on a rayon pool of `threads` threads.
 fn cache_on_threads(scan: &Path, threads: usize) -> Vec<(Stage, String)> {
     cache_with(scan, threads, &PipelineParams::default())
@@ -179,25 +187,11 @@ fn check_scan(scan: &Path) {
     // fresh run with the new params.
     let mut p = params.clone();
     p.sound.output_rate_hz = 48_000;
-    wb_mut(&mut h).set_params(p.clone());
-    settle(&mut h);
-    assert_same(
-        "after an output-rate change",
-        &cache_with(scan, 2, &p),
-        &workbench_outputs(wb(&h)),
-    );
+    set_and_compare(&mut h, scan, &p, "after an output-rate change");
 
     // An edge-stage knob: the edge stage alone reruns, and equals a fresh run.
-    let mut p = params.clone();
     p.edges.column_sigma_px *= 2.0;
-    p.sound.output_rate_hz = 48_000;
-    wb_mut(&mut h).set_params(p.clone());
-    settle(&mut h);
-    assert_same(
-        "after an edge-knob change",
-        &cache_with(scan, 2, &p),
-        &workbench_outputs(wb(&h)),
-    );
+    set_and_compare(&mut h, scan, &p, "after an edge-knob change");
 
     // A clip reconstruction racing the stage worker: started as soon as the scan is open,
     // while the group's first run is still going, with a rerun from the start while it runs.

@@ -9,7 +9,7 @@ fn s(p: &std::path::Path) -> &str {
     p.to_str().unwrap()
 }
 
-#[cfg(feature = "video")]
+/// The scan metadata every import is given.
 const META: [&str; 10] = [
     "--rpm",
     "78",
@@ -120,22 +120,9 @@ fn import_video_errors_are_one_line_naming_the_file() {
 fn import_video_without_the_feature_says_so() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("scan");
-    let o = groovescope(&[
-        "import-video",
-        "clip.avi",
-        "--out",
-        s(&out),
-        "--rpm",
-        "78",
-        "--radius-mm",
-        "115",
-        "--pixel-pitch-um",
-        "0.39",
-        "--working-distance-mm",
-        "4",
-        "--frame-step-um",
-        "0.78",
-    ]);
+    let mut args = vec!["import-video", "clip.avi", "--out", s(&out)];
+    args.extend(META);
+    let o = groovescope(&args);
     assert!(!o.status.success());
     let err = stderr(&o);
     assert!(err.contains("built without video support"), "{err}");

@@ -24,17 +24,6 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-fn setup(cfg: &StillConfig, scene: &StillScene, k: usize) -> StillSetup {
-    StillSetup {
-        axis: cfg.axis,
-        um_per_px: cfg.um_per_px,
-        rpm: cfg.rpm,
-        radius_mm: scene.grooves[k].radius_mm,
-        cut: cfg.cut,
-        reverse: false,
-    }
-}
-
 /// The finished sound (44.1 kHz, the default DSP) of groove `k` (0-based).
 fn decode(
     img: &Image,
@@ -44,7 +33,7 @@ fn decode(
 ) -> groovescope::io::wav::Audio {
     let a = analyse_still(
         img,
-        &setup(cfg, scene, k),
+        &scene.setup(k).unwrap(),
         Some(k + 1),
         &StillParams::default(),
     )
@@ -190,7 +179,7 @@ fn reverse_plays_the_groove_backwards() {
     };
     let scene = StillScene::new(&cfg, None).unwrap();
     let img = render_still(&scene).image;
-    let mut st = setup(&cfg, &scene, 1);
+    let mut st = scene.setup(1).unwrap();
     let params = StillParams::default();
     let finished = |st: &StillSetup| {
         let signal = analyse_still(&img, st, Some(2), &params).unwrap().signal;

@@ -6,6 +6,7 @@
 
 mod gui_common;
 
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -20,10 +21,8 @@ use gui_common::*;
 
 #[test]
 fn opens_the_demo_scan_and_steps_through_groups() {
-    let tmp = tempfile::tempdir().unwrap();
     let scan = demo_scan();
-    let mut h = harness(options(tmp.path(), Some(scan.clone()), DeviceChoice::Off));
-    settle(&mut h);
+    let (_tmp, mut h) = settled_on(&scan);
     let groups = wb(&h).scan().unwrap().groups.len();
     assert!(groups >= 2);
     assert_eq!(wb(&h).group(), 0);
@@ -46,10 +45,8 @@ fn opens_the_demo_scan_and_steps_through_groups() {
 
 #[test]
 fn bad_input_gives_a_message_and_keeps_the_scan() {
-    let tmp = tempfile::tempdir().unwrap();
     let good = lateral_scan();
-    let mut h = harness(options(tmp.path(), Some(good.clone()), DeviceChoice::Off));
-    settle(&mut h);
+    let (tmp, mut h) = settled_on(&good);
     // Not a scan.
     let not_scan = tmp.path().join("holiday_photos");
     std::fs::create_dir_all(&not_scan).unwrap();
@@ -86,10 +83,7 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
 
 #[test]
 fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
-    let tmp = tempfile::tempdir().unwrap();
-    let scan = lateral_scan();
-    let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
-    settle(&mut h);
+    let (_tmp, mut h) = settled_on(&lateral_scan());
     wb_mut(&mut h).set_view(View::Flow);
     h.run_ok();
     for s in [Stage::Derivatives, Stage::Flow] {
@@ -125,10 +119,7 @@ fn changing_lambda_reruns_flow_onward_and_the_flow_view_updates() {
 
 #[test]
 fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
-    let tmp = tempfile::tempdir().unwrap();
-    let scan = demo_scan();
-    let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
-    settle(&mut h);
+    let (_tmp, mut h) = settled_on(&demo_scan());
     let runs = Stage::ALL.map(|s| wb(&h).stage_runs(s));
     let flows = wb(&h).cache().flows().cloned().unwrap();
     let mut p = wb(&h).params().clone();
@@ -158,10 +149,8 @@ fn changing_a_hough_range_reruns_stripes_onward_but_not_derivatives_or_flow() {
 
 #[test]
 fn reconstructs_exports_a_wav_and_reads_it_back() {
-    let tmp = tempfile::tempdir().unwrap();
     let scan = demo_scan();
-    let mut h = harness(options(tmp.path(), Some(scan), DeviceChoice::Off));
-    settle(&mut h);
+    let (tmp, mut h) = settled_on(&scan);
     wb_mut(&mut h).set_view(View::Waveform);
     h.run_ok();
     h.get_by_label("Reconstruct clip").click();
@@ -286,9 +275,7 @@ fn snapshot(h: &mut H, name: &str) {
 /// little), on the lateral scan: the depth path and the whole clip.
 #[test]
 fn snapshots_of_the_depth_path_views() {
-    let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(lateral_scan()), DeviceChoice::Off));
-    settle(&mut h);
+    let (_tmp, mut h) = settled_on(&lateral_scan());
     wb_mut(&mut h).reconstruct(None);
     settle(&mut h);
     for v in View::ALL {
@@ -304,9 +291,7 @@ fn snapshots_of_the_depth_path_views() {
 /// Snapshots of the Hough and stripes views (and the overview) on the dual-focus demo scan.
 #[test]
 fn snapshots_of_the_dual_focus_views() {
-    let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
-    settle(&mut h);
+    let (_tmp, mut h) = settled_on(&demo_scan());
     for (v, name) in [
         (View::Hough, "hough"),
         (View::Stripes, "stripes"),
@@ -320,9 +305,7 @@ fn snapshots_of_the_dual_focus_views() {
 
 #[test]
 fn exports_a_view_as_png_and_round_trips_a_preset() {
-    let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(lateral_scan()), DeviceChoice::Off));
-    settle(&mut h);
+    let (tmp, mut h) = settled_on(&lateral_scan());
     // A view as PNG: a capture of the view's area.
     let png = tmp.path().join("flow.png");
     wb_mut(&mut h).capture_view(png.clone(), View::Flow, false);
@@ -355,22 +338,27 @@ fn exports_a_view_as_png_and_round_trips_a_preset() {
     settle(&mut h);
 }
 
-#[test]
-fn per_disc_preset_loads_on_open_and_metadata_saves_back() {
-    let tmp = tempfile::tempdir().unwrap();
+/// A two-group quick-test scan (`frames_per_group` frames each) with its own preset.toml, the
+/// defaults but for the flow's λ.
+fn scan_with_lambda_preset(name: &str, frames_per_group: usize, lambda: f32) -> PathBuf {
     let scan = rendered_scan(
-        "own",
+        name,
         SynthConfig {
-            frames_per_group: 7,
+            frames_per_group,
             max_groups: Some(2),
             ..SynthConfig::quick_test()
         },
     );
     let mut preset = groovescope::pipeline::PipelineParams::default();
-    preset.flow.lambda = 0.125;
+    preset.flow.lambda = lambda;
     std::fs::write(scan.join("preset.toml"), preset.to_toml_string().unwrap()).unwrap();
-    let mut h = harness(options(tmp.path(), Some(scan.clone()), DeviceChoice::Off));
-    settle(&mut h);
+    scan
+}
+
+#[test]
+fn per_disc_preset_loads_on_open_and_metadata_saves_back() {
+    let scan = scan_with_lambda_preset("own", 7, 0.125);
+    let (_tmp, mut h) = settled_on(&scan);
     assert_eq!(
         wb(&h).params().flow.lambda,
         0.125,
@@ -411,21 +399,9 @@ fn group_outputs(h: &H) -> String {
 /// Issue 20: settings never leak from one disc into the next.
 #[test]
 fn a_second_scan_without_a_preset_runs_on_the_defaults_and_says_so() {
-    let tmp = tempfile::tempdir().unwrap();
-    let a = rendered_scan(
-        "with-preset",
-        SynthConfig {
-            frames_per_group: 8,
-            max_groups: Some(2),
-            ..SynthConfig::quick_test()
-        },
-    );
-    let mut preset = groovescope::pipeline::PipelineParams::default();
-    preset.flow.lambda = 0.2;
-    std::fs::write(a.join("preset.toml"), preset.to_toml_string().unwrap()).unwrap();
+    let a = scan_with_lambda_preset("with-preset", 8, 0.2);
     let b = lateral_scan();
-    let mut h = harness(options(tmp.path(), Some(a.clone()), DeviceChoice::Off));
-    settle(&mut h);
+    let (_tmp, mut h) = settled_on(&a);
     assert_eq!(
         wb(&h).params().flow.lambda,
         0.2,
@@ -500,10 +476,8 @@ fn switching_scans_with_unsaved_knobs_asks_once() {
 /// machine), the app says so and offers its own path field, which works.
 #[test]
 fn a_dialog_failure_shows_a_message_and_the_path_field() {
-    let tmp = tempfile::tempdir().unwrap();
     let scan = lateral_scan();
-    let mut h = harness(options(tmp.path(), Some(scan.clone()), DeviceChoice::Off));
-    settle(&mut h);
+    let (tmp, mut h) = settled_on(&scan);
     h.get_by_label("File").click();
     h.run_ok();
     h.get_by_label("Save preset…").click();
@@ -543,9 +517,7 @@ fn a_dialog_failure_shows_a_message_and_the_path_field() {
 /// pan the plot), although egui reports the drag only once the pointer has left the edge.
 #[test]
 fn a_drag_that_starts_on_a_hough_edge_resizes_the_window() {
-    let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
-    settle(&mut h);
+    let (_tmp, mut h) = settled_on(&demo_scan());
     wb_mut(&mut h).set_view(View::Hough);
     h.run_ok();
     let before = wb(&h)
@@ -587,9 +559,7 @@ fn a_drag_that_starts_on_a_hough_edge_resizes_the_window() {
 /// wrong knob); neither does loading one or changing a knob.
 #[test]
 fn the_parameter_list_does_not_move_when_a_preset_is_saved() {
-    let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(lateral_scan()), DeviceChoice::Off));
-    settle(&mut h);
+    let (tmp, mut h) = settled_on(&lateral_scan());
     let place = |h: &H| h.get_by_label("λ (smoothness)").rect();
     let before = place(&h);
     let preset = tmp
@@ -616,9 +586,7 @@ fn the_parameter_list_does_not_move_when_a_preset_is_saved() {
 /// click on a cell shows that group; the waveform's time axis maps to the same groups.
 #[test]
 fn the_health_strip_has_one_cell_per_group_and_a_click_navigates() {
-    let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
-    settle(&mut h);
+    let (_tmp, mut h) = settled_on(&demo_scan());
     let groups = wb(&h).scan().unwrap().groups.len();
     let cells = |h: &H| h.get_all_by_label_contains("health of group ").count();
     assert_eq!(cells(&h), groups, "one cell per group before a clip");
@@ -643,9 +611,7 @@ fn the_health_strip_has_one_cell_per_group_and_a_click_navigates() {
 /// the groups near the one shown; the plain 16-bit export writes 16-bit 44.1 kHz.
 #[test]
 fn the_previous_clip_stays_for_ab_and_a_range_around_the_group_reconstructs() {
-    let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
-    settle(&mut h);
+    let (tmp, mut h) = settled_on(&demo_scan());
     wb_mut(&mut h).reconstruct(None);
     settle(&mut h);
     let first = wb(&h).clip().unwrap().recovered.clone();
@@ -681,9 +647,7 @@ fn the_previous_clip_stays_for_ab_and_a_range_around_the_group_reconstructs() {
 /// Issue 20: the arrow keys step through the group's frames.
 #[test]
 fn arrow_keys_step_frames() {
-    let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(lateral_scan()), DeviceChoice::Off));
-    settle(&mut h);
+    let (_tmp, mut h) = settled_on(&lateral_scan());
     let f = wb(&h).frame();
     h.key_press(egui::Key::ArrowRight);
     h.run_ok();
@@ -698,9 +662,7 @@ fn arrow_keys_step_frames() {
 /// so far; the whole clip replaces them when it is done.
 #[test]
 fn the_groups_finished_so_far_can_be_played_while_reconstructing() {
-    let tmp = tempfile::tempdir().unwrap();
-    let mut h = harness(options(tmp.path(), Some(demo_scan()), DeviceChoice::Off));
-    settle(&mut h);
+    let (_tmp, mut h) = settled_on(&demo_scan());
     wb_mut(&mut h).reconstruct(None);
     wb_mut(&mut h).play_so_far();
     let mut partial_len = None;

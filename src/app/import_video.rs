@@ -10,6 +10,7 @@ use std::thread::JoinHandle;
 use egui::{Color32, Grid, Ui};
 
 use super::dialogs::DialogKind;
+use super::views::meta_ui::number_row;
 use crate::io::Cut;
 use crate::io::video::{ClipMeta, GroupLayout, ImportSummary, import_video};
 
@@ -237,13 +238,6 @@ pub enum ImportAction {
     Close,
 }
 
-fn num(ui: &mut Ui, text: &str, value: &mut f64, speed: f64) {
-    let l = ui.label(text);
-    ui.add(egui::DragValue::new(value).speed(speed).max_decimals(6))
-        .labelled_by(l.id);
-    ui.end_row();
-}
-
 fn count(ui: &mut Ui, text: &str, value: &mut usize, min: usize) {
     let l = ui.label(text);
     ui.add(egui::DragValue::new(value).range(min..=100_000))
@@ -294,8 +288,8 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
                 1,
             );
             count(ui, "max groups (0 = all)", &mut form.max_groups, 0);
-            num(ui, "rpm", &mut form.meta.rpm, 0.1);
-            num(ui, "radius (mm)", &mut form.meta.radius_mm, 0.1);
+            number_row(ui, "rpm", &mut form.meta.rpm, 0.1);
+            number_row(ui, "radius (mm)", &mut form.meta.radius_mm, 0.1);
             let l = ui.label("cut");
             egui::ComboBox::from_id_salt("import_cut")
                 .selected_text(format!("{:?}", form.meta.cut).to_lowercase())
@@ -307,14 +301,14 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
                 .response
                 .labelled_by(l.id);
             ui.end_row();
-            num(ui, "pixel pitch (µm)", &mut form.meta.pixel_pitch_um, 0.01);
-            num(
+            number_row(ui, "pixel pitch (µm)", &mut form.meta.pixel_pitch_um, 0.01);
+            number_row(
                 ui,
                 "working distance (mm)",
                 &mut form.meta.working_distance_mm,
                 0.01,
             );
-            num(ui, "frame step (µm)", &mut form.meta.frame_step_um, 0.01);
+            number_row(ui, "frame step (µm)", &mut form.meta.frame_step_um, 0.01);
             ui.checkbox(&mut form.own_group_step, "group step (µm)");
             if form.own_group_step {
                 ui.add(egui::DragValue::new(&mut form.group_step_um).speed(0.1));

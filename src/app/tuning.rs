@@ -203,24 +203,23 @@ impl Tuning {
 
     /// Goes back one step; false when there is nothing to undo.
     pub fn undo(&mut self) -> bool {
-        match self.history.undo(&self.params) {
-            Some(p) => {
-                self.params = p;
-                true
-            }
-            None => false,
-        }
+        let step = self.history.undo(&self.params);
+        self.take_step(step)
     }
 
     /// Goes forward one step; false when there is nothing to redo.
     pub fn redo(&mut self) -> bool {
-        match self.history.redo(&self.params) {
-            Some(p) => {
-                self.params = p;
-                true
-            }
-            None => false,
-        }
+        let step = self.history.redo(&self.params);
+        self.take_step(step)
+    }
+
+    /// Puts the params of an undo or redo step in force; false when there was no step.
+    fn take_step(&mut self, step: Option<PipelineParams>) -> bool {
+        let Some(p) = step else {
+            return false;
+        };
+        self.params = p;
+        true
     }
 
     /// True when there is something to undo / redo.

@@ -7,15 +7,24 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::LoadError;
 
+/// A file beside `target`, named by `name_of` from `target`'s file name (`fallback` when it
+/// has none).
+#[must_use]
+pub fn beside(target: &Path, fallback: &str, name_of: impl FnOnce(&str) -> String) -> PathBuf {
+    let name = target
+        .file_name()
+        .map_or_else(|| fallback.to_owned(), |n| n.to_string_lossy().into_owned());
+    target.with_file_name(name_of(&name))
+}
+
 /// A temporary name beside `target`, unique to this process and this write (two threads, or
 /// two windows, writing the same target never share one).
 fn temp_path(target: &Path) -> PathBuf {
     static NEXT: AtomicU64 = AtomicU64::new(0);
-    let name = target
-        .file_name()
-        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
     let n = NEXT.fetch_add(1, Ordering::Relaxed);
-    target.with_file_name(format!(".{name}.{}.{n}.tmp", std::process::id()))
+    beside(target, "out", |name| {
+        format!(".{name}.{}.{n}.tmp", std::process::id())
+    })
 }
 
 /// Moves the finished temporary file to `target`. Without `overwrite` this never replaces a

@@ -348,38 +348,47 @@ pub fn save_grey_png(
     sixteen_bit: bool,
     overwrite: bool,
 ) -> Result<(), LoadError> {
+    save_grey_as(img, path, sixteen_bit, overwrite, image::ImageFormat::Png)
+}
+
+/// Saves a grey image (values in `[0, 1]`, clamped, rounded to 8 or 16 bits) in `format`,
+/// atomically.
+///
+/// # Errors
+/// [`LoadError::Io`] when the file exists and `overwrite` is false, or the write fails.
+pub(crate) fn save_grey_as(
+    img: &Image,
+    path: &Path,
+    sixteen_bit: bool,
+    overwrite: bool,
+    format: image::ImageFormat,
+) -> Result<(), LoadError> {
     let (w, h) = (img.width as u32, img.height as u32);
-    let encoded: DynamicImage = if sixteen_bit {
-        let raw: Vec<u16> = img
+    let mismatch = || LoadError::Io {
+        problem: "image size does not match its data".into(),
+        path: path.to_path_buf(),
+    };
+    let encoded = if sixteen_bit {
+        let raw = img
             .data
             .iter()
             .map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16)
             .collect();
-        let Some(buf) = ImageBuffer::<Luma<u16>, _>::from_raw(w, h, raw) else {
-            return Err(LoadError::Io {
-                problem: "image size does not match its data".into(),
-                path: path.to_path_buf(),
-            });
-        };
-        DynamicImage::ImageLuma16(buf)
+        DynamicImage::ImageLuma16(
+            ImageBuffer::<Luma<u16>, _>::from_raw(w, h, raw).ok_or_else(mismatch)?,
+        )
     } else {
-        let raw: Vec<u8> = img
+        let raw = img
             .data
             .iter()
             .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
             .collect();
-        let Some(buf) = ImageBuffer::<Luma<u8>, _>::from_raw(w, h, raw) else {
-            return Err(LoadError::Io {
-                problem: "image size does not match its data".into(),
-                path: path.to_path_buf(),
-            });
-        };
-        DynamicImage::ImageLuma8(buf)
+        DynamicImage::ImageLuma8(
+            ImageBuffer::<Luma<u8>, _>::from_raw(w, h, raw).ok_or_else(mismatch)?,
+        )
     };
     write_atomic_with(path, overwrite, |wr| {
-        encoded
-            .write_to(wr, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)
+        encoded.write_to(wr, format).map_err(std::io::Error::other)
     })
 }
 

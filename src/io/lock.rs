@@ -18,10 +18,7 @@ const LOCK_ATTEMPTS: usize = 8;
 /// The lock file of `target`: `.NAME.lock` in the same folder.
 #[must_use]
 pub fn lock_path(target: &Path) -> PathBuf {
-    let name = target
-        .file_name()
-        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-    target.with_file_name(format!(".{name}.lock"))
+    super::atomic::beside(target, "out", |name| format!(".{name}.lock"))
 }
 
 /// An exclusive lock on one output file, held until dropped.

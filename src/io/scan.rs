@@ -205,27 +205,44 @@ impl Scan {
     }
 }
 
+/// Scan metadata shared by the unit tests of several modules.
+#[cfg(test)]
+pub(crate) mod test_support {
+    use std::path::Path;
+
+    use super::ScanMeta;
+
+    /// scan.toml of a 78 rpm lateral record at 115 mm under the paper's camera (0.39 µm px at
+    /// 4 mm), frames 0.78 µm apart and groups `group_step_um` apart.
+    pub(crate) fn scan_toml(group_step_um: f64) -> String {
+        format!(
+            "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\ncut = \"lateral\"\n\
+             [camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n\
+             [motion]\nframe_step_um = 0.78\ngroup_step_um = {group_step_um:?}\n"
+        )
+    }
+
+    /// [`scan_toml`] read.
+    #[allow(clippy::unwrap_used)] // test support: the text is valid
+    pub(crate) fn scan_meta(group_step_um: f64) -> ScanMeta {
+        ScanMeta::from_toml_str(&scan_toml(group_step_um), Path::new("scan.toml")).unwrap()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    const MINIMAL: &str = r#"
-format = 1
-[record]
-rpm = 78.0
-radius_mm = 115.0
-cut = "lateral"
-[camera]
-pixel_pitch_um = 0.39
-working_distance_mm = 4.0
-[motion]
-frame_step_um = 0.78
-group_step_um = 460.2
-"#;
+    use test_support::scan_toml;
+
+    /// The minimal scan.toml, its groups 460.2 µm apart (one 1280 px frame's land motion).
+    fn minimal() -> String {
+        scan_toml(460.2)
+    }
 
     #[test]
     fn minimal_file_loads_and_derives_geometry() {
-        let m = ScanMeta::from_toml_str(MINIMAL, Path::new("scan.toml")).unwrap();
+        let m = ScanMeta::from_toml_str(&minimal(), Path::new("scan.toml")).unwrap();
         let g = m.geometry();
         assert!((g.focal_px - 10_256.41).abs() < 0.01);
         assert!((g.land_flow_px() + 2.0).abs() < 1e-9);
@@ -235,7 +252,7 @@ group_step_um = 460.2
 
     #[test]
     fn missing_key_names_it_and_the_file() {
-        let text = MINIMAL.replace("rpm = 78.0\n", "");
+        let text = minimal().replace("rpm = 78.0\n", "");
         let err = ScanMeta::from_toml_str(&text, Path::new("/x/scan.toml")).unwrap_err();
         let msg = err.to_string();
         assert!(msg.contains("rpm"), "{msg}");
@@ -244,9 +261,9 @@ group_step_um = 460.2
 
     #[test]
     fn nan_and_negative_values_are_rejected() {
-        let text = MINIMAL.replace("radius_mm = 115.0", "radius_mm = nan");
+        let text = minimal().replace("radius_mm = 115.0", "radius_mm = nan");
         assert!(ScanMeta::from_toml_str(&text, Path::new("s")).is_err());
-        let text = MINIMAL.replace("frame_step_um = 0.78", "frame_step_um = -0.78");
+        let text = minimal().replace("frame_step_um = 0.78", "frame_step_um = -0.78");
         let msg = ScanMeta::from_toml_str(&text, Path::new("s"))
             .unwrap_err()
             .to_string();
@@ -256,7 +273,8 @@ group_step_um = 460.2
     #[test]
     fn dual_focus_shift_matches_thin_lens_geometry() {
         let text = format!(
-            "{MINIMAL}\n[dual_focus]\nfocus_distance_mm = 4.0\nglass_thickness_mm = 0.11\nglass_index = 1.515\nglass_edge_row = 300\n"
+            "{}\n[dual_focus]\nfocus_distance_mm = 4.0\nglass_thickness_mm = 0.11\nglass_index = 1.515\nglass_edge_row = 300\n",
+            minimal()
         );
         let m = ScanMeta::from_toml_str(&text, Path::new("s")).unwrap();
         let (a, b) = m.dual_focus.unwrap().focal_distances_mm();
@@ -268,7 +286,7 @@ group_step_um = 460.2
 
     #[test]
     fn extra_tables_round_trip() {
-        let text = format!("{MINIMAL}\n[synth]\nseed = 7\n");
+        let text = format!("{}\n[synth]\nseed = 7\n", minimal());
         let m = ScanMeta::from_toml_str(&text, Path::new("s")).unwrap();
         let back = ScanMeta::from_toml_str(&m.to_toml_string().unwrap(), Path::new("s")).unwrap();
         assert_eq!(m, back);

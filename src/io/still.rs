@@ -10,11 +10,8 @@ use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
-use image::{DynamicImage, ImageBuffer, Luma};
-
 use super::LoadError;
-use super::atomic::write_atomic_with;
-use super::frames::{load_frame, save_grey_png};
+use super::frames::{load_frame, save_grey_as};
 use crate::image::Image;
 
 /// Largest still side accepted, px.
@@ -363,36 +360,10 @@ pub fn save_grey_image(
     let tiff = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff"));
-    if !tiff {
-        return save_grey_png(img, path, sixteen_bit, overwrite);
-    }
-    let (w, h) = (img.width as u32, img.height as u32);
-    let mismatch = || LoadError::Io {
-        problem: "image size does not match its data".into(),
-        path: path.to_path_buf(),
-    };
-    let encoded = if sixteen_bit {
-        let raw = img
-            .data
-            .iter()
-            .map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16)
-            .collect();
-        DynamicImage::ImageLuma16(
-            ImageBuffer::<Luma<u16>, _>::from_raw(w, h, raw).ok_or_else(mismatch)?,
-        )
+    let format = if tiff {
+        image::ImageFormat::Tiff
     } else {
-        let raw = img
-            .data
-            .iter()
-            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-            .collect();
-        DynamicImage::ImageLuma8(
-            ImageBuffer::<Luma<u8>, _>::from_raw(w, h, raw).ok_or_else(mismatch)?,
-        )
+        image::ImageFormat::Png
     };
-    write_atomic_with(path, overwrite, |wr| {
-        encoded
-            .write_to(wr, image::ImageFormat::Tiff)
-            .map_err(std::io::Error::other)
-    })
+    save_grey_as(img, path, sixteen_bit, overwrite, format)
 }

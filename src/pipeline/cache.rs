@@ -67,6 +67,24 @@ pub struct StageCache {
     slots: [Option<Slot>; Stage::COUNT],
 }
 
+/// One accessor per stage output, `name: Variant => Type;` each: the output of
+/// `Stage::Variant`, when its slot holds one (and, for a stage that only one path runs, when
+/// that path ran it).
+macro_rules! output_accessors {
+    ($($(#[doc = $doc:literal])* $name:ident: $variant:ident => $ty:ty;)*) => {
+        $(
+            $(#[doc = $doc])*
+            #[must_use]
+            pub fn $name(&self) -> Option<&Arc<$ty>> {
+                match self.output(Stage::$variant)? {
+                    StageOutput::$variant(o) => o.into(),
+                    _ => None,
+                }
+            }
+        )*
+    };
+}
+
 impl StageCache {
     /// An empty cache whose flow stage computes `flow_detail` on the dual-focus path.
     #[must_use]
@@ -119,67 +137,21 @@ impl StageCache {
         self.slots[stage.index()].as_ref().map(|s| &s.output)
     }
 
-    /// [`Stage::Derivatives`]: one set per derivative window.
-    #[must_use]
-    pub fn derivatives(&self) -> Option<&Arc<Vec<Derivatives>>> {
-        match self.output(Stage::Derivatives)? {
-            StageOutput::Derivatives(d) => Some(d),
-            _ => None,
-        }
-    }
-
-    /// [`Stage::Flow`]: one field per derivative window (dual-focus path: the middle one).
-    #[must_use]
-    pub fn flows(&self) -> Option<&Arc<Vec<FlowField>>> {
-        match self.output(Stage::Flow)? {
-            StageOutput::Flow(f) => Some(f),
-            _ => None,
-        }
-    }
-
-    /// [`Stage::Depth`] (depth path only).
-    #[must_use]
-    pub fn depth(&self) -> Option<&Arc<DepthOutput>> {
-        match self.output(Stage::Depth)? {
-            StageOutput::Depth(d) => d.as_ref(),
-            _ => None,
-        }
-    }
-
-    /// [`Stage::Stripes`] (dual-focus path only).
-    #[must_use]
-    pub fn stripes(&self) -> Option<&Arc<Stripes>> {
-        match self.output(Stage::Stripes)? {
-            StageOutput::Stripes(s) => s.as_ref(),
-            _ => None,
-        }
-    }
-
-    /// [`Stage::Orientation`].
-    #[must_use]
-    pub fn orientation(&self) -> Option<&Arc<OrientationOutput>> {
-        match self.output(Stage::Orientation)? {
-            StageOutput::Orientation(o) => Some(o),
-            _ => None,
-        }
-    }
-
-    /// [`Stage::Sound`].
-    #[must_use]
-    pub fn signal(&self) -> Option<&Arc<GroupSignal>> {
-        match self.output(Stage::Sound)? {
-            StageOutput::Sound(s) => Some(s),
-            _ => None,
-        }
-    }
-
-    /// [`Stage::Edges`] (methods that read the edges only).
-    #[must_use]
-    pub fn edges(&self) -> Option<&Arc<Edges>> {
-        match self.output(Stage::Edges)? {
-            StageOutput::Edges(e) => e.as_ref(),
-            _ => None,
-        }
+    output_accessors! {
+        /// [`Stage::Derivatives`]: one set per derivative window.
+        derivatives: Derivatives => Vec<Derivatives>;
+        /// [`Stage::Flow`]: one field per derivative window (dual-focus path: the middle one).
+        flows: Flow => Vec<FlowField>;
+        /// [`Stage::Depth`] (depth path only).
+        depth: Depth => DepthOutput;
+        /// [`Stage::Stripes`] (dual-focus path only).
+        stripes: Stripes => Stripes;
+        /// [`Stage::Orientation`].
+        orientation: Orientation => OrientationOutput;
+        /// [`Stage::Sound`].
+        signal: Sound => GroupSignal;
+        /// [`Stage::Edges`] (methods that read the edges only).
+        edges: Edges => Edges;
     }
 
     /// A unique identity of the output `stage` holds (0 when none): equal identities mean the
@@ -448,18 +420,23 @@ mod tests {
         );
     }
 
+    /// A cache that has run every stage on `input` with `p`.
+    fn run_all(input: &GroupInput, p: &PipelineParams) -> StageCache {
+        let mut cache = StageCache::default();
+        cache
+            .run_from(Stage::Derivatives, input, p, &mut |_, _| true)
+            .unwrap();
+        cache
+    }
+
     /// Staleness follows the graph: a Hough range makes stripes, orientation and sound stale
     /// (not derivatives, flow or depth); λ makes flow onward stale; an output-rate change the
     /// orientation stage's sample grid; a rerun of flow everything that reads it, transitively;
     /// a new clip slope reference orientation onward.
     #[test]
     fn staleness_follows_the_stage_graph() {
-        let input = dual_focus_group(7);
-        let p = PipelineParams::default();
-        let mut cache = StageCache::default();
-        cache
-            .run_from(Stage::Derivatives, &input, &p, &mut |_, _| true)
-            .unwrap();
+        let (input, p) = (dual_focus_group(7), PipelineParams::default());
+        let mut cache = run_all(&input, &p);
         assert_eq!(cache.first_stale(&p), None);
         let fresh = |c: &StageCache, q: &PipelineParams| Stage::ALL.map(|s| c.is_fresh(s, q));
         let mut hough = p.clone();
@@ -522,12 +499,8 @@ mod tests {
     /// from another group replaces everything.
     #[test]
     fn adopted_outputs_keep_their_identity() {
-        let input = dual_focus_group(7);
-        let p = PipelineParams::default();
-        let mut worker = StageCache::default();
-        worker
-            .run_from(Stage::Derivatives, &input, &p, &mut |_, _| true)
-            .unwrap();
+        let (input, p) = (dual_focus_group(7), PipelineParams::default());
+        let worker = run_all(&input, &p);
         let mut ui = StageCache::default();
         for s in Stage::ALL {
             ui.adopt(s, &worker);

@@ -21,6 +21,8 @@ pub mod sampling;
 pub mod simd;
 pub mod slope_reference;
 pub mod still;
+#[cfg(test)]
+pub(crate) mod test_support;
 pub mod walls;
 
 /// Why a stage could not produce its output.

@@ -15,6 +15,16 @@ const EXACT_GAUSS_MAX_SIGMA_PX: f64 = 3.0;
 /// Namespace of the blur-stack renderer.
 pub struct BlurStack;
 
+/// Copies `row` into `pad` from index `r` on, and fills the rest of `pad` on either side with
+/// the row's end values (clamped borders).
+fn pad_clamped(pad: &mut [f32], row: &[f32], r: usize) {
+    let first = row.first().copied().unwrap_or(0.0);
+    let last = row.last().copied().unwrap_or(0.0);
+    pad[..r].fill(first);
+    pad[r..r + row.len()].copy_from_slice(row);
+    pad[r + row.len()..].fill(last);
+}
+
 /// Convolves every row with a symmetric kernel (clamped borders).
 fn rows_kernel(img: &mut Image, kernel: &[f32]) {
     let w = img.width;
@@ -22,11 +32,7 @@ fn rows_kernel(img: &mut Image, kernel: &[f32]) {
     img.data.par_chunks_mut(w.max(1)).for_each_init(
         || vec![0.0f32; w + 2 * r],
         |pad, row| {
-            let first = row.first().copied().unwrap_or(0.0);
-            let last = row.last().copied().unwrap_or(0.0);
-            pad[..r].fill(first);
-            pad[r..r + w].copy_from_slice(row);
-            pad[r + w..].fill(last);
+            pad_clamped(pad, row, r);
             for (x, v) in row.iter_mut().enumerate() {
                 *v = pad[x..x + kernel.len()]
                     .iter()
@@ -45,11 +51,7 @@ fn rows_box(img: &mut Image, r: usize) {
     img.data.par_chunks_mut(w.max(1)).for_each_init(
         || vec![0.0f32; w + 2 * r + 1],
         |pad, row| {
-            let first = row.first().copied().unwrap_or(0.0);
-            let last = row.last().copied().unwrap_or(0.0);
-            pad[..r].fill(first);
-            pad[r..r + w].copy_from_slice(row);
-            pad[r + w..].fill(last);
+            pad_clamped(pad, row, r);
             let mut acc: f64 = pad[..2 * r + 1].iter().map(|&v| f64::from(v)).sum();
             for x in 0..w {
                 row[x] = (acc * norm) as f32;

@@ -203,28 +203,37 @@ impl Default for SynthConfig {
     }
 }
 
-fn bad(key: &str, problem: impl Into<String>) -> SynthError {
-    SynthError::Config {
-        key: format!("synth.{key}"),
-        problem: problem.into(),
+/// The checks of one config table's values; an error names the key as `table.key`.
+#[derive(Clone, Copy)]
+pub(crate) struct Table(pub(crate) &'static str);
+
+impl Table {
+    pub(crate) fn bad(self, key: &str, problem: impl Into<String>) -> SynthError {
+        SynthError::Config {
+            key: format!("{}.{key}", self.0),
+            problem: problem.into(),
+        }
+    }
+
+    pub(crate) fn positive(self, key: &str, v: f64) -> Result<(), SynthError> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(self.bad(key, format!("must be a positive number, got {v}")))
+        }
+    }
+
+    pub(crate) fn within(self, key: &str, v: f64, lo: f64, hi: f64) -> Result<(), SynthError> {
+        if v.is_finite() && v >= lo && v <= hi {
+            Ok(())
+        } else {
+            Err(self.bad(key, format!("must lie in [{lo}, {hi}], got {v}")))
+        }
     }
 }
 
-fn positive(key: &str, v: f64) -> Result<(), SynthError> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(bad(key, format!("must be a positive number, got {v}")))
-    }
-}
-
-fn within(key: &str, v: f64, lo: f64, hi: f64) -> Result<(), SynthError> {
-    if v.is_finite() && v >= lo && v <= hi {
-        Ok(())
-    } else {
-        Err(bad(key, format!("must lie in [{lo}, {hi}], got {v}")))
-    }
-}
+/// The `[synth]` table's checks.
+const SYNTH: Table = Table("synth");
 
 /// Largest frame side accepted.
 const MAX_SIDE_PX: usize = 16_384;
@@ -340,18 +349,15 @@ impl SynthConfig {
     pub fn validate(&self) -> Result<(), SynthError> {
         for (key, v) in [("width_px", self.width_px), ("height_px", self.height_px)] {
             if !(16..=MAX_SIDE_PX).contains(&v) {
-                return Err(bad(
-                    key,
-                    format!("must lie in [16, {MAX_SIDE_PX}], got {v}"),
-                ));
+                return Err(SYNTH.bad(key, format!("must lie in [16, {MAX_SIDE_PX}], got {v}")));
             }
         }
-        positive("pixel_pitch_um", self.pixel_pitch_um)?;
-        positive("working_distance_mm", self.working_distance_mm)?;
-        positive("rpm", self.rpm)?;
-        positive("radius_mm", self.radius_mm)?;
+        SYNTH.positive("pixel_pitch_um", self.pixel_pitch_um)?;
+        SYNTH.positive("working_distance_mm", self.working_distance_mm)?;
+        SYNTH.positive("rpm", self.rpm)?;
+        SYNTH.positive("radius_mm", self.radius_mm)?;
         if !(MIN_FRAMES_PER_GROUP..=999).contains(&self.frames_per_group) {
-            return Err(bad(
+            return Err(SYNTH.bad(
                 "frames_per_group",
                 format!(
                     "must lie in [{MIN_FRAMES_PER_GROUP}, 999], got {}",
@@ -359,9 +365,9 @@ impl SynthConfig {
                 ),
             ));
         }
-        positive("frame_step_um", self.frame_step_um)?;
+        SYNTH.positive("frame_step_um", self.frame_step_um)?;
         if self.group_overlap_px >= self.width_px {
-            return Err(bad(
+            return Err(SYNTH.bad(
                 "group_overlap_px",
                 format!(
                     "{} must be smaller than width_px = {}",
@@ -369,13 +375,13 @@ impl SynthConfig {
                 ),
             ));
         }
-        positive("groove_top_width_um", self.groove_top_width_um)?;
-        positive("groove_depth_um", self.groove_depth_um)?;
-        within("wall_angle_deg", self.wall_angle_deg, 1.0, 89.0)?;
-        within("bottom_radius_um", self.bottom_radius_um, 0.0, 1e6)?;
+        SYNTH.positive("groove_top_width_um", self.groove_top_width_um)?;
+        SYNTH.positive("groove_depth_um", self.groove_depth_um)?;
+        SYNTH.within("wall_angle_deg", self.wall_angle_deg, 1.0, 89.0)?;
+        SYNTH.within("bottom_radius_um", self.bottom_radius_um, 0.0, 1e6)?;
         let frame_um = self.height_px as f64 * self.pixel_pitch_um;
         if self.groove_top_width_um >= frame_um {
-            return Err(bad(
+            return Err(SYNTH.bad(
                 "groove_top_width_um",
                 format!(
                     "the groove ({} µm) is wider than the frame ({frame_um:.1} µm = height_px × pixel_pitch_um)",
@@ -386,7 +392,7 @@ impl SynthConfig {
         let tan_wall = self.wall_angle_deg.to_radians().tan();
         let half_top = 0.5 * self.groove_top_width_um;
         if self.groove_depth_um / tan_wall > half_top {
-            return Err(bad(
+            return Err(SYNTH.bad(
                 "groove_depth_um",
                 format!(
                     "{} µm walls at {}° do not fit in a {} µm wide groove (they would cross above the bottom)",
@@ -398,7 +404,7 @@ impl SynthConfig {
         let wall_angle = self.wall_angle_deg.to_radians();
         let uc0 = half_top - (self.groove_depth_um - r + r / wall_angle.cos()) / tan_wall;
         if uc0 < 0.0 || r > self.groove_depth_um {
-            return Err(bad(
+            return Err(SYNTH.bad(
                 "bottom_radius_um",
                 format!(
                     "{r} µm is too large for a {} µm deep, {} µm wide groove",
@@ -406,63 +412,63 @@ impl SynthConfig {
                 ),
             ));
         }
-        within(
+        SYNTH.within(
             "groove_offset_um",
             self.groove_offset_um,
             -frame_um,
             frame_um,
         )?;
-        within("peak_velocity_mm_s", self.peak_velocity_mm_s, 0.0, 1e4)?;
-        positive("texture_scale_um", self.texture_scale_um)?;
-        within("texture_contrast", self.texture_contrast, 0.0, 1.0)?;
+        SYNTH.within("peak_velocity_mm_s", self.peak_velocity_mm_s, 0.0, 1e4)?;
+        SYNTH.positive("texture_scale_um", self.texture_scale_um)?;
+        SYNTH.within("texture_contrast", self.texture_contrast, 0.0, 1.0)?;
         for (key, v) in [
             ("land_brightness", self.land_brightness),
             ("wall_brightness", self.wall_brightness),
             ("bottom_brightness", self.bottom_brightness),
             ("flake_brightness", self.flake_brightness),
         ] {
-            within(key, v, 0.0, 1.0)?;
+            SYNTH.within(key, v, 0.0, 1.0)?;
         }
-        within("noise_sigma_8bit", self.noise_sigma_8bit, 0.0, 255.0)?;
+        SYNTH.within("noise_sigma_8bit", self.noise_sigma_8bit, 0.0, 255.0)?;
         if !matches!(self.bit_depth, 8 | 16) {
-            return Err(bad(
+            return Err(SYNTH.bad(
                 "bit_depth",
                 format!("must be 8 or 16, got {}", self.bit_depth),
             ));
         }
         if !(1..=4).contains(&self.supersample) {
-            return Err(bad(
+            return Err(SYNTH.bad(
                 "supersample",
                 format!("must lie in [1, 4], got {}", self.supersample),
             ));
         }
-        within("numerical_aperture", self.numerical_aperture, 0.0, 0.95)?;
+        SYNTH.within("numerical_aperture", self.numerical_aperture, 0.0, 0.95)?;
         if let Some(f) = self.focus_distance_mm {
-            positive("focus_distance_mm", f)?;
+            SYNTH.positive("focus_distance_mm", f)?;
         }
         if let Some(df) = &self.dual_focus {
             self.validate_dual_focus(df)?;
         }
         self.validate_damage()?;
-        within("start_secs", self.start_secs, 0.0, 1e6)?;
+        SYNTH.within("start_secs", self.start_secs, 0.0, 1e6)?;
         if self.max_groups == Some(0) {
-            return Err(bad("max_groups", "must be at least 1 when given"));
+            return Err(SYNTH.bad("max_groups", "must be at least 1 when given"));
         }
         Ok(())
     }
 
     fn validate_dual_focus(&self, df: &DualFocusConfig) -> Result<(), SynthError> {
-        positive("dual_focus.focus_distance_mm", df.focus_distance_mm)?;
-        positive("dual_focus.glass_thickness_mm", df.glass_thickness_mm)?;
-        within("dual_focus.glass_index", df.glass_index, 1.0, 4.0)?;
+        SYNTH.positive("dual_focus.focus_distance_mm", df.focus_distance_mm)?;
+        SYNTH.positive("dual_focus.glass_thickness_mm", df.glass_thickness_mm)?;
+        SYNTH.within("dual_focus.glass_index", df.glass_index, 1.0, 4.0)?;
         if self.numerical_aperture <= 0.0 {
-            return Err(bad(
+            return Err(SYNTH.bad(
                 "numerical_aperture",
                 "dual focus needs depth of field: set a numerical aperture above 0 (e.g. 0.3)",
             ));
         }
         if self.focus_distance_mm.is_some() {
-            return Err(bad(
+            return Err(SYNTH.bad(
                 "focus_distance_mm",
                 "give the focus in dual_focus.focus_distance_mm only",
             ));
@@ -472,7 +478,7 @@ impl SynthConfig {
         let z_glass = z_plain + df.focus_shift_um();
         let depth = self.groove_depth_um;
         if !(z_plain > 0.05 * depth && z_glass < 0.95 * depth) {
-            return Err(bad(
+            return Err(SYNTH.bad(
                 "dual_focus.focus_distance_mm",
                 format!(
                     "the focal planes lie {z_plain:.1} µm and {z_glass:.1} µm below the land; both must \
@@ -485,37 +491,37 @@ impl SynthConfig {
 
     fn validate_damage(&self) -> Result<(), SynthError> {
         let d = &self.damage;
-        within("damage.scratches_per_mm", d.scratches_per_mm, 0.0, 1000.0)?;
-        within("damage.dust_per_mm2", d.dust_per_mm2, 0.0, 1e5)?;
-        within(
+        SYNTH.within("damage.scratches_per_mm", d.scratches_per_mm, 0.0, 1000.0)?;
+        SYNTH.within("damage.dust_per_mm2", d.dust_per_mm2, 0.0, 1e5)?;
+        SYNTH.within(
             "damage.missing_wall_chunks_per_mm",
             d.missing_wall_chunks_per_mm,
             0.0,
             100.0,
         )?;
-        positive("damage.chunk_length_um", d.chunk_length_um)?;
-        within(
+        SYNTH.positive("damage.chunk_length_um", d.chunk_length_um)?;
+        SYNTH.within(
             "damage.chunk_wall_fraction",
             d.chunk_wall_fraction,
             0.01,
             1.0,
         )?;
-        within("damage.chunk_depth_um", d.chunk_depth_um, 0.0, 50.0)?;
+        SYNTH.within("damage.chunk_depth_um", d.chunk_depth_um, 0.0, 50.0)?;
         for (i, c) in d.chunks.iter().enumerate() {
-            within(
+            SYNTH.within(
                 &format!("damage.chunks[{i}].start_um"),
                 c.start_um,
                 -1e12,
                 1e12,
             )?;
-            positive(&format!("damage.chunks[{i}].length_um"), c.length_um)?;
-            within(
+            SYNTH.positive(&format!("damage.chunks[{i}].length_um"), c.length_um)?;
+            SYNTH.within(
                 &format!("damage.chunks[{i}].wall_fraction"),
                 c.wall_fraction,
                 0.01,
                 1.0,
             )?;
-            within(
+            SYNTH.within(
                 &format!("damage.chunks[{i}].depth_um"),
                 c.depth_um,
                 0.0,
@@ -556,37 +562,27 @@ mod tests {
 
     #[test]
     fn absurd_geometry_names_the_key() {
-        let c = SynthConfig {
-            groove_depth_um: -3.0,
-            ..SynthConfig::default()
-        };
-        assert_eq!(key_of(c.validate().unwrap_err()), "synth.groove_depth_um");
+        /// One bad value set on the defaults.
+        type Edit = fn(&mut SynthConfig);
+        // (the edit, the key its error names)
+        let cases: [(Edit, &str); 5] = [
+            (|c| c.groove_depth_um = -3.0, "synth.groove_depth_um"),
+            (|c| c.wall_angle_deg = 90.0, "synth.wall_angle_deg"),
+            (|c| c.bit_depth = 12, "synth.bit_depth"),
+            (|c| c.pixel_pitch_um = f64::NAN, "synth.pixel_pitch_um"),
+            (|c| c.bottom_radius_um = 60.0, "synth.bottom_radius_um"),
+        ];
+        for (edit, key) in cases {
+            let mut c = SynthConfig::default();
+            edit(&mut c);
+            assert_eq!(key_of(c.validate().unwrap_err()), key);
+        }
         let c = SynthConfig {
             groove_top_width_um: 500.0,
             ..SynthConfig::default()
         };
         let e = c.validate().unwrap_err();
         assert!(e.to_string().contains("wider than the frame"), "{e}");
-        let c = SynthConfig {
-            wall_angle_deg: 90.0,
-            ..SynthConfig::default()
-        };
-        assert_eq!(key_of(c.validate().unwrap_err()), "synth.wall_angle_deg");
-        let c = SynthConfig {
-            bit_depth: 12,
-            ..SynthConfig::default()
-        };
-        assert_eq!(key_of(c.validate().unwrap_err()), "synth.bit_depth");
-        let c = SynthConfig {
-            pixel_pitch_um: f64::NAN,
-            ..SynthConfig::default()
-        };
-        assert_eq!(key_of(c.validate().unwrap_err()), "synth.pixel_pitch_um");
-        let c = SynthConfig {
-            bottom_radius_um: 60.0,
-            ..SynthConfig::default()
-        };
-        assert_eq!(key_of(c.validate().unwrap_err()), "synth.bottom_radius_um");
         let mut c = SynthConfig::dual_focus_demo();
         c.working_distance_mm = 4.0;
         assert_eq!(

@@ -125,6 +125,14 @@ pub struct Optics {
     pub glass_index: f64,
 }
 
+impl Optics {
+    /// True when image row `row` sees the groove through the glass.
+    #[must_use]
+    pub fn sees_glass(&self, row: usize) -> bool {
+        self.glass_edge_row.is_some_and(|edge| (row as f64) < edge)
+    }
+}
+
 /// A groove ready to render: the sound integrated, the damage laid out, the optics placed.
 #[derive(Clone, Debug)]
 pub struct Groove {

@@ -36,6 +36,8 @@ pub mod render;
 pub mod scene;
 pub mod sounds;
 pub mod still;
+#[cfg(test)]
+pub(crate) mod test_support;
 pub mod track;
 
 #[cfg(test)]

@@ -106,10 +106,7 @@ impl Groove {
             .zip(z_map.data.par_chunks_mut(w))
             .enumerate()
             .for_each(|(row, (out, zout))| {
-                let glass = self
-                    .optics
-                    .glass_edge_row
-                    .is_some_and(|edge| (row as f64) < edge);
+                let glass = self.optics.sees_glass(row);
                 let mut guesses = [wd; 16];
                 for (x, (o, zo)) in out.iter_mut().zip(zout.iter_mut()).enumerate() {
                     let mut acc = 0.0f32;
@@ -151,10 +148,7 @@ impl Groove {
                 .zip(z_map.data.par_chunks(w))
                 .enumerate()
                 .for_each(|(row, (srow, zrow))| {
-                    let glass = self
-                        .optics
-                        .glass_edge_row
-                        .is_some_and(|edge| (row as f64) < edge);
+                    let glass = self.optics.sees_glass(row);
                     let focus = if glass {
                         self.optics.focus_glass_um
                     } else {
@@ -213,16 +207,11 @@ mod tests {
     use super::*;
     use crate::synth::config::SynthConfig;
     use crate::synth::sounds::tone;
+    use crate::synth::test_support::narrow_dual_focus_groove;
 
     #[test]
     fn glass_shift_matches_snell_for_a_known_angle() {
-        let cfg = SynthConfig {
-            width_px: 64,
-            height_px: 700,
-            group_overlap_px: 10,
-            ..SynthConfig::dual_focus_demo()
-        };
-        let g = Groove::new(&tone(1000.0, 0.01, 48_000), &cfg).unwrap();
+        let g = narrow_dual_focus_groove();
         // 30° incidence through 110 µm of n = 1.515 glass.
         let tan_i = 30f64.to_radians().tan();
         let k = g.glass_shift(tan_i, 0.0);

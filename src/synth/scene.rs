@@ -14,6 +14,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::config::Table;
 use super::noise::{Rng, hash_seq, marble};
 use super::{SynthError, prepare_out_dir};
 use crate::image::Image;
@@ -142,12 +143,8 @@ impl SceneMeta {
     }
 }
 
-fn bad(key: &str, problem: String) -> SynthError {
-    SynthError::Config {
-        key: format!("scene.{key}"),
-        problem,
-    }
-}
+/// The `[scene]` table's checks.
+const SCENE: Table = Table("scene");
 
 impl SceneConfig {
     /// Camera geometry for the depth stage: the background plane plays the land's part, so the
@@ -169,11 +166,11 @@ impl SceneConfig {
     pub fn validate(&self) -> Result<(), SynthError> {
         for (key, v) in [("width_px", self.width_px), ("height_px", self.height_px)] {
             if !(8..=8192).contains(&v) {
-                return Err(bad(key, format!("must lie in [8, 8192], got {v}")));
+                return Err(SCENE.bad(key, format!("must lie in [8, 8192], got {v}")));
             }
         }
         if !(2..=1000).contains(&self.frames) {
-            return Err(bad(
+            return Err(SCENE.bad(
                 "frames",
                 format!("must lie in [2, 1000], got {}", self.frames),
             ));
@@ -186,28 +183,16 @@ impl SceneConfig {
             ("object_size_um", self.object_size_um),
             ("texture_scale_um", self.texture_scale_um),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(bad(key, format!("must be a positive number, got {v}")));
-            }
+            SCENE.positive(key, v)?;
         }
-        if !(0.0..=1.0).contains(&self.texture_contrast) {
-            return Err(bad(
-                "texture_contrast",
-                format!("must lie in [0, 1], got {}", self.texture_contrast),
-            ));
-        }
-        if !(0.0..=255.0).contains(&self.noise_sigma_8bit) {
-            return Err(bad(
-                "noise_sigma_8bit",
-                format!("must lie in [0, 255], got {}", self.noise_sigma_8bit),
-            ));
-        }
+        SCENE.within("texture_contrast", self.texture_contrast, 0.0, 1.0)?;
+        SCENE.within("noise_sigma_8bit", self.noise_sigma_8bit, 0.0, 255.0)?;
         // The object's bounding sphere must lie between the camera and the plane.
         let reach = self.object_size_um * 0.9;
         if self.object_distance_um + reach >= self.plane_distance_um
             || self.object_distance_um - reach <= 0.0
         {
-            return Err(bad(
+            return Err(SCENE.bad(
                 "object_distance_um",
                 format!(
                     "the object (centre {} µm, reach {reach:.1} µm) must lie between the camera and the plane at {} µm",

@@ -416,14 +416,18 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
     assert!(!dir.path().join("x").exists());
     let not_wav = dir.path().join("song.wav");
     std::fs::write(&not_wav, b"RIFF but not really").unwrap();
-    let e = render_scan_wav(
-        &not_wav,
-        &SynthConfig::quick_test(),
-        &dir.path().join("y"),
-        &no_progress,
-        &cancel,
-    )
-    .unwrap_err();
+    // The quick-test scan of the sound in `wav`, to `out`: refused.
+    let refused_wav = |wav: &Path, out: &str| {
+        render_scan_wav(
+            wav,
+            &SynthConfig::quick_test(),
+            &dir.path().join(out),
+            &no_progress,
+            &cancel,
+        )
+        .unwrap_err()
+    };
+    let e = refused_wav(&not_wav, "y");
     assert!(e.to_string().contains("song.wav"), "{e}");
     let short = dir.path().join("short.wav");
     crate::io::wav::write_wav(
@@ -433,14 +437,7 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
         false,
     )
     .unwrap();
-    let e = render_scan_wav(
-        &short,
-        &SynthConfig::quick_test(),
-        &dir.path().join("z"),
-        &no_progress,
-        &cancel,
-    )
-    .unwrap_err();
+    let e = refused_wav(&short, "z");
     let msg = e.to_string();
     assert!(
         msg.contains("too short") && msg.contains("short.wav"),

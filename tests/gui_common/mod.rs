@@ -158,6 +158,19 @@ pub fn options(tmp: &Path, scan: Option<PathBuf>, audio: DeviceChoice) -> Workbe
     }
 }
 
+/// A harness on `scan` (sound off) that has settled, and the temporary folder its settings
+/// live in (keep it for the test's length).
+pub fn settled_on(scan: &Path) -> (tempfile::TempDir, H) {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut h = harness(options(
+        tmp.path(),
+        Some(scan.to_path_buf()),
+        DeviceChoice::Off,
+    ));
+    settle(&mut h);
+    (tmp, h)
+}
+
 /// The workbench and the eframe frame it draws into (the harness owns both).
 pub struct App {
     pub wb: Option<Workbench>,

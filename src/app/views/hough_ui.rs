@@ -61,38 +61,33 @@ pub fn edge_near(
     })
 }
 
+/// A label and a drag value labelled by it.
+fn labelled_drag(
+    ui: &mut Ui,
+    text: &str,
+    value: &mut f32,
+    speed: f64,
+    range: std::ops::RangeInclusive<f64>,
+) {
+    let l = ui.label(text);
+    ui.add(egui::DragValue::new(value).speed(speed).range(range))
+        .labelled_by(l.id);
+}
+
 /// Number controls of the windows and ranges; edits `draft`.
 pub fn hough_controls(ui: &mut Ui, draft: &mut HoughParams) {
     ui.horizontal(|ui| {
-        let l = ui.label("window ±θ°");
-        ui.add(
-            egui::DragValue::new(&mut draft.window_theta_deg)
-                .speed(0.1)
-                .range(0.1..=90.0),
-        )
-        .labelled_by(l.id);
-        let l = ui.label("±ρ px");
-        ui.add(
-            egui::DragValue::new(&mut draft.window_rho_px)
-                .speed(0.5)
-                .range(0.5..=2000.0),
-        )
-        .labelled_by(l.id);
+        labelled_drag(
+            ui,
+            "window ±θ°",
+            &mut draft.window_theta_deg,
+            0.1,
+            0.1..=90.0,
+        );
+        labelled_drag(ui, "±ρ px", &mut draft.window_rho_px, 0.5, 0.5..=2000.0);
         ui.separator();
-        let l = ui.label("θ from°");
-        ui.add(
-            egui::DragValue::new(&mut draft.theta_min_deg)
-                .speed(0.5)
-                .range(-90.0..=90.0),
-        )
-        .labelled_by(l.id);
-        let l = ui.label("to°");
-        ui.add(
-            egui::DragValue::new(&mut draft.theta_max_deg)
-                .speed(0.5)
-                .range(-90.0..=90.0),
-        )
-        .labelled_by(l.id);
+        labelled_drag(ui, "θ from°", &mut draft.theta_min_deg, 0.5, -90.0..=90.0);
+        labelled_drag(ui, "to°", &mut draft.theta_max_deg, 0.5, -90.0..=90.0);
     });
 }
 

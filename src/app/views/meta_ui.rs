@@ -51,11 +51,21 @@ pub enum MetaAction {
     Revert,
 }
 
-fn row(ui: &mut Ui, text: &str, value: &mut f64, speed: f64) {
+/// A grid row: a label and a drag value (`speed` per point dragged) labelled by it.
+pub(crate) fn number_row(ui: &mut Ui, text: &str, value: &mut f64, speed: f64) {
     let l = ui.label(text);
     ui.add(egui::DragValue::new(value).speed(speed).max_decimals(6))
         .labelled_by(l.id);
     ui.end_row();
+}
+
+/// A heading row, then one [`number_row`] per `(label, value, speed)`.
+fn section_rows<const N: usize>(ui: &mut Ui, heading: &str, rows: [(&str, &mut f64, f64); N]) {
+    ui.strong(heading);
+    ui.end_row();
+    for (text, value, speed) in rows {
+        number_row(ui, text, value, speed);
+    }
 }
 
 /// The metadata form; `original` is what `scan.toml` holds now.
@@ -66,10 +76,15 @@ pub fn meta_ui(ui: &mut Ui, form: &mut MetaForm, original: &ScanMeta) -> Option<
             .num_columns(2)
             .striped(true)
             .show(ui, |ui| {
-                ui.strong("record");
-                ui.end_row();
-                row(ui, "rpm", &mut form.draft.record.rpm, 0.1);
-                row(ui, "radius (mm)", &mut form.draft.record.radius_mm, 0.1);
+                let record = &mut form.draft.record;
+                section_rows(
+                    ui,
+                    "record",
+                    [
+                        ("rpm", &mut record.rpm, 0.1),
+                        ("radius (mm)", &mut record.radius_mm, 0.1),
+                    ],
+                );
                 let l = ui.label("cut");
                 egui::ComboBox::from_id_salt("meta_cut")
                     .selected_text(format!("{:?}", form.draft.record.cut))
@@ -86,33 +101,26 @@ pub fn meta_ui(ui: &mut Ui, form: &mut MetaForm, original: &ScanMeta) -> Option<
                     ui.label(format!("{} values (kept)", r.len()));
                     ui.end_row();
                 }
-                ui.strong("camera");
-                ui.end_row();
-                row(
+                let (camera, motion) = (&mut form.draft.camera, &mut form.draft.motion);
+                section_rows(
                     ui,
-                    "pixel pitch (µm)",
-                    &mut form.draft.camera.pixel_pitch_um,
-                    0.001,
+                    "camera",
+                    [
+                        ("pixel pitch (µm)", &mut camera.pixel_pitch_um, 0.001),
+                        (
+                            "working distance (mm)",
+                            &mut camera.working_distance_mm,
+                            0.01,
+                        ),
+                    ],
                 );
-                row(
+                section_rows(
                     ui,
-                    "working distance (mm)",
-                    &mut form.draft.camera.working_distance_mm,
-                    0.01,
-                );
-                ui.strong("motion");
-                ui.end_row();
-                row(
-                    ui,
-                    "frame step (µm)",
-                    &mut form.draft.motion.frame_step_um,
-                    0.001,
-                );
-                row(
-                    ui,
-                    "group step (µm)",
-                    &mut form.draft.motion.group_step_um,
-                    0.1,
+                    "motion",
+                    [
+                        ("frame step (µm)", &mut motion.frame_step_um, 0.001),
+                        ("group step (µm)", &mut motion.group_step_um, 0.1),
+                    ],
                 );
                 ui.strong("dual focus");
                 ui.end_row();
@@ -121,9 +129,9 @@ pub fn meta_ui(ui: &mut Ui, form: &mut MetaForm, original: &ScanMeta) -> Option<
                 ui.end_row();
                 if form.dual {
                     let d = &mut form.dual_draft;
-                    row(ui, "focus distance (mm)", &mut d.focus_distance_mm, 0.001);
-                    row(ui, "glass thickness (mm)", &mut d.glass_thickness_mm, 0.001);
-                    row(ui, "glass index", &mut d.glass_index, 0.001);
+                    number_row(ui, "focus distance (mm)", &mut d.focus_distance_mm, 0.001);
+                    number_row(ui, "glass thickness (mm)", &mut d.glass_thickness_mm, 0.001);
+                    number_row(ui, "glass index", &mut d.glass_index, 0.001);
                     let l = ui.label("glass side");
                     ui.horizontal(|ui| {
                         ui.selectable_value(&mut d.glass_side, GlassSide::Top, "top");
@@ -132,7 +140,7 @@ pub fn meta_ui(ui: &mut Ui, form: &mut MetaForm, original: &ScanMeta) -> Option<
                     .response
                     .labelled_by(l.id);
                     ui.end_row();
-                    row(ui, "glass edge row", &mut d.glass_edge_row, 1.0);
+                    number_row(ui, "glass edge row", &mut d.glass_edge_row, 1.0);
                 }
             });
         let meta = form.meta();

@@ -30,6 +30,11 @@ fn thumb<'a>(id: &str, h: f32, w: f32) -> Plot<'a> {
         .show_y(false)
 }
 
+/// A [`thumb`] of an image: square pixels, rows downward.
+fn image_thumb<'a>(id: &str, h: f32, w: f32) -> Plot<'a> {
+    thumb(id, h, w).data_aspect(1.0).invert_y(true)
+}
+
 fn title(
     ui: &mut Ui,
     text: &str,
@@ -99,33 +104,27 @@ pub fn overview_ui(
                     &mut open,
                     View::Frame,
                 );
-                thumb("ov_frame", cell_h, cell_w)
-                    .data_aspect(1.0)
-                    .invert_y(true)
-                    .show(ui, |p| {
-                        if let Some(t) = &frame_tex {
-                            p.image(image_item("frame", t, false));
-                        }
-                        if let Some((_, f)) = data.flow_for_frame(data.frame) {
-                            let opts = ArrowOptions {
-                                spacing_px: 48,
-                                ..ArrowOptions::default()
-                            };
-                            flow_arrows(p, f, &opts, data.land_flow_px());
-                        }
-                    });
+                image_thumb("ov_frame", cell_h, cell_w).show(ui, |p| {
+                    if let Some(t) = &frame_tex {
+                        p.image(image_item("frame", t, false));
+                    }
+                    if let Some((_, f)) = data.flow_for_frame(data.frame) {
+                        let opts = ArrowOptions {
+                            spacing_px: 48,
+                            ..ArrowOptions::default()
+                        };
+                        flow_arrows(p, f, &opts, data.land_flow_px());
+                    }
+                });
             });
             ui.vertical(|ui| {
                 title(ui, "flow", Some(Stage::Flow), data, &mut open, View::Flow);
                 let dim = data.status(Stage::Flow).dim();
-                thumb("ov_flow", cell_h, cell_w)
-                    .data_aspect(1.0)
-                    .invert_y(true)
-                    .show(ui, |p| {
-                        if let Some(t) = &flow_tex {
-                            p.image(image_item("flow", t, dim));
-                        }
-                    });
+                image_thumb("ov_flow", cell_h, cell_w).show(ui, |p| {
+                    if let Some(t) = &flow_tex {
+                        p.image(image_item("flow", t, dim));
+                    }
+                });
             });
             ui.vertical(|ui| {
                 let (name, stage, view) = if dual {
@@ -135,17 +134,14 @@ pub fn overview_ui(
                 };
                 title(ui, name, Some(stage), data, &mut open, view);
                 let dim = data.status(stage).dim();
-                thumb("ov_third", cell_h, cell_w)
-                    .data_aspect(1.0)
-                    .invert_y(true)
-                    .show(ui, |p| {
-                        if let Some(t) = &third {
-                            p.image(image_item(name, t, dim));
-                        }
-                        if let (false, Some(d)) = (dual, data.cache.depth()) {
-                            wall_lines(p, &d.walls, Color32::WHITE);
-                        }
-                    });
+                image_thumb("ov_third", cell_h, cell_w).show(ui, |p| {
+                    if let Some(t) = &third {
+                        p.image(image_item(name, t, dim));
+                    }
+                    if let (false, Some(d)) = (dual, data.cache.depth()) {
+                        wall_lines(p, &d.walls, Color32::WHITE);
+                    }
+                });
             });
             ui.end_row();
             ui.vertical(|ui| {

@@ -113,6 +113,14 @@ fn section(
         });
 }
 
+/// Rows of one params table, `kind "label" field (further arguments);` each: a call of `kind`
+/// (`num`, `log_num`, `check` or `choice`) on the field, its TOML key `table.field`.
+macro_rules! rows {
+    ($ui:expr, $table:literal, $s:expr; $($kind:ident $text:literal $field:ident ($($arg:expr),*);)*) => {
+        $($kind($ui, $text, concat!($table, ".", stringify!($field)), &mut $s.$field $(, $arg)*);)*
+    };
+}
+
 /// The parameter panel. Edits `p` in place; the caller compares it with the applied params.
 pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Stage::ALL.len()]) {
     let st = |s: Stage| Some(&status[s.index()]);
@@ -130,405 +138,104 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Sta
         );
     });
     section(ui, "derivatives", st(Stage::Derivatives), false, |ui| {
-        let d = &mut p.derivatives;
-        choice(
-            ui,
-            "filters",
-            "derivatives.mode",
-            &mut d.mode,
-            &[
+        rows!(ui, "derivatives", p.derivatives;
+            choice "filters" mode (&[
                 (DerivativeMode::Simoncelli, "Simoncelli p5/d5"),
                 (DerivativeMode::TwoFrame, "two-frame differences"),
-            ],
-        );
-        check(
-            ui,
-            "pre-warp by land flow",
-            "derivatives.prewarp",
-            &mut d.prewarp,
+            ]);
+            check "pre-warp by land flow" prewarp ();
         );
     });
     section(ui, "flow", st(Stage::Flow), true, |ui| {
-        let f = &mut p.flow;
-        choice(
-            ui,
-            "method",
-            "flow.method",
-            &mut f.method,
-            &[
+        rows!(ui, "flow", p.flow;
+            choice "method" method (&[
                 (FlowMethod::GrooveHornSchunck, "Horn–Schunck + groove"),
                 (FlowMethod::HornSchunck, "Horn–Schunck"),
                 (FlowMethod::LucasKanade, "Lucas–Kanade"),
-            ],
-        );
-        choice(
-            ui,
-            "solver",
-            "flow.solver",
-            &mut f.solver,
-            &[
+            ]);
+            choice "solver" solver (&[
                 (Solver::GaussSeidel, "Gauss–Seidel"),
                 (Solver::Jacobi, "Jacobi"),
-            ],
-        );
-        log_num(
-            ui,
-            "λ (smoothness)",
-            "flow.lambda",
-            &mut f.lambda,
-            1e-5..=1e3,
-        );
-        num(
-            ui,
-            "iterations",
-            "flow.max_iterations",
-            &mut f.max_iterations,
-            1.0,
-            1..=10_000,
-        );
-        log_num(
-            ui,
-            "τ (px)",
-            "flow.tolerance_px",
-            &mut f.tolerance_px,
-            1e-9..=1.0,
-        );
-        log_num(
-            ui,
-            "gradient threshold",
-            "flow.gradient_threshold",
-            &mut f.gradient_threshold,
-            1e-7..=10.0,
-        );
-        num(
-            ui,
-            "LK window (px)",
-            "flow.lk_window_px",
-            &mut f.lk_window_px,
-            2.0,
-            3..=63,
+            ]);
+            log_num "λ (smoothness)" lambda (1e-5..=1e3);
+            num "iterations" max_iterations (1.0, 1..=10_000);
+            log_num "τ (px)" tolerance_px (1e-9..=1.0);
+            log_num "gradient threshold" gradient_threshold (1e-7..=10.0);
+            num "LK window (px)" lk_window_px (2.0, 3..=63);
         );
     });
     section(ui, "depth", st(Stage::Depth), false, |ui| {
-        let d = &mut p.depth;
-        check(ui, "Kalman filter", "depth.kalman", &mut d.kalman);
-        log_num(
-            ui,
-            "process noise",
-            "depth.process_noise",
-            &mut d.process_noise,
-            1e-12..=1.0,
+        rows!(ui, "depth", p.depth;
+            check "Kalman filter" kalman ();
+            log_num "process noise" process_noise (1e-12..=1.0);
+            log_num "measurement noise (px²)" measurement_noise_px2 (1e-10..=10.0);
+            num "median (px)" median_px (2.0, 1..=31);
+            log_num "min confidence" min_confidence (1e-8..=10.0);
+            num "neighbourhood (px)" neighbourhood_px (0.5, 1..=63);
         );
-        log_num(
-            ui,
-            "measurement noise (px²)",
-            "depth.measurement_noise_px2",
-            &mut d.measurement_noise_px2,
-            1e-10..=10.0,
-        );
-        num(
-            ui,
-            "median (px)",
-            "depth.median_px",
-            &mut d.median_px,
-            2.0,
-            1..=31,
-        );
-        log_num(
-            ui,
-            "min confidence",
-            "depth.min_confidence",
-            &mut d.min_confidence,
-            1e-8..=10.0,
-        );
-        num(
-            ui,
-            "neighbourhood (px)",
-            "depth.neighbourhood_px",
-            &mut d.neighbourhood_px,
-            0.5,
-            1..=63,
-        );
-        let w = &mut p.walls;
-        choice(
-            ui,
-            "wall finder",
-            "walls.method",
-            &mut w.method,
-            &[
+        rows!(ui, "walls", p.walls;
+            choice "wall finder" method (&[
                 (WallMethod::DepthLevels, "depth levels"),
                 (WallMethod::SlopeRuns, "slope runs"),
-            ],
-        );
-        num(
-            ui,
-            "wall min slope",
-            "walls.min_slope",
-            &mut w.min_slope,
-            0.01,
-            0.0..=10.0,
-        );
-        num(
-            ui,
-            "wall trim (px)",
-            "walls.trim_px",
-            &mut w.trim_px,
-            0.5,
-            0..=100,
-        );
-        num(
-            ui,
-            "wall smoothing (px)",
-            "walls.smooth_px",
-            &mut w.smooth_px,
-            0.5,
-            0..=100,
-        );
-        num(
-            ui,
-            "wall column window (px)",
-            "walls.column_window_px",
-            &mut w.column_window_px,
-            1.0,
-            1..=10_001,
+            ]);
+            num "wall min slope" min_slope (0.01, 0.0..=10.0);
+            num "wall trim (px)" trim_px (0.5, 0..=100);
+            num "wall smoothing (px)" smooth_px (0.5, 0..=100);
+            num "wall column window (px)" column_window_px (1.0, 1..=10_001);
         );
     });
     section(ui, "hough / stripes", st(Stage::Stripes), false, |ui| {
-        let h = &mut p.hough;
-        log_num(
-            ui,
-            "in-focus gradient",
-            "hough.gradient_threshold",
-            &mut h.gradient_threshold,
-            1e-5..=10.0,
-        );
-        num(
-            ui,
-            "θ min (°)",
-            "hough.theta_min_deg",
-            &mut h.theta_min_deg,
-            0.5,
-            -90.0..=90.0,
-        );
-        num(
-            ui,
-            "θ max (°)",
-            "hough.theta_max_deg",
-            &mut h.theta_max_deg,
-            0.5,
-            -90.0..=90.0,
-        );
-        num(
-            ui,
-            "θ step (°)",
-            "hough.theta_step_deg",
-            &mut h.theta_step_deg,
-            0.05,
-            0.01..=10.0,
-        );
-        num(
-            ui,
-            "ρ step (px)",
-            "hough.rho_step_px",
-            &mut h.rho_step_px,
-            0.05,
-            0.05..=20.0,
-        );
-        num(
-            ui,
-            "peaks",
-            "hough.peak_count",
-            &mut h.peak_count,
-            0.1,
-            1..=8,
-        );
-        num(
-            ui,
-            "window ±θ (°)",
-            "hough.window_theta_deg",
-            &mut h.window_theta_deg,
-            0.1,
-            0.1..=90.0,
-        );
-        num(
-            ui,
-            "window ±ρ (px)",
-            "hough.window_rho_px",
-            &mut h.window_rho_px,
-            0.5,
-            0.5..=2000.0,
-        );
-        num(
-            ui,
-            "line smoothing (px)",
-            "hough.line_smoothing_px",
-            &mut h.line_smoothing_px,
-            0.5,
-            0..=200,
-        );
-        num(
-            ui,
-            "min votes per column",
-            "hough.min_votes_per_column",
-            &mut h.min_votes_per_column,
-            0.01,
-            0.0..=100.0,
-        );
-        num(
-            ui,
-            "max voting pixels (0 = all)",
-            "hough.max_vote_points",
-            &mut h.max_vote_points,
-            1000.0,
-            0..=100_000_000,
+        rows!(ui, "hough", p.hough;
+            log_num "in-focus gradient" gradient_threshold (1e-5..=10.0);
+            num "θ min (°)" theta_min_deg (0.5, -90.0..=90.0);
+            num "θ max (°)" theta_max_deg (0.5, -90.0..=90.0);
+            num "θ step (°)" theta_step_deg (0.05, 0.01..=10.0);
+            num "ρ step (px)" rho_step_px (0.05, 0.05..=20.0);
+            num "peaks" peak_count (0.1, 1..=8);
+            num "window ±θ (°)" window_theta_deg (0.1, 0.1..=90.0);
+            num "window ±ρ (px)" window_rho_px (0.5, 0.5..=2000.0);
+            num "line smoothing (px)" line_smoothing_px (0.5, 0..=200);
+            num "min votes per column" min_votes_per_column (0.01, 0.0..=100.0);
+            num "max voting pixels (0 = all)" max_vote_points (1000.0, 0..=100_000_000);
         );
     });
     section(ui, "orientation", st(Stage::Orientation), false, |ui| {
-        let o = &mut p.orientation;
-        check(
-            ui,
-            "robust (Lorentzian)",
-            "orientation.robust",
-            &mut o.robust,
-        );
-        num(
-            ui,
-            "neighbourhood (px)",
-            "orientation.neighbourhood_px",
-            &mut o.neighbourhood_px,
-            1.0,
-            3..=1000,
-        );
-        log_num(
-            ui,
-            "σ start (µm)",
-            "orientation.sigma_start_um",
-            &mut o.sigma_start_um,
-            1e-4..=1e3,
-        );
-        num(
-            ui,
-            "σ decay",
-            "orientation.sigma_decay",
-            &mut o.sigma_decay,
-            0.01,
-            0.01..=1.0,
-        );
-        log_num(
-            ui,
-            "σ min (µm)",
-            "orientation.sigma_min_um",
-            &mut o.sigma_min_um,
-            1e-5..=1e2,
-        );
-        log_num(
-            ui,
-            "τ1 residual (µm)",
-            "orientation.residual_tolerance_um",
-            &mut o.residual_tolerance_um,
-            1e-8..=10.0,
-        );
-        num(
-            ui,
-            "τ2 divergence factor",
-            "orientation.divergence_factor",
-            &mut o.divergence_factor,
-            0.05,
-            1.0..=100.0,
-        );
-        num(
-            ui,
-            "iterations",
-            "orientation.max_iterations",
-            &mut o.max_iterations,
-            1.0,
-            1..=1000,
-        );
-        num(
-            ui,
-            "outlier σs",
-            "orientation.outlier_sigmas",
-            &mut o.outlier_sigmas,
-            0.05,
-            0.1..=20.0,
-        );
-        num(
-            ui,
-            "max wall-slope change",
-            "orientation.max_wall_slope_change",
-            &mut o.max_wall_slope_change,
-            0.01,
-            0.0..=10.0,
+        rows!(ui, "orientation", p.orientation;
+            check "robust (Lorentzian)" robust ();
+            num "neighbourhood (px)" neighbourhood_px (1.0, 3..=1000);
+            log_num "σ start (µm)" sigma_start_um (1e-4..=1e3);
+            num "σ decay" sigma_decay (0.01, 0.01..=1.0);
+            log_num "σ min (µm)" sigma_min_um (1e-5..=1e2);
+            log_num "τ1 residual (µm)" residual_tolerance_um (1e-8..=10.0);
+            num "τ2 divergence factor" divergence_factor (0.05, 1.0..=100.0);
+            num "iterations" max_iterations (1.0, 1..=1000);
+            num "outlier σs" outlier_sigmas (0.05, 0.1..=20.0);
+            num "max wall-slope change" max_wall_slope_change (0.01, 0.0..=10.0);
         );
     });
     section(ui, "sound", st(Stage::Sound), false, |ui| {
-        let s = &mut p.sound;
-        choice(
-            ui,
-            "output rate",
-            "sound.output_rate_hz",
-            &mut s.output_rate_hz,
-            &[
+        rows!(ui, "sound", p.sound;
+            choice "output rate" output_rate_hz (&[
                 (44_100, "44 100 Hz"),
                 (48_000, "48 000 Hz"),
                 (96_000, "96 000 Hz"),
-            ],
-        );
-        num(
-            ui,
-            "native spacing (µm, 0 = auto)",
-            "sound.native_spacing_um",
-            &mut s.native_spacing_um,
-            0.001,
-            0.0..=100.0,
-        );
-        num(
-            ui,
-            "normalise to peak (0 = off)",
-            "sound.normalize_peak",
-            &mut s.normalize_peak,
-            0.01,
-            0.0..=1.0,
-        );
-        num(
-            ui,
-            "full scale (mm/s)",
-            "sound.full_scale_mm_s",
-            &mut s.full_scale_mm_s,
-            1.0,
-            0.001..=10_000.0,
+            ]);
+            num "native spacing (µm, 0 = auto)" native_spacing_um (0.001, 0.0..=100.0);
+            num "normalise to peak (0 = off)" normalize_peak (0.01, 0.0..=1.0);
+            num "full scale (mm/s)" full_scale_mm_s (1.0, 0.001..=10_000.0);
         );
     });
     section(ui, "filter / EQ (clip)", None, false, |ui| {
-        let d = &mut p.dsp;
-        check(ui, "DC block", "dsp.dc_block", &mut d.dc_block);
-        num(
-            ui,
-            "DC block corner (Hz)",
-            "dsp.dc_block_hz",
-            &mut d.dc_block_hz,
-            0.5,
-            0.1..=1000.0,
-        );
-        check(ui, "low-pass", "dsp.lowpass", &mut d.lowpass);
-        num(
-            ui,
-            "cutoff (Hz)",
-            "dsp.lowpass_hz",
-            &mut d.lowpass_hz,
-            10.0,
-            10.0..=40_000.0,
-        );
-        choice(
-            ui,
-            "EQ curve",
-            "dsp.eq",
-            &mut d.eq,
-            &[
+        rows!(ui, "dsp", p.dsp;
+            check "DC block" dc_block ();
+            num "DC block corner (Hz)" dc_block_hz (0.5, 0.1..=1000.0);
+            check "low-pass" lowpass ();
+            num "cutoff (Hz)" lowpass_hz (10.0, 10.0..=40_000.0);
+            choice "EQ curve" eq (&[
                 (EqCurve::Flat, "flat (velocity)"),
                 (EqCurve::Riaa, "RIAA"),
                 (EqCurve::Turnover500, "78: 500 Hz turnover"),
-            ],
+            ]);
         );
     });
 }

@@ -94,13 +94,8 @@ pub fn stripes_ui(
             );
         }
     });
-    let w = stripes.in_focus.width;
     if let Some((x, y)) = hovered_pixel(&resp, base.size()) {
-        let l = stripes
-            .labels
-            .get(y * w + x)
-            .copied()
-            .unwrap_or(label::NONE);
+        let l = stripes.label_at(x, y);
         let what = match l {
             l if l >= 0 && l as usize == stripes.dropped => format!("stripe {l} (dropped)"),
             l if l >= 0 => format!("stripe {l}"),

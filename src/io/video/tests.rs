@@ -29,14 +29,30 @@ fn no_progress(_: usize, _: usize) {}
 
 /// Imports `clip` into `out` with the default metadata, no progress and no cancel.
 fn import(clip: &Path, out: &Path, layout: &GroupLayout) -> Result<ImportSummary, VideoError> {
+    import_with(clip, out, layout, &ClipMeta::default(), false)
+}
+
+/// Imports `clip` into `out` with `meta`, no progress, cancelled from the start when `cancel`.
+fn import_with(
+    clip: &Path,
+    out: &Path,
+    layout: &GroupLayout,
+    meta: &ClipMeta,
+    cancel: bool,
+) -> Result<ImportSummary, VideoError> {
     import_video(
         clip,
         out,
         layout,
-        &ClipMeta::default(),
+        meta,
         &no_progress,
-        &AtomicBool::new(false),
+        &AtomicBool::new(cancel),
     )
+}
+
+/// How many entries the folder `dir` holds.
+fn entries(dir: &Path) -> usize {
+    std::fs::read_dir(dir).unwrap().count()
 }
 
 fn layout(fpg: usize, stride: Option<usize>) -> GroupLayout {
@@ -217,11 +233,7 @@ fn text_file_named_mp4_is_not_a_video() {
         ),
         "{msg}"
     );
-    assert_eq!(
-        std::fs::read_dir(dir.path()).unwrap().count(),
-        1,
-        "nothing written"
-    );
+    assert_eq!(entries(dir.path()), 1, "nothing written");
 }
 
 #[test]
@@ -235,12 +247,8 @@ fn non_empty_output_folder_is_refused_and_untouched() {
     assert!(matches!(e, VideoError::OutputExists { .. }), "{e}");
     assert!(e.to_string().contains("busy"), "{e}");
     assert_eq!(std::fs::read(out.join("keep.txt")).unwrap(), b"mine");
-    assert_eq!(std::fs::read_dir(&out).unwrap().count(), 1);
-    assert_eq!(
-        std::fs::read_dir(dir.path()).unwrap().count(),
-        2,
-        "no temporary folder"
-    );
+    assert_eq!(entries(&out), 1);
+    assert_eq!(entries(dir.path()), 2, "no temporary folder");
     // An empty folder is accepted and filled.
     let empty = dir.path().join("empty");
     std::fs::create_dir(&empty).unwrap();
@@ -267,11 +275,7 @@ fn clip_shorter_than_one_group_leaves_nothing() {
     );
     assert!(e.to_string().contains("short.avi"), "{e}");
     assert!(!out.exists());
-    assert_eq!(
-        std::fs::read_dir(dir.path()).unwrap().count(),
-        1,
-        "no temporary folder"
-    );
+    assert_eq!(entries(dir.path()), 1, "no temporary folder");
 }
 
 #[test]
@@ -279,17 +283,9 @@ fn cancel_leaves_nothing_and_bad_settings_are_named() {
     let dir = tempfile::tempdir().unwrap();
     let (path, _) = clip(dir.path(), "clip.avi", 8, false);
     let out = dir.path().join("scan");
-    let e = import_video(
-        &path,
-        &out,
-        &layout(7, None),
-        &ClipMeta::default(),
-        &no_progress,
-        &AtomicBool::new(true),
-    )
-    .unwrap_err();
+    let e = import_with(&path, &out, &layout(7, None), &ClipMeta::default(), true).unwrap_err();
     assert!(matches!(e, VideoError::Cancelled), "{e}");
-    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    assert_eq!(entries(dir.path()), 1);
 
     let e = import(&path, &out, &layout(6, None)).unwrap_err();
     assert!(e.to_string().contains("frames_per_group"), "{e}");
@@ -297,15 +293,7 @@ fn cancel_leaves_nothing_and_bad_settings_are_named() {
         rpm: f64::NAN,
         ..ClipMeta::default()
     };
-    let e = import_video(
-        &path,
-        &out,
-        &layout(7, None),
-        &bad,
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap_err();
+    let e = import_with(&path, &out, &layout(7, None), &bad, false).unwrap_err();
     assert!(e.to_string().contains("record.rpm"), "{e}");
     assert!(!out.exists());
 }
@@ -351,15 +339,7 @@ fn demo_frames_survive_a_clip_and_the_imported_scan_reconstructs() {
     };
     let out = dir.path().join("scan");
     let started = std::time::Instant::now();
-    let s = import_video(
-        &path,
-        &out,
-        &layout(7, None),
-        &meta,
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap();
+    let s = import_with(&path, &out, &layout(7, None), &meta, false).unwrap();
     eprintln!("import of a 14-frame 320x384 clip: {:?}", started.elapsed());
     assert_eq!(s.groups, 2);
     let scan = Scan::open(&out).unwrap();

@@ -77,10 +77,9 @@ pub fn pack_scan(
             path: out.to_path_buf(),
         });
     }
-    let name = out
-        .file_name()
-        .map_or_else(|| "scan.zarr".into(), |n| n.to_string_lossy().into_owned());
-    let tmp = out.with_file_name(format!(".{name}.pack-{}.tmp", std::process::id()));
+    let tmp = crate::io::atomic::beside(out, "scan.zarr", |name| {
+        format!(".{name}.pack-{}.tmp", std::process::id())
+    });
     let result = pack_into(scan, &tmp, level, progress, cancel);
     let finished = result.and_then(|mut summary| {
         if out.exists() {

@@ -167,75 +167,80 @@ pub fn stitch(groups: &[GroupSignal], spacing_um: f64) -> Result<StitchedSignal,
         }
     }
 
-    let mut sums = vec![vec![0.0f64; n]; n_channels];
-    let mut weights = vec![vec![0.0f64; n]; n_channels];
+    // One channel at a time, so the accumulators are one channel long (a clip's eight
+    // border tracks would otherwise need 128 bytes a grid point); every sum still adds its
+    // groups in group order.
+    let mut sums = vec![0.0f64; n];
+    let mut weights = vec![0.0f64; n];
+    let mut missing = vec![false; n];
+    let mut channels = Vec::with_capacity(n_channels);
     let tol_um = SPAN_TOL_SPACINGS * spacing_um;
-    for (gi, g) in groups.iter().enumerate() {
-        let (a, b) = spans[gi];
-        if !a.is_finite() || g.positions_um.len() < 2 {
-            // A lone sample: it lands on the nearest grid point only if it is on one.
-            if let (Some(&p), true) = (g.positions_um.first(), g.positions_um.len() == 1) {
-                let k = ((p - lo_um) / spacing_um).round();
-                if ((lo_um + k * spacing_um) - p).abs() <= tol_um {
-                    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-                    let k = k as usize;
-                    for (c, ch) in g.channels.iter().enumerate() {
+    for c in 0..n_channels {
+        sums.fill(0.0);
+        weights.fill(0.0);
+        for (gi, g) in groups.iter().enumerate() {
+            let (a, b) = spans[gi];
+            let ch = &g.channels[c];
+            if !a.is_finite() || g.positions_um.len() < 2 {
+                // A lone sample: it lands on the nearest grid point only if it is on one.
+                if let (Some(&p), true) = (g.positions_um.first(), g.positions_um.len() == 1) {
+                    let k = ((p - lo_um) / spacing_um).round();
+                    if ((lo_um + k * spacing_um) - p).abs() <= tol_um {
+                        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+                        let k = k as usize;
                         if let Some(&v) = ch.first().filter(|v| v.is_finite())
                             && k < n
                         {
-                            sums[c][k] += MIN_FADE_WEIGHT * f64::from(v);
-                            weights[c][k] += MIN_FADE_WEIGHT;
+                            sums[k] += MIN_FADE_WEIGHT * f64::from(v);
+                            weights[k] += MIN_FADE_WEIGHT;
                         }
                     }
                 }
+                continue;
             }
-            continue;
-        }
-        let ramp_um = overlap[gi]
-            .max(spacing_um)
-            .min(((b - a) / 2.0).max(spacing_um));
-        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // inside 0..n
-        let k0 = ((a - lo_um - tol_um) / spacing_um).ceil().max(0.0) as usize;
-        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-        let k1 = (((b - lo_um + tol_um) / spacing_um).floor().max(0.0) as usize).min(n - 1);
-        let pos = &g.positions_um;
-        let mut j = 0usize;
-        #[allow(clippy::cast_precision_loss)] // grid indices ≤ 2^28
-        for k in k0..=k1 {
-            let p = (lo_um + k as f64 * spacing_um).clamp(a, b);
-            while j + 2 < pos.len() && pos[j + 1] < p {
-                j += 1;
-            }
-            let w = ((p - a).min(b - p) / ramp_um).clamp(MIN_FADE_WEIGHT, 1.0);
-            for (c, ch) in g.channels.iter().enumerate() {
+            let ramp_um = overlap[gi]
+                .max(spacing_um)
+                .min(((b - a) / 2.0).max(spacing_um));
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // inside 0..n
+            let k0 = ((a - lo_um - tol_um) / spacing_um).ceil().max(0.0) as usize;
+            #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
+            let k1 = (((b - lo_um + tol_um) / spacing_um).floor().max(0.0) as usize).min(n - 1);
+            let pos = &g.positions_um;
+            let mut j = 0usize;
+            #[allow(clippy::cast_precision_loss)] // grid indices ≤ 2^28
+            for k in k0..=k1 {
+                let p = (lo_um + k as f64 * spacing_um).clamp(a, b);
+                while j + 2 < pos.len() && pos[j + 1] < p {
+                    j += 1;
+                }
+                let w = ((p - a).min(b - p) / ramp_um).clamp(MIN_FADE_WEIGHT, 1.0);
                 if let Some(v) = interpolate(pos, ch, j, p) {
-                    sums[c][k] += w * v;
-                    weights[c][k] += w;
+                    sums[k] += w * v;
+                    weights[k] += w;
                 }
             }
         }
-    }
-
-    let mut gaps: Vec<Range<usize>> = Vec::new();
-    let mut channels = vec![vec![0.0f32; n]; n_channels];
-    for k in 0..n {
-        let mut missing = false;
-        for c in 0..n_channels {
-            let w = weights[c][k];
+        let mut out = vec![0.0f32; n];
+        for k in 0..n {
+            let w = weights[k];
             if w > 0.0 {
                 #[allow(clippy::cast_possible_truncation)] // audio samples are f32
                 {
-                    channels[c][k] = (sums[c][k] / w) as f32;
+                    out[k] = (sums[k] / w) as f32;
                 }
             } else {
-                missing = true;
+                missing[k] = true;
             }
         }
-        if missing {
-            match gaps.last_mut() {
-                Some(r) if r.end == k => r.end = k + 1,
-                _ => gaps.push(k..k + 1),
-            }
+        channels.push(out);
+    }
+    drop((sums, weights));
+
+    let mut gaps: Vec<Range<usize>> = Vec::new();
+    for (k, _) in missing.iter().enumerate().filter(|(_, m)| **m) {
+        match gaps.last_mut() {
+            Some(r) if r.end == k => r.end = k + 1,
+            _ => gaps.push(k..k + 1),
         }
     }
     let mean_vt = vt_sum / vt_count;

@@ -4,6 +4,7 @@ use super::*;
 use crate::image::Image;
 use crate::pipeline::dsp::magnitude_spectrum;
 use crate::pipeline::orientation::{PlaneFit, StopReason, WallOrientation};
+use crate::pipeline::test_support::assert_each_edit_is_refused;
 use std::f64::consts::PI;
 
 const VT_MM_S: f64 = 939.0;
@@ -495,22 +496,12 @@ fn orientation_to_output_rate_end_to_end() {
 fn output_level_and_checks() {
     let p = SoundParams::default();
     assert!(p.validate().is_ok());
-    for bad in [
-        SoundParams {
-            native_spacing_um: -1.0,
-            ..SoundParams::default()
-        },
-        SoundParams {
-            output_rate_hz: 0,
-            ..SoundParams::default()
-        },
-        SoundParams {
-            full_scale_mm_s: f64::NAN,
-            ..SoundParams::default()
-        },
-    ] {
-        assert!(bad.validate().is_err(), "{bad:?}");
-    }
+    let edits: [fn(&mut SoundParams); 3] = [
+        |p| p.native_spacing_um = -1.0,
+        |p| p.output_rate_hz = 0,
+        |p| p.full_scale_mm_s = f64::NAN,
+    ];
+    assert_each_edit_is_refused(&edits, SoundParams::validate);
 
     let mut ch = vec![vec![10.0f32, -40.0], vec![f32::NAN, 20.0]];
     let g = p.scale_to_output(&mut ch).unwrap();

@@ -171,27 +171,46 @@ impl Border {
 /// Model parameters: low, high, position, width.
 type Theta = [f64; 4];
 
-/// Weighted cost Σ w·r² of `theta` over `points`.
-fn cost(points: &[ProfilePoint], theta: &Theta) -> f64 {
-    let [lo, hi, mu, w] = *theta;
+/// Each point's Φ((x − μ)/w) into `cdf`, which [`cost_at`], [`normal_equations`] and
+/// [`linear_levels`] at the same μ and w share.
+fn cdfs_at(points: &[ProfilePoint], mu: f64, w: f64, cdf: &mut Vec<f64>) {
+    cdf.clear();
+    cdf.extend(points.iter().map(|p| normal_cdf((p.x_px - mu) / w)));
+}
+
+/// Weighted cost Σ w·r² of `theta` over `points`, given their Φ at its μ and w.
+fn cost_at(points: &[ProfilePoint], theta: &Theta, cdf: &[f64]) -> f64 {
+    let [lo, hi, _, _] = *theta;
     points
         .iter()
-        .map(|p| {
-            let r = p.value - (lo + (hi - lo) * normal_cdf((p.x_px - mu) / w));
+        .zip(cdf)
+        .map(|(p, &phi)| {
+            let r = p.value - (lo + (hi - lo) * phi);
             p.weight * r * r
         })
         .sum()
 }
 
-/// JᵀWJ (upper triangle used) and JᵀW·r of `theta`.
-fn normal_equations(points: &[ProfilePoint], theta: &Theta) -> ([[f64; 4]; 4], [f64; 4]) {
+/// Weighted cost Σ w·r² of `theta` over `points`; `cdf` receives each point's Φ((x − μ)/w),
+/// which [`normal_equations`] at the same `theta` reuses.
+fn cost(points: &[ProfilePoint], theta: &Theta, cdf: &mut Vec<f64>) -> f64 {
+    cdfs_at(points, theta[2], theta[3], cdf);
+    cost_at(points, theta, cdf)
+}
+
+/// JᵀWJ (upper triangle used) and JᵀW·r of `theta`, given each point's Φ from [`cost`] at the
+/// same `theta`.
+fn normal_equations(
+    points: &[ProfilePoint],
+    theta: &Theta,
+    cdfs: &[f64],
+) -> ([[f64; 4]; 4], [f64; 4]) {
     let [lo, hi, mu, w] = *theta;
     let c = hi - lo;
     let mut a = [[0.0; 4]; 4];
     let mut g = [0.0; 4];
-    for p in points {
+    for (p, &cdf) in points.iter().zip(cdfs) {
         let z = (p.x_px - mu) / w;
-        let cdf = normal_cdf(z);
         let pdf = normal_pdf(z);
         let r = p.value - (lo + c * cdf);
         let j = [1.0 - cdf, cdf, -c * pdf / w, -c * pdf * z / w];
@@ -253,12 +272,12 @@ fn position_variance_factor(a: &[[f64; 4]; 4]) -> Option<f64> {
     solve4(a, &[0.0, 0.0, 1.0, 0.0]).map(|x| x[2])
 }
 
-/// Best `low` and `high` for a fixed position and width: the 2-parameter weighted linear
-/// least squares. None when the points do not straddle the border.
-fn linear_levels(points: &[ProfilePoint], mu: f64, w: f64) -> Option<(f64, f64)> {
+/// Best `low` and `high` for a fixed position and width, given each point's Φ((x − μ)/w) there:
+/// the 2-parameter weighted linear least squares. None when the points do not straddle the
+/// border.
+fn linear_levels(points: &[ProfilePoint], cdfs: &[f64]) -> Option<(f64, f64)> {
     let (mut saa, mut sab, mut sbb, mut sav, mut sbv) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for p in points {
-        let b = normal_cdf((p.x_px - mu) / w);
+    for (p, &b) in points.iter().zip(cdfs) {
         let a = 1.0 - b;
         saa += p.weight * a * a;
         sab += p.weight * a * b;
@@ -310,12 +329,14 @@ fn fit_usable(points: &[ProfilePoint], seed: BorderSeed, params: &BorderParams) 
     } else {
         1.0
     });
-    let (lo0, hi0) = linear_levels(points, seed.position_px, w0)?;
+    let (mut cdf, mut trial_cdf) = (Vec::new(), Vec::new());
+    cdfs_at(points, seed.position_px, w0, &mut cdf);
+    let (lo0, hi0) = linear_levels(points, &cdf)?;
     let mut theta: Theta = [lo0, hi0, seed.position_px, w0];
-    let mut current = cost(points, &theta);
+    let mut current = cost_at(points, &theta, &cdf);
     let mut damping = LM_DAMPING_START;
     let mut iterations = 0;
-    let mut normal = normal_equations(points, &theta);
+    let mut normal = normal_equations(points, &theta, &cdf);
     while iterations < params.max_iterations {
         iterations += 1;
         let (a, g) = &normal;
@@ -335,7 +356,7 @@ fn fit_usable(points: &[ProfilePoint], seed: BorderSeed, params: &BorderParams) 
             *t += s;
         }
         next[3] = clamp_w(next[3]);
-        let trial = cost(points, &next);
+        let trial = cost(points, &next, &mut trial_cdf);
         if trial.is_finite() && trial <= current {
             // Position and width both settled (the levels follow them linearly).
             let moved = (next[2] - theta[2]).abs().max((next[3] - theta[3]).abs());
@@ -343,7 +364,8 @@ fn fit_usable(points: &[ProfilePoint], seed: BorderSeed, params: &BorderParams) 
             let settled = current - trial <= 1e-12 * current.max(f64::MIN_POSITIVE);
             current = trial;
             damping = (damping / LM_DAMPING_FACTOR).max(1e-12);
-            normal = normal_equations(points, &theta);
+            std::mem::swap(&mut cdf, &mut trial_cdf);
+            normal = normal_equations(points, &theta, &cdf);
             if moved < params.tolerance_px || settled {
                 break;
             }

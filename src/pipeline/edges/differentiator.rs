@@ -14,6 +14,8 @@
 //! A border's noise is flat in displacement, so the filter's noise gain `Σc²` ([`noise_gain`])
 //! sets the velocity noise.
 
+use std::sync::{Mutex, PoisonError};
+
 use serde::{Deserialize, Serialize};
 
 use crate::pipeline::{StageError, check_range};
@@ -202,6 +204,45 @@ pub fn noise_gain(taps: &Taps) -> f64 {
     taps.coefficients.iter().map(|c| c * c).sum()
 }
 
+/// What a design depends on: the taps before and after, and the bits of the params' design
+/// knobs (`half_taps`, `band`, `aperture_samples`, `ridge`).
+type DesignKey = (usize, usize, usize, u64, u64, u64);
+
+/// Designs made so far in this process. A design is a pure function of its key and every group
+/// of a scan asks for the same few (the centred filter and the one-sided ones at run ends), so
+/// each is solved once; the list is cleared if it ever holds [`MAX_KEPT_DESIGNS`].
+static DESIGNS: Mutex<Vec<(DesignKey, Option<Taps>)>> = Mutex::new(Vec::new());
+
+/// Most designs [`DESIGNS`] keeps (all one-sided variants of a few parameter sets).
+const MAX_KEPT_DESIGNS: usize = 4096;
+
+/// [`design`], remembered in [`DESIGNS`].
+fn remembered_design(before: usize, after: usize, params: &DifferentiatorParams) -> Option<Taps> {
+    let key = (
+        before,
+        after,
+        params.half_taps,
+        params.band.to_bits(),
+        params.aperture_samples.to_bits(),
+        params.ridge.to_bits(),
+    );
+    {
+        let kept = DESIGNS.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some((_, taps)) = kept.iter().find(|(k, _)| *k == key) {
+            return taps.clone();
+        }
+    }
+    let taps = design(before, after, params);
+    let mut kept = DESIGNS.lock().unwrap_or_else(PoisonError::into_inner);
+    if kept.len() >= MAX_KEPT_DESIGNS {
+        kept.clear();
+    }
+    if !kept.iter().any(|(k, _)| *k == key) {
+        kept.push((key, taps.clone()));
+    }
+    taps
+}
+
 /// The derivative (per sample) of `track` at every sample: the centred filter where it fits
 /// inside the run of finite samples, else the one-sided filter the run allows. NaN samples,
 /// and runs shorter than `min_run`, give NaN.
@@ -226,7 +267,7 @@ pub fn differentiate(track: &[f64], params: &DifferentiatorParams) -> Vec<f64> {
                 let idx = match cache.iter().position(|(k, _)| *k == key) {
                     Some(i) => i,
                     None => {
-                        cache.push((key, design(key.0, key.1, params)));
+                        cache.push((key, remembered_design(key.0, key.1, params)));
                         cache.len() - 1
                     }
                 };
@@ -261,6 +302,24 @@ mod tests {
 
     /// The brief's bar: the centred filter is within 0.5 dB of the ideal iω up to 0.8 × Nyquist,
     /// with a zero real part (no delay).
+    #[test]
+    fn a_remembered_design_is_the_design() {
+        let p = DifferentiatorParams::default();
+        for (before, after) in [(6, 6), (2, 6), (6, 0), (3, 3), (0, 1)] {
+            for _ in 0..2 {
+                assert_eq!(
+                    remembered_design(before, after, &p),
+                    design(before, after, &p)
+                );
+            }
+        }
+        let other = DifferentiatorParams {
+            ridge: 1e-2,
+            ..p.clone()
+        };
+        assert_ne!(remembered_design(6, 6, &other), remembered_design(6, 6, &p));
+    }
+
     #[test]
     fn centred_response_is_within_half_a_db_of_ideal() {
         let p = plain();

@@ -34,11 +34,18 @@ pub fn erf(x: f64) -> f64 {
             den = (den + Q[i]) * z;
         }
         x * (num + P[3]) / (den + Q[3])
+    } else if a >= ERF_IS_ONE {
+        // erfc(a) < 2⁻⁵⁴ here, so 1 − erfc(a) rounds to 1 exactly.
+        if x < 0.0 { -1.0 } else { 1.0 }
     } else {
         let c = erfc_abs(a);
         if x < 0.0 { c - 1.0 } else { 1.0 - c }
     }
 }
+
+/// From here on `1 − erfc(a)` rounds to exactly 1 in f64: erfc(6) ≈ 2.2e-17 lies below half the
+/// spacing of the doubles just under 1 (2⁻⁵⁴ ≈ 5.6e-17), so erf needs no exponentials there.
+const ERF_IS_ONE: f64 = 6.0;
 
 /// erfc(a) for a ≥ 0.5 (Cody).
 #[allow(clippy::excessive_precision)] // Cody's published coefficients, kept as printed
@@ -121,4 +128,38 @@ pub fn normal_cdf(z: f64) -> f64 {
 #[must_use]
 pub fn normal_pdf(z: f64) -> f64 {
     FRAC_1_SQRT_2PI * (-0.5 * z * z).exp()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn erf_is_exactly_one_where_the_shortcut_says() {
+        // The shortcut returns what the full formula rounds to, over its whole range.
+        let mut a = ERF_IS_ONE;
+        while a < 27.0 {
+            assert_eq!(1.0 - erfc_abs(a), 1.0, "erf({a})");
+            assert_eq!(erfc_abs(a) - 1.0, -1.0, "erf(-{a})");
+            assert_eq!(erf(a), 1.0);
+            assert_eq!(erf(-a), -1.0);
+            a += 1e-3;
+        }
+        // Just below it the formula still differs from 1.
+        assert!(1.0 - erfc_abs(5.5) < 1.0);
+    }
+
+    #[test]
+    fn erf_matches_known_values() {
+        for (x, want) in [
+            (0.1, 0.112_462_916_018_284_9),
+            (0.5, 0.520_499_877_813_046_5),
+            (1.0, 0.842_700_792_949_714_9),
+            (2.0, 0.995_322_265_018_952_7),
+            (4.5, 0.999_999_999_803_383_9),
+        ] {
+            assert!((erf(x) - want).abs() < 1e-14, "erf({x}) = {}", erf(x));
+            assert!((erf(-x) + want).abs() < 1e-14);
+        }
+    }
 }

@@ -120,6 +120,7 @@ impl FrameGeometry {
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
+    use crate::synth::test_support::narrow_dual_focus_groove;
     use crate::synth::{Groove, SynthConfig, scan_meta, tone};
 
     #[test]
@@ -127,7 +128,7 @@ mod tests {
         let cfg = SynthConfig::quick_test();
         let g = Groove::new(&tone(1000.0, 0.01, 48_000), &cfg).unwrap();
         let meta = scan_meta(&g).unwrap();
-        let geo = FrameGeometry::new(&meta, cfg.width_px, cfg.height_px);
+        let geo = FrameGeometry::new(&meta, g.cfg.width_px, g.cfg.height_px);
         // At the land, column x of frame k of group 1 sees the generator's land_s_um.
         let cam = geo.cam_s_um(1, 5);
         for x in [0.0, 17.5, 255.0] {
@@ -148,15 +149,9 @@ mod tests {
 
     #[test]
     fn the_glass_brings_its_rows_nearer() {
-        let cfg = SynthConfig {
-            width_px: 64,
-            height_px: 700,
-            group_overlap_px: 10,
-            ..SynthConfig::dual_focus_demo()
-        };
-        let g = Groove::new(&tone(1000.0, 0.01, 48_000), &cfg).unwrap();
+        let g = narrow_dual_focus_groove();
         let meta = scan_meta(&g).unwrap();
-        let geo = FrameGeometry::new(&meta, cfg.width_px, cfg.height_px);
+        let geo = FrameGeometry::new(&meta, g.cfg.width_px, g.cfg.height_px);
         let glass = geo.glass.unwrap();
         assert!(glass.on_top);
         let shift = 110.0 * (1.0 - 1.0 / 1.515);

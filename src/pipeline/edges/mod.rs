@@ -31,7 +31,10 @@ pub mod coarse;
 pub mod differentiator;
 pub mod erf;
 pub mod geometry;
+mod predict;
 pub mod profile;
+#[cfg(test)]
+mod reference;
 pub mod refine;
 pub mod robust;
 mod signal;
@@ -45,6 +48,7 @@ use self::border::BorderParams;
 use self::coarse::{StripBorders, strip_borders};
 use self::differentiator::{DifferentiatorParams, differentiate};
 use self::geometry::FrameGeometry;
+use self::predict::interpolant;
 use self::profile::{SampleBorder, SampleTask, fit_sample};
 use self::refine::{RefineSample, refine_border};
 use self::robust::{CombineParams, combine_borders};
@@ -311,47 +315,6 @@ fn depth_from_widths(rows: &StripBorders, geo: &FrameGeometry, tan_a: f64) -> [f
     })
 }
 
-/// A Catmull–Rom interpolant through `(s, y)` points sorted by `s` (constant beyond the ends).
-fn interpolant(points: Vec<(f64, f64)>) -> impl Fn(f64) -> f64 {
-    move |s: f64| {
-        let n = points.len();
-        if n == 0 {
-            return f64::NAN;
-        }
-        let i = points.partition_point(|p| p.0 <= s);
-        if i == 0 {
-            return points[0].1;
-        }
-        if i >= n {
-            return points[n - 1].1;
-        }
-        let (p1, p2) = (points[i - 1], points[i]);
-        let p0 = if i >= 2 { points[i - 2] } else { p1 };
-        let p3 = points.get(i + 1).copied().unwrap_or(p2);
-        let h = p2.0 - p1.0;
-        if h <= 0.0 {
-            return p1.1;
-        }
-        let t = (s - p1.0) / h;
-        // Tangents by finite differences over the neighbours (non-uniform spacing allowed).
-        let m1 = if p2.0 > p0.0 {
-            (p2.1 - p0.1) / (p2.0 - p0.0) * h
-        } else {
-            p2.1 - p1.1
-        };
-        let m2 = if p3.0 > p1.0 {
-            (p3.1 - p1.1) / (p3.0 - p1.0) * h
-        } else {
-            p2.1 - p1.1
-        };
-        let (t2, t3) = (t * t, t * t * t);
-        (2.0 * t3 - 3.0 * t2 + 1.0) * p1.1
-            + (t3 - 2.0 * t2 + t) * m1
-            + (-2.0 * t3 + 3.0 * t2) * p2.1
-            + (t3 - t2) * m2
-    }
-}
-
 /// Median of each value with its two neighbours (keeps NaN where the value is NaN).
 fn median3(v: &[f64]) -> Vec<f64> {
     (0..v.len())
@@ -500,93 +463,104 @@ pub fn detect_edges(
         .enumerate()
         .map(|(k, (f, &c))| (f, c, first_frame + k))
         .collect();
-    let mut borders = Vec::with_capacity(4);
-    let mut warnings = Vec::new();
-    for id in BorderId::ALL {
-        let z = z_of(id);
-        let rows: Vec<f64> = median3(
-            &coarse_rows
+    // The four borders are independent: fitted side by side, kept in order.
+    let fitted: Vec<(BorderTrack, Option<String>)> = BorderId::ALL
+        .into_par_iter()
+        .map(|id| {
+            let z = z_of(id);
+            let rows: Vec<f64> = median3(
+                &coarse_rows
+                    .iter()
+                    .map(|(_, r)| r[id as usize])
+                    .collect::<Vec<_>>(),
+            );
+            let points: Vec<(f64, f64)> = coarse_rows
                 .iter()
-                .map(|(_, r)| r[id as usize])
-                .collect::<Vec<_>>(),
-        );
-        let points: Vec<(f64, f64)> = coarse_rows
-            .iter()
-            .zip(&rows)
-            .filter(|(_, r)| r.is_finite() && z.is_finite())
-            .map(|((j, _), &r)| (*j as f64 * spacing, geo.y_at(r, geo.apparent_z_um(z, r))))
-            .collect();
-        let typical_row = finite_median(rows.clone()).unwrap_or(f64::NAN);
-        let z_app = geo.apparent_z_um(z, typical_row);
-        let fits: Vec<Option<SampleBorder>> = if points.is_empty() {
-            vec![None; n]
-        } else {
-            let predict = interpolant(points.clone());
-            (0..n)
-                .into_par_iter()
-                .map(|i| {
-                    let s = positions_um[i];
-                    let task = SampleTask {
-                        s_lo_um: s - half,
-                        s_hi_um: s + half,
-                        z_um: z_app,
-                        predict_y: &predict,
-                    };
-                    fit_sample(&frame_list, reference, &geo, &task, params)
-                })
-                .collect()
-        };
-        let refined = if params.refine && !points.is_empty() {
-            let predict = interpolant(points.clone());
-            let samples: Vec<Option<RefineSample>> = fits
-                .iter()
-                .zip(&positions_um)
-                .map(|(f, &s)| {
-                    f.as_ref().map(|f| RefineSample {
-                        task: SampleTask {
+                .zip(&rows)
+                .filter(|(_, r)| r.is_finite() && z.is_finite())
+                .map(|((j, _), &r)| (*j as f64 * spacing, geo.y_at(r, geo.apparent_z_um(z, r))))
+                .collect();
+            let typical_row = finite_median(rows.clone()).unwrap_or(f64::NAN);
+            let z_app = geo.apparent_z_um(z, typical_row);
+            let fits: Vec<Option<SampleBorder>> = if points.is_empty() {
+                vec![None; n]
+            } else {
+                let predict = interpolant(points.clone());
+                (0..n)
+                    .into_par_iter()
+                    .map(|i| {
+                        let s = positions_um[i];
+                        let task = SampleTask {
                             s_lo_um: s - half,
                             s_hi_um: s + half,
                             z_um: z_app,
                             predict_y: &predict,
-                        },
-                        fit: f.fit,
-                        row_px: f.row_px,
-                        column_weights: &f.column_weights,
+                        };
+                        fit_sample(&frame_list, reference, &geo, &task, params)
                     })
-                })
-                .collect();
-            let subset: Vec<(&Image, f64)> =
-                spread_frames(frames.len(), reference, params.spline_frames)
-                    .into_iter()
-                    .map(|k| (&frames[k], cams[k]))
+                    .collect()
+            };
+            let refined = if params.refine && !points.is_empty() {
+                let predict = interpolant(points.clone());
+                let samples: Vec<Option<RefineSample>> = fits
+                    .iter()
+                    .zip(&positions_um)
+                    .map(|(f, &s)| {
+                        f.as_ref().map(|f| RefineSample {
+                            task: SampleTask {
+                                s_lo_um: s - half,
+                                s_hi_um: s + half,
+                                z_um: z_app,
+                                predict_y: &predict,
+                            },
+                            fit: f.fit,
+                            row_px: f.row_px,
+                            column_weights: &f.column_weights,
+                        })
+                    })
                     .collect();
-            refine_border(&subset, cam_ref, &geo, &samples, spacing, params)
-        } else {
-            vec![None; n]
-        };
-        let mut y_um = vec![f64::NAN; n];
-        let mut std_error_um = vec![f64::NAN; n];
-        for (i, f) in fits.iter().enumerate() {
-            if let Some(f) = f {
-                let row = refined.get(i).copied().flatten().unwrap_or(f.row_px);
-                y_um[i] = geo.y_at(row, z_app);
-                std_error_um[i] = f.std_error_px * geo.um_per_px(z_app);
+                let subset: Vec<(&Image, f64)> =
+                    spread_frames(frames.len(), reference, params.spline_frames)
+                        .into_iter()
+                        .map(|k| (&frames[k], cams[k]))
+                        .collect();
+                refine_border(&subset, cam_ref, &geo, &samples, spacing, params)
+            } else {
+                vec![None; n]
+            };
+            let mut y_um = vec![f64::NAN; n];
+            let mut std_error_um = vec![f64::NAN; n];
+            for (i, f) in fits.iter().enumerate() {
+                if let Some(f) = f {
+                    let row = refined.get(i).copied().flatten().unwrap_or(f.row_px);
+                    y_um[i] = geo.y_at(row, z_app);
+                    std_error_um[i] = f.std_error_px * geo.um_per_px(z_app);
+                }
             }
-        }
-        if n > 0 && y_um.iter().all(|v| v.is_nan()) {
-            warnings.push(format!(
-                "group {group}: the {} was lost over the whole group",
-                id.name()
-            ));
-        }
-        borders.push(BorderTrack {
-            id,
-            z_um: z,
-            y_um,
-            std_error_um,
-            weight: vec![0.0; n],
-            fits,
-        });
+            let lost = (n > 0 && y_um.iter().all(|v| v.is_nan())).then(|| {
+                format!(
+                    "group {group}: the {} was lost over the whole group",
+                    id.name()
+                )
+            });
+            (
+                BorderTrack {
+                    id,
+                    z_um: z,
+                    y_um,
+                    std_error_um,
+                    weight: vec![0.0; n],
+                    fits,
+                },
+                lost,
+            )
+        })
+        .collect();
+    let mut borders = Vec::with_capacity(4);
+    let mut warnings = Vec::new();
+    for (track, lost) in fitted {
+        borders.push(track);
+        warnings.extend(lost);
     }
 
     // 4. Combination.

@@ -21,6 +21,11 @@
 //! `column_rounds` times.
 //! Each frame's own position is then one linear least-squares step (levels and position) from
 //! the joint fit on that frame's bins.
+//!
+//! Each frame's band is read from the frame once (a `BandView`: every column's pixels with
+//! their bins and offsets) and every robust round re-weights those; `reference.rs` holds the
+//! plain version that reads the frame pixel by pixel in every round, and the two give the same
+//! bits (the same sums in the same order).
 
 use super::EdgeParams;
 use super::border::{Border, BorderSeed, ProfilePoint, fit_border, normal_cdf, normal_pdf};
@@ -119,15 +124,15 @@ pub(crate) fn columns(
 
 /// Sub-pixel bins of one frame's straightened profile: Σw, Σw·u, Σw·v per bin.
 #[derive(Clone, Debug)]
-struct Bins {
-    sums: Vec<[f64; 3]>,
+pub(super) struct Bins {
+    pub(super) sums: Vec<[f64; 3]>,
     /// Σ share·weight·row over the columns, and Σ share·weight.
-    row_sum: f64,
-    weight_sum: f64,
+    pub(super) row_sum: f64,
+    pub(super) weight_sum: f64,
 }
 
 impl Bins {
-    fn new(n: usize) -> Self {
+    pub(super) fn new(n: usize) -> Self {
         Self {
             sums: vec![[0.0; 3]; n],
             row_sum: 0.0,
@@ -164,14 +169,14 @@ impl Bins {
 
 /// Band geometry shared by the passes.
 #[derive(Clone, Copy)]
-struct Band {
-    half_px: f64,
-    bin_px: f64,
-    bins: usize,
+pub(super) struct Band {
+    pub(super) half_px: f64,
+    pub(super) bin_px: f64,
+    pub(super) bins: usize,
 }
 
 impl Band {
-    fn new(params: &EdgeParams) -> Self {
+    pub(super) fn new(params: &EdgeParams) -> Self {
         let half_px = params.band_half_height_px;
         let bin_px = params.bin_px;
         Self {
@@ -182,40 +187,149 @@ impl Band {
     }
 
     /// Rows of a column whose offset lies in the band, with their offsets.
-    fn rows(&self, predicted: f64, height: usize) -> impl Iterator<Item = (usize, f64)> {
+    pub(super) fn rows(&self, predicted: f64, height: usize) -> impl Iterator<Item = (usize, f64)> {
         let lo = (predicted - self.half_px).ceil().max(0.0) as usize;
         let hi = ((predicted + self.half_px).floor().max(-1.0) + 1.0) as usize;
         (lo..hi.min(height)).map(move |r| (r, r as f64 - predicted))
     }
 
+    /// The bin of offset `u`: `⌊(u + half)/bin⌋` when inside the band. For a non-negative
+    /// quotient truncation is the floor (and saturates as the floor's cast does), and NaN or a
+    /// negative quotient is outside, so no floor call is needed per pixel.
     fn bin(&self, u: f64) -> Option<usize> {
-        let b = ((u + self.half_px) / self.bin_px).floor();
-        (b >= 0.0 && (b as usize) < self.bins).then_some(b as usize)
+        let t = (u + self.half_px) / self.bin_px;
+        if t >= 0.0 {
+            let b = t as usize;
+            (b < self.bins).then_some(b)
+        } else {
+            None
+        }
     }
 }
 
-/// Accumulates one frame's columns into bins, each column weighted by `weight(s)`.
-fn accumulate(frame: &Image, cols: &[Column], band: Band, weight: &dyn Fn(f64) -> f64) -> Bins {
-    let mut bins = Bins::new(band.bins);
+/// One pixel of a column inside the band: its bin, its offset from the predicted row, its grey
+/// level.
+#[derive(Clone, Copy, Debug)]
+struct BandPixel {
+    bin: usize,
+    u: f64,
+    v: f64,
+}
+
+/// One frame's band, read from the frame once: each column's pixels inside the band, in row
+/// order (`ends[k]` closes column `k`'s run of `pixels`).
+struct BandView<'c> {
+    cols: &'c [Column],
+    ends: Vec<usize>,
+    pixels: Vec<BandPixel>,
+}
+
+/// Reads the band of `cols` from `frame`.
+fn gather<'c>(frame: &Image, cols: &'c [Column], band: Band) -> BandView<'c> {
+    let mut pixels = Vec::with_capacity(cols.len() * (2.0 * band.half_px + 1.0) as usize);
+    let mut ends = Vec::with_capacity(cols.len());
     for c in cols {
-        let w = c.share * weight(c.s_um);
-        if w <= 0.0 {
-            continue;
-        }
         for (r, u) in band.rows(c.row, frame.height) {
-            let (Some(b), Some(v)) = (band.bin(u), frame.get(c.x, r)) else {
-                continue;
-            };
-            if let Some(s) = bins.sums.get_mut(b) {
-                s[0] += w;
-                s[1] += w * u;
-                s[2] += w * f64::from(v);
+            if let (Some(bin), Some(v)) = (band.bin(u), frame.get(c.x, r)) {
+                pixels.push(BandPixel {
+                    bin,
+                    u,
+                    v: f64::from(v),
+                });
             }
         }
-        bins.row_sum += w * c.row;
-        bins.weight_sum += w;
+        ends.push(pixels.len());
     }
-    bins
+    BandView { cols, ends, pixels }
+}
+
+impl BandView<'_> {
+    /// Each column with its pixels.
+    fn columns(&self) -> impl Iterator<Item = (&Column, &[BandPixel])> {
+        let starts = std::iter::once(0).chain(self.ends.iter().copied());
+        self.cols
+            .iter()
+            .zip(starts.zip(&self.ends))
+            .map(|(c, (a, &b))| (c, self.pixels.get(a..b).unwrap_or(&[])))
+    }
+
+    /// The columns accumulated into bins, each weighted by `weight(s)`.
+    fn accumulate(&self, bins_len: usize, weight: &dyn Fn(f64) -> f64) -> Bins {
+        let mut bins = Bins::new(bins_len);
+        for (c, pixels) in self.columns() {
+            let w = c.share * weight(c.s_um);
+            if w <= 0.0 {
+                continue;
+            }
+            for p in pixels {
+                if let Some(s) = bins.sums.get_mut(p.bin) {
+                    s[0] += w;
+                    s[1] += w * p.u;
+                    s[2] += w * p.v;
+                }
+            }
+            bins.row_sum += w * c.row;
+            bins.weight_sum += w;
+        }
+        bins
+    }
+
+    /// Per-column offsets against the fitted model and their Lorentzian weights (see
+    /// [`column_table`]).
+    fn column_weights(&self, table: &[(f64, f64)], sigma_px: f64) -> Vec<(usize, f64, f64)> {
+        self.columns()
+            .map(|(c, pixels)| {
+                let (mut num, mut den) = (0.0, 0.0);
+                for p in pixels {
+                    let Some(&(m, slope)) = table.get(p.bin) else {
+                        continue;
+                    };
+                    // model(u − δ) ≈ m − slope·δ  ⇒  δ = −Σ(v − m)·slope / Σ slope².
+                    num -= (p.v - m) * slope;
+                    den += slope * slope;
+                }
+                let delta = if den > 0.0 { num / den } else { 0.0 };
+                (c.x, c.s_um, lorentzian_weight(delta, sigma_px))
+            })
+            .collect()
+    }
+}
+
+/// How a fit reads its frames' bands: view `k` is the `k`-th frame that sees the stretch.
+pub(super) trait BandReader {
+    /// View `k`'s columns accumulated into bins, each weighted by `weight(s)`.
+    fn bins(&self, k: usize, weight: &dyn Fn(f64) -> f64) -> Option<Bins>;
+    /// View `k`'s per-column (column, groove position, Lorentzian weight) against the model
+    /// `table` (see [`column_table`]).
+    fn column_weights(
+        &self,
+        k: usize,
+        table: &[(f64, f64)],
+        sigma_px: f64,
+    ) -> Option<Vec<(usize, f64, f64)>>;
+}
+
+/// Every view's band gathered once.
+struct Gathered<'c> {
+    band: Band,
+    views: Vec<Option<BandView<'c>>>,
+}
+
+impl BandReader for Gathered<'_> {
+    fn bins(&self, k: usize, weight: &dyn Fn(f64) -> f64) -> Option<Bins> {
+        let view = self.views.get(k)?.as_ref()?;
+        Some(view.accumulate(self.band.bins, weight))
+    }
+
+    fn column_weights(
+        &self,
+        k: usize,
+        table: &[(f64, f64)],
+        sigma_px: f64,
+    ) -> Option<Vec<(usize, f64, f64)>> {
+        let view = self.views.get(k)?.as_ref()?;
+        Some(view.column_weights(table, sigma_px))
+    }
 }
 
 /// Lorentzian weight of a residual `r` at scale `sigma`: ψ(r)/r = 1/(1 + r²/(2σ²)).
@@ -224,38 +338,14 @@ pub fn lorentzian_weight(r: f64, sigma: f64) -> f64 {
     1.0 / (1.0 + r * r / (2.0 * sigma * sigma))
 }
 
-/// Per-column offsets on the reference frame against the fitted model (one Gauss–Newton step
-/// on the position per column) and their Lorentzian weights.
-fn column_weights(
-    frame: &Image,
-    cols: &[Column],
-    band: Band,
-    fit: &Border,
-    sigma_px: f64,
-) -> Vec<(usize, f64, f64)> {
-    // The model and its slope at each bin centre, looked up per pixel.
-    let table: Vec<(f64, f64)> = (0..band.bins)
+/// The fitted model and its slope at each bin centre, looked up per pixel by the column check:
+/// each column's offset is one Gauss–Newton step on the position, and its Lorentzian weight
+/// follows.
+pub(super) fn column_table(band: Band, fit: &Border) -> Vec<(f64, f64)> {
+    (0..band.bins)
         .map(|b| {
             let u = -band.half_px + (b as f64 + 0.5) * band.bin_px;
             (fit.model_at(u), fit.slope_at(u))
-        })
-        .collect();
-    cols.iter()
-        .map(|c| {
-            let (mut num, mut den) = (0.0, 0.0);
-            for (r, u) in band.rows(c.row, frame.height) {
-                let (Some(b), Some(v)) = (band.bin(u), frame.get(c.x, r)) else {
-                    continue;
-                };
-                let Some(&(m, slope)) = table.get(b) else {
-                    continue;
-                };
-                // model(u − δ) ≈ m − slope·δ  ⇒  δ = −Σ(v − m)·slope / Σ slope².
-                num -= (f64::from(v) - m) * slope;
-                den += slope * slope;
-            }
-            let delta = if den > 0.0 { num / den } else { 0.0 };
-            (c.x, c.s_um, lorentzian_weight(delta, sigma_px))
         })
         .collect()
 }
@@ -314,6 +404,19 @@ fn invert3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     }))
 }
 
+/// The frames that see the whole stretch (index in `frames`, their columns).
+pub(super) fn frame_views(
+    frames: &[(&Image, f64, usize)],
+    geo: &FrameGeometry,
+    task: &SampleTask,
+) -> Vec<(usize, Vec<Column>)> {
+    frames
+        .iter()
+        .enumerate()
+        .filter_map(|(i, (_, cam, _))| columns(geo, *cam, task).map(|c| (i, c)))
+        .collect()
+}
+
 /// Fits one border of one sample over `frames` (each with its `cam_s_um` and index in the
 /// group); `reference` is the position in `frames` of the frame the robust column check reads.
 /// None when no frame sees the whole stretch or the fit finds no border.
@@ -326,11 +429,28 @@ pub fn fit_sample(
     params: &EdgeParams,
 ) -> Option<SampleBorder> {
     let band = Band::new(params);
-    let views: Vec<(usize, Vec<Column>)> = frames
-        .iter()
-        .enumerate()
-        .filter_map(|(i, (_, cam, _))| columns(geo, *cam, task).map(|c| (i, c)))
-        .collect();
+    let views = frame_views(frames, geo, task);
+    let reader = Gathered {
+        band,
+        views: views
+            .iter()
+            .map(|(i, cols)| frames.get(*i).map(|(img, _, _)| gather(img, cols, band)))
+            .collect(),
+    };
+    fit_views(frames, &views, reference, geo, task, params, &reader)
+}
+
+/// The fit of [`fit_sample`] on the frames' `views`, their bands read through `reader`.
+pub(super) fn fit_views(
+    frames: &[(&Image, f64, usize)],
+    views: &[(usize, Vec<Column>)],
+    reference: usize,
+    geo: &FrameGeometry,
+    task: &SampleTask,
+    params: &EdgeParams,
+    reader: &dyn BandReader,
+) -> Option<SampleBorder> {
+    let band = Band::new(params);
     if views.is_empty() {
         return None;
     }
@@ -338,8 +458,9 @@ pub fn fit_sample(
     // the nearest that does.
     let ref_view = views
         .iter()
-        .min_by_key(|(i, _)| i.abs_diff(reference))
-        .map(|(i, _)| *i)?;
+        .enumerate()
+        .min_by_key(|(_, (i, _))| i.abs_diff(reference))
+        .map(|(k, _)| k)?;
     let seed = BorderSeed {
         position_px: 0.0,
         width_px: 1.0,
@@ -358,19 +479,16 @@ pub fn fit_sample(
         rounds += 1;
         let per_frame: Vec<(usize, Bins)> = views
             .iter()
-            .filter_map(|(i, cols)| {
-                let (img, _, _) = frames.get(*i)?;
-                Some((*i, accumulate(img, cols, band, &|s| weight_at(&weights, s))))
-            })
+            .enumerate()
+            .filter_map(|(k, (i, _))| Some((*i, reader.bins(k, &|s| weight_at(&weights, s))?)))
             .collect();
         let mut joint = Bins::new(band.bins);
         for (_, b) in &per_frame {
             joint.add(b);
         }
         let fit = fit_border(&joint.points(), seed, &params.border)?;
-        let (ref_img, _, _) = frames.get(ref_view)?;
-        let ref_cols = &views.iter().find(|(i, _)| *i == ref_view)?.1;
-        let checked = column_weights(ref_img, ref_cols, band, &fit, params.column_sigma_px);
+        let table = column_table(band, &fit);
+        let checked = reader.column_weights(ref_view, &table, params.column_sigma_px)?;
         let outliers = checked.iter().any(|c| c.2 < OUTLIER_WEIGHT);
         #[allow(clippy::cast_possible_truncation)] // weights in [0, 1]
         let column_report: Vec<(usize, f32)> = checked.iter().map(|c| (c.0, c.2 as f32)).collect();
@@ -413,23 +531,23 @@ pub fn fit_sample(
 
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // tests may panic
-mod tests {
+pub(super) mod tests {
     use super::*;
+    use crate::io::scan::test_support::scan_meta;
     use crate::meta::ScanMeta;
 
-    fn meta() -> ScanMeta {
-        ScanMeta::from_toml_str(
-            "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\ncut = \"lateral\"\n\
-             [camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n\
-             [motion]\nframe_step_um = 0.78\ngroup_step_um = 40.0\n",
-            std::path::Path::new("scan.toml"),
-        )
-        .unwrap()
+    pub(in crate::pipeline::edges) fn meta() -> ScanMeta {
+        scan_meta(40.0)
     }
 
     /// Frames of a land/wall border at record y(s) = `y0 + slope·s` (µm), blurred by 0.7 px,
     /// with a bright speck `speck` columns wide across it at groove position 20 µm.
-    fn frames(geo: &FrameGeometry, y0: f64, slope: f64, speck: usize) -> Vec<Image> {
+    pub(in crate::pipeline::edges) fn frames(
+        geo: &FrameGeometry,
+        y0: f64,
+        slope: f64,
+        speck: usize,
+    ) -> Vec<Image> {
         (0..6)
             .map(|k| {
                 let cam = geo.cam_s_um(0, k);

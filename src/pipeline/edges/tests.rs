@@ -3,6 +3,7 @@
 
 use std::f64::consts::SQRT_2;
 
+use super::predict::first_after;
 use super::*;
 use crate::pipeline::audio_signal::SoundParams;
 use crate::synth::{Groove, SynthConfig, scan_meta, stereo, tone};
@@ -323,5 +324,33 @@ fn explore_scan_borders() {
             (sq[k][1] / cnt[k][1].max(1) as f64).sqrt(),
             cnt[k][1]
         );
+    }
+}
+
+#[test]
+fn the_interpolants_search_is_the_partition_point() {
+    // Evenly spaced points with gaps, and uneven ones; queries inside, outside, on points, NaN.
+    let even: Vec<(f64, f64)> = (0..40)
+        .filter(|j| j % 7 != 3)
+        .map(|j| (f64::from(j) * 21.3 - 100.0, 0.0))
+        .collect();
+    let uneven: Vec<(f64, f64)> = (0..30).map(|j| (f64::from(j * j) * 0.7, 0.0)).collect();
+    for pts in [even, uneven, vec![(5.0, 1.0)]] {
+        let s0 = pts[0].0;
+        let step = if pts.len() > 1 {
+            (pts[pts.len() - 1].0 - s0) / (pts.len() - 1) as f64
+        } else {
+            1.0
+        };
+        let mut queries: Vec<f64> = (-200..1000).map(|k| f64::from(k) * 0.77).collect();
+        queries.extend(pts.iter().map(|p| p.0));
+        queries.extend([f64::NAN, f64::INFINITY, f64::NEG_INFINITY]);
+        for s in queries {
+            assert_eq!(
+                first_after(&pts, s, s0, step),
+                pts.partition_point(|p| p.0 <= s),
+                "s = {s}"
+            );
+        }
     }
 }

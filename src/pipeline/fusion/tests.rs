@@ -2,17 +2,12 @@
 //! agreeing inputs exactly, fills each method's gaps from the other and checks its inputs.
 
 use super::*;
+use crate::io::scan::test_support::scan_meta;
 use crate::meta::ScanMeta;
 use crate::synth::noise::Rng;
 
 fn meta() -> ScanMeta {
-    ScanMeta::from_toml_str(
-        "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\ncut = \"lateral\"\n\
-         [camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n\
-         [motion]\nframe_step_um = 0.78\ngroup_step_um = 460.2\n",
-        std::path::Path::new("scan.toml"),
-    )
-    .unwrap()
+    scan_meta(460.2)
 }
 
 fn signal(start_sample: i64, channels: Vec<Vec<f32>>) -> StitchedSignal {

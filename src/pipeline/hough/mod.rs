@@ -165,6 +165,20 @@ pub struct Stripes {
     /// Index (into `peaks`) of each line in `lines`.
     pub line_peaks: Vec<usize>,
 }
+
+impl Stripes {
+    /// The label of pixel (`x`, `y`) of the in-focus map: an index into `peaks` or a [`label`]
+    /// constant ([`label::NONE`] outside the map).
+    #[must_use]
+    pub fn label_at(&self, x: usize, y: usize) -> i8 {
+        let w = self.in_focus.width;
+        if x >= w {
+            return label::NONE;
+        }
+        self.labels.get(y * w + x).copied().unwrap_or(label::NONE)
+    }
+}
+
 /// The in-focus map, Hough accumulator and peaks alone, for showing why segmentation failed
 /// (`inspect` writes them when [`segment_stripes`] returns an error).
 ///

@@ -1,6 +1,7 @@
 //! Tests of the stripe stage: scenes with known lines, the windows, the centroid lines, the glass sides, bad input.
 
 use super::*;
+use crate::pipeline::test_support::assert_each_edit_is_refused;
 
 /// A tiny deterministic generator (tests only).
 struct Lcg(u64);
@@ -345,11 +346,17 @@ fn void_is_filled_on_the_peak_line() {
     }
 }
 
+/// The three lines (a little noise) segmented under a cover glass on `side`.
+fn three_stripes_under_glass(side: GlassSide) -> (DualFocusMeta, Stripes) {
+    let (d, f) = scene(400, 200, &three_lines(), 1.0, 0.01, 0..0);
+    let meta = dual(side);
+    let s = segment_stripes(&d, &f, &meta, &HoughParams::default()).unwrap();
+    (meta, s)
+}
+
 #[test]
 fn kept_lines_get_the_right_depths_for_glass_on_top() {
-    let (d, f) = scene(400, 200, &three_lines(), 1.0, 0.01, 0..0);
-    let meta = dual(GlassSide::Top);
-    let s = segment_stripes(&d, &f, &meta, &HoughParams::default()).unwrap();
+    let (meta, s) = three_stripes_under_glass(GlassSide::Top);
     assert_eq!(s.dropped, 0);
     assert_eq!(s.line_peaks, vec![1, 2]);
     let shift_um = meta.focus_shift_mm() * 1000.0;
@@ -366,9 +373,7 @@ fn kept_lines_get_the_right_depths_for_glass_on_top() {
 
 #[test]
 fn glass_at_the_bottom_mirrors_the_choice() {
-    let (d, f) = scene(400, 200, &three_lines(), 1.0, 0.01, 0..0);
-    let meta = dual(GlassSide::Bottom);
-    let s = segment_stripes(&d, &f, &meta, &HoughParams::default()).unwrap();
+    let (_, s) = three_stripes_under_glass(GlassSide::Bottom);
     assert_eq!(s.dropped, 2);
     assert_eq!(s.line_peaks, vec![0, 1]);
     assert!((s.lines[0].depth_um.unwrap() - 4050.0).abs() < 1e-6);
@@ -425,42 +430,19 @@ fn subsampled_votes_find_the_same_peaks() {
 fn invalid_params_and_inputs_are_rejected() {
     let (d, f) = scene(40, 30, &three_lines(), 1.0, 0.0, 0..0);
     let meta = dual(GlassSide::Top);
-    let bad = [
-        HoughParams {
-            gradient_threshold: f32::NAN,
-            ..HoughParams::default()
+    // Each edit makes the defaults invalid.
+    let edits: [fn(&mut HoughParams); 6] = [
+        |p| p.gradient_threshold = f32::NAN,
+        |p| {
+            p.theta_min_deg = 10.0;
+            p.theta_max_deg = -10.0;
         },
-        HoughParams {
-            theta_min_deg: 10.0,
-            theta_max_deg: -10.0,
-            ..HoughParams::default()
-        },
-        HoughParams {
-            theta_step_deg: 0.0,
-            ..HoughParams::default()
-        },
-        HoughParams {
-            rho_step_px: 0.0,
-            ..HoughParams::default()
-        },
-        HoughParams {
-            window_rho_px: -1.0,
-            ..HoughParams::default()
-        },
-        HoughParams {
-            peak_count: 2,
-            ..HoughParams::default()
-        },
+        |p| p.theta_step_deg = 0.0,
+        |p| p.rho_step_px = 0.0,
+        |p| p.window_rho_px = -1.0,
+        |p| p.peak_count = 2,
     ];
-    for p in &bad {
-        assert!(
-            matches!(
-                segment_stripes(&d, &f, &meta, p),
-                Err(StageError::InvalidParam { .. })
-            ),
-            "{p:?}"
-        );
-    }
+    assert_each_edit_is_refused(&edits, |p| segment_stripes(&d, &f, &meta, p));
     let mut bad_meta = meta.clone();
     bad_meta.glass_index = 0.5;
     assert!(matches!(

@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::pipeline::derivatives::{DerivativeMode, DerivativeParams, compute_derivatives};
+use crate::pipeline::test_support::assert_each_edit_is_refused;
 use proptest::prelude::*;
 
 mod reference;
@@ -495,57 +496,20 @@ fn groove_solution_satisfies_euler_lagrange() {
 fn invalid_params_are_rejected() {
     let frames = translating(16, 16, 7, 0.3, 0.0, 1);
     let d = middle(&frames, 0.0, &no_prewarp());
-    let bad = [
-        FlowParams {
-            lambda: f32::NAN,
-            ..FlowParams::default()
-        },
-        FlowParams {
-            lambda: 0.0,
-            ..FlowParams::default()
-        },
-        FlowParams {
-            lambda: -1.0,
-            ..FlowParams::default()
-        },
-        FlowParams {
-            max_iterations: 0,
-            ..FlowParams::default()
-        },
-        FlowParams {
-            tolerance_px: f32::NAN,
-            ..FlowParams::default()
-        },
-        FlowParams {
-            gradient_threshold: -1.0,
-            ..FlowParams::default()
-        },
-        FlowParams {
-            lk_window_px: 8,
-            ..FlowParams::default()
-        },
-        FlowParams {
-            lk_window_px: 1,
-            ..FlowParams::default()
-        },
-        FlowParams {
-            groove_weight: f32::INFINITY,
-            ..FlowParams::default()
-        },
-        FlowParams {
-            sor_omega: 2.0,
-            ..FlowParams::default()
-        },
+    // Each edit makes the defaults invalid.
+    let edits: [fn(&mut FlowParams); 10] = [
+        |p| p.lambda = f32::NAN,
+        |p| p.lambda = 0.0,
+        |p| p.lambda = -1.0,
+        |p| p.max_iterations = 0,
+        |p| p.tolerance_px = f32::NAN,
+        |p| p.gradient_threshold = -1.0,
+        |p| p.lk_window_px = 8,
+        |p| p.lk_window_px = 1,
+        |p| p.groove_weight = f32::INFINITY,
+        |p| p.sor_omega = 2.0,
     ];
-    for p in &bad {
-        assert!(
-            matches!(
-                compute_flow(&d, 1e4, None, p),
-                Err(StageError::InvalidParam { .. })
-            ),
-            "{p:?}"
-        );
-    }
+    assert_each_edit_is_refused(&edits, |p| compute_flow(&d, 1e4, None, p));
     assert!(matches!(
         compute_flow(&d, f64::NAN, None, &FlowParams::default()),
         Err(StageError::InvalidParam { .. })

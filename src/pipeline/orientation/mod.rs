@@ -247,7 +247,9 @@ pub fn orient_from_depth(
     let f = geom.focal_px;
     let cx = (width as f64 - 1.0) / 2.0;
     let cy = (height as f64 - 1.0) / 2.0;
-    let results = fit_samples(walls.len(), sample_columns, params, |ws, wi, x_s| {
+    let sides: Vec<WallSide> = walls.iter().map(|l| l.side).collect();
+    // The points and weight-map pixels of one sample's fit.
+    let gather = |ws: &mut Workspace, wi: usize, x_s: f32| {
         let Some(line) = walls.get(wi) else {
             return usize::MAX;
         };
@@ -276,15 +278,14 @@ pub fn orient_from_depth(
             }
         }
         MIN_SAMPLE_POINTS
-    });
-    let sides: Vec<WallSide> = walls.iter().map(|l| l.side).collect();
-    Ok(assemble(
+    };
+    Ok(fit_walls(
         &sides,
-        sample_columns.len(),
-        results,
+        sample_columns,
         width,
         height,
         params,
+        gather,
     ))
 }
 /// Orientation from iso-depth lines (dual-focus path): a plane per sample column through the
@@ -346,7 +347,8 @@ pub fn orient_from_lines(
             problem: "no wall has two iso-depth lines at distinct depths".into(),
         });
     }
-    let results = fit_samples(sides.len(), sample_columns, params, |ws, wi, x_s| {
+    // The points and weight-map pixels of one sample's fit.
+    let gather = |ws: &mut Workspace, wi: usize, x_s: f32| {
         let (Some(group), Some(true)) = (members.get(wi), usable.get(wi).copied()) else {
             return usize::MAX;
         };
@@ -384,13 +386,13 @@ pub fn orient_from_lines(
         } else {
             usize::MAX
         }
-    });
-    Ok(assemble(
+    };
+    Ok(fit_walls(
         &sides,
-        sample_columns.len(),
-        results,
+        sample_columns,
         width,
         height,
         params,
+        gather,
     ))
 }

@@ -83,10 +83,24 @@ impl Workspace {
     }
 }
 
+/// The orientation of the walls `sides`: [`fit_samples`] with `gather`, then [`assemble`] on a
+/// `width` × `height` weight map.
+pub(super) fn fit_walls(
+    sides: &[WallSide],
+    sample_columns: &[f32],
+    width: usize,
+    height: usize,
+    params: &OrientationParams,
+    gather: impl Fn(&mut Workspace, usize, f32) -> usize + Sync,
+) -> Orientation {
+    let results = fit_samples(sides.len(), sample_columns, params, gather);
+    assemble(sides, sample_columns.len(), results, width, height, params)
+}
+
 /// One fit per (wall, sample column), in parallel, in wall-then-column order: `gather(ws,
 /// wall, x_s)` fills the workspace's points and pixels for the sample at column `x_s` and
 /// returns the fewest points its fit needs (`usize::MAX`: a gap).
-pub(super) fn fit_samples(
+fn fit_samples(
     walls: usize,
     sample_columns: &[f32],
     params: &OrientationParams,
@@ -169,7 +183,7 @@ pub(crate) fn test_fit(a: f64, b: f64) -> PlaneFit {
 
 /// Assembles the per-wall sample lists, the weight map and the mean outlier share; rejects
 /// fits with implausible wall slopes ([`OrientationParams::max_wall_slope_change`]).
-pub(super) fn assemble(
+fn assemble(
     sides: &[WallSide],
     n_samples: usize,
     results: Vec<SampleResult>,

@@ -19,17 +19,6 @@ fn small(axis: Axis, cut: Cut) -> StillConfig {
     }
 }
 
-fn setup_for(cfg: &StillConfig, scene: &StillScene, k: usize) -> StillSetup {
-    StillSetup {
-        axis: cfg.axis,
-        um_per_px: cfg.um_per_px,
-        rpm: cfg.rpm,
-        radius_mm: scene.grooves[k].radius_mm,
-        cut: cfg.cut,
-        reverse: false,
-    }
-}
-
 #[test]
 fn every_groove_of_a_small_still_gives_its_tone() {
     for axis in [Axis::Vertical, Axis::Horizontal] {
@@ -37,7 +26,7 @@ fn every_groove_of_a_small_still_gives_its_tone() {
         let scene = StillScene::new(&cfg, None).unwrap();
         let img = render_still(&scene).image;
         for k in 0..3 {
-            let setup = setup_for(&cfg, &scene, k);
+            let setup = scene.setup(k).unwrap();
             let a = analyse_still(&img, &setup, Some(k + 1), &StillParams::default()).unwrap();
             assert_eq!(a.grooves.grooves.len(), 3, "{axis:?}");
             let want = scene.grooves[k].tones_hz.unwrap().0;
@@ -58,7 +47,7 @@ fn stereo_walls_keep_their_own_tones() {
     let k = 1;
     let a = analyse_still(
         &img,
-        &setup_for(&cfg, &scene, k),
+        &scene.setup(k).unwrap(),
         Some(k + 1),
         &StillParams::default(),
     )
@@ -76,7 +65,7 @@ fn the_wrong_axis_an_empty_image_and_a_missing_groove_are_reported() {
     let cfg = small(Axis::Vertical, Cut::Lateral);
     let scene = StillScene::new(&cfg, None).unwrap();
     let img = render_still(&scene).image;
-    let mut setup = setup_for(&cfg, &scene, 0);
+    let mut setup = scene.setup(0).unwrap();
     setup.axis = Axis::Horizontal;
     let e = analyse_still(&img, &setup, None, &StillParams::default()).unwrap_err();
     assert!(matches!(e, StillError::AxisContradicts { .. }), "{e}");

@@ -60,6 +60,14 @@ impl Groove {
         }
     }
 
+    /// [`Groove::new`] displaced by a sine of `amplitude_um` and `wavelength_um` along the
+    /// groove.
+    pub(crate) fn sine(geom: Geometry, amplitude_um: f64, wavelength_um: f64) -> Self {
+        Self::new(geom, move |x_um| {
+            amplitude_um * (std::f64::consts::TAU * x_um / wavelength_um).sin()
+        })
+    }
+
     /// Z (µm) at the physical point (X, Y).
     pub(crate) fn z_at(&self, x_um: f64, y_um: f64) -> f64 {
         let inner = self.depth_um + self.bottom_half_um - (y_um - (self.d)(x_um)).abs();

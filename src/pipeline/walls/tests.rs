@@ -48,9 +48,7 @@ fn check_against_truth(
 #[test]
 fn finds_both_walls_of_a_wiggling_groove() {
     let geom = paper_geometry();
-    let g = Groove::new(geom, |x_um| {
-        15.0 * (std::f64::consts::TAU * x_um / 120.0).sin()
-    });
+    let g = Groove::sine(geom, 15.0, 120.0);
     let (w, h) = (400, 600);
     let depth = g.depth_map(w, h);
     for method in [WallMethod::DepthLevels, WallMethod::SlopeRuns] {
@@ -73,9 +71,7 @@ fn depth_levels_find_the_walls_of_a_blurred_noisy_map() {
     // What the Kalman filter gives: the groove profile rounded by a wide blur, noise of a
     // few µm, and deep spikes on the bottom.
     let geom = paper_geometry();
-    let g = Groove::new(geom, |x_um| {
-        8.0 * (std::f64::consts::TAU * x_um / 140.0).sin()
-    });
+    let g = Groove::sine(geom, 8.0, 140.0);
     let (w, h) = (400, 600);
     let sharp = g.depth_map(w, h);
     let mut depth = sharp.clone();
@@ -99,9 +95,7 @@ fn depth_levels_find_the_walls_of_a_blurred_noisy_map() {
 #[test]
 fn rejects_noise_dust_and_fills_voids() {
     let geom = paper_geometry();
-    let g = Groove::new(geom, |x_um| {
-        10.0 * (std::f64::consts::TAU * x_um / 150.0).sin()
-    });
+    let g = Groove::sine(geom, 10.0, 150.0);
     let (w, h) = (400, 600);
     let mut depth = g.depth_map(w, h);
     let mut rng = Rng::new(3);

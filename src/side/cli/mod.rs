@@ -241,10 +241,7 @@ fn json_line(value: &serde_json::Value) {
 /// The journal of a whole run writing `out`: `OUT.journal` beside it.
 #[must_use]
 pub fn journal_path(out: &Path) -> PathBuf {
-    let name = out
-        .file_name()
-        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-    out.with_file_name(format!("{name}.journal"))
+    crate::io::atomic::beside(out, "out", |name| format!("{name}.journal"))
 }
 
 /// Takes the output lock of every path (one writer at a time per output: a second run writing

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 use crate::io::Cut;
 use crate::pipeline::still::Axis;
 use crate::synth::SynthError;
+use crate::synth::config::Table;
 
 /// Largest still the generator renders (pixels); it holds the image as `f32` while rendering.
 pub const MAX_STILL_RENDER_PIXELS: usize = 64 * 1024 * 1024;
@@ -169,28 +170,8 @@ pub fn default_tones_hz(grooves: usize, cut: Cut) -> Vec<f64> {
     }
 }
 
-fn bad(key: &str, problem: impl Into<String>) -> SynthError {
-    SynthError::Config {
-        key: format!("still.{key}"),
-        problem: problem.into(),
-    }
-}
-
-fn positive(key: &str, v: f64) -> Result<(), SynthError> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(bad(key, format!("must be a positive number, got {v}")))
-    }
-}
-
-fn within(key: &str, v: f64, lo: f64, hi: f64) -> Result<(), SynthError> {
-    if v.is_finite() && v >= lo && v <= hi {
-        Ok(())
-    } else {
-        Err(bad(key, format!("must lie in [{lo}, {hi}], got {v}")))
-    }
-}
+/// The `[still]` table's checks.
+const STILL: Table = Table("still");
 
 impl StillConfig {
     /// The bundled demo strip: one long horizontal strip of a 16⅔ rpm speech disc (R = 75 mm)
@@ -243,7 +224,7 @@ impl StillConfig {
     /// [`SynthError::Config`] naming the first bad key.
     pub fn validate(&self) -> Result<(), SynthError> {
         if self.length_px < 16 || self.across_px < 8 {
-            return Err(bad(
+            return Err(STILL.bad(
                 "length_px",
                 format!(
                     "the still must be at least 16 px long and 8 px across, got {} × {}",
@@ -252,7 +233,7 @@ impl StillConfig {
             ));
         }
         if self.length_px.saturating_mul(self.across_px) > MAX_STILL_RENDER_PIXELS {
-            return Err(bad(
+            return Err(STILL.bad(
                 "length_px",
                 format!(
                     "{} × {} px is larger than the generator's limit of {MAX_STILL_RENDER_PIXELS} pixels",
@@ -260,31 +241,28 @@ impl StillConfig {
                 ),
             ));
         }
-        positive("um_per_px", self.um_per_px)?;
-        positive("rpm", self.rpm)?;
-        positive("radius_mm", self.radius_mm)?;
+        STILL.positive("um_per_px", self.um_per_px)?;
+        STILL.positive("rpm", self.rpm)?;
+        STILL.positive("radius_mm", self.radius_mm)?;
         if self.cut == Cut::Vertical {
-            return Err(bad(
+            return Err(STILL.bad(
                 "cut",
                 "a vertical (hill-and-dale) cut does not move the borders seen from above; use lateral or stereo",
             ));
         }
         if !(1..=64).contains(&self.grooves) {
-            return Err(bad(
-                "grooves",
-                format!("must be 1–64, got {}", self.grooves),
-            ));
+            return Err(STILL.bad("grooves", format!("must be 1–64, got {}", self.grooves)));
         }
-        positive("pitch_um", self.pitch_um)?;
-        positive("top_width_um", self.top_width_um)?;
-        within(
+        STILL.positive("pitch_um", self.pitch_um)?;
+        STILL.positive("top_width_um", self.top_width_um)?;
+        STILL.within(
             "bottom_width_um",
             self.bottom_width_um,
             0.0,
             self.top_width_um,
         )?;
         if self.top_width_um >= self.pitch_um {
-            return Err(bad(
+            return Err(STILL.bad(
                 "top_width_um",
                 format!(
                     "{} µm wide grooves do not fit {} µm apart",
@@ -292,10 +270,10 @@ impl StillConfig {
                 ),
             ));
         }
-        within("wall_angle_deg", self.wall_angle_deg, 10.0, 80.0)?;
+        STILL.within("wall_angle_deg", self.wall_angle_deg, 10.0, 80.0)?;
         let walls = if self.cut == Cut::Stereo { 2 } else { 1 };
         if !self.tones_hz.is_empty() && self.tones_hz.len() != walls * self.grooves {
-            return Err(bad(
+            return Err(STILL.bad(
                 "tones_hz",
                 format!(
                     "needs {} tones ({} per groove for a {:?} cut), got {}",
@@ -307,13 +285,13 @@ impl StillConfig {
             ));
         }
         for &f in &self.tones_hz {
-            positive("tones_hz", f)?;
+            STILL.positive("tones_hz", f)?;
         }
-        within("peak_velocity_mm_s", self.peak_velocity_mm_s, 0.0, 1e4)?;
-        within("start_secs", self.start_secs, -1e6, 1e6)?;
-        within("drift_um", self.drift_um, -1e7, 1e7)?;
-        within("wander_um", self.wander_um, 0.0, 1e7)?;
-        positive("wander_period_um", self.wander_period_um)?;
+        STILL.within("peak_velocity_mm_s", self.peak_velocity_mm_s, 0.0, 1e4)?;
+        STILL.within("start_secs", self.start_secs, -1e6, 1e6)?;
+        STILL.within("drift_um", self.drift_um, -1e7, 1e7)?;
+        STILL.within("wander_um", self.wander_um, 0.0, 1e7)?;
+        STILL.positive("wander_period_um", self.wander_period_um)?;
         for (key, v) in [
             ("land_level", self.land_level),
             ("wall_level", self.wall_level),
@@ -321,22 +299,22 @@ impl StillConfig {
             ("rim_level", self.rim_level),
             ("rim_fraction", self.rim_fraction),
         ] {
-            within(key, v, 0.0, 1.0)?;
+            STILL.within(key, v, 0.0, 1.0)?;
         }
-        within("wall_level_spread", self.wall_level_spread, 0.0, 0.9)?;
-        within("rim_width_um", self.rim_width_um, 0.0, 1e4)?;
-        within("texture", self.texture, 0.0, 1.0)?;
-        positive("texture_scale_um", self.texture_scale_um)?;
-        within(
+        STILL.within("wall_level_spread", self.wall_level_spread, 0.0, 0.9)?;
+        STILL.within("rim_width_um", self.rim_width_um, 0.0, 1e4)?;
+        STILL.within("texture", self.texture, 0.0, 1.0)?;
+        STILL.positive("texture_scale_um", self.texture_scale_um)?;
+        STILL.within(
             "illumination_unevenness",
             self.illumination_unevenness,
             0.0,
             0.9,
         )?;
-        within("dust_per_mpx", self.dust_per_mpx, 0.0, 1e5)?;
-        within("dust_max_radius_px", self.dust_max_radius_px, 0.5, 1e3)?;
+        STILL.within("dust_per_mpx", self.dust_per_mpx, 0.0, 1e5)?;
+        STILL.within("dust_max_radius_px", self.dust_max_radius_px, 0.5, 1e3)?;
         if self.text_height_px > 0 && self.text_height_px < 7 {
-            return Err(bad(
+            return Err(STILL.bad(
                 "text_height_px",
                 format!(
                     "must be 0 (no text) or at least 7, got {}",
@@ -344,23 +322,23 @@ impl StillConfig {
                 ),
             ));
         }
-        within("blur_sigma_px", self.blur_sigma_px, 0.0, 32.0)?;
-        within("noise_sigma", self.noise_sigma, 0.0, 0.5)?;
+        STILL.within("blur_sigma_px", self.blur_sigma_px, 0.0, 32.0)?;
+        STILL.within("noise_sigma", self.noise_sigma, 0.0, 0.5)?;
         if self.bit_depth != 8 && self.bit_depth != 16 {
-            return Err(bad(
+            return Err(STILL.bad(
                 "bit_depth",
                 format!("must be 8 or 16, got {}", self.bit_depth),
             ));
         }
         if !matches!(self.format.as_str(), "png" | "tiff") {
-            return Err(bad(
+            return Err(STILL.bad(
                 "format",
                 format!("must be png or tiff, got {:?}", self.format),
             ));
         }
         let inner_mm = self.radius_mm - self.pitch_um / 1000.0 * self.grooves as f64;
         if inner_mm <= 0.0 {
-            return Err(bad(
+            return Err(STILL.bad(
                 "radius_mm",
                 format!(
                     "{} grooves {} µm apart do not fit inside a radius of {} mm",

@@ -19,7 +19,7 @@
 
 use crate::io::Cut;
 use crate::io::wav::Audio;
-use crate::pipeline::still::Axis;
+use crate::pipeline::still::{Axis, StillSetup};
 use crate::synth::SynthError;
 use crate::synth::noise::{Rng, hash_seq};
 use crate::synth::track::Track;
@@ -163,6 +163,22 @@ fn sound_tracks(sound: &Audio, stereo: bool, peak_um_s: f64) -> Result<[Track; 2
 }
 
 impl StillScene {
+    /// What the still decoder is told to decode groove `k` (0-based) of this still: the
+    /// still's axis, scale, speed and cut and the groove's radius, played forwards. None when
+    /// there is no groove `k`.
+    #[must_use]
+    pub fn setup(&self, k: usize) -> Option<StillSetup> {
+        let groove = self.grooves.get(k)?;
+        Some(StillSetup {
+            axis: self.cfg.axis,
+            um_per_px: self.cfg.um_per_px,
+            rpm: self.cfg.rpm,
+            radius_mm: groove.radius_mm,
+            cut: self.cfg.cut,
+            reverse: false,
+        })
+    }
+
     /// Lays out the grooves of `cfg`; with `sound`, every groove carries it (the middle groove
     /// from `start_secs`, each turn further in one revolution later), otherwise the built-in tones.
     ///
