@@ -179,7 +179,7 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
         stage: Stage::Derivatives,
         reads: &[],
         // The path decides which frames are derived.
-        knobs_changed: |a, b| a.path != b.path || a.derivatives != b.derivatives,
+        knobs_changed: |a, b| a.path != b.path || differ(&a.derivatives, &b.derivatives),
         reads_slope_reference: false,
         needed: reads_flow,
         run: run_derivatives,
@@ -187,7 +187,7 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
     StageSpec {
         stage: Stage::Flow,
         reads: &[Stage::Derivatives],
-        knobs_changed: |a, b| a.path != b.path || a.flow != b.flow,
+        knobs_changed: |a, b| a.path != b.path || differ(&a.flow, &b.flow),
         reads_slope_reference: false,
         needed: reads_flow,
         run: run_flow,
@@ -195,7 +195,9 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
     StageSpec {
         stage: Stage::Depth,
         reads: &[Stage::Flow],
-        knobs_changed: |a, b| a.path != b.path || a.depth != b.depth || a.walls != b.walls,
+        knobs_changed: |a, b| {
+            a.path != b.path || differ(&a.depth, &b.depth) || differ(&a.walls, &b.walls)
+        },
         reads_slope_reference: false,
         needed: reads_flow,
         run: run_depth,
@@ -203,7 +205,7 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
     StageSpec {
         stage: Stage::Stripes,
         reads: &[Stage::Derivatives, Stage::Flow],
-        knobs_changed: |a, b| a.path != b.path || a.hough != b.hough,
+        knobs_changed: |a, b| a.path != b.path || differ(&a.hough, &b.hough),
         reads_slope_reference: false,
         needed: reads_flow,
         run: run_stripes,
@@ -213,7 +215,7 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
         reads: &[Stage::Derivatives, Stage::Depth, Stage::Stripes],
         // The sample grid follows the sound table (output rate, native spacing).
         knobs_changed: |a, b| {
-            a.path != b.path || a.orientation != b.orientation || a.sound != b.sound
+            a.path != b.path || differ(&a.orientation, &b.orientation) || differ(&a.sound, &b.sound)
         },
         reads_slope_reference: true,
         needed: reads_flow,
@@ -233,14 +235,28 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
         // The sample grid follows the sound table (output rate, native spacing).
         knobs_changed: |a, b| {
             a.method.reads_edges() != b.method.reads_edges()
-                || a.edges != b.edges
-                || a.sound != b.sound
+                || differ(&a.edges, &b.edges)
+                || differ(&a.sound, &b.sound)
         },
         reads_slope_reference: false,
         needed: |p| p.method.reads_edges(),
         run: run_edges,
     },
 ];
+
+/// Whether two knob tables differ, a NaN knob equal to a NaN knob. An operator can leave a
+/// knob at NaN (the stage refuses it when it runs); were NaN unequal to itself, that stage
+/// would look changed on every frame and the workbench would rerun it, failing, forever.
+fn differ<T: PartialEq + serde::Serialize>(a: &T, b: &T) -> bool {
+    if a == b {
+        return false;
+    }
+    // Only tables holding a NaN reach here unchanged; TOML writes NaN as `nan`.
+    match (toml::to_string(a), toml::to_string(b)) {
+        (Ok(x), Ok(y)) => x != y,
+        _ => true,
+    }
+}
 
 fn reads_flow(p: &PipelineParams) -> bool {
     p.method.reads_flow()
@@ -498,5 +514,19 @@ mod tests {
                 spec.stage
             );
         }
+    }
+
+    #[test]
+    fn a_nan_knob_equals_itself_so_its_stage_does_not_look_changed_forever() {
+        let mut p = PipelineParams::default();
+        p.flow.lambda = f32::NAN;
+        p.orientation.sigma_start_um = f64::NAN;
+        assert_eq!(p.first_changed_stage(&p.clone()), None);
+        let mut q = p.clone();
+        q.flow.lambda = 0.5;
+        assert_eq!(p.first_changed_stage(&q), Some(Stage::Flow));
+        let mut r = p.clone();
+        r.orientation.sigma_start_um = f64::INFINITY;
+        assert_eq!(p.first_changed_stage(&r), Some(Stage::Orientation));
     }
 }
