@@ -15,7 +15,7 @@ use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::frames::{RawFrame, RawSamples, grey_from_raw};
 use groovescope::io::frames::{check_frame_bytes, decode_frame};
 use groovescope::io::still::save_grey_image;
-use groovescope::io::zarr::{SampleType, ZarrWriter};
+use groovescope::io::zarr::{SampleType, ZarrGroup, ZarrWriter};
 use groovescope::io::{Scan, ScanMeta, flo, load_group, wav};
 use groovescope::meta::Cut;
 use groovescope::pipeline::PipelineParams;
@@ -250,22 +250,20 @@ fn write_scan(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<()> {
         let len = u.int_in_range(0usize..=64)?;
         meta = String::from_utf8_lossy(u.bytes(len)?).into_owned();
     }
-    std::fs::write(dir.join("scan.toml"), meta).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    std::fs::write(dir.join("scan.toml"), meta).map_err(fail)?;
     for g in 0..groups {
         let group_dir = dir.join(format!("g{g:05}"));
-        std::fs::create_dir(&group_dir).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        std::fs::create_dir(&group_dir).map_err(fail)?;
         let frames = u.int_in_range(5usize..=9)?;
         for k in 0..frames {
             let (bytes, ext) = frame_bytes(u, width, height, g * 16 + k)?;
-            std::fs::write(group_dir.join(format!("f{k:03}.{ext}")), bytes)
-                .map_err(|_| arbitrary::Error::IncorrectFormat)?;
+            std::fs::write(group_dir.join(format!("f{k:03}.{ext}")), bytes).map_err(fail)?;
         }
     }
     if u.ratio(1u8, 3)? {
         let mut bytes = wav_bytes(u)?;
         damage(u, &mut bytes)?;
-        std::fs::write(dir.join("reference.wav"), bytes)
-            .map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        std::fs::write(dir.join("reference.wav"), bytes).map_err(fail)?;
     }
     Ok(())
 }
@@ -341,8 +339,7 @@ fn wav_bytes(u: &mut Unstructured) -> arbitrary::Result<Vec<u8>> {
         },
     };
     let mut out = Cursor::new(Vec::new());
-    let mut w =
-        hound::WavWriter::new(&mut out, spec).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    let mut w = hound::WavWriter::new(&mut out, spec).map_err(fail)?;
     let n = u.int_in_range(0usize..=64)? * usize::from(spec.channels);
     for i in 0..n {
         let r = if float {
@@ -350,10 +347,9 @@ fn wav_bytes(u: &mut Unstructured) -> arbitrary::Result<Vec<u8>> {
         } else {
             w.write_sample(((i as f32 * 0.1).sin() * 100.0) as i32)
         };
-        r.map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        r.map_err(fail)?;
     }
-    w.finalize()
-        .map_err(|_| arbitrary::Error::IncorrectFormat)?;
+    w.finalize().map_err(fail)?;
     Ok(out.into_inner())
 }
 
@@ -440,14 +436,13 @@ fn write_still(
     let raw = u.ratio(1u8, 8)?;
     if !raw {
         // A configuration the generator refuses is not an input for the decoder.
-        let scene = StillScene::new(&cfg, None).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        let scene = StillScene::new(&cfg, None).map_err(fail)?;
         let img = render_still(&scene).image;
-        save_grey_image(&img, &path, sixteen, false)
-            .map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        save_grey_image(&img, &path, sixteen, false).map_err(fail)?;
         if u.ratio(1u8, 8)? {
-            let mut bytes = std::fs::read(&path).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+            let mut bytes = std::fs::read(&path).map_err(fail)?;
             damage(u, &mut bytes)?;
-            std::fs::write(&path, bytes).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+            std::fs::write(&path, bytes).map_err(fail)?;
         }
     }
     // The decoder is told the truth, or a wrong axis, scale, speed or groove.
@@ -481,7 +476,7 @@ fn write_still(
     };
     if raw {
         let len = u.len();
-        std::fs::write(&path, u.bytes(len)?).map_err(|_| arbitrary::Error::IncorrectFormat)?;
+        std::fs::write(&path, u.bytes(len)?).map_err(fail)?;
     }
     Ok((path, setup, groove))
 }
@@ -555,6 +550,18 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
         [camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n\
         [motion]\nframe_step_um = 0.78\ngroup_step_um = 8.0\n";
     writer.finish(scan_toml).map_err(fail)?;
+    // The chunk file of group `g`, as the reader names it.
+    let chunk = |g: usize| {
+        ZarrGroup {
+            store: dir.to_path_buf(),
+            group: g,
+            frames,
+            width: w,
+            height: h,
+            sample_type,
+        }
+        .chunk_path()
+    };
     let damaged = match u.int_in_range(0u8..=7)? {
         0..=2 => false,
         3 => {
@@ -573,11 +580,11 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
         }
         5 => {
             let g = u.int_in_range(0..=groups - 1)?;
-            std::fs::remove_file(chunk(dir, g)).map_err(fail)?;
+            std::fs::remove_file(chunk(g)).map_err(fail)?;
             true
         }
         _ => {
-            let path = chunk(dir, u.int_in_range(0..=groups - 1)?);
+            let path = chunk(u.int_in_range(0..=groups - 1)?);
             let mut bytes = std::fs::read(&path).map_err(fail)?;
             damage(u, &mut bytes)?;
             std::fs::write(&path, bytes).map_err(fail)?;
@@ -585,11 +592,6 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
         }
     };
     Ok((written, damaged))
-}
-
-/// The chunk file of group `g` in the store at `dir`.
-fn chunk(dir: &Path, g: usize) -> std::path::PathBuf {
-    dir.join("frames/c").join(g.to_string()).join("0/0/0")
 }
 
 /// Any failure while building an input: the input is not one this target tries.

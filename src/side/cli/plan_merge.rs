@@ -10,7 +10,7 @@ use super::{lock_outputs, make_report, refuse_existing};
 use crate::cli::{load_params, path_choice};
 use crate::engine::{GroupOutcome, GroupStream, SlopeMode, run_groups};
 use crate::io::wav::{WavBits, write_wav};
-use crate::io::{Scan, ScanMeta, write_atomic, write_json_atomic};
+use crate::io::{Scan, ScanMeta, write_json_atomic};
 use crate::pipeline::PipelineParams;
 use crate::pipeline::slope_reference::SlopeHistory;
 use crate::side::merge::merge_parts;
@@ -165,7 +165,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
     let scan = Scan::open(&args.scan)?;
     let probe = probe_secs_per_group(&scan, &params, args.keep_going, args.probe_groups)?;
     let plan = Plan::new(&scan, &params, args.keep_going, args.shards, probe)?;
-    write_atomic(&args.out, &serde_json::to_vec_pretty(&plan)?, args.force)?;
+    write_json_atomic(&args.out, &plan, args.force)?;
     println!(
         "wrote {} ({} groups in {} shards; each also runs up to {} groups before its range)",
         args.out.display(),
