@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::io::wav::{Audio, read_wav};
 use crate::io::{LoadError, Scan, ScanMeta};
-use crate::pipeline::audio_signal::{GroupSignal, StitchedSignal, read_from, resample};
+use crate::pipeline::audio_signal::{GroupSignal, SignalPack, StitchedSignal, read_from, resample};
 use crate::pipeline::eval::{Scores, evaluate};
 pub use crate::pipeline::finish::{BRIDGE_GAP_SAMPLES, bridge_short_gaps};
 use crate::pipeline::finish::{ClipSignals, FusionReport, finish_method_clip};
@@ -207,11 +207,12 @@ pub fn reconstruct(
 /// The groups of a clip gathered in order: signals, report rows, warnings and timings.
 #[derive(Clone, Debug, Default)]
 pub struct ClipGroups {
-    /// The signals of the groups that produced sound, in group order.
-    pub signals: Vec<GroupSignal>,
+    /// The signals of the groups that produced sound, in group order, packed (a long run
+    /// holds them all until it is finished).
+    pub signals: SignalPack,
     /// The edge stage's border tracks of those groups, in group order (methods that read the
-    /// edges).
-    pub borders: Vec<GroupSignal>,
+    /// edges), packed.
+    pub borders: SignalPack,
     /// Report rows in group order.
     pub reports: Vec<GroupReport>,
     /// Per-group warnings (failed groups), in group order.
@@ -229,7 +230,8 @@ impl ClipGroups {
     #[must_use]
     pub fn with_capacity(groups: usize) -> Self {
         Self {
-            signals: Vec::with_capacity(groups),
+            signals: SignalPack::with_capacity(groups),
+            borders: SignalPack::with_capacity(groups),
             reports: Vec::with_capacity(groups),
             stage_secs: vec![0.0; Stage::ALL.len()],
             ..Self::default()
@@ -250,10 +252,10 @@ impl ClipGroups {
             self.reports.push(report);
         }
         if let Some(sig) = outcome.signal {
-            self.signals.push(Arc::unwrap_or_clone(sig));
+            self.signals.push(&sig);
         }
         if let Some(b) = outcome.borders {
-            self.borders.push(Arc::unwrap_or_clone(b));
+            self.borders.push(&b);
         }
     }
 }
@@ -310,8 +312,8 @@ pub fn finish_reconstruction(
     }
     let finished = finish_method_clip(
         ClipSignals {
-            flow: &signals,
-            borders: &borders,
+            flow: signals,
+            borders,
         },
         meta,
         params,

@@ -13,7 +13,7 @@
 
 use serde::Serialize;
 
-use super::audio_signal::{GroupSignal, StitchedSignal, resample, stitch};
+use super::audio_signal::{GroupSignals, SignalPack, StitchedSignal, resample, stitch};
 use super::dsp::{DcBlockPhase, apply_dsp_with};
 use super::edges::decode_border_signal;
 use super::fusion::{FusionBlock, GroupFusion, fuse};
@@ -49,21 +49,22 @@ pub struct FusionReport {
     pub blocks: Vec<FusionBlock>,
 }
 
-/// A clip's group signals as the method needs them, in group order.
-#[derive(Clone, Copy, Debug)]
-pub struct ClipSignals<'a> {
+/// A clip's group signals as the method needs them, in group order. Finishing takes them
+/// over, so each is freed as soon as it has been stitched.
+#[derive(Clone, Debug, Default)]
+pub struct ClipSignals {
     /// The flow method's velocity per group (read by `flow` and `fused`).
-    pub flow: &'a [GroupSignal],
+    pub flow: SignalPack,
     /// The edge stage's border tracks per group ([`super::edges::Edges::border_signal`]; read
     /// by `edges` and `fused`).
-    pub borders: &'a [GroupSignal],
+    pub borders: SignalPack,
 }
 
 /// Groove speed (mm/s) at each sample of `grid` from the groups' speeds at their middles,
 /// linearly between them and constant beyond the ends.
-fn groove_speed_along(groups: &[GroupSignal], grid: &StitchedSignal) -> Vec<f64> {
+fn groove_speed_along<S: GroupSignals + ?Sized>(groups: &S, grid: &StitchedSignal) -> Vec<f64> {
     let mids: Vec<(f64, f64)> = groups
-        .iter()
+        .views()
         .filter_map(|g| {
             let (a, b) = (g.positions_um.first()?, g.positions_um.last()?);
             Some((0.5 * (a + b), g.groove_speed_mm_s))
@@ -89,8 +90,8 @@ fn groove_speed_along(groups: &[GroupSignal], grid: &StitchedSignal) -> Vec<f64>
 /// differentiated, and scaled by the groove speed at each sample. With it, on the same grid,
 /// each channel's displacement noise in velocity units (`σ_d·Vt·sin α/Δ`, mm/s per radian per
 /// sample: the edge noise power at ω is its square times ω²; NaN where unknown).
-fn edge_velocity(
-    borders: &[GroupSignal],
+fn edge_velocity<S: GroupSignals + ?Sized>(
+    borders: &S,
     spacing_um: f64,
     meta: &ScanMeta,
     params: &PipelineParams,
@@ -146,21 +147,30 @@ fn edge_velocity(
 /// [`StageError`] when the signals the method reads are missing or do not stitch, or the
 /// resampling or DSP fails.
 pub fn finish_method_clip(
-    signals: ClipSignals<'_>,
+    signals: ClipSignals,
     meta: &ScanMeta,
     params: &PipelineParams,
 ) -> Result<FinishedClip, StageError> {
     let spacing_um = super::sampling::native_spacing_um(meta, &params.sound);
     match params.method {
-        Method::Flow => finish_clip(signals.flow, spacing_um, params),
+        Method::Flow => finish_clip(&signals.flow, spacing_um, params),
         Method::Edges => {
-            let (velocity, _) = edge_velocity(signals.borders, spacing_um, meta, params)?;
+            let (velocity, _) = edge_velocity(&signals.borders, spacing_um, meta, params)?;
             finish_stitched(velocity, params, DcBlockPhase::ZeroPhase)
         }
         Method::Fused => {
-            let (velocity, noise) = edge_velocity(signals.borders, spacing_um, meta, params)?;
-            let flow = stitch(signals.flow, spacing_um)?;
-            let fused = fuse(&flow, &velocity, Some(&noise), meta, &params.fusion)?;
+            let ClipSignals { flow, borders } = signals;
+            let (velocity, noise) = edge_velocity(&borders, spacing_um, meta, params)?;
+            drop(borders);
+            let flow_velocity = stitch(&flow, spacing_um)?;
+            drop(flow);
+            let fused = fuse(
+                &flow_velocity,
+                &velocity,
+                Some(&noise),
+                meta,
+                &params.fusion,
+            )?;
             let mut clip = finish_stitched(fused.signal, params, DcBlockPhase::ZeroPhase)?;
             clip.fusion = Some(FusionReport {
                 groups: fused.groups,
@@ -179,8 +189,8 @@ pub fn finish_method_clip(
 ///
 /// # Errors
 /// [`StageError`] when stitching, resampling or the DSP chain fails (no signals, bad params).
-pub fn finish_clip(
-    signals: &[GroupSignal],
+pub fn finish_clip<S: GroupSignals + ?Sized>(
+    signals: &S,
     spacing_um: f64,
     params: &PipelineParams,
 ) -> Result<FinishedClip, StageError> {
@@ -289,6 +299,7 @@ pub fn bridge_short_gaps(signal: &mut StitchedSignal) -> usize {
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
+    use crate::pipeline::audio_signal::GroupSignal;
 
     fn stitched(values: Vec<f32>, gaps: Vec<std::ops::Range<usize>>) -> StitchedSignal {
         StitchedSignal {
@@ -341,6 +352,6 @@ mod tests {
         let peak = clip.channels[0].iter().fold(0.0f32, |m, v| m.max(v.abs()));
         assert!((peak - 0.5).abs() < 1e-6, "{peak}");
         assert!(clip.stitched.gaps.is_empty());
-        assert!(finish_clip(&[], spacing_um, &params).is_err());
+        assert!(finish_clip(&Vec::new(), spacing_um, &params).is_err());
     }
 }

@@ -98,11 +98,12 @@ pub struct RangeRun<'a> {
     pub force: bool,
 }
 
-/// What a journaled run gave.
+/// What a journaled run gave (its groups went to the caller's sink as they finished).
 #[derive(Debug)]
 pub struct RangeResult {
-    /// Every group of the range, in order (those read back from the journal first).
-    pub groups: Vec<GroupOutcome>,
+    /// Groups of the range handed to the sink, in order (those read back from the journal
+    /// first).
+    pub groups: usize,
     /// Groups read back from the journal.
     pub resumed: usize,
     /// Groups before the range run for the slope history (0 when resumed past that point).
@@ -129,8 +130,9 @@ pub enum RunEvent<'a> {
     },
 }
 
-/// Runs `run`, journaling every finished group; with `resume` it continues a journal left by
-/// the same run (and refuses one from another).
+/// Runs `run`, journaling every finished group and handing it to `sink` in group order (the
+/// journal's groups first), so the caller keeps only what it needs of each; with `resume` it
+/// continues a journal left by the same run (and refuses one from another).
 ///
 /// # Errors
 /// [`SideError`]: a journal there without `--resume` or `--force`, a journal from another
@@ -138,6 +140,7 @@ pub enum RunEvent<'a> {
 pub fn run_range(
     run: &RangeRun<'_>,
     on_event: &mut dyn FnMut(RunEvent<'_>),
+    sink: &mut dyn FnMut(GroupOutcome),
     cancel: &AtomicBool,
 ) -> Result<RangeResult, SideError> {
     run.params.validate().map_err(EngineError::from)?;
@@ -154,15 +157,17 @@ pub fn run_range(
         (Journal::create(run.journal, &run.identity)?, Vec::new())
     };
     let mut seed = None;
-    let mut groups: Vec<GroupOutcome> = Vec::with_capacity(run.range.len());
+    let mut resumed_groups: Vec<GroupOutcome> = Vec::new();
     for record in records {
         match record {
-            Record::Seed(h) if groups.is_empty() => seed = Some(h),
-            Record::Group(g) if g.group == run.range.start + groups.len() => groups.push(g),
+            Record::Seed(h) if resumed_groups.is_empty() => seed = Some(h),
+            Record::Group(g) if g.group == run.range.start + resumed_groups.len() => {
+                resumed_groups.push(g);
+            }
             _ => break,
         }
     }
-    let resumed = groups.len();
+    let resumed = resumed_groups.len();
     if resumed > 0 || seed.is_some() {
         on_event(RunEvent::Resumed(resumed));
     }
@@ -181,9 +186,11 @@ pub fn run_range(
     } else {
         SlopeHistory::default()
     };
-    for g in &groups {
+    for g in resumed_groups {
         slopes.push(&g.slopes);
+        sink(g);
     }
+    let mut done = resumed;
     let total = run.range.len();
     let next = run.range.start + resumed;
     run_groups(
@@ -205,20 +212,19 @@ pub fn run_range(
                         path: run.journal.to_path_buf(),
                     })
                 })?;
-            groups.push(outcome);
-            if let Some(o) = groups.last() {
-                on_event(RunEvent::Group {
-                    outcome: o,
-                    done: groups.len(),
-                    total,
-                });
-            }
+            done += 1;
+            on_event(RunEvent::Group {
+                outcome: &outcome,
+                done,
+                total,
+            });
+            sink(outcome);
             Ok(())
         },
     )?;
     journal.sync()?;
     Ok(RangeResult {
-        groups,
+        groups: done,
         resumed,
         context_groups,
         journal,

@@ -25,12 +25,14 @@ use super::walls::WallSide;
 use super::{StageError, check_range};
 use crate::meta::Cut;
 
+mod pack;
 mod resample;
 mod stitch;
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // tests unwrap known-good results
 mod tests;
 
+pub use pack::{GroupSignals, SignalPack, SignalView};
 pub use resample::{read_from, resample};
 pub use stitch::{StitchedSignal, stitch};
 

@@ -71,7 +71,10 @@ pub(super) fn interpolate(pos: &[f64], val: &[f32], j: usize, p: f64) -> Option<
 /// [`StageError`] when there are no groups or samples, channel counts or lengths differ, a
 /// position is NaN, or the spacing is not positive.
 #[allow(clippy::too_many_lines)] // one pass: validate, size the grid, accumulate, normalise
-pub fn stitch(groups: &[GroupSignal], spacing_um: f64) -> Result<StitchedSignal, StageError> {
+pub fn stitch<S: GroupSignals + ?Sized>(
+    groups: &S,
+    spacing_um: f64,
+) -> Result<StitchedSignal, StageError> {
     check_range(
         "sound.native_spacing_um",
         spacing_um,
@@ -82,25 +85,25 @@ pub fn stitch(groups: &[GroupSignal], spacing_um: f64) -> Result<StitchedSignal,
         stage: "stitch",
         problem,
     };
-    let Some(first) = groups.first() else {
+    let Some(first) = groups.view(0) else {
         return Err(bad("no groups".to_string()));
     };
-    let n_channels = first.channels.len();
+    let n_channels = first.channel_count();
     if n_channels == 0 {
         return Err(bad(format!("group {} has no channel", first.group)));
     }
     let (mut lo_um, mut hi_um) = (f64::INFINITY, f64::NEG_INFINITY);
     let (mut vt_sum, mut vt_count) = (0.0, 0.0);
-    for g in groups {
-        if g.channels.len() != n_channels {
+    for g in groups.views() {
+        if g.channel_count() != n_channels {
             return Err(bad(format!(
                 "group {} has {} channels, group {} has {n_channels}",
                 g.group,
-                g.channels.len(),
+                g.channel_count(),
                 first.group
             )));
         }
-        if g.channels.iter().any(|c| c.len() != g.positions_um.len()) {
+        if !g.lengths_agree() {
             return Err(bad(format!(
                 "group {}: channel and position lengths differ",
                 g.group
@@ -145,17 +148,17 @@ pub fn stitch(groups: &[GroupSignal], spacing_um: f64) -> Result<StitchedSignal,
     // Each group's cross-fade ramp: its longest overlap with another group, at least one spacing
     // and at most half its span.
     let spans: Vec<(f64, f64)> = groups
-        .iter()
+        .views()
         .map(|g| match (g.positions_um.first(), g.positions_um.last()) {
             (Some(&a), Some(&b)) => (a, b),
             _ => (f64::NAN, f64::NAN),
         })
         .collect();
-    let mut order: Vec<usize> = (0..groups.len())
+    let mut order: Vec<usize> = (0..groups.group_count())
         .filter(|&i| spans[i].0.is_finite())
         .collect();
     order.sort_by(|&a, &b| spans[a].0.total_cmp(&spans[b].0));
-    let mut overlap = vec![0.0f64; groups.len()];
+    let mut overlap = vec![0.0f64; groups.group_count()];
     for (k, &i) in order.iter().enumerate() {
         for &j in &order[k + 1..] {
             if spans[j].0 >= spans[i].1 {
@@ -178,9 +181,9 @@ pub fn stitch(groups: &[GroupSignal], spacing_um: f64) -> Result<StitchedSignal,
     for c in 0..n_channels {
         sums.fill(0.0);
         weights.fill(0.0);
-        for (gi, g) in groups.iter().enumerate() {
+        for (gi, g) in groups.views().enumerate() {
             let (a, b) = spans[gi];
-            let ch = &g.channels[c];
+            let ch = g.channel(c);
             if !a.is_finite() || g.positions_um.len() < 2 {
                 // A lone sample: it lands on the nearest grid point only if it is on one.
                 if let (Some(&p), true) = (g.positions_um.first(), g.positions_um.len() == 1) {
@@ -205,7 +208,7 @@ pub fn stitch(groups: &[GroupSignal], spacing_um: f64) -> Result<StitchedSignal,
             let k0 = ((a - lo_um - tol_um) / spacing_um).ceil().max(0.0) as usize;
             #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
             let k1 = (((b - lo_um + tol_um) / spacing_um).floor().max(0.0) as usize).min(n - 1);
-            let pos = &g.positions_um;
+            let pos = g.positions_um;
             let mut j = 0usize;
             #[allow(clippy::cast_precision_loss)] // grid indices ≤ 2^28
             for k in k0..=k1 {

@@ -10,7 +10,9 @@ use indicatif::ProgressBar;
 use serde::Serialize;
 
 use crate::cli::{ReconstructArgs, load_params, method_choice, path_choice, progress_bar};
-use crate::engine::{ClipGroups, Reconstruction, StageTimings, finish_reconstruction};
+use crate::engine::{
+    ClipGroups, GroupOutcome, Reconstruction, StageTimings, finish_reconstruction,
+};
 use crate::io::wav::write_wav;
 use crate::io::{Scan, ScanMeta, write_json_atomic};
 use crate::pipeline::PipelineParams;
@@ -274,17 +276,19 @@ pub(crate) fn refuse_existing(paths: &[&Path], force: bool) -> Result<()> {
     Ok(())
 }
 
-/// Runs `run` with the terminal progress `args` ask for; returns its result and rate.
+/// Runs `run` with the terminal progress `args` ask for, each finished group to `sink`;
+/// returns its result and rate.
 fn run_with_progress(
     run: &RangeRun<'_>,
     args: &ReconstructArgs,
+    sink: &mut dyn FnMut(GroupOutcome),
 ) -> Result<(crate::side::run::RangeResult, RunProgress)> {
     let mut progress = ProgressOut::new(run.range.len(), args);
     let cancel = AtomicBool::new(false);
-    let result = run_range(run, &mut |e| progress.event(e), &cancel);
+    let result = run_range(run, &mut |e| progress.event(e), sink, &cancel);
     match result {
         Ok(r) => {
-            let p = progress.summary(r.groups.len() - r.resumed);
+            let p = progress.summary(r.groups - r.resumed);
             Ok((r, p))
         }
         Err(e) => {
@@ -345,11 +349,10 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         force: args.force,
     };
     let started = Instant::now();
-    let (result, run_progress) = run_with_progress(&run, args)?;
-    let mut clip = ClipGroups::with_capacity(result.groups.len());
-    for g in result.groups {
-        clip.add(g);
-    }
+    // Each group goes into the clip as it finishes: the clip keeps its signals packed and
+    // drops the rest (timings summed, slope entries already in the history).
+    let mut clip = ClipGroups::with_capacity(run.range.len());
+    let (result, run_progress) = run_with_progress(&run, args, &mut |g| clip.add(g))?;
     let mut rec = finish_reconstruction(
         clip,
         &scan.meta,
@@ -492,9 +495,10 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
         resume: args.side.resume,
         force: args.force,
     };
-    let (result, mut run_progress) = run_with_progress(&run, args)?;
+    let mut groups = Vec::with_capacity(range.len());
+    let (result, mut run_progress) = run_with_progress(&run, args, &mut |g| groups.push(g))?;
     run_progress.context_groups = result.context_groups;
-    let written = write_part(&args.out, &identity, &result.groups, args.force)?;
+    let written = write_part(&args.out, &identity, &groups, args.force)?;
     let report = ShardReport {
         version: env!("CARGO_PKG_VERSION"),
         scan: &identity.scan,
@@ -503,9 +507,8 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
         shards: plan.shards.len(),
         groups: identity.groups,
         progress: run_progress.clone(),
-        load_secs: result.groups.iter().map(|g| g.load_secs).sum(),
-        warnings: result
-            .groups
+        load_secs: groups.iter().map(|g| g.load_secs).sum(),
+        warnings: groups
             .iter()
             .filter_map(|g| g.report.as_ref().and_then(|r| r.warning.clone()))
             .collect(),
