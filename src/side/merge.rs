@@ -19,19 +19,35 @@ pub struct Merged {
     pub parts: Vec<PathBuf>,
 }
 
+/// A part that passed [`read_parts`]' checks: where it is and what it belongs to (its groups
+/// are read again, one part at a time, when merged).
+#[derive(Clone, Debug)]
+pub struct CheckedPart {
+    /// The part as given.
+    pub path: PathBuf,
+    /// Its header.
+    pub identity: RunIdentity,
+}
+
 /// Reads every part and checks that together they are all the shards of one plan: one scan,
-/// one plan, one set of params, each shard once.
+/// one plan, one set of params, each shard once. Each part is read whole and checked (its
+/// checksum, every group record), then only its header is kept, so a side's parts are never
+/// all in memory at once. Returns them in shard order.
 ///
 /// # Errors
 /// [`SideError::Refused`] naming the part: truncated, from another scan, another plan, other
 /// params, a duplicated shard; or naming the shard that is missing.
-pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<Part>, SideError> {
+pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
     let Some(first_path) = paths.first() else {
         return Err(SideError::refused("no parts given", "."));
     };
-    let mut parts: Vec<Part> = Vec::with_capacity(paths.len());
+    let mut parts: Vec<CheckedPart> = Vec::with_capacity(paths.len());
     for path in paths {
-        let part = read_part(path)?;
+        let Part { identity, .. } = read_part(path)?;
+        let part = CheckedPart {
+            path: path.clone(),
+            identity,
+        };
         let Some(shard) = part.identity.shard.clone() else {
             return Err(SideError::refused(
                 "not a shard's part (no plan in its header)",
@@ -137,7 +153,14 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged, SideError> {
     let reference = Some(scan_dir.join("reference.wav")).filter(|p| p.is_file());
     let mut clip = ClipGroups::with_capacity(identity.scan_groups);
     let part_paths: Vec<PathBuf> = parts.iter().map(|p| p.path.clone()).collect();
-    for part in parts {
+    for checked in parts {
+        let part = read_part(&checked.path)?;
+        if part.identity.difference(&checked.identity).is_some() {
+            return Err(SideError::refused(
+                "changed while the parts were merged",
+                &checked.path,
+            ));
+        }
         for g in part.groups {
             clip.add(g);
         }

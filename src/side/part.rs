@@ -100,17 +100,14 @@ pub fn read_part(path: &Path) -> Result<Part, SideError> {
     let mut end = None;
     let mut start_of_end = 0;
     let mut prev_end = bytes.len().min(valid);
-    for (i, (record, end_at)) in records.iter().enumerate() {
+    let mut record_end = 0;
+    for (record, end_at) in records {
         match record {
-            Record::Group(g) if end.is_none() => groups.push(g.clone()),
+            Record::Group(g) if end.is_none() => groups.push(g),
             Record::End { groups, file_crc } if end.is_none() => {
-                end = Some((*groups, *file_crc));
-                start_of_end = if i == 0 {
-                    0
-                } else {
-                    records.get(i - 1).map_or(0, |r| r.1)
-                };
-                prev_end = *end_at;
+                end = Some((groups, file_crc));
+                start_of_end = record_end;
+                prev_end = end_at;
             }
             _ => {
                 return Err(SideError::refused(
@@ -119,6 +116,7 @@ pub fn read_part(path: &Path) -> Result<Part, SideError> {
                 ));
             }
         }
+        record_end = end_at;
     }
     let truncated = |what: String| {
         SideError::refused(
