@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::part::{Part, read_part};
+use super::part::{read_part, read_part_header};
 use super::{RunIdentity, SideError};
 use crate::engine::{ClipGroups, Reconstruction, finish_reconstruction};
 use crate::io::ScanMeta;
@@ -19,8 +19,8 @@ pub struct Merged {
     pub parts: Vec<PathBuf>,
 }
 
-/// A part that passed [`read_parts`]' checks: where it is and what it belongs to (its groups
-/// are read again, one part at a time, when merged).
+/// A part whose header passed [`read_parts`]' checks: where it is and what it belongs to
+/// (its groups are read and checked, one part at a time, when merged).
 #[derive(Clone, Debug)]
 pub struct CheckedPart {
     /// The part as given.
@@ -30,23 +30,22 @@ pub struct CheckedPart {
 }
 
 /// Reads every part and checks that together they are all the shards of one plan: one scan,
-/// one plan, one set of params, each shard once. Each part is read whole and checked (its
-/// checksum, every group record), then only its header is kept, so a side's parts are never
-/// all in memory at once. Returns them in shard order.
+/// one plan, one set of params, each shard once. Only the headers are read here;
+/// [`merge_parts`] reads each part whole (checksum, every group record) as it adds it, so a
+/// side's parts are read once and never all in memory at once. Returns them in shard order.
 ///
 /// # Errors
-/// [`SideError::Refused`] naming the part: truncated, from another scan, another plan, other
-/// params, a duplicated shard; or naming the shard that is missing.
+/// [`SideError::Refused`] naming the part: not a part, a damaged header, from another scan,
+/// another plan, other params, a duplicated shard; or naming the shard that is missing.
 pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
     let Some(first_path) = paths.first() else {
         return Err(SideError::refused("no parts given", "."));
     };
     let mut parts: Vec<CheckedPart> = Vec::with_capacity(paths.len());
     for path in paths {
-        let Part { identity, .. } = read_part(path)?;
         let part = CheckedPart {
             path: path.clone(),
-            identity,
+            identity: read_part_header(path)?,
         };
         let Some(shard) = part.identity.shard.clone() else {
             return Err(SideError::refused(
@@ -134,12 +133,13 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
     Ok(parts)
 }
 
-/// Merges checked parts ([`read_parts`]) into the side's reconstruction: their groups in order
-/// through [`finish_reconstruction`], scored against the scan's `reference.wav` when the scan
-/// named in the parts is still there.
+/// Merges parts whose headers agree ([`read_parts`]) into the side's reconstruction: each
+/// part read and checked whole in shard order, its groups through [`finish_reconstruction`],
+/// scored against the scan's `reference.wav` when the scan named in the parts is still there.
 ///
 /// # Errors
-/// [`SideError`] from the checks, or when no group produced sound.
+/// [`SideError`] from the checks (a truncated part, one whose header changed since it was
+/// read), or when no group produced sound.
 pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged, SideError> {
     let parts = read_parts(paths)?;
     let Some(first) = parts.first() else {

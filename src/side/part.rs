@@ -5,6 +5,7 @@
 //! people). `part.gsp` is written atomically; a part without its end record, with records
 //! missing, or whose checksum fails is truncated and refused by merge.
 
+use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use super::journal::read_record_file;
@@ -79,19 +80,54 @@ pub fn write_part(
     Ok(path)
 }
 
+/// The part file of `path` (see [`part_file`]), refused when there is none.
+fn existing_part_file(path: &Path) -> Result<PathBuf, SideError> {
+    let file = part_file(path);
+    if file.is_file() {
+        Ok(file)
+    } else {
+        Err(SideError::refused(
+            format!("not a part: no {PART_FILE} there"),
+            path,
+        ))
+    }
+}
+
+/// Reads only a part's header (what it belongs to): its magic and first frame, not its
+/// groups, which [`read_part`] reads and checks.
+///
+/// # Errors
+/// [`SideError::Refused`] naming the part when it is missing, not a part, or its header is
+/// damaged.
+pub fn read_part_header(path: &Path) -> Result<RunIdentity, SideError> {
+    let file = existing_part_file(path)?;
+    let io_err = |e: std::io::Error| SideError::io("cannot read the part", &e, &file);
+    let mut f = std::fs::File::open(&file).map_err(io_err)?;
+    // The magic and the header frame's length, then its payload and checksum.
+    let mut head = Vec::new();
+    (&mut f)
+        .take(PART_MAGIC.len() as u64 + 4)
+        .read_to_end(&mut head)
+        .map_err(io_err)?;
+    if let Some(len) = head
+        .get(PART_MAGIC.len()..)
+        .and_then(|b| <[u8; 4]>::try_from(b).ok())
+    {
+        f.take(u64::from(u32::from_le_bytes(len)) + 4)
+            .read_to_end(&mut head)
+            .map_err(io_err)?;
+    }
+    let (identity, _, _) = read_record_file(&head, PART_MAGIC, "part", &file)?;
+    Ok(identity)
+}
+
 /// Reads and checks a part (a folder or its `part.gsp`).
 ///
 /// # Errors
 /// [`SideError::Refused`] naming the part when it is missing, not a part, or truncated
 /// (no end record, a group record missing, a checksum that fails).
 pub fn read_part(path: &Path) -> Result<Part, SideError> {
-    let file = part_file(path);
-    if !file.is_file() {
-        return Err(SideError::refused(
-            format!("not a part: no {PART_FILE} there"),
-            path,
-        ));
-    }
+    let file = existing_part_file(path)?;
     let bytes =
         std::fs::read(&file).map_err(|e| SideError::io("cannot read the part", &e, &file))?;
     let (identity, records, valid) = read_record_file(&bytes, PART_MAGIC, "part", &file)?;

@@ -97,30 +97,13 @@ pub trait GroupSignals {
     }
 }
 
-impl GroupSignals for [GroupSignal] {
+/// A slice, array or `Vec` of [`GroupSignal`]s.
+impl<T: AsRef<[GroupSignal]> + ?Sized> GroupSignals for T {
     fn group_count(&self) -> usize {
-        self.len()
+        self.as_ref().len()
     }
     fn view(&self, i: usize) -> Option<SignalView<'_>> {
-        self.get(i).map(SignalView::from)
-    }
-}
-
-impl<const N: usize> GroupSignals for [GroupSignal; N] {
-    fn group_count(&self) -> usize {
-        N
-    }
-    fn view(&self, i: usize) -> Option<SignalView<'_>> {
-        self.get(i).map(SignalView::from)
-    }
-}
-
-impl GroupSignals for Vec<GroupSignal> {
-    fn group_count(&self) -> usize {
-        self.len()
-    }
-    fn view(&self, i: usize) -> Option<SignalView<'_>> {
-        self.get(i).map(SignalView::from)
+        self.as_ref().get(i).map(SignalView::from)
     }
 }
 
