@@ -36,11 +36,13 @@ fn edges_and_fused_read_a_lateral_tone_better_than_flow() {
     let scan = dir.path().join("tone");
     render_tone("1 kHz", 1000.0, &cfg, &scan).unwrap();
     let m = scores(&scan, &cfg);
-    // Measured: flow 3.7 dB, edges 12.8 dB, fused 13.5 dB.
-    assert!(m.edges.snr_db > 10.0, "edges SNR {:.1} dB", m.edges.snr_db);
+    // Measured: flow 3.8 dB, edges 17.5 dB, fused 15.8 dB (with each sample's own border
+    // weights the edges read 12.9 dB and fused beat them at 13.6 dB).
+    assert!(m.edges.snr_db > 15.0, "edges SNR {:.1} dB", m.edges.snr_db);
     assert!(m.edges.snr_db > m.flow.snr_db + 5.0);
+    assert!(m.fused.snr_db > m.flow.snr_db + 5.0);
     assert!(
-        m.fused.snr_db > m.edges.snr_db,
+        m.fused.snr_db > m.edges.snr_db - 2.5,
         "fused {:.1} dB, edges {:.1} dB",
         m.fused.snr_db,
         m.edges.snr_db
@@ -48,7 +50,7 @@ fn edges_and_fused_read_a_lateral_tone_better_than_flow() {
 }
 
 #[test]
-fn fused_beats_both_on_a_wall_with_flakes_out() {
+fn edges_and_fused_hold_a_wall_with_flakes_out() {
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = small_lateral(6);
     // The upper 60% of the right wall flaked away over a third of the scan.
@@ -62,8 +64,12 @@ fn fused_beats_both_on_a_wall_with_flakes_out() {
     let scan = dir.path().join("flaked");
     render_tone("flaked 1 kHz", 1000.0, &cfg, &scan).unwrap();
     let m = scores(&scan, &cfg);
+    // Measured: flow 3.6 dB, edges 16.5 dB, fused 15.1 dB. Fused beat both here (8.9 against
+    // 7.5 dB) until the border weights followed stretches: the edges gained 9 dB and now win
+    // (docs/ACCURACY.md).
+    assert!(m.edges.snr_db > 14.0, "edges SNR {:.1} dB", m.edges.snr_db);
     assert!(
-        m.fused.snr_db > m.edges.snr_db && m.fused.snr_db > m.flow.snr_db,
+        m.fused.snr_db > m.flow.snr_db + 5.0 && m.fused.snr_db > m.edges.snr_db - 2.5,
         "fused {:.1} dB, edges {:.1} dB, flow {:.1} dB",
         m.fused.snr_db,
         m.edges.snr_db,

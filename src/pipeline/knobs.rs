@@ -147,6 +147,8 @@ knob_docs! {
         => "floor of a border's standard error when weighting the borders (µm); default 0.02",
     "edges.max_bridge_samples"
         => "longest run of missing samples bridged by interpolation; default 3",
+    "edges.weight_window_samples"
+        => "samples over which a border's squared standard error is averaged (geometric mean) into its weight when the borders are combined, so the mix of borders stays steady; 0 or 1 = each sample its own; default 32",
     "edges.refine"
         => "refine each border with one smooth curve over the group (edges::refine); default true",
     "edges.hard_width_px"

@@ -140,6 +140,8 @@ pub struct EdgeParams {
     pub border_floor_um: f64,
     #[doc = knob!("edges.max_bridge_samples")]
     pub max_bridge_samples: usize,
+    #[doc = knob!("edges.weight_window_samples")]
+    pub weight_window_samples: usize,
     #[doc = knob!("edges.refine")]
     pub refine: bool,
     #[doc = knob!("edges.hard_width_px")]
@@ -168,6 +170,7 @@ impl Default for EdgeParams {
             border_sigma_um: 0.3,
             border_floor_um: 0.02,
             max_bridge_samples: 3,
+            weight_window_samples: 32,
             refine: true,
             hard_width_px: 0.45,
             crossing_sigma_px: 0.05,
@@ -574,6 +577,7 @@ pub fn detect_edges(
             sigma_um: params.border_sigma_um,
             floor_um: params.border_floor_um,
             max_bridge: params.max_bridge_samples,
+            weight_window: params.weight_window_samples,
         },
     );
     for (track, w) in borders.iter_mut().zip(combined.border_weights.iter()) {

@@ -8,12 +8,19 @@
 //! bottom, right land) — a deeper groove widens at the land, while the bottom corners move with
 //! `d` alone. A lateral cut has `e = 0`. Each sample solves for `d` (and `e`) by weighted least
 //! squares over its borders (weights `1/se²`, the standard error floored at
-//! `border_floor_um`), reweighted by the Lorentzian `1/(1 + r²/(2σ²))` of each border's residual
+//! `border_floor_um`; with `weight_window_samples` > 1, `se²` is its geometric mean over that
+//! many samples around, see below), reweighted by the Lorentzian `1/(1 + r²/(2σ²))` of each border's residual
 //! (σ = `border_sigma_um`) from a median start; the constants are the weighted means of
 //! `y_β − d − k_β·e`, and the two steps alternate `ROUNDS` times. The constants' common
 //! offset is fixed so that the lands (else the bottom corners) are symmetric about `d`, so `d`
 //! is the groove's centre line; `e`'s offset (which the tracks cannot tell from the lands'
 //! constants) so that its median is zero.
+//!
+//! Each border's fit reads texture fixed to the record, so its per-sample standard error
+//! scatters around the border's true level. Weighting every sample by its own `1/se²` lets the
+//! mix of borders jump from sample to sample, and the borders' different texture offsets turn
+//! those jumps into broadband noise in `d`; a stretch's geometric mean keeps the mix steady
+//! while still following a border that goes bad (flakes, blur) over a stretch.
 //!
 //! The left wall's displacement is `d − e` and the right wall's `d + e` (each wall's border
 //! at the land moves by that). Where a wall's sample has no estimate it is a gap; gaps of at
@@ -46,6 +53,39 @@ pub struct CombineParams {
     pub floor_um: f64,
     /// Longest gap bridged by interpolation (samples).
     pub max_bridge: usize,
+    /// Samples over which a border's squared standard error is averaged (geometrically) into
+    /// its weight; 0 or 1 weighs each sample by its own.
+    pub weight_window: usize,
+}
+
+/// Each border's weight `1/se²` per sample (None where the border is not seen), `se` floored
+/// at `floor` and, with `window` > 1, `se²` the geometric mean of the floored `se²` of the
+/// seen samples within `window/2` on each side.
+fn border_weights(y: &[f64], se: &[f64], n: usize, floor: f64, window: usize) -> Vec<Option<f64>> {
+    let var = |j: usize| -> Option<f64> {
+        let (yv, sv) = (*y.get(j)?, *se.get(j)?);
+        (yv.is_finite() && sv.is_finite()).then(|| sv.max(floor).powi(2))
+    };
+    if window <= 1 {
+        return (0..n).map(|j| var(j).map(|v| 1.0 / v)).collect();
+    }
+    let logs: Vec<Option<f64>> = (0..n).map(|j| var(j).map(f64::ln)).collect();
+    // Prefix sums of the logs and of the count of seen samples.
+    let mut sum = vec![0.0; n + 1];
+    let mut count = vec![0usize; n + 1];
+    for (j, l) in logs.iter().enumerate() {
+        sum[j + 1] = sum[j] + l.unwrap_or(0.0);
+        count[j + 1] = count[j] + usize::from(l.is_some());
+    }
+    let half = window / 2;
+    (0..n)
+        .map(|j| {
+            logs[j]?;
+            let (lo, hi) = (j.saturating_sub(half), j.saturating_add(half + 1).min(n));
+            let k = count[hi] - count[lo];
+            (k > 0).then(|| (-(sum[hi] - sum[lo]) / k as f64).exp())
+        })
+        .collect()
 }
 
 /// The borders of a track combined.
@@ -152,10 +192,9 @@ fn solve_sample(
 pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams) -> Combined {
     let n = y.iter().map(Vec::len).min().unwrap_or(0);
     let lateral = p.cut == Cut::Lateral;
-    let weight = |b: usize, j: usize| -> Option<f64> {
-        let (yv, sv) = (*y[b].get(j)?, *se[b].get(j)?);
-        (yv.is_finite() && sv.is_finite()).then(|| 1.0 / sv.max(p.floor_um).powi(2))
-    };
+    let weights: [Vec<Option<f64>>; 4] =
+        std::array::from_fn(|b| border_weights(&y[b], &se[b], n, p.floor_um, p.weight_window));
+    let weight = |b: usize, j: usize| -> Option<f64> { weights[b].get(j).copied().flatten() };
     let mut c: [f64; 4] =
         std::array::from_fn(|b| finite_median(y[b][..n].to_vec()).unwrap_or(f64::NAN));
     let mut d = vec![f64::NAN; n];
@@ -325,6 +364,7 @@ mod tests {
             sigma_um: 0.5,
             floor_um: 0.01,
             max_bridge: 3,
+            weight_window: 0,
         }
     }
 
@@ -395,6 +435,50 @@ mod tests {
             }
         }
         assert!(crate::pipeline::median(c.e_um.clone()).unwrap().abs() < 1e-9);
+    }
+
+    #[test]
+    fn stretch_weights_keep_the_mix_steady_where_standard_errors_scatter() {
+        // Four borders with the same true noise (0.1 µm) whose fits' standard errors scatter
+        // by a factor of up to 4 from sample to sample, independently of their errors: per-
+        // sample weights then mix the borders unevenly, a stretch's weights do not.
+        let n = 400;
+        let mut state = 12_345u64;
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let d = |j: usize| 4.0 * (j as f64 * 0.05).sin();
+        let c = [-90.0, -20.0, 20.0, 90.0];
+        let mut y: [Vec<f64>; 4] = Default::default();
+        let mut se: [Vec<f64>; 4] = Default::default();
+        for b in 0..4 {
+            for j in 0..n {
+                // Sum of four uniforms: near-normal noise of σ 0.1 µm.
+                let z = (0..4).map(|_| uniform() - 0.5).sum::<f64>() * 0.1 * 3f64.sqrt();
+                y[b].push(c[b] + d(j) + z);
+                se[b].push(0.1 * 4f64.powf(2.0 * uniform() - 1.0));
+            }
+        }
+        let rms_error = |window: usize| {
+            let p = CombineParams {
+                weight_window: window,
+                ..params(Cut::Lateral)
+            };
+            let comb = combine_borders(&y, &se, &p);
+            let err: Vec<f64> = (0..n).map(|j| comb.d_um[j] - d(j)).collect();
+            let mean = err.iter().sum::<f64>() / n as f64;
+            (err.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / n as f64).sqrt()
+        };
+        let (own, stretch) = (rms_error(0), rms_error(32));
+        // Equal weights would give 0.1/√4 = 0.05 µm.
+        assert!(stretch < 0.058, "stretch weights: {stretch:.4} µm");
+        assert!(
+            own > 1.15 * stretch,
+            "own {own:.4} µm, stretch {stretch:.4} µm"
+        );
     }
 
     #[test]

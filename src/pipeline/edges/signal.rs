@@ -170,6 +170,7 @@ pub fn decode_border_signal(
             sigma_um: params.border_sigma_um,
             floor_um: params.border_floor_um,
             max_bridge: params.max_bridge_samples,
+            weight_window: params.weight_window_samples,
         },
     );
     let alpha = params.wall_angle_deg.to_radians();

@@ -196,6 +196,12 @@ pub fn fit_noise(
             *w = lorentzian_weight(p / m - 1.0, REL_SIGMA) / (m * m);
         }
     }
+    // With the edge level known, a fit that leaves the flow no noise at all says the difference
+    // is smaller than the edge noise alone would make it: the fits' standard errors overstate
+    // it here, and this block cannot split the two.
+    if known.is_some() && model.flow <= 0.0 && model.flow_gain <= 0.0 {
+        return None;
+    }
     Some(model)
 }
 
