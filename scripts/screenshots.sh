@@ -2,7 +2,8 @@
 # Runs the workbench for real in an X window under Xvfb and saves a screenshot of each view
 # into screenshots/ (the app captures itself: GROOVESCOPE_SCREENSHOT, then closes). Every view
 # is taken after the clip is reconstructed, so the health strip is filled; the waveform after a
-# second reconstruction with the "noisy" symptom preset, so it shows the A/B pair.
+# second reconstruction with the "noisy" symptom preset, so it shows the A/B pair; "ab" is the
+# waveform view under the "Compare methods" window, fused against flow.
 #
 # usage: scripts/screenshots.sh [SCAN] [DEPTH_SCAN]
 #   SCAN        scan for overview, flow, hough, stripes and waveform (default assets/demo, a
@@ -36,7 +37,7 @@ trap 'kill "$xvfb_pid" 2>/dev/null || true; rm -rf "$XDG_RUNTIME_DIR" "$GROOVESC
 export DISPLAY="$display"
 sleep 1
 status=0
-for view in ${VIEWS:-overview flow hough stripes depth waveform}; do
+for view in ${VIEWS:-overview flow hough stripes depth waveform ab}; do
     s="$scan"
     if [ "$view" = depth ]; then
         if [ -z "$depth" ]; then
@@ -47,9 +48,12 @@ for view in ${VIEWS:-overview flow hough stripes depth waveform}; do
     fi
     out="$outdir/$view.png"
     echo "== $view ($s) -> $out"
-    compare=()
-    if [ "$view" = waveform ]; then compare=(GROOVESCOPE_COMPARE=noisy); fi
-    if ! env "${compare[@]}" GROOVESCOPE_RECONSTRUCT=1 GROOVESCOPE_VIEW="$view" \
+    compare=(GROOVESCOPE_RECONSTRUCT=1 GROOVESCOPE_VIEW="$view")
+    if [ "$view" = waveform ]; then compare+=(GROOVESCOPE_COMPARE=noisy); fi
+    if [ "$view" = ab ]; then
+        compare=(GROOVESCOPE_VIEW=waveform GROOVESCOPE_COMPARE_METHODS=fused,flow)
+    fi
+    if ! env "${compare[@]}" \
         GROOVESCOPE_SCREENSHOT="$out" timeout 900 "$bin" gui "$s"; then
         echo "screenshot of $view failed" >&2
         status=1

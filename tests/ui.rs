@@ -5,6 +5,8 @@
 #![allow(clippy::unwrap_used)] // tests may panic
 
 mod gui_common;
+#[path = "ui_parts/still_ab.rs"]
+mod still_ab;
 
 use std::path::PathBuf;
 use std::sync::Arc;

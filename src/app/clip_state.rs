@@ -33,6 +33,9 @@ pub struct ClipState {
     /// The sound of the groups finished so far, arrived from the running reconstruction and
     /// not yet handed to the player.
     pub partial_arrived: Option<Result<PartialClip, String>>,
+    /// The methods A and B when the player holds a method comparison's sound instead of the
+    /// clip's (source 0: A, 1: B).
+    pub comparison_heard: Option<[crate::pipeline::Method; 2]>,
     groups: usize,
 }
 
@@ -95,6 +98,7 @@ impl ClipState {
             (old, laid)
         });
         self.clip = Some(clip);
+        self.comparison_heard = None;
         self.refresh_health();
     }
 

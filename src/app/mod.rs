@@ -4,11 +4,13 @@
 //!
 //! Threads: the UI thread only reads results and draws; `groovescope-stages` runs
 //! [`worker::Job`]s; `groovescope-reconstruct` runs the engine over all groups;
-//! `groovescope-dialog` shows file dialogs; `groovescope-import` imports a video clip (feature
+//! `groovescope-compare` reconstructs it twice for "Compare methods"; `groovescope-dialog` shows file dialogs; `groovescope-import` imports a video clip (feature
 //! `video`); the cpal callback reads a prepared buffer.
 
 mod actions;
 pub mod clip_state;
+pub mod compare;
+mod compare_actions;
 pub mod dialogs;
 pub mod export;
 pub mod files;
@@ -54,6 +56,9 @@ pub const DIALOG_ENV: &str = "GROOVESCOPE_DIALOG";
 /// Env var: once the clip is reconstructed, apply this symptom preset (`flaked wall`, `dusty`,
 /// `noisy`) and reconstruct again, so the waveform shows the two clips for A/B.
 pub const COMPARE_ENV: &str = "GROOVESCOPE_COMPARE";
+/// Env var: open "Compare methods" and run it with these two methods (`fused,flow`) as soon as
+/// the scan opens, so a screenshot shows the comparison.
+pub const COMPARE_METHODS_ENV: &str = "GROOVESCOPE_COMPARE_METHODS";
 /// Window size (points): also the size of screenshots.
 pub const WINDOW_SIZE: [f32; 2] = [1600.0, 1000.0];
 
@@ -130,6 +135,13 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
         }
         Err(_) => None,
     };
+    let compare_methods = match std::env::var(COMPARE_METHODS_ENV) {
+        Ok(text) => Some(
+            compare::parse_pair(&text)
+                .map_err(|e| anyhow::anyhow!("{COMPARE_METHODS_ENV}: {e}"))?,
+        ),
+        Err(_) => None,
+    };
     let reconstruct_on_open = std::env::var(RECONSTRUCT_ENV).is_ok_and(|v| v == "1")
         || compare.is_some()
         || (screenshot.is_some() && view == Some(View::Waveform))
@@ -144,6 +156,7 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
         hide_timings: false,
         open_dialog,
         compare,
+        compare_methods,
     };
     if let Some(p) = &screenshot
         && p.exists()

@@ -72,6 +72,13 @@ impl Workbench {
                 {
                     self.show_dialog(DialogKind::ExportWav(false));
                 }
+                if ui
+                    .add_enabled(self.nav.scan.is_some(), egui::Button::new("Compare methods…"))
+                    .on_hover_text("the clip with two methods: both waveforms, their difference, the agreement per group, listen to either")
+                    .clicked()
+                {
+                    self.open_compare();
+                }
                 if ui.button("Export view as PNG…").clicked() {
                     self.show_dialog(DialogKind::ExportPng(self.view));
                 }

@@ -161,7 +161,10 @@ impl Workbench {
     }
 
     fn screenshot_step(&mut self, ctx: &egui::Context) {
-        let ready = self.is_idle() && !self.is_reconstructing() && self.nav.scan.is_some();
+        let ready = self.is_idle()
+            && !self.is_reconstructing()
+            && self.compare_on_open.is_none()
+            && self.nav.scan.is_some();
         if ready
             && self.clip.clip.is_some()
             && let Some(preset) = self.compare.take()
@@ -237,6 +240,7 @@ impl eframe::App for Workbench {
             .default_size(330.0)
             .show(ui, |ui| self.side_panel(ui, &statuses));
         egui::CentralPanel::default().show(ui, |ui| self.central(ui, &statuses));
+        self.compare_step(&ctx);
         self.confirm_modal(&ctx);
         self.prompt_modal(&ctx);
         #[cfg(feature = "video")]
@@ -273,5 +277,6 @@ impl eframe::App for Workbench {
     fn on_exit(&mut self) {
         self.player.pause();
         self.cancel_reconstruction();
+        self.cancel_comparison();
     }
 }

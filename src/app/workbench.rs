@@ -54,6 +54,9 @@ pub struct WorkbenchOptions {
     /// Once the clip is made, apply this symptom preset and reconstruct again (scripts: see
     /// [`super::COMPARE_ENV`]).
     pub compare: Option<super::symptoms::SymptomPreset>,
+    /// Open "Compare methods" and run it with these methods once the scan is open (scripts:
+    /// see [`super::COMPARE_METHODS_ENV`]).
+    pub compare_methods: Option<[crate::pipeline::Method; 2]>,
 }
 
 /// Settings that hold for the whole session.
@@ -97,6 +100,10 @@ pub struct Workbench {
     pub(super) open_dialog: Option<DialogKind>,
     /// A second reconstruction to make for A/B ([`WorkbenchOptions::compare`]).
     pub(super) compare: Option<super::symptoms::SymptomPreset>,
+    /// The "Compare methods" window and its runs.
+    pub(super) methods: super::compare::CompareState,
+    /// A method comparison to run once the scan is open ([`WorkbenchOptions::compare_methods`]).
+    pub(super) compare_on_open: Option<[crate::pipeline::Method; 2]>,
     /// The "Import video" window and its running import.
     #[cfg(feature = "video")]
     pub(super) video_import: super::import_video::VideoImport,
@@ -149,6 +156,8 @@ impl Workbench {
             max_busy_frame: Duration::ZERO,
             open_dialog: opts.open_dialog,
             compare: opts.compare,
+            methods: super::compare::CompareState::default(),
+            compare_on_open: opts.compare_methods,
             #[cfg(feature = "video")]
             video_import: super::import_video::VideoImport::default(),
         };
@@ -267,10 +276,10 @@ impl Workbench {
         self.jobs.is_idle() && self.nav.opening.is_none()
     }
 
-    /// True while the clip reconstructs.
+    /// True while the clip reconstructs or a method comparison runs.
     #[must_use]
     pub fn is_reconstructing(&self) -> bool {
-        self.clip.is_running()
+        self.clip.is_running() || self.methods.run.is_some()
     }
 
     /// Longest UI frame (time spent in `ui`) seen while the worker was busy.
@@ -400,6 +409,10 @@ impl Workbench {
         self.clip = ClipState::for_scan(groups);
         self.player.load(PlayBuffers::default());
         self.views = ViewStates::default();
+        self.methods = super::compare::CompareState {
+            open: self.methods.open,
+            ..Default::default()
+        };
         self.files.confirm = None;
         self.files.prompt = None;
         if let Err(e) = self.files.recent.push(&dir) {
@@ -588,8 +601,10 @@ impl Workbench {
             Some(Err(e)) => self.error(format!("reconstruction: {e}")),
             None => {}
         }
+        self.poll_comparison();
         match self.clip.partial_arrived.take() {
             Some(Ok(p)) => {
+                self.clip.comparison_heard = None;
                 self.player.load(PlayBuffers {
                     rate_hz: p.audio.sample_rate_hz,
                     sources: vec![p.audio.channels],

@@ -1,5 +1,6 @@
 //! The workbench's views: each draws one stage of the current group from cached results, never computing it.
 
+pub mod compare_ui;
 pub mod depth_ui;
 pub mod flow_ui;
 pub mod frame_ui;

@@ -107,6 +107,15 @@ pub fn transport_ui(
             player.stop();
         }
         ui.separator();
+        if let Some([a, b]) = clips.comparison_heard {
+            // The player holds a method comparison (source 0: A, 1: B).
+            let mut source = player.source().min(1);
+            ui.selectable_value(&mut source, 0, format!("A: {}", a.name()));
+            ui.selectable_value(&mut source, 1, format!("B: {}", b.name()));
+            player.set_source(source);
+            ui.weak("(the method comparison; reconstruct to hear the clip again)");
+            return;
+        }
         let has_prev = clips
             .previous
             .as_ref()

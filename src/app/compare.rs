@@ -1,0 +1,428 @@
+//! "Compare methods" (A/B of decoders): the clip reconstructed with two methods one after the
+//! other on the named thread `groovescope-compare`, with progress and cancel, and what the
+//! comparison shows: B laid on A's time axis, their difference, and the agreement (correlation
+//! r and SNR of B against A) per group and over the whole clip.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+use super::health::GroupTrack;
+use super::recon::{Clip, make_clip};
+use super::tuning::ParamState;
+use crate::engine::{ReconstructOptions, reconstruct};
+use crate::io::Scan;
+use crate::pipeline::{Method, PipelineParams};
+use crate::playback::PlayBuffers;
+
+/// Every method, in the order the pickers list them.
+pub const METHODS: [Method; 3] = [Method::Fused, Method::Flow, Method::Edges];
+
+/// SNR shown for two identical signals (dB): the agreement stays a finite number.
+pub const MAX_AGREEMENT_DB: f64 = 120.0;
+
+/// The method to set against `a` by default: the other of the two best (fused and flow).
+#[must_use]
+pub fn default_partner(a: Method) -> Method {
+    match a {
+        Method::Fused => Method::Flow,
+        Method::Flow | Method::Edges => Method::Fused,
+    }
+}
+
+/// The pair named by `text` (`"fused,flow"`), as `GROOVESCOPE_COMPARE_METHODS` takes it.
+///
+/// # Errors
+/// A line naming the word that is not a method.
+pub fn parse_pair(text: &str) -> Result<[Method; 2], String> {
+    let words: Vec<&str> = text.split(',').map(str::trim).collect();
+    let [a, b] = words.as_slice() else {
+        return Err(format!(
+            "give two methods separated by a comma (e.g. fused,flow), not {text:?}"
+        ));
+    };
+    let one = |w: &str| {
+        Method::from_name(w).ok_or_else(|| {
+            format!(
+                "unknown method {w:?} (one of: {})",
+                METHODS.map(Method::name).join(", ")
+            )
+        })
+    };
+    Ok([one(a)?, one(b)?])
+}
+
+/// How well B agrees with A over a stretch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Agreement {
+    /// Group index (for the whole clip: its first group).
+    pub group: usize,
+    /// Pearson correlation of the two waveforms, in `[-1, 1]` (1 for identical signals).
+    pub r: f64,
+    /// A's energy over the energy of A − B (dB), at most [`MAX_AGREEMENT_DB`].
+    pub snr_db: f64,
+    /// Samples compared.
+    pub samples: usize,
+}
+
+/// Agreement of `b` with `a` over their common length (`group` is recorded as given).
+#[must_use]
+pub fn agreement(group: usize, a: &[f32], b: &[f32]) -> Agreement {
+    let n = a.len().min(b.len());
+    let (a, b) = (a.get(..n).unwrap_or(&[]), b.get(..n).unwrap_or(&[]));
+    if n == 0 {
+        return Agreement {
+            group,
+            r: 0.0,
+            snr_db: 0.0,
+            samples: 0,
+        };
+    }
+    let mean = |x: &[f32]| x.iter().map(|v| f64::from(*v)).sum::<f64>() / n as f64;
+    let (ma, mb) = (mean(a), mean(b));
+    let (mut sab, mut saa, mut sbb, mut energy, mut err) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        let (x, y) = (f64::from(*x), f64::from(*y));
+        let (dx, dy) = (x - ma, y - mb);
+        sab += dx * dy;
+        saa += dx * dx;
+        sbb += dy * dy;
+        energy += x * x;
+        err += (x - y) * (x - y);
+    }
+    let r = if saa > 0.0 && sbb > 0.0 {
+        (sab / (saa * sbb).sqrt()).clamp(-1.0, 1.0)
+    } else if err == 0.0 {
+        1.0 // identical (constant) signals
+    } else {
+        0.0
+    };
+    let snr_db = if err == 0.0 {
+        MAX_AGREEMENT_DB
+    } else if energy == 0.0 {
+        -MAX_AGREEMENT_DB
+    } else {
+        (10.0 * (energy / err).log10()).clamp(-MAX_AGREEMENT_DB, MAX_AGREEMENT_DB)
+    };
+    Agreement {
+        group,
+        r,
+        snr_db,
+        samples: n,
+    }
+}
+
+/// A finished comparison of two methods on the same groups.
+#[derive(Clone, Debug)]
+pub struct MethodComparison {
+    /// The methods A and B.
+    pub methods: [Method; 2],
+    /// The clip made with A.
+    pub a: Arc<Clip>,
+    /// The clip made with B.
+    pub b: Arc<Clip>,
+    /// B's sound (mono) laid on A's time axis, as long as A's.
+    pub b_on_a: Arc<Vec<f32>>,
+    /// A − B, sample by sample, on A's time axis.
+    pub difference: Vec<f32>,
+    /// The agreement of each group that made sound in A, in group order.
+    pub groups: Vec<Agreement>,
+    /// The agreement over the whole clip.
+    pub overall: Agreement,
+}
+
+impl MethodComparison {
+    /// Compares two clips of the same groups (`b` is laid on `a` by groove position).
+    ///
+    /// # Errors
+    /// When the clips cannot be laid on one axis (different sample rates).
+    pub fn new(methods: [Method; 2], a: Clip, b: Clip) -> Result<Self, String> {
+        let b_on_a = a.lay_on(&b).ok_or_else(|| {
+            format!(
+                "the two clips have different sample rates ({} and {} Hz)",
+                a.rate_hz(),
+                b.rate_hz()
+            )
+        })?;
+        let difference = a
+            .recovered
+            .iter()
+            .zip(&b_on_a)
+            .map(|(x, y)| x - y)
+            .collect();
+        let rate = f64::from(a.rate_hz());
+        let n = a.recovered.len();
+        let groups = a
+            .tracks
+            .iter()
+            .filter_map(|t| {
+                let (s, e) = a.group_span_secs(t.group)?;
+                let i0 = ((s * rate).round().max(0.0) as usize).min(n);
+                let i1 = ((e * rate).round().max(0.0) as usize).clamp(i0, n);
+                let (x, y) = (a.recovered.get(i0..i1)?, b_on_a.get(i0..i1)?);
+                (i1 > i0).then(|| agreement(t.group, x, y))
+            })
+            .collect();
+        let overall = agreement(a.groups.start, &a.recovered, &b_on_a);
+        Ok(Self {
+            methods,
+            a: Arc::new(a),
+            b: Arc::new(b),
+            b_on_a: Arc::new(b_on_a),
+            difference,
+            groups,
+            overall,
+        })
+    }
+
+    /// Sound for the player: source 0 is A, source 1 is B (both mono, on A's time axis).
+    #[must_use]
+    pub fn play_buffers(&self) -> PlayBuffers {
+        PlayBuffers {
+            rate_hz: self.a.rate_hz(),
+            sources: vec![vec![self.a.recovered.to_vec()], vec![self.b_on_a.to_vec()]],
+        }
+    }
+
+    /// The lowest group agreement (r), when any group was compared.
+    #[must_use]
+    pub fn worst_group(&self) -> Option<&Agreement> {
+        self.groups.iter().min_by(|x, y| x.r.total_cmp(&y.r))
+    }
+}
+
+/// Messages from the comparison thread.
+#[derive(Debug)]
+enum CompareEvent {
+    /// Groups finished in the pass running now (0: A, 1: B).
+    Progress {
+        pass: usize,
+        done: usize,
+    },
+    Finished(Result<Box<MethodComparison>, String>),
+}
+
+/// A comparison running in the background.
+#[derive(Debug)]
+pub struct CompareRun {
+    cancel: Arc<AtomicBool>,
+    rx: Receiver<CompareEvent>,
+    thread: Option<JoinHandle<()>>,
+    /// When it started.
+    pub started: Instant,
+    /// The methods A and B.
+    pub methods: [Method; 2],
+    /// The pass running (0: A, 1: B).
+    pub pass: usize,
+    /// Groups finished in that pass.
+    pub done: usize,
+    /// Groups per pass.
+    pub total: usize,
+}
+
+impl CompareRun {
+    /// Starts reconstructing `groups` of `scan` (None: all) with `params` (whose origin is
+    /// `param_state`) under method A, then under method B, on a named thread; `repaint` wakes the UI.
+    ///
+    /// # Errors
+    /// When the thread cannot be started.
+    pub fn start(
+        scan: Scan,
+        params: &PipelineParams,
+        methods: [Method; 2],
+        groups: Option<std::ops::Range<usize>>,
+        param_state: ParamState,
+        repaint: Box<dyn Fn() + Send + Sync>,
+    ) -> std::io::Result<Self> {
+        let cancel = Arc::new(AtomicBool::new(false));
+        let (tx, rx) = mpsc::channel();
+        let flag = cancel.clone();
+        let range = groups.clone().unwrap_or(0..scan.groups.len());
+        let total = range.end.min(scan.groups.len()).saturating_sub(range.start);
+        let base = params.clone();
+        let thread = std::thread::Builder::new()
+            .name("groovescope-compare".into())
+            .spawn(move || {
+                let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    let mut clips = Vec::with_capacity(2);
+                    for (pass, method) in methods.into_iter().enumerate() {
+                        let params = PipelineParams {
+                            method,
+                            ..base.clone()
+                        };
+                        let opts = ReconstructOptions {
+                            params: params.clone(),
+                            groups: Some(range.clone()),
+                            keep_going: true,
+                        };
+                        let mut tracks = Vec::new();
+                        let recon = reconstruct(
+                            &scan,
+                            &opts,
+                            &mut |p| {
+                                tracks.push(GroupTrack::new(
+                                    range.start + p.done.saturating_sub(1),
+                                    p.signal.as_deref(),
+                                ));
+                                let _ = tx.send(CompareEvent::Progress { pass, done: p.done });
+                                repaint();
+                            },
+                            &flag,
+                        )
+                        .map_err(|e| format!("method {}: {e}", method.name()))?;
+                        if flag.load(Ordering::Relaxed) {
+                            return Err("cancelled".to_string());
+                        }
+                        clips.push(make_clip(
+                            &scan,
+                            recon,
+                            params,
+                            param_state.clone(),
+                            range.clone(),
+                            tracks,
+                        ));
+                    }
+                    let b = clips.pop().ok_or("no clip B")?;
+                    let a = clips.pop().ok_or("no clip A")?;
+                    MethodComparison::new(methods, a, b).map(Box::new)
+                }));
+                let outcome =
+                    outcome.unwrap_or_else(|_| Err("the comparison panicked (see the log)".into()));
+                let _ = tx.send(CompareEvent::Finished(outcome));
+                repaint();
+            })?;
+        Ok(Self {
+            cancel,
+            rx,
+            thread: Some(thread),
+            started: Instant::now(),
+            methods,
+            pass: 0,
+            done: 0,
+            total,
+        })
+    }
+
+    /// Asks the run to stop after the current group.
+    pub fn cancel(&self) {
+        self.cancel.store(true, Ordering::Relaxed);
+    }
+
+    /// True once cancel was asked for.
+    #[must_use]
+    pub fn cancelling(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+
+    /// Takes the waiting progress reports; returns the outcome once the run ended.
+    pub fn poll(&mut self) -> Option<Result<Box<MethodComparison>, String>> {
+        while let Ok(ev) = self.rx.try_recv() {
+            match ev {
+                CompareEvent::Progress { pass, done } => {
+                    self.pass = pass;
+                    self.done = done;
+                }
+                CompareEvent::Finished(outcome) => {
+                    if let Some(t) = self.thread.take() {
+                        let _ = t.join();
+                    }
+                    return Some(outcome);
+                }
+            }
+        }
+        None
+    }
+
+    /// Share of both passes done, in `[0, 1]`.
+    #[must_use]
+    pub fn fraction(&self) -> f32 {
+        if self.total == 0 {
+            0.0
+        } else {
+            (self.pass * self.total + self.done) as f32 / (2 * self.total) as f32
+        }
+    }
+}
+
+impl Drop for CompareRun {
+    /// Asks the run to stop and lets the thread finish on its own (never blocks the UI).
+    fn drop(&mut self) {
+        self.cancel();
+    }
+}
+
+/// The "Compare methods" window's state for the open scan.
+#[derive(Debug, Default)]
+pub struct CompareState {
+    /// The window is shown.
+    pub open: bool,
+    /// The methods picked (None: not chosen yet; the window fills in the default pair).
+    pub methods: Option<[Method; 2]>,
+    /// The comparison running now.
+    pub run: Option<CompareRun>,
+    /// The last finished comparison.
+    pub result: Option<Arc<MethodComparison>>,
+    /// Draw the difference A − B.
+    pub hide_difference: bool,
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+
+    fn tone(n: usize, f: f64, phase: f64) -> Vec<f32> {
+        (0..n)
+            .map(|i| (std::f64::consts::TAU * f * i as f64 / 8000.0 + phase).sin() as f32)
+            .collect()
+    }
+
+    #[test]
+    fn identical_signals_agree_perfectly() {
+        let x = tone(800, 440.0, 0.0);
+        let a = agreement(3, &x, &x);
+        assert_eq!(a.group, 3);
+        assert_eq!(a.samples, 800);
+        assert!((a.r - 1.0).abs() < 1e-12, "{}", a.r);
+        assert_eq!(a.snr_db, MAX_AGREEMENT_DB);
+    }
+
+    #[test]
+    fn agreement_measures_noise_and_inversion() {
+        let x = tone(8000, 440.0, 0.0);
+        // B = A + an error 1/10 of A's RMS: 20 dB.
+        let e = tone(8000, 1234.0, 0.3);
+        let y: Vec<f32> = x.iter().zip(&e).map(|(a, b)| a + 0.1 * b).collect();
+        let a = agreement(0, &x, &y);
+        assert!((a.snr_db - 20.0).abs() < 0.2, "{}", a.snr_db);
+        assert!(a.r > 0.99 && a.r < 1.0, "{}", a.r);
+        let inv: Vec<f32> = x.iter().map(|v| -v).collect();
+        let a = agreement(0, &x, &inv);
+        assert!((a.r + 1.0).abs() < 1e-9, "{}", a.r);
+        assert!(
+            (a.snr_db - 10.0 * 0.25f64.log10()).abs() < 0.01,
+            "{}",
+            a.snr_db
+        );
+        assert_eq!(agreement(0, &[], &[]).samples, 0);
+    }
+
+    #[test]
+    fn pairs_parse_and_bad_words_say_which() {
+        assert_eq!(parse_pair("fused, flow"), Ok([Method::Fused, Method::Flow]));
+        assert_eq!(
+            parse_pair("edges,edges"),
+            Ok([Method::Edges, Method::Edges])
+        );
+        assert!(parse_pair("fused").unwrap_err().contains("two methods"));
+        assert!(
+            parse_pair("fused,wavelet")
+                .unwrap_err()
+                .contains("\"wavelet\"")
+        );
+        assert_eq!(default_partner(Method::Fused), Method::Flow);
+        assert_eq!(default_partner(Method::Flow), Method::Fused);
+    }
+}
