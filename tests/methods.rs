@@ -36,7 +36,7 @@ fn edges_and_fused_read_a_lateral_tone_better_than_flow() {
     let scan = dir.path().join("tone");
     render_tone("1 kHz", 1000.0, &cfg, &scan).unwrap();
     let m = scores(&scan, &cfg);
-    // Measured: flow 3.8 dB, edges 17.5 dB, fused 15.8 dB (with each sample's own border
+    // Measured: flow 3.8 dB, edges 17.5 dB, fused 15.6 dB (with each sample's own border
     // weights the edges read 12.9 dB and fused beat them at 13.6 dB).
     assert!(m.edges.snr_db > 15.0, "edges SNR {:.1} dB", m.edges.snr_db);
     assert!(m.edges.snr_db > m.flow.snr_db + 5.0);
@@ -80,8 +80,8 @@ fn edges_and_fused_hold_a_wall_with_flakes_out() {
 #[test]
 fn edges_and_fused_hold_a_2_khz_tone_above_30_db_on_the_papers_pixels() {
     // The paper's optics (0.39 µm pixels, 78 rpm at 115 mm) on a smaller sensor, 16 groups
-    // (≈ 3.4 ms). Measured: flow 6.7 dB, edges 33.6 dB (33.6 without the DC block; 21.9 with
-    // it settled on the plain mean), fused 33.6 dB.
+    // (≈ 3.4 ms). Measured: flow 6.7 dB, edges 35.0 dB (35.1 without the DC block), fused
+    // 35.0 dB.
     let dir = tempfile::tempdir().unwrap();
     let cfg = SynthConfig {
         width_px: 512,
