@@ -80,24 +80,17 @@ pub fn agreement(group: usize, a: &[f32], b: &[f32]) -> Agreement {
             samples: 0,
         };
     }
-    let mean = |x: &[f32]| x.iter().map(|v| f64::from(*v)).sum::<f64>() / n as f64;
-    let (ma, mb) = (mean(a), mean(b));
-    let (mut sab, mut saa, mut sbb, mut energy, mut err) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let (mut energy, mut err) = (0.0, 0.0);
     for (x, y) in a.iter().zip(b) {
         let (x, y) = (f64::from(*x), f64::from(*y));
-        let (dx, dy) = (x - ma, y - mb);
-        sab += dx * dy;
-        saa += dx * dx;
-        sbb += dy * dy;
         energy += x * x;
         err += (x - y) * (x - y);
     }
-    let r = if saa > 0.0 && sbb > 0.0 {
-        (sab / (saa * sbb).sqrt()).clamp(-1.0, 1.0)
-    } else if err == 0.0 {
-        1.0 // identical (constant) signals
+    // Identical signals agree perfectly even where r is undefined (constant or one sample).
+    let r = if err == 0.0 {
+        1.0
     } else {
-        0.0
+        crate::pipeline::eval::pearson(a, b)
     };
     let snr_db = if err == 0.0 {
         MAX_AGREEMENT_DB
