@@ -37,7 +37,7 @@ trap 'kill "$xvfb_pid" 2>/dev/null || true; rm -rf "$XDG_RUNTIME_DIR" "$GROOVESC
 export DISPLAY="$display"
 sleep 1
 status=0
-for view in ${VIEWS:-overview flow hough stripes depth waveform ab}; do
+for view in ${VIEWS:-overview flow hough stripes depth waveform ab still}; do
     s="$scan"
     if [ "$view" = depth ]; then
         if [ -z "$depth" ]; then
@@ -52,6 +52,11 @@ for view in ${VIEWS:-overview flow hough stripes depth waveform ab}; do
     if [ "$view" = waveform ]; then compare+=(GROOVESCOPE_COMPARE=noisy); fi
     if [ "$view" = ab ]; then
         compare=(GROOVESCOPE_VIEW=waveform GROOVESCOPE_COMPARE_METHODS=fused,flow)
+    fi
+    if [ "$view" = still ]; then
+        # The bundled still strip in the still window, its speech groove decoded.
+        compare=(GROOVESCOPE_VIEW=overview)
+        s=assets/demo-still/still.png
     fi
     if ! env "${compare[@]}" \
         GROOVESCOPE_SCREENSHOT="$out" timeout 900 "$bin" gui "$s"; then

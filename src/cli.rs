@@ -112,7 +112,7 @@ pub enum Command {
     ImportVideo(crate::video_cli::ImportVideoArgs),
     /// Open the workbench (optionally on a scan).
     Gui {
-        /// Scan folder to open.
+        /// Scan folder to open, or a still image (PNG or TIFF) to open in the still window.
         scan: Option<PathBuf>,
     },
 }

@@ -7,6 +7,8 @@
 mod gui_common;
 #[path = "ui_parts/still_ab.rs"]
 mod still_ab;
+#[path = "ui_parts/still_mode.rs"]
+mod still_mode;
 
 use std::path::PathBuf;
 use std::sync::Arc;

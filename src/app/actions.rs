@@ -256,8 +256,7 @@ impl Workbench {
 
     /// Opens the dialog `kind`, starting in the scan's folder with a name made from the scan.
     pub fn show_dialog(&mut self, kind: DialogKind) {
-        let start = self.nav.dir().map(Path::to_path_buf);
-        let name = super::files::suggested_name(&kind, start.as_deref(), self.path_name());
+        let (start, name) = self.dialog_start(&kind);
         let ctx = self.ctx.clone();
         if let Err(e) = self.files.dialogs.show(
             kind.clone(),
@@ -269,10 +268,26 @@ impl Workbench {
         }
     }
 
+    /// The folder a dialog for `kind` starts in and the file name it suggests: the still's
+    /// folder for still dialogs (once a still is open), else the scan's.
+    fn dialog_start(&self, kind: &DialogKind) -> (Option<PathBuf>, Option<String>) {
+        match (kind, self.still_doc()) {
+            (DialogKind::OpenStill, Some(doc)) => (doc.path.parent().map(Path::to_path_buf), None),
+            (DialogKind::ExportStillWav, Some(doc)) => (
+                doc.path.parent().map(Path::to_path_buf),
+                super::files::still_export_name(doc),
+            ),
+            _ => {
+                let start = self.nav.dir().map(Path::to_path_buf);
+                let name = super::files::suggested_name(kind, start.as_deref(), self.path_name());
+                (start, name)
+            }
+        }
+    }
+
     /// Shows the in-app path field for `kind`, saying `reason` (no native dialog opened).
     pub(super) fn offer_path_field(&mut self, kind: DialogKind, reason: String) {
-        let start = self.nav.dir().map(Path::to_path_buf);
-        let name = super::files::suggested_name(&kind, start.as_deref(), self.path_name());
+        let (start, name) = self.dialog_start(&kind);
         self.error(format!("{}: {reason}; type the path instead", kind.title()));
         self.files.prompt = Some(PathPrompt {
             text: super::files::suggested_path(start.as_deref(), name.as_deref()),
@@ -301,6 +316,8 @@ impl Workbench {
                     let _ = self.save_preset_to(&path, false);
                 }
             }
+            DialogKind::OpenStill => self.open_still(&path),
+            DialogKind::ExportStillWav => self.request_export_still(path.with_extension("wav")),
             DialogKind::ExportPng(view) => {
                 let path = path.with_extension("png");
                 if path.exists() {
@@ -337,6 +354,9 @@ impl Workbench {
                 let _ = self.save_preset_to(&path, true);
             }
             Confirm::ExportPng(path, view) => self.capture_view(path, view, true),
+            Confirm::ExportStill(path) => {
+                let _ = self.export_still_to(&path, true);
+            }
             Confirm::SwitchScan(dir) => self.open_scan_anyway(&dir),
         }
     }

@@ -24,6 +24,10 @@ pub enum DialogKind {
     SavePreset,
     /// Choose where to save a view as PNG.
     ExportPng(View),
+    /// Pick a still image to open in the still window.
+    OpenStill,
+    /// Choose where to export the still's decoded groove.
+    ExportStillWav,
     /// Pick a video clip to import.
     #[cfg(feature = "video")]
     VideoClip,
@@ -43,6 +47,8 @@ impl DialogKind {
             DialogKind::LoadPreset => "Load preset",
             DialogKind::SavePreset => "Save preset",
             DialogKind::ExportPng(_) => "Export view as PNG",
+            DialogKind::OpenStill => "Open still image",
+            DialogKind::ExportStillWav => "Export the groove as WAV",
             #[cfg(feature = "video")]
             DialogKind::VideoClip => "Import video clip",
             #[cfg(feature = "video")]
@@ -60,6 +66,7 @@ impl DialogKind {
             "load-preset" => Some(DialogKind::LoadPreset),
             "save-preset" => Some(DialogKind::SavePreset),
             "export-png" => Some(DialogKind::ExportPng(view)),
+            "open-still" => Some(DialogKind::OpenStill),
             _ => None,
         }
     }
@@ -69,7 +76,10 @@ impl DialogKind {
     pub fn saves(&self) -> bool {
         matches!(
             self,
-            DialogKind::ExportWav(_) | DialogKind::SavePreset | DialogKind::ExportPng(_)
+            DialogKind::ExportWav(_)
+                | DialogKind::SavePreset
+                | DialogKind::ExportPng(_)
+                | DialogKind::ExportStillWav
         )
     }
 
@@ -259,6 +269,10 @@ fn run_native(
         DialogKind::LoadPreset => d.add_filter("TOML preset", &["toml"]).pick_file(),
         DialogKind::SavePreset => d.add_filter("TOML preset", &["toml"]).save_file(),
         DialogKind::ExportPng(_) => d.add_filter("PNG", &["png"]).save_file(),
+        DialogKind::OpenStill => d
+            .add_filter("Still image", &["png", "tif", "tiff"])
+            .pick_file(),
+        DialogKind::ExportStillWav => d.add_filter("WAV", &["wav"]).save_file(),
         #[cfg(feature = "video")]
         DialogKind::VideoClip => d
             .add_filter("Video", &["avi", "mp4", "mkv", "mov", "m4v"])

@@ -25,6 +25,8 @@ pub enum Confirm {
     ExportPng(PathBuf, View),
     /// Open another scan although the knobs were changed since the preset (or defaults).
     SwitchScan(PathBuf),
+    /// Replace an existing WAV (and report) with the still's decoded groove.
+    ExportStill(PathBuf),
 }
 
 /// The in-app path field: what it is for, why it is shown, and the path typed so far.
@@ -76,6 +78,20 @@ pub fn suggested_name(
         DialogKind::ExportPng(v) => Some(format!("{stem}-{}.png", v.name())),
         _ => None,
     }
+}
+
+/// The file name offered for the still's decoded groove: `IMAGE-grooveN.wav`.
+#[must_use]
+pub fn still_export_name(doc: &super::still::StillDoc) -> Option<String> {
+    let stem = doc.path.file_stem()?.to_string_lossy().into_owned();
+    let run = doc.run.as_ref()?;
+    let n = run
+        .analysis
+        .grooves
+        .grooves
+        .get(run.analysis.chosen)?
+        .number;
+    Some(format!("{stem}-groove{n}.wav"))
 }
 
 /// The path the in-app field starts with: the suggested file in the scan folder, or the folder.

@@ -4,10 +4,12 @@
 //!
 //! Threads: the UI thread only reads results and draws; `groovescope-stages` runs
 //! [`worker::Job`]s; `groovescope-reconstruct` runs the engine over all groups;
-//! `groovescope-compare` reconstructs it twice for "Compare methods"; `groovescope-dialog` shows file dialogs; `groovescope-import` imports a video clip (feature
-//! `video`); the cpal callback reads a prepared buffer.
+//! `groovescope-compare` reconstructs it twice for "Compare methods"; `groovescope-still` opens
+//! and decodes a still image; `groovescope-dialog` shows file dialogs; `groovescope-import`
+//! imports a video clip (feature `video`); the cpal callback reads a prepared buffer.
 
 mod actions;
+pub mod background;
 pub mod clip_state;
 pub mod compare;
 mod compare_actions;
@@ -29,6 +31,8 @@ pub mod render;
 pub mod screenshot;
 pub mod shell;
 pub mod stages;
+pub mod still;
+mod still_actions;
 pub mod symptoms;
 pub mod textures;
 pub mod tuning;
@@ -93,6 +97,11 @@ pub fn default_scan(config_dir: Option<&Path>) -> Option<PathBuf> {
 /// # Errors
 /// When no window can be opened (no display), or a requested screenshot was not written.
 pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
+    // A still image opens in the still window, over the last scan (or the demo scan).
+    let (scan, still) = match scan {
+        Some(p) if still::is_still_image(&p) => (None, Some(p)),
+        other => (other, None),
+    };
     let config_dir = recent::config_dir();
     let screenshot = std::env::var_os(SCREENSHOT_ENV).map(PathBuf::from);
     let view = match std::env::var(VIEW_ENV) {
@@ -157,6 +166,7 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
         open_dialog,
         compare,
         compare_methods,
+        still,
     };
     if let Some(p) = &screenshot
         && p.exists()

@@ -57,6 +57,13 @@ impl Workbench {
                         }
                     }
                 });
+                if ui
+                    .button("Open still image…")
+                    .on_hover_text("a PNG or TIFF of grooves seen from above: find them, pick one, listen")
+                    .clicked()
+                {
+                    self.show_dialog(DialogKind::OpenStill);
+                }
                 ui.separator();
                 if ui.button("Load preset…").clicked() {
                     self.show_dialog(DialogKind::LoadPreset);
@@ -386,6 +393,12 @@ impl Workbench {
             Confirm::ExportPng(path, _) => {
                 ("File exists", "Replace the existing PNG?", path, "Replace")
             }
+            Confirm::ExportStill(path) => (
+                "File exists",
+                "Replace the existing WAV (and its .json report) with this groove?",
+                path,
+                "Replace",
+            ),
             Confirm::SwitchScan(path) => (
                 "Unsaved parameters",
                 "The parameters were changed since their preset (or the defaults) and are not \

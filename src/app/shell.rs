@@ -136,9 +136,11 @@ impl Workbench {
                 }
             } else if p.extension().is_some_and(|e| e == "toml") {
                 let _ = self.load_preset_from(&p);
+            } else if super::still::is_still_image(&p) {
+                self.open_still(&p);
             } else {
                 self.error(format!(
-                    "drop a scan folder or a preset .toml, not {}",
+                    "drop a scan folder, a preset .toml or a still image (PNG, TIFF), not {}",
                     p.display()
                 ));
             }
@@ -241,6 +243,7 @@ impl eframe::App for Workbench {
             .show(ui, |ui| self.side_panel(ui, &statuses));
         egui::CentralPanel::default().show(ui, |ui| self.central(ui, &statuses));
         self.compare_step(&ctx);
+        self.still_step(&ctx);
         self.confirm_modal(&ctx);
         self.prompt_modal(&ctx);
         #[cfg(feature = "video")]
@@ -249,7 +252,7 @@ impl eframe::App for Workbench {
             egui::Area::new(egui::Id::unique("drop_hint"))
                 .fixed_pos(egui::pos2(40.0, 40.0))
                 .show(&ctx, |ui| {
-                    ui.heading("drop a scan folder (or a preset .toml) to open it")
+                    ui.heading("drop a scan folder, a preset .toml or a still image to open it")
                 });
         }
         if !self.is_idle() || self.is_reconstructing() {
@@ -278,5 +281,6 @@ impl eframe::App for Workbench {
         self.player.pause();
         self.cancel_reconstruction();
         self.cancel_comparison();
+        self.cancel_still();
     }
 }

@@ -57,6 +57,8 @@ pub struct WorkbenchOptions {
     /// Open "Compare methods" and run it with these methods once the scan is open (scripts:
     /// see [`super::COMPARE_METHODS_ENV`]).
     pub compare_methods: Option<[crate::pipeline::Method; 2]>,
+    /// Open this still image in the still window.
+    pub still: Option<PathBuf>,
 }
 
 /// Settings that hold for the whole session.
@@ -104,6 +106,8 @@ pub struct Workbench {
     pub(super) methods: super::compare::CompareState,
     /// A method comparison to run once the scan is open ([`WorkbenchOptions::compare_methods`]).
     pub(super) compare_on_open: Option<[crate::pipeline::Method; 2]>,
+    /// The still window, its open still and its decode.
+    pub(super) still: super::still::StillState,
     /// The "Import video" window and its running import.
     #[cfg(feature = "video")]
     pub(super) video_import: super::import_video::VideoImport,
@@ -158,11 +162,15 @@ impl Workbench {
             compare: opts.compare,
             methods: super::compare::CompareState::default(),
             compare_on_open: opts.compare_methods,
+            still: super::still::StillState::default(),
             #[cfg(feature = "video")]
             video_import: super::import_video::VideoImport::default(),
         };
         if let Some(dir) = opts.scan {
             let _ = wb.open_scan(&dir);
+        }
+        if let Some(still) = opts.still {
+            wb.open_still(&still);
         }
         Ok(wb)
     }
@@ -276,10 +284,10 @@ impl Workbench {
         self.jobs.is_idle() && self.nav.opening.is_none()
     }
 
-    /// True while the clip reconstructs or a method comparison runs.
+    /// True while the clip reconstructs, a method comparison runs or a still decodes.
     #[must_use]
     pub fn is_reconstructing(&self) -> bool {
-        self.clip.is_running() || self.methods.run.is_some()
+        self.clip.is_running() || self.methods.run.is_some() || self.still.job.is_some()
     }
 
     /// Longest UI frame (time spent in `ui`) seen while the worker was busy.
@@ -602,6 +610,7 @@ impl Workbench {
             None => {}
         }
         self.poll_comparison();
+        self.poll_still();
         match self.clip.partial_arrived.take() {
             Some(Ok(p)) => {
                 self.clip.comparison_heard = None;

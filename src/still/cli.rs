@@ -230,8 +230,8 @@ struct StillReport<'a> {
     params_file: Option<String>,
     image_width_px: usize,
     image_height_px: usize,
-    axis: &'a str,
-    cut: &'a str,
+    axis: &'static str,
+    cut: &'static str,
     reverse: bool,
     um_per_px: f64,
     rpm: f64,
@@ -304,75 +304,19 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
         .map(|r| super::score_still(&run.audio, r))
         .transpose()?;
     crate::io::wav::write_wav(&args.out, &run.audio, args.bits, args.force)?;
+    if let Some(path) = &args.report {
+        let what = ReportInputs {
+            image: &args.image,
+            out: &args.out,
+            params_file: args.params.as_deref(),
+            reference: args.reference.as_deref(),
+            scores: scores.clone(),
+            chosen_automatically: args.groove.is_none(),
+        };
+        write_still_report(path, &run, &setup, &params, &what, args.force)?;
+    }
     let a = &run.analysis;
     let groove = &a.grooves.grooves[a.chosen];
-    let line_ms = 1000.0 * args.um_per_px / setup.groove_speed_um_s();
-    if let Some(path) = &args.report {
-        let names = ["land|wall", "wall|bottom", "bottom|wall", "wall|land"];
-        let report = StillReport {
-            version: env!("CARGO_PKG_VERSION"),
-            image: args.image.display().to_string(),
-            output: args.out.display().to_string(),
-            params_file: args.params.as_ref().map(|p| p.display().to_string()),
-            image_width_px: run.image_px.0,
-            image_height_px: run.image_px.1,
-            axis: &args.axis,
-            cut: &args.cut,
-            reverse: args.reverse,
-            um_per_px: args.um_per_px,
-            rpm: args.rpm,
-            radius_mm: args.radius_mm,
-            groove_speed_mm_s: setup.groove_speed_um_s() / 1000.0,
-            grooves_found: a
-                .grooves
-                .grooves
-                .iter()
-                .map(|g| GrooveLine {
-                    number: g.number,
-                    coverage: g.coverage,
-                    position_px: g.position_px,
-                    width_px: g.width_px,
-                })
-                .collect(),
-            bottoms_visible: a.grooves.bottoms_visible,
-            groove: groove.number,
-            groove_chosen_automatically: args.groove.is_none(),
-            left_wall: left_wall_text(axis, args.reverse),
-            native_rate_hz: a.signal.native_rate_hz,
-            sample_rate_hz: run.audio.sample_rate_hz,
-            channels: run.audio.channels.len(),
-            duration_secs: run.audio.duration_secs(),
-            gain_per_mm_s: run.gain_per_mm_s,
-            borders: names
-                .iter()
-                .zip(a.signal.border_counts)
-                .map(|(n, c)| BorderLine {
-                    border: n,
-                    lines_fitted: c[0],
-                    screened_out: c[1],
-                    rejected_outliers: c[2],
-                })
-                .collect(),
-            gaps: a
-                .signal
-                .gaps
-                .iter()
-                .map(|g| GapLine {
-                    channel: g.channel,
-                    start_line: g.start_line,
-                    lines: g.lines,
-                    start_ms: g.start_line as f64 * line_ms,
-                    duration_ms: g.lines as f64 * line_ms,
-                })
-                .collect(),
-            reference: args.reference.as_ref().map(|p| p.display().to_string()),
-            scores: scores.clone(),
-            timings: run.timings,
-            params: &params,
-            warnings: &run.warnings,
-        };
-        crate::io::write_json_atomic(path, &report, args.force)?;
-    }
     if !args.quiet {
         for w in &run.warnings {
             eprintln!("warning: {w}");
@@ -408,6 +352,113 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
             }
         }
     }
+    Ok(())
+}
+
+/// What a still report says beyond the decode itself.
+#[derive(Clone, Debug)]
+pub struct ReportInputs<'a> {
+    /// The still decoded.
+    pub image: &'a Path,
+    /// The WAV written.
+    pub out: &'a Path,
+    /// The params file, if one was given.
+    pub params_file: Option<&'a Path>,
+    /// The reference scored against, if any.
+    pub reference: Option<&'a Path>,
+    /// Its scores per channel.
+    pub scores: Option<Vec<Option<crate::pipeline::eval::Scores>>>,
+    /// The groove was chosen by the decoder, not asked for.
+    pub chosen_automatically: bool,
+}
+
+/// Writes the JSON report of a decoded still to `path` (atomically; an existing file only
+/// when `overwrite`).
+///
+/// # Errors
+/// One line naming the file when it exists or cannot be written.
+pub fn write_still_report(
+    path: &Path,
+    run: &super::StillRun,
+    setup: &crate::pipeline::still::StillSetup,
+    params: &crate::pipeline::PipelineParams,
+    what: &ReportInputs<'_>,
+    overwrite: bool,
+) -> Result<()> {
+    let a = &run.analysis;
+    let groove = &a.grooves.grooves[a.chosen];
+    let line_ms = 1000.0 * setup.um_per_px / setup.groove_speed_um_s();
+    let names = ["land|wall", "wall|bottom", "bottom|wall", "wall|land"];
+    let report = StillReport {
+        version: env!("CARGO_PKG_VERSION"),
+        image: what.image.display().to_string(),
+        output: what.out.display().to_string(),
+        params_file: what.params_file.map(|p| p.display().to_string()),
+        image_width_px: run.image_px.0,
+        image_height_px: run.image_px.1,
+        axis: match setup.axis {
+            Axis::Vertical => "vertical",
+            Axis::Horizontal => "horizontal",
+        },
+        cut: if setup.cut == Cut::Stereo {
+            "stereo"
+        } else {
+            "lateral"
+        },
+        reverse: setup.reverse,
+        um_per_px: setup.um_per_px,
+        rpm: setup.rpm,
+        radius_mm: setup.radius_mm,
+        groove_speed_mm_s: setup.groove_speed_um_s() / 1000.0,
+        grooves_found: a
+            .grooves
+            .grooves
+            .iter()
+            .map(|g| GrooveLine {
+                number: g.number,
+                coverage: g.coverage,
+                position_px: g.position_px,
+                width_px: g.width_px,
+            })
+            .collect(),
+        bottoms_visible: a.grooves.bottoms_visible,
+        groove: groove.number,
+        groove_chosen_automatically: what.chosen_automatically,
+        left_wall: left_wall_text(setup.axis, setup.reverse),
+        native_rate_hz: a.signal.native_rate_hz,
+        sample_rate_hz: run.audio.sample_rate_hz,
+        channels: run.audio.channels.len(),
+        duration_secs: run.audio.duration_secs(),
+        gain_per_mm_s: run.gain_per_mm_s,
+        borders: names
+            .iter()
+            .zip(a.signal.border_counts)
+            .map(|(n, c)| BorderLine {
+                border: n,
+                lines_fitted: c[0],
+                screened_out: c[1],
+                rejected_outliers: c[2],
+            })
+            .collect(),
+        gaps: a
+            .signal
+            .gaps
+            .iter()
+            .map(|g| GapLine {
+                channel: g.channel,
+                start_line: g.start_line,
+                lines: g.lines,
+                start_ms: g.start_line as f64 * line_ms,
+                duration_ms: g.lines as f64 * line_ms,
+            })
+            .collect(),
+        reference: what.reference.map(|p| p.display().to_string()),
+        scores: what.scores.clone(),
+        timings: run.timings,
+        params,
+        warnings: &run.warnings,
+    };
+    crate::io::write_json_atomic(path, &report, overwrite)?;
     Ok(())
 }
 

@@ -17,8 +17,8 @@ use crate::pipeline::audio_signal::resample;
 use crate::pipeline::eval::{Scores, evaluate};
 use crate::pipeline::finish::channels_to_output;
 use crate::pipeline::still::{
-    ProfileBuilder, RibbonBuilder, StillAnalysis, StillError, StillSetup, StillSignal,
-    choose_groove, decode_borders, detect_grooves, track_borders,
+    GrooveMap, ProfileBuilder, RibbonBuilder, StillAnalysis, StillError, StillParams, StillSetup,
+    StillSignal, choose_groove, decode_borders, detect_grooves, track_borders,
 };
 use crate::pipeline::{PipelineParams, StageError};
 
@@ -35,6 +35,9 @@ pub enum StillRunError {
     /// The image (or the reference) cannot be read.
     #[error(transparent)]
     Load(#[from] LoadError),
+    /// The caller cancelled it.
+    #[error("cancelled")]
+    Cancelled,
     /// The decoder refused it.
     #[error("{source}: {}", path.display())]
     Still {
@@ -71,15 +74,52 @@ pub struct StillTimings {
     pub total_secs: f64,
 }
 
+/// What the caller of the still decoder hears back while it runs: the phase and the share of it
+/// done; answering `false` cancels the decode ([`StillRunError::Cancelled`]).
+pub type StillProgress<'a> = &'a mut dyn FnMut(StillPhase, f64) -> bool;
+
+/// The phases of a still decode, in order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StillPhase {
+    /// First pass over the image: the block profiles.
+    Profiles,
+    /// Second pass: the band around the chosen groove.
+    Ribbon,
+    /// Border fits, outlier rejection and the sound.
+    Decode,
+}
+
+impl StillPhase {
+    /// What it does, for a progress line.
+    #[must_use]
+    pub fn describe(self) -> &'static str {
+        match self {
+            StillPhase::Profiles => "finding the grooves",
+            StillPhase::Ribbon => "reading the chosen groove",
+            StillPhase::Decode => "fitting the borders",
+        }
+    }
+}
+
+/// Opens the image anew for each pass (a file, or an in-memory image).
+pub type OpenStill<'a> = &'a mut dyn FnMut() -> Result<StillReader, LoadError>;
+
 fn feed(
-    path: &Path,
+    open: OpenStill<'_>,
+    phase: StillPhase,
+    progress: StillProgress<'_>,
     read_secs: &mut f64,
     mut push: impl FnMut(&[f32]) -> Result<(), StillError>,
 ) -> Result<(), StillRunError> {
-    let mut reader = StillReader::open(path)?;
-    let rows_per_band = (BAND_VALUES / reader.width()).max(1);
+    let mut reader = open()?;
+    let path = reader.path().to_path_buf();
+    let rows_per_band = (BAND_VALUES / reader.width().max(1)).max(1);
+    let height = reader.height().max(1);
     let mut band = Vec::new();
     loop {
+        if !progress(phase, reader.next_row() as f64 / height as f64) {
+            return Err(StillRunError::Cancelled);
+        }
         let t = Instant::now();
         let got = reader.read_rows(&mut band, rows_per_band)?;
         *read_secs += t.elapsed().as_secs_f64();
@@ -88,7 +128,7 @@ fn feed(
         }
         push(&band).map_err(|source| StillRunError::Still {
             source,
-            path: path.to_path_buf(),
+            path: path.clone(),
         })?;
     }
 }
@@ -125,25 +165,103 @@ pub fn decode_still_file(
     params: &PipelineParams,
 ) -> Result<StillRun, StillRunError> {
     let started = Instant::now();
-    let wrap = |source: StillError| StillRunError::Still {
+    let mut open = || StillReader::open(path);
+    let mut go_on = |_: StillPhase, _: f64| true;
+    let found = find_grooves(&mut open, setup, &params.still, &mut go_on)?;
+    let chosen = choose_groove(&found.grooves, groove).map_err(|source| StillRunError::Still {
         source,
         path: path.to_path_buf(),
+    })?;
+    decode_groove(
+        &mut open, &found, chosen, setup, params, &mut go_on, started,
+    )
+}
+
+/// The grooves of a still (the first pass) and what the second pass needs to know of it.
+#[derive(Clone, Debug)]
+pub struct FoundGrooves {
+    /// The grooves, numbered.
+    pub grooves: GrooveMap,
+    /// Image size (width, height).
+    pub image_px: (usize, usize),
+    /// The image's name, for messages.
+    pub path: PathBuf,
+    /// Seconds spent reading the image in the first pass.
+    pub read_secs: f64,
+}
+
+/// Finds the grooves of the still `open` gives (the first pass over it).
+///
+/// # Errors
+/// [`StillRunError`] naming the image: unreadable, bad settings, no groove, a contradicting axis;
+/// [`StillRunError::Cancelled`] when `progress` said stop.
+pub fn find_grooves(
+    open: OpenStill<'_>,
+    setup: &StillSetup,
+    params: &StillParams,
+    progress: StillProgress<'_>,
+) -> Result<FoundGrooves, StillRunError> {
+    let (width, height, path) = {
+        let r = open()?;
+        (r.width(), r.height(), r.path().to_path_buf())
+    };
+    let wrap = |source: StillError| StillRunError::Still {
+        source,
+        path: path.clone(),
+    };
+    setup.validate().map_err(|e| wrap(StillError::Param(e)))?;
+    let mut read_secs = 0.0;
+    let mut profiles = ProfileBuilder::new(width, height, setup.axis, params).map_err(wrap)?;
+    feed(
+        open,
+        StillPhase::Profiles,
+        progress,
+        &mut read_secs,
+        |rows| profiles.push_rows(rows),
+    )?;
+    let profiles = profiles.finish().map_err(wrap)?;
+    let grooves = detect_grooves(&profiles, setup, params).map_err(wrap)?;
+    Ok(FoundGrooves {
+        grooves,
+        image_px: (width, height),
+        path,
+        read_secs,
+    })
+}
+
+/// Decodes groove index `chosen` of `found` (the second pass over the still `open` gives),
+/// finishing the sound as the engine does; `started` is when the whole decode began.
+///
+/// # Errors
+/// [`StillRunError`] naming the image; [`StillRunError::Cancelled`] when `progress` said stop.
+pub fn decode_groove(
+    open: OpenStill<'_>,
+    found: &FoundGrooves,
+    chosen: usize,
+    setup: &StillSetup,
+    params: &PipelineParams,
+    progress: StillProgress<'_>,
+    started: Instant,
+) -> Result<StillRun, StillRunError> {
+    let wrap = |source: StillError| StillRunError::Still {
+        source,
+        path: found.path.clone(),
     };
     let sp = &params.still;
-    let (width, height) = {
-        let r = StillReader::open(path)?;
-        (r.width(), r.height())
-    };
-    let mut read_secs = 0.0;
-    let mut profiles = ProfileBuilder::new(width, height, setup.axis, sp).map_err(wrap)?;
-    feed(path, &mut read_secs, |rows| profiles.push_rows(rows))?;
-    let profiles = profiles.finish().map_err(wrap)?;
-    let grooves = detect_grooves(&profiles, setup, sp).map_err(wrap)?;
-    let chosen = choose_groove(&grooves, groove).map_err(wrap)?;
-    let mut ribbon = RibbonBuilder::new(&grooves, chosen, width, height, sp).map_err(wrap)?;
-    feed(path, &mut read_secs, |rows| ribbon.push_rows(rows))?;
+    let (width, height) = found.image_px;
+    let mut read_secs = found.read_secs;
+    let mut ribbon = RibbonBuilder::new(&found.grooves, chosen, width, height, sp).map_err(wrap)?;
+    feed(open, StillPhase::Ribbon, progress, &mut read_secs, |rows| {
+        ribbon.push_rows(rows)
+    })?;
     let ribbon = ribbon.finish().map_err(wrap)?;
+    if !progress(StillPhase::Decode, 0.0) {
+        return Err(StillRunError::Cancelled);
+    }
     let borders = track_borders(&ribbon, sp);
+    if !progress(StillPhase::Decode, 0.8) {
+        return Err(StillRunError::Cancelled);
+    }
     let signal = decode_borders(&borders, setup, sp).map_err(wrap)?;
     let (audio, gain_per_mm_s) =
         finish_sound(&signal, params).map_err(|e| wrap(StillError::Param(e)))?;
@@ -164,7 +282,7 @@ pub fn decode_still_file(
     }
     Ok(StillRun {
         analysis: StillAnalysis {
-            grooves,
+            grooves: found.grooves.clone(),
             chosen,
             borders,
             signal,

@@ -13,6 +13,7 @@ pub mod orientation_ui;
 pub mod overview_ui;
 pub mod params_ui;
 pub mod states;
+pub mod still_ui;
 pub mod stripes_ui;
 pub mod transport_ui;
 pub mod waveform_ui;
