@@ -36,6 +36,8 @@ pub struct ClipState {
     /// The methods A and B when the player holds a method comparison's sound instead of the
     /// clip's (source 0: A, 1: B).
     pub comparison_heard: Option<[crate::pipeline::Method; 2]>,
+    /// The player holds the still window's groove instead of the clip.
+    pub still_heard: bool,
     groups: usize,
 }
 
@@ -99,6 +101,7 @@ impl ClipState {
         });
         self.clip = Some(clip);
         self.comparison_heard = None;
+        self.still_heard = false;
         self.refresh_health();
     }
 

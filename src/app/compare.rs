@@ -4,11 +4,8 @@
 //! r and SNR of B against A) per group and over the whole clip.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self, Receiver};
-use std::thread::JoinHandle;
-use std::time::Instant;
 
+use super::background::Background;
 use super::health::GroupTrack;
 use super::recon::{Clip, make_clip};
 use super::tuning::ParamState;
@@ -186,31 +183,13 @@ impl MethodComparison {
     }
 }
 
-/// Messages from the comparison thread.
-#[derive(Debug)]
-enum CompareEvent {
-    /// Groups finished in the pass running now (0: A, 1: B).
-    Progress {
-        pass: usize,
-        done: usize,
-    },
-    Finished(Result<Box<MethodComparison>, String>),
-}
-
 /// A comparison running in the background.
 #[derive(Debug)]
 pub struct CompareRun {
-    cancel: Arc<AtomicBool>,
-    rx: Receiver<CompareEvent>,
-    thread: Option<JoinHandle<()>>,
-    /// When it started.
-    pub started: Instant,
+    /// The job; its progress is (pass running: 0 for A, 1 for B; groups finished in it).
+    job: Background<(usize, usize), Box<MethodComparison>>,
     /// The methods A and B.
     pub methods: [Method; 2],
-    /// The pass running (0: A, 1: B).
-    pub pass: usize,
-    /// Groups finished in that pass.
-    pub done: usize,
     /// Groups per pass.
     pub total: usize,
 }
@@ -229,103 +208,84 @@ impl CompareRun {
         param_state: ParamState,
         repaint: Box<dyn Fn() + Send + Sync>,
     ) -> std::io::Result<Self> {
-        let cancel = Arc::new(AtomicBool::new(false));
-        let (tx, rx) = mpsc::channel();
-        let flag = cancel.clone();
         let range = groups.clone().unwrap_or(0..scan.groups.len());
         let total = range.end.min(scan.groups.len()).saturating_sub(range.start);
         let base = params.clone();
-        let thread = std::thread::Builder::new()
-            .name("groovescope-compare".into())
-            .spawn(move || {
-                let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    let mut clips = Vec::with_capacity(2);
-                    for (pass, method) in methods.into_iter().enumerate() {
-                        let params = PipelineParams {
-                            method,
-                            ..base.clone()
-                        };
-                        let opts = ReconstructOptions {
-                            params: params.clone(),
-                            groups: Some(range.clone()),
-                            keep_going: true,
-                        };
-                        let mut tracks = Vec::new();
-                        let recon = reconstruct(
-                            &scan,
-                            &opts,
-                            &mut |p| {
-                                tracks.push(GroupTrack::new(
-                                    range.start + p.done.saturating_sub(1),
-                                    p.signal.as_deref(),
-                                ));
-                                let _ = tx.send(CompareEvent::Progress { pass, done: p.done });
-                                repaint();
-                            },
-                            &flag,
-                        )
-                        .map_err(|e| format!("method {}: {e}", method.name()))?;
-                        if flag.load(Ordering::Relaxed) {
-                            return Err("cancelled".to_string());
-                        }
-                        clips.push(make_clip(
-                            &scan,
-                            recon,
-                            params,
-                            param_state.clone(),
-                            range.clone(),
-                            tracks,
+        let job = Background::start("groovescope-compare", (0, 0), repaint, move |r| {
+            let mut clips = Vec::with_capacity(2);
+            for (pass, method) in methods.into_iter().enumerate() {
+                let params = PipelineParams {
+                    method,
+                    ..base.clone()
+                };
+                let opts = ReconstructOptions {
+                    params: params.clone(),
+                    groups: Some(range.clone()),
+                    keep_going: true,
+                };
+                let mut tracks = Vec::new();
+                let recon = reconstruct(
+                    &scan,
+                    &opts,
+                    &mut |p| {
+                        tracks.push(GroupTrack::new(
+                            range.start + p.done.saturating_sub(1),
+                            p.signal.as_deref(),
                         ));
-                    }
-                    let b = clips.pop().ok_or("no clip B")?;
-                    let a = clips.pop().ok_or("no clip A")?;
-                    MethodComparison::new(methods, a, b).map(Box::new)
-                }));
-                let outcome =
-                    outcome.unwrap_or_else(|_| Err("the comparison panicked (see the log)".into()));
-                let _ = tx.send(CompareEvent::Finished(outcome));
-                repaint();
-            })?;
+                        r.report((pass, p.done));
+                    },
+                    r.flag(),
+                )
+                .map_err(|e| format!("method {}: {e}", method.name()))?;
+                if r.cancelled() {
+                    return Err("cancelled".to_string());
+                }
+                clips.push(make_clip(
+                    &scan,
+                    recon,
+                    params,
+                    param_state.clone(),
+                    range.clone(),
+                    tracks,
+                ));
+            }
+            let b = clips.pop().ok_or("no clip B")?;
+            let a = clips.pop().ok_or("no clip A")?;
+            MethodComparison::new(methods, a, b).map(Box::new)
+        })?;
         Ok(Self {
-            cancel,
-            rx,
-            thread: Some(thread),
-            started: Instant::now(),
+            job,
             methods,
-            pass: 0,
-            done: 0,
             total,
         })
     }
 
     /// Asks the run to stop after the current group.
     pub fn cancel(&self) {
-        self.cancel.store(true, Ordering::Relaxed);
+        self.job.cancel();
     }
 
     /// True once cancel was asked for.
     #[must_use]
     pub fn cancelling(&self) -> bool {
-        self.cancel.load(Ordering::Relaxed)
+        self.job.cancelling()
     }
 
     /// Takes the waiting progress reports; returns the outcome once the run ended.
     pub fn poll(&mut self) -> Option<Result<Box<MethodComparison>, String>> {
-        while let Ok(ev) = self.rx.try_recv() {
-            match ev {
-                CompareEvent::Progress { pass, done } => {
-                    self.pass = pass;
-                    self.done = done;
-                }
-                CompareEvent::Finished(outcome) => {
-                    if let Some(t) = self.thread.take() {
-                        let _ = t.join();
-                    }
-                    return Some(outcome);
-                }
-            }
-        }
-        None
+        self.job.poll()
+    }
+
+    /// The pass running (0: A, 1: B).
+    #[must_use]
+    pub fn pass(&self) -> usize {
+        self.job.progress.0
+    }
+
+    /// Groups finished in that pass.
+    #[must_use]
+    pub fn done(&self) -> usize {
+        self.job.progress.1
     }
 
     /// Share of both passes done, in `[0, 1]`.
@@ -334,15 +294,8 @@ impl CompareRun {
         if self.total == 0 {
             0.0
         } else {
-            (self.pass * self.total + self.done) as f32 / (2 * self.total) as f32
+            (self.pass() * self.total + self.done()) as f32 / (2 * self.total) as f32
         }
-    }
-}
-
-impl Drop for CompareRun {
-    /// Asks the run to stop and lets the thread finish on its own (never blocks the UI).
-    fn drop(&mut self) {
-        self.cancel();
     }
 }
 

@@ -114,6 +114,7 @@ impl Workbench {
         if self.clip.comparison_heard != Some(cmp.methods) {
             self.player.load(cmp.play_buffers());
             self.clip.comparison_heard = Some(cmp.methods);
+            self.clip.still_heard = false;
         }
         self.player.set_source(which.min(1));
         if !self.player.is_playing()

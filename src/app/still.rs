@@ -182,8 +182,6 @@ pub struct StillState {
     pub pending: Option<(PathBuf, StillSetup, SetupSource)>,
     /// The picture of the stretch shown.
     pub picture: Option<StillPicture>,
-    /// The player holds the still's sound.
-    pub heard: bool,
     /// First image line shown.
     pub first_line: f64,
     /// Image lines shown across the view (0: fit the image).

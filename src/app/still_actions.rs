@@ -32,7 +32,12 @@ impl Workbench {
         self.still.first_line = 0.0;
         self.still.lines_shown = 0.0;
         self.still.doc = None;
-        self.still.heard = false;
+        if self.clip.still_heard {
+            // The player gives the old still's sound back for the clip's.
+            self.clip.still_heard = false;
+            self.player.stop();
+            self.player.load(self.clip.play_buffers());
+        }
         self.start_still_task(
             StillTask {
                 path: path.to_path_buf(),
@@ -185,9 +190,12 @@ impl Workbench {
                 );
                 let warnings = run.warnings.clone();
                 doc.run = Some(run);
-                if self.still.heard {
-                    self.still.heard = false;
+                if self.clip.still_heard
+                    && let Some(buffers) = doc.play_buffers()
+                {
+                    // The player holds the still: it takes the new groove's sound.
                     self.player.stop();
+                    self.player.load(buffers);
                 }
                 self.info(msg);
                 for w in warnings {
@@ -206,10 +214,11 @@ impl Workbench {
             self.error("nothing to listen to: decode a groove first");
             return;
         };
-        if !self.still.heard {
+        if !self.clip.still_heard {
             self.player.load(buffers);
+            self.player.set_source(0);
             self.clip.comparison_heard = None;
-            self.still.heard = true;
+            self.clip.still_heard = true;
         }
         if !self.player.is_playing()
             && let Err(e) = self.player.play()
@@ -275,8 +284,8 @@ impl Workbench {
         if !self.still.open {
             return;
         }
-        let position = self.still.heard.then(|| self.player.position_secs());
-        let playing = self.still.heard && self.player.is_playing();
+        let position = self.clip.still_heard.then(|| self.player.position_secs());
+        let playing = self.clip.still_heard && self.player.is_playing();
         let actions = still_window(ctx, &mut self.still, position, playing);
         for a in actions {
             match a {

@@ -614,6 +614,7 @@ impl Workbench {
         match self.clip.partial_arrived.take() {
             Some(Ok(p)) => {
                 self.clip.comparison_heard = None;
+                self.clip.still_heard = false;
                 self.player.load(PlayBuffers {
                     rate_hz: p.audio.sample_rate_hz,
                     sources: vec![p.audio.channels],

@@ -106,9 +106,9 @@ fn body(
         if let Some(run) = &state.run {
             let label = format!(
                 "{} ({}): group {} / {}",
-                if run.pass == 0 { "A" } else { "B" },
-                run.methods.get(run.pass).map_or("", |m| m.name()),
-                run.done,
+                if run.pass() == 0 { "A" } else { "B" },
+                run.methods.get(run.pass()).map_or("", |m| m.name()),
+                run.done(),
                 run.total
             );
             ui.add(

@@ -118,7 +118,7 @@ fn body(
     ui.separator();
     image_view(ui, state, position, busy, actions);
     if let Some(doc) = &state.doc {
-        sound_view(ui, doc, position, playing, state.heard, actions);
+        sound_view(ui, doc, position, playing, position.is_some(), actions);
     }
 }
 

@@ -107,6 +107,10 @@ pub fn transport_ui(
             player.stop();
         }
         ui.separator();
+        if clips.still_heard {
+            ui.weak("(the still window's groove; reconstruct to hear the clip again)");
+            return;
+        }
         if let Some([a, b]) = clips.comparison_heard {
             // The player holds a method comparison (source 0: A, 1: B).
             let mut source = player.source().min(1);
