@@ -29,7 +29,10 @@ fn fresh_name(stem: &str, ext: &str) -> PathBuf {
 
 fn default_action() -> anyhow::Result<()> {
     if cfg!(feature = "gui") && display_available() {
-        return run_gui(None);
+        // The workbench (on the last scan, else the demo scan) with the demo still open in the
+        // still window, its speech groove decoded and ready to play.
+        let demo = read_generated_still(&demo_still_dir())?;
+        return run_gui(Some(demo.image));
     }
     let out = fresh_name("groovescope-demo", "wav");
     let report = out.with_extension("report.json");

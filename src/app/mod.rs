@@ -54,7 +54,7 @@ pub const VIEW_ENV: &str = "GROOVESCOPE_VIEW";
 /// Env var: set to `1` to reconstruct the clip as soon as the scan opens.
 pub const RECONSTRUCT_ENV: &str = "GROOVESCOPE_RECONSTRUCT";
 /// Env var: open this file dialog once the work settled, as its menu item does (`open-scan`,
-/// `export-wav`, `load-preset`, `save-preset`, `export-png`); with `GROOVESCOPE_SCREENSHOT`
+/// `export-wav`, `load-preset`, `save-preset`, `export-png`, `open-still`); with `GROOVESCOPE_SCREENSHOT`
 /// the picture shows what came up.
 pub const DIALOG_ENV: &str = "GROOVESCOPE_DIALOG";
 /// Env var: once the clip is reconstructed, apply this symptom preset (`flaked wall`, `dusty`,
@@ -119,7 +119,7 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
                 || {
                     format!(
                         "unknown dialog {name:?} in {DIALOG_ENV} (one of: open-scan, export-wav, \
-                         load-preset, save-preset, export-png)"
+                         load-preset, save-preset, export-png, open-still)"
                     )
                 },
             )?,
