@@ -15,10 +15,11 @@
 //! Dust and scratches are fixed to the record, so they are the same in every frame and only
 //! the columns they cover can be told apart: on the reference frame each column's own offset is
 //! one Gauss–Newton step on the fitted model, Lorentzian weights `1/(1 + δ²/(2σ²))` down-weight
-//! columns that stray (`column_sigma_px`), and while any column weighs less than
-//! [`OUTLIER_WEIGHT`] the bins are summed again with those weights (outliers left out; applied
-//! in every frame to the columns that see the same groove position) and refitted, up to
-//! `column_rounds` times.
+//! columns that stray (`column_sigma_px`), and while a column not yet left out weighs less
+//! than [`OUTLIER_WEIGHT`] the bins are summed again with those weights (outliers left out;
+//! applied in every frame to the columns that see the same groove position) and refitted, up
+//! to `column_rounds` times. Columns already left out stray from the refit too, by design, so
+//! they do not ask for another round: once no new column strays the fit has settled.
 //! Each frame's own position is then one linear least-squares step (levels and position) from
 //! the joint fit on that frame's bins.
 //!
@@ -162,6 +163,13 @@ impl Bins {
             .collect()
     }
 
+    /// Back to empty, keeping its buffer.
+    fn clear(&mut self) {
+        self.sums.fill([0.0; 3]);
+        self.row_sum = 0.0;
+        self.weight_sum = 0.0;
+    }
+
     fn mean_row(&self) -> Option<f64> {
         (self.weight_sum > 0.0).then(|| self.row_sum / self.weight_sum)
     }
@@ -207,13 +215,14 @@ impl Band {
     }
 }
 
-/// One pixel of a column inside the band: its bin, its offset from the predicted row, its grey
-/// level.
+/// One pixel of a column inside the band: its row (its offset from the predicted row is
+/// `row − column.row`, recomputed exactly as `Band::rows` gives it), its bin and its grey level.
+/// Twelve bytes, so a fit's bands stay in the cache between its robust rounds.
 #[derive(Clone, Copy, Debug)]
 struct BandPixel {
-    bin: usize,
-    u: f64,
-    v: f64,
+    row: u32,
+    bin: u32,
+    v: f32,
 }
 
 /// One frame's band, read from the frame once: each column's pixels inside the band, in row
@@ -230,12 +239,10 @@ fn gather<'c>(frame: &Image, cols: &'c [Column], band: Band) -> BandView<'c> {
     let mut ends = Vec::with_capacity(cols.len());
     for c in cols {
         for (r, u) in band.rows(c.row, frame.height) {
-            if let (Some(bin), Some(v)) = (band.bin(u), frame.get(c.x, r)) {
-                pixels.push(BandPixel {
-                    bin,
-                    u,
-                    v: f64::from(v),
-                });
+            if let (Some(bin), Some(v)) = (band.bin(u), frame.get(c.x, r))
+                && let (Ok(row), Ok(bin)) = (u32::try_from(r), u32::try_from(bin))
+            {
+                pixels.push(BandPixel { row, bin, v });
             }
         }
         ends.push(pixels.len());
@@ -253,25 +260,23 @@ impl BandView<'_> {
             .map(|(c, (a, &b))| (c, self.pixels.get(a..b).unwrap_or(&[])))
     }
 
-    /// The columns accumulated into bins, each weighted by `weight(s)`.
-    fn accumulate(&self, bins_len: usize, weight: &dyn Fn(f64) -> f64) -> Bins {
-        let mut bins = Bins::new(bins_len);
+    /// The columns accumulated into the empty `bins`, each weighted by `weight(s)`.
+    fn accumulate(&self, bins: &mut Bins, weight: &dyn Fn(f64) -> f64) {
         for (c, pixels) in self.columns() {
             let w = c.share * weight(c.s_um);
             if w <= 0.0 {
                 continue;
             }
             for p in pixels {
-                if let Some(s) = bins.sums.get_mut(p.bin) {
+                if let Some(s) = bins.sums.get_mut(p.bin as usize) {
                     s[0] += w;
-                    s[1] += w * p.u;
-                    s[2] += w * p.v;
+                    s[1] += w * (f64::from(p.row) - c.row);
+                    s[2] += w * f64::from(p.v);
                 }
             }
             bins.row_sum += w * c.row;
             bins.weight_sum += w;
         }
-        bins
     }
 
     /// Per-column offsets against the fitted model and their Lorentzian weights (see
@@ -281,11 +286,11 @@ impl BandView<'_> {
             .map(|(c, pixels)| {
                 let (mut num, mut den) = (0.0, 0.0);
                 for p in pixels {
-                    let Some(&(m, slope)) = table.get(p.bin) else {
+                    let Some(&(m, slope)) = table.get(p.bin as usize) else {
                         continue;
                     };
                     // model(u − δ) ≈ m − slope·δ  ⇒  δ = −Σ(v − m)·slope / Σ slope².
-                    num -= (p.v - m) * slope;
+                    num -= (f64::from(p.v) - m) * slope;
                     den += slope * slope;
                 }
                 let delta = if den > 0.0 { num / den } else { 0.0 };
@@ -299,6 +304,17 @@ impl BandView<'_> {
 pub(super) trait BandReader {
     /// View `k`'s columns accumulated into bins, each weighted by `weight(s)`.
     fn bins(&self, k: usize, weight: &dyn Fn(f64) -> f64) -> Option<Bins>;
+    /// [`bins`](Self::bins) into `out` (which may hold an earlier view's sums); false when
+    /// there is no view `k`.
+    fn bins_into(&self, k: usize, weight: &dyn Fn(f64) -> f64, out: &mut Bins) -> bool {
+        match self.bins(k, weight) {
+            Some(b) => {
+                *out = b;
+                true
+            }
+            None => false,
+        }
+    }
     /// View `k`'s per-column (column, groove position, Lorentzian weight) against the model
     /// `table` (see [`column_table`]).
     fn column_weights(
@@ -317,8 +333,21 @@ struct Gathered<'c> {
 
 impl BandReader for Gathered<'_> {
     fn bins(&self, k: usize, weight: &dyn Fn(f64) -> f64) -> Option<Bins> {
-        let view = self.views.get(k)?.as_ref()?;
-        Some(view.accumulate(self.band.bins, weight))
+        let mut out = Bins::new(self.band.bins);
+        self.bins_into(k, weight, &mut out).then_some(out)
+    }
+
+    fn bins_into(&self, k: usize, weight: &dyn Fn(f64) -> f64, out: &mut Bins) -> bool {
+        let Some(view) = self.views.get(k).and_then(Option::as_ref) else {
+            return false;
+        };
+        if out.sums.len() == self.band.bins {
+            out.clear();
+        } else {
+            *out = Bins::new(self.band.bins);
+        }
+        view.accumulate(out, weight);
+        true
     }
 
     fn column_weights(
@@ -419,7 +448,8 @@ pub(super) fn frame_views(
 
 /// Fits one border of one sample over `frames` (each with its `cam_s_um` and index in the
 /// group); `reference` is the position in `frames` of the frame the robust column check reads.
-/// None when no frame sees the whole stretch or the fit finds no border.
+/// None when no frame sees the whole stretch or the fit finds no border. Each frame's own row
+/// is left out (`frames` empty); [`fit_sample_with_frames`] adds them.
 #[must_use]
 pub fn fit_sample(
     frames: &[(&Image, f64, usize)],
@@ -427,6 +457,30 @@ pub fn fit_sample(
     geo: &FrameGeometry,
     task: &SampleTask,
     params: &EdgeParams,
+) -> Option<SampleBorder> {
+    fit_gathered(frames, reference, geo, task, params, false)
+}
+
+/// [`fit_sample`] with each frame's own row (`frames`): the same fit, plus one least-squares
+/// step per frame.
+#[must_use]
+pub fn fit_sample_with_frames(
+    frames: &[(&Image, f64, usize)],
+    reference: usize,
+    geo: &FrameGeometry,
+    task: &SampleTask,
+    params: &EdgeParams,
+) -> Option<SampleBorder> {
+    fit_gathered(frames, reference, geo, task, params, true)
+}
+
+fn fit_gathered(
+    frames: &[(&Image, f64, usize)],
+    reference: usize,
+    geo: &FrameGeometry,
+    task: &SampleTask,
+    params: &EdgeParams,
+    want_frames: bool,
 ) -> Option<SampleBorder> {
     let band = Band::new(params);
     let views = frame_views(frames, geo, task);
@@ -437,10 +491,21 @@ pub fn fit_sample(
             .map(|(i, cols)| frames.get(*i).map(|(img, _, _)| gather(img, cols, band)))
             .collect(),
     };
-    fit_views(frames, &views, reference, geo, task, params, &reader)
+    fit_views(
+        frames,
+        &views,
+        reference,
+        geo,
+        task,
+        params,
+        &reader,
+        want_frames,
+    )
 }
 
-/// The fit of [`fit_sample`] on the frames' `views`, their bands read through `reader`.
+/// The fit of [`fit_sample`] on the frames' `views`, their bands read through `reader`; with
+/// `want_frames` each frame's own row too.
+#[allow(clippy::too_many_arguments)] // the fit's inputs, each its own kind
 pub(super) fn fit_views(
     frames: &[(&Image, f64, usize)],
     views: &[(usize, Vec<Column>)],
@@ -449,6 +514,7 @@ pub(super) fn fit_views(
     task: &SampleTask,
     params: &EdgeParams,
     reader: &dyn BandReader,
+    want_frames: bool,
 ) -> Option<SampleBorder> {
     let band = Band::new(params);
     if views.is_empty() {
@@ -475,21 +541,30 @@ pub(super) fn fit_views(
         i.checked_sub(1).and_then(|k| w.get(k)).map_or(1.0, |e| e.1)
     };
     let mut rounds = 0;
+    // One frame's bins, reused; the joint bins sum them frame by frame.
+    let mut scratch = Bins::new(band.bins);
+    let mut per_frame: Vec<(usize, Bins)> = Vec::new();
     loop {
         rounds += 1;
-        let per_frame: Vec<(usize, Bins)> = views
-            .iter()
-            .enumerate()
-            .filter_map(|(k, (i, _))| Some((*i, reader.bins(k, &|s| weight_at(&weights, s))?)))
-            .collect();
+        per_frame.clear();
         let mut joint = Bins::new(band.bins);
-        for (_, b) in &per_frame {
-            joint.add(b);
+        for (k, (i, _)) in views.iter().enumerate() {
+            if reader.bins_into(k, &|s| weight_at(&weights, s), &mut scratch) {
+                joint.add(&scratch);
+                if want_frames {
+                    per_frame.push((*i, scratch.clone()));
+                }
+            }
         }
         let fit = fit_border(&joint.points(), seed, &params.border)?;
         let table = column_table(band, &fit);
         let checked = reader.column_weights(ref_view, &table, params.column_sigma_px)?;
-        let outliers = checked.iter().any(|c| c.2 < OUTLIER_WEIGHT);
+        // A new outlier: one the last round kept (the columns are the reference view's, in the
+        // same order every round).
+        let outliers = checked
+            .iter()
+            .enumerate()
+            .any(|(k, c)| c.2 < OUTLIER_WEIGHT && weights.get(k).is_none_or(|w| w.1 > 0.0));
         #[allow(clippy::cast_possible_truncation)] // weights in [0, 1]
         let column_report: Vec<(usize, f32)> = checked.iter().map(|c| (c.0, c.2 as f32)).collect();
         if outliers && rounds < params.column_rounds {
@@ -589,7 +664,7 @@ pub(super) mod tests {
             column_rounds: rounds,
             ..EdgeParams::default()
         };
-        let got = fit_sample(&list, 3, &geo, &task, &params).unwrap();
+        let got = fit_sample_with_frames(&list, 3, &geo, &task, &params).unwrap();
         // The truth: the border averaged over the stretch, in rows.
         let y_mean = y0 + slope * 20.65;
         (geo.row_at(y_mean, geo.working_distance_um), got, geo)

@@ -108,7 +108,7 @@ fn fit_sample(
         views: &views,
         band: Band::new(params),
     };
-    fit_views(frames, &views, reference, geo, task, params, &reader)
+    fit_views(frames, &views, reference, geo, task, params, &reader, true)
 }
 
 #[allow(clippy::unwrap_used)] // tests may panic
@@ -163,8 +163,9 @@ mod tests {
                     ..EdgeParams::default()
                 };
                 for reference in [0, 3, 5] {
-                    let fast =
-                        super::super::profile::fit_sample(&list, reference, &geo, &task, &params);
+                    let fast = super::super::profile::fit_sample_with_frames(
+                        &list, reference, &geo, &task, &params,
+                    );
                     let plain = fit_sample(&list, reference, &geo, &task, &params);
                     assert_eq!(
                         fast, plain,
