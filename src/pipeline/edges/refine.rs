@@ -305,7 +305,7 @@ pub fn refine_border(
     let blur = widths[((widths.len() - 1) as f64 * BLUR_QUANTILE).round() as usize];
     let sharp = blur < params.hard_width_px;
     let half = 0.5 * geo.um_per_px(z);
-    let rejected: Vec<(f64, f64)> = present
+    let mut rejected: Vec<(f64, f64)> = present
         .iter()
         .flat_map(|(_, s)| s.column_weights.iter())
         .filter(|c| f64::from(c.1) < OUTLIER_WEIGHT)
@@ -314,6 +314,16 @@ pub fn refine_border(
             (s - half, s + half)
         })
         .collect();
+    // Every rejected stretch is one column wide, so sorted by start they are sorted by end
+    // too, and `s` lies in one of them exactly when it lies in the last one starting at or
+    // before it.
+    rejected.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let is_rejected = |s: f64| {
+        let k = rejected.partition_point(|r| r.0 <= s);
+        k.checked_sub(1)
+            .and_then(|k| rejected.get(k))
+            .is_some_and(|r| s < r.1)
+    };
     let sample_at = |s: f64| -> Option<&RefineSample> {
         let k = present.partition_point(|(_, p)| p.task.s_hi_um <= s);
         present
@@ -332,33 +342,36 @@ pub fn refine_border(
         let mut steps: Vec<Option<ColumnStep>> = Vec::with_capacity(x_hi + 1 - x_lo.min(x_hi + 1));
         for x in x_lo..=x_hi {
             let s = geo.s_at(cam, x as f64, z);
-            let step = sample_at(s)
-                .filter(|_| !rejected.iter().any(|r| s >= r.0 && s < r.1))
-                .and_then(|smp| {
-                    let predicted = geo.row_at((smp.task.predict_y)(s), z);
-                    let centre = predicted + smp.fit.position_px;
-                    let rising = smp.fit.high > smp.fit.low;
-                    let (row, crossing) = step_row(
-                        img,
-                        x,
-                        centre,
-                        threshold(&smp.fit),
-                        rising,
-                        params.band_half_height_px,
-                    )?;
-                    // The border's slope in rows per column, from the prediction.
-                    let ds = 0.5 * um_per_px;
-                    let slope = (geo.row_at((smp.task.predict_y)(s + ds), z)
+            let step = sample_at(s).filter(|_| !is_rejected(s)).and_then(|smp| {
+                let predicted = geo.row_at((smp.task.predict_y)(s), z);
+                let centre = predicted + smp.fit.position_px;
+                let rising = smp.fit.high > smp.fit.low;
+                let (row, crossing) = step_row(
+                    img,
+                    x,
+                    centre,
+                    threshold(&smp.fit),
+                    rising,
+                    params.band_half_height_px,
+                )?;
+                // The border's slope in rows per column, from the prediction (only the
+                // crossings of a sharp border use it).
+                let ds = 0.5 * um_per_px;
+                let slope = if sharp {
+                    (geo.row_at((smp.task.predict_y)(s + ds), z)
                         - geo.row_at((smp.task.predict_y)(s - ds), z))
-                    .abs();
-                    Some(ColumnStep {
-                        x,
-                        s,
-                        row,
-                        crossing,
-                        slope,
-                    })
-                });
+                    .abs()
+                } else {
+                    f64::NAN
+                };
+                Some(ColumnStep {
+                    x,
+                    s,
+                    row,
+                    crossing,
+                    slope,
+                })
+            });
             steps.push(step);
         }
         if sharp {
