@@ -128,6 +128,70 @@ fn an_unreadable_reference_is_a_warning_naming_it_and_the_reconstruction_goes_on
     );
 }
 
+#[test]
+fn a_long_reference_is_scored_on_the_clip_and_a_tiny_rate_is_refused() {
+    // A reference resampled whole to the clip's rate: 2^22 samples at 8 kHz is nine minutes,
+    // and a few thousand samples "at 2 Hz" were hours of sound (a fuzzed scan folder hung on
+    // that); only the clip's stretch is resampled now, and a rate no recording has is refused.
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    let reference = demo.join("reference.wav");
+    let write = |rate: u32, n: usize| {
+        let audio = groovescope::io::wav::Audio {
+            sample_rate_hz: rate,
+            channels: vec![(0..n).map(|i| ((i % 7) as f32 - 3.0) / 4.0).collect()],
+        };
+        std::fs::remove_file(&reference).unwrap();
+        groovescope::io::wav::write_wav(
+            &reference,
+            &audio,
+            groovescope::io::wav::WavBits::Int16,
+            false,
+        )
+        .unwrap();
+    };
+    let opts = ReconstructOptions {
+        groups: Some(0..2),
+        ..ReconstructOptions::default()
+    };
+    write(8000, 1 << 22);
+    let scan = Scan::open(&demo).unwrap();
+    let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false)).unwrap();
+    assert!(!rec.audio.is_empty());
+    // What is resampled ends 10 s after the clip (the clip starts near the reference's start),
+    // not nine minutes later.
+    let aligned = groovescope::engine::aligned_reference(
+        &rec.audio,
+        &rec.stitched,
+        scan.meta.groove_speed_mm_s(0),
+        &reference,
+    )
+    .unwrap();
+    let rate = f64::from(rec.audio.sample_rate_hz);
+    let most = (rec.audio.duration_secs() + 11.0) * rate;
+    assert!(
+        (aligned.len() as f64) <= most,
+        "{} samples aligned, at most {most}",
+        aligned.len()
+    );
+    assert!(
+        aligned.len() > rec.audio.channels[0].len(),
+        "the clip's stretch is all there"
+    );
+    write(2, 4000);
+    let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false)).unwrap();
+    assert!(rec.scores.is_none());
+    assert!(
+        rec.warnings
+            .iter()
+            .any(|w| w.contains("reference not scored")
+                && w.contains("2 Hz")
+                && w.contains("reference.wav")),
+        "{:?}",
+        rec.warnings
+    );
+}
+
 /// A valid 16×12 grey PNG whose header claims `w`×`h` (its checksum fixed up).
 fn png_claiming(w: u32, h: u32) -> Vec<u8> {
     let img = image::GrayImage::from_fn(16, 12, |x, y| image::Luma([(x * 7 + y) as u8]));

@@ -348,10 +348,26 @@ pub fn finish_reconstruction(
     })
 }
 
+/// Seconds of the reference kept past the clip's end before it is resampled (far more than
+/// the resampler's filter and the scores' lag search reach, so the clip's stretch comes out the
+/// same as from the whole reference).
+const REFERENCE_TAIL_SECS: f64 = 10.0;
+/// Most samples a reference is resampled to for scoring (23 min at 48 kHz): a reference that
+/// needs more, because the clip starts that far into it, is not scored.
+const MAX_RESAMPLED_REFERENCE: f64 = (1u64 << 26) as f64;
+/// Lowest reference rate scored against (Hz): nothing slower records a groove's sound, and
+/// resampling from it to the clip's rate costs in proportion to the ratio.
+const MIN_REFERENCE_RATE_HZ: u32 = 1000;
+
 /// Reference sound aligned to the stretch a reconstruction covers, at the recovered rate.
 ///
+/// Only the reference up to [`REFERENCE_TAIL_SECS`] past the clip's end is resampled: a long
+/// reference at a low rate (a hostile or mislabelled `reference.wav`: a few thousand samples
+/// "at 1 Hz") would otherwise be resampled whole, to hours of sound.
+///
 /// # Errors
-/// [`LoadError`] when the reference cannot be read or resampled.
+/// [`LoadError`] when the reference cannot be read or resampled, or the clip starts too far
+/// into it.
 pub fn aligned_reference(
     recovered: &Audio,
     stitched: &StitchedSignal,
@@ -359,17 +375,47 @@ pub fn aligned_reference(
     path: &std::path::Path,
 ) -> Result<Vec<f32>, LoadError> {
     let reference = read_wav(path)?;
+    if reference.sample_rate_hz < MIN_REFERENCE_RATE_HZ {
+        return Err(LoadError::Sound {
+            problem: format!(
+                "its rate, {} Hz, is below the {MIN_REFERENCE_RATE_HZ} Hz a recording of the \
+                 groove's sound needs",
+                reference.sample_rate_hz
+            ),
+            path: path.to_path_buf(),
+        });
+    }
     let mono = reference.mono();
     let rate = f64::from(reference.sample_rate_hz);
     let start_secs = stitched.start_um / (groove_speed_mm_s * 1000.0);
     // The whole reference at the recovered rate, read from the clip's start, which may fall
     // between samples (rounding it to a reference sample misaligned the scores by up to half a
     // sample: up to 10 µs at 48 kHz, −18 dB of error at 2 kHz).
-    let resampled =
-        resample(&mono, rate, recovered.sample_rate_hz).map_err(|e| LoadError::Sound {
-            problem: format!("cannot resample the reference: {e}"),
+    let out_rate = f64::from(recovered.sample_rate_hz);
+    let end_secs = start_secs + recovered.duration_secs() + REFERENCE_TAIL_SECS;
+    let keep = if end_secs.is_finite() {
+        ((end_secs * rate).ceil().max(0.0) as usize).min(mono.len())
+    } else {
+        mono.len()
+    };
+    let needed = keep as f64 * out_rate / rate;
+    if needed.is_nan() || needed > MAX_RESAMPLED_REFERENCE {
+        return Err(LoadError::Sound {
+            problem: format!(
+                "the clip starts {start_secs:.0} s into the reference, which would take                  {needed:.3e} samples at {out_rate} Hz to score (at most {MAX_RESAMPLED_REFERENCE:.3e})"
+            ),
             path: path.to_path_buf(),
-        })?;
+        });
+    }
+    let resampled = resample(
+        mono.get(..keep).unwrap_or(&[]),
+        rate,
+        recovered.sample_rate_hz,
+    )
+    .map_err(|e| LoadError::Sound {
+        problem: format!("cannot resample the reference: {e}"),
+        path: path.to_path_buf(),
+    })?;
     Ok(read_from(
         &resampled,
         (start_secs * f64::from(recovered.sample_rate_hz)).max(0.0),
