@@ -97,8 +97,8 @@ pub struct StillProgressNow {
 /// error after the grooves were found keeps them, so the operator can pick another.
 #[derive(Clone, Debug)]
 pub struct StillOutcome {
-    /// The image and its settings.
-    pub image: Arc<Image>,
+    /// The image (None when it could not be read).
+    pub image: Option<Arc<Image>>,
     /// The grooves found.
     pub found: Option<Arc<FoundGrooves>>,
     /// The groove decoded.
@@ -262,11 +262,7 @@ fn run_task(task: StillTask, r: &Reporter<StillProgressNow, StillOutcome>) -> St
                 Ok(i) => Arc::new(i),
                 Err(e) => {
                     return StillOutcome {
-                        image: Arc::new(Image {
-                            width: 0,
-                            height: 0,
-                            data: Vec::new(),
-                        }),
+                        image: None,
                         found: None,
                         run: None,
                         error: Some(e),
@@ -276,7 +272,7 @@ fn run_task(task: StillTask, r: &Reporter<StillProgressNow, StillOutcome>) -> St
         }
     };
     let fail = |found: Option<Arc<FoundGrooves>>, e: StillRunError| StillOutcome {
-        image: image.clone(),
+        image: Some(image.clone()),
         found,
         run: None,
         error: Some(e.to_string()),
@@ -330,7 +326,7 @@ fn run_task(task: StillTask, r: &Reporter<StillProgressNow, StillOutcome>) -> St
         started,
     ) {
         Ok(run) => StillOutcome {
-            image: image.clone(),
+            image: Some(image.clone()),
             found: Some(found),
             run: Some(Arc::new(run)),
             error: None,

@@ -150,17 +150,17 @@ impl Workbench {
             }
         };
         if let Some((path, setup, source)) = self.still.pending.take() {
-            if outcome.image.width == 0 {
+            let Some(image) = outcome.image.clone() else {
                 self.error(
                     outcome
                         .error
                         .unwrap_or_else(|| "the still did not open".into()),
                 );
                 return;
-            }
+            };
             self.still.doc = Some(StillDoc {
                 path,
-                image: outcome.image.clone(),
+                image,
                 setup,
                 source,
                 found: None,
@@ -250,7 +250,7 @@ impl Workbench {
         };
         let _lock = OutputLock::acquire(path).map_err(|e| e.to_string())?;
         let report = super::export::sidecar_path(path);
-        if !overwrite && (path.exists() || report.exists()) {
+        if !overwrite && super::export::would_overwrite(path) {
             return Err(format!(
                 "refusing to overwrite an existing file: {}",
                 path.display()

@@ -462,8 +462,9 @@ pub fn write_still_report(
     Ok(())
 }
 
-/// Which wall is the left channel, for the report.
-fn left_wall_text(axis: Axis, reverse: bool) -> &'static str {
+/// Which wall is the left channel (the report, the workbench).
+#[must_use]
+pub fn left_wall_text(axis: Axis, reverse: bool) -> &'static str {
     match (axis, reverse) {
         (Axis::Vertical, false) => "the right-hand wall (time runs down)",
         (Axis::Vertical, true) => "the left-hand wall (time runs up)",

@@ -497,12 +497,10 @@ fn sound_view(
             actions.push(StillAction::Export);
         }
         if run.audio.channels.len() > 1 {
-            ui.weak(match (doc.setup.axis, doc.setup.reverse) {
-                (Axis::Vertical, false) => "left channel: the right-hand wall",
-                (Axis::Vertical, true) => "left channel: the left-hand wall",
-                (Axis::Horizontal, false) => "left channel: the upper wall",
-                (Axis::Horizontal, true) => "left channel: the lower wall",
-            });
+            ui.weak(format!(
+                "left channel: {}",
+                crate::still::cli::left_wall_text(doc.setup.axis, doc.setup.reverse)
+            ));
         }
         if heard && !playing {
             ui.weak("(the player holds this groove; reconstruct to hear the clip again)");
