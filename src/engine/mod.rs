@@ -361,7 +361,7 @@ const MIN_REFERENCE_RATE_HZ: u32 = 1000;
 
 /// Reference sound aligned to the stretch a reconstruction covers, at the recovered rate.
 ///
-/// Only the reference up to [`REFERENCE_TAIL_SECS`] past the clip's end is resampled: a long
+/// Only the reference up to 10 s (`REFERENCE_TAIL_SECS`) past the clip's end is resampled: a long
 /// reference at a low rate (a hostile or mislabelled `reference.wav`: a few thousand samples
 /// "at 1 Hz") would otherwise be resampled whole, to hours of sound.
 ///
