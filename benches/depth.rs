@@ -67,14 +67,7 @@ fn flows(g: &Geometry) -> Vec<FlowField> {
                 let z = groove_z(x, y, cam, g);
                 (-g.focal_px * g.frame_step_um / z + 0.01 * rng.gauss()) as f32
             });
-            FlowField {
-                u,
-                v: Image::zeros(WIDTH, HEIGHT),
-                confidence: Image::filled(WIDTH, HEIGHT, 1.0),
-                iterations: 1,
-                converged: true,
-                frame_index: k,
-            }
+            FlowField::exact(u, k)
         })
         .collect()
 }

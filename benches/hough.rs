@@ -36,23 +36,8 @@ fn frame() -> (Derivatives, FlowField) {
             0.0
         }
     });
-    let zeros = Image::zeros(WIDTH, HEIGHT);
-    let d = Derivatives {
-        ix: zeros.clone(),
-        iy,
-        it: zeros.clone(),
-        image: zeros.clone(),
-        frame_index: 3,
-        base_flow_px: -2.0,
-    };
-    let f = FlowField {
-        u: zeros.clone(),
-        v: zeros,
-        confidence: Image::filled(WIDTH, HEIGHT, 1.0),
-        iterations: 1,
-        converged: true,
-        frame_index: 3,
-    };
+    let d = Derivatives::from_iy(iy, 3, -2.0);
+    let f = FlowField::exact(Image::zeros(WIDTH, HEIGHT), 3);
     (d, f)
 }
 

@@ -11,14 +11,26 @@ use super::{GroupLayout, VideoError, io_err};
 use crate::image::Image;
 use crate::io::frames::save_grey_png;
 
-/// Bits of the first component of `format` (8 when FFmpeg does not know the format).
+/// Bits per component of `format` (8 when FFmpeg does not know the format).
+///
+/// Derived from FFmpeg's safe `bits_per_pixel`, which counts the chroma planes at their
+/// subsampled size: the bits are divided by the components per pixel, where the two chroma
+/// components of a format with three or more count 1/2^(log2_chroma_w + log2_chroma_h) each.
+/// That gives gray16 16, yuv420p10 10, p010 10, rgb48 16, yuva420p10 10, and 8 or less for
+/// every 8-bit and packed format (rgb565 5, nv12 8, pal8 8).
 pub(super) fn component_depth_bits(format: Pixel) -> i32 {
     let Some(desc) = format.descriptor() else {
         return 8;
     };
-    // SAFETY: `descriptor()` only returns `Some` for FFmpeg's static, non-null table entry of
-    // this format; every entry has `comp[0]` filled in.
-    unsafe { (*desc.as_ptr()).comp[0].depth }
+    let components = i32::from(desc.nb_components());
+    if components == 0 {
+        return 8;
+    }
+    let chroma = if components >= 3 { 2 } else { 0 };
+    let sub = 1i32 << (u32::from(desc.log2_chroma_w()) + u32::from(desc.log2_chroma_h())).min(8);
+    // Components per pixel, scaled by `sub` so that it stays an integer.
+    let per_pixel_scaled = (components - chroma) * sub + chroma;
+    (desc.bits_per_pixel() * sub + per_pixel_scaled / 2) / per_pixel_scaled
 }
 
 /// Converts decoded frames to grey images, through swscale when the format is not grey already.

@@ -393,3 +393,28 @@ fn import_speed_full_size_frames() {
         t.elapsed()
     );
 }
+
+#[test]
+fn component_depth_is_read_from_the_safe_descriptor_fields() {
+    use ffmpeg::format::Pixel as P;
+    let cases = [
+        (P::GRAY8, 8),
+        (P::GRAY16LE, 16),
+        (P::GRAY10LE, 10),
+        (P::YUV420P, 8),
+        (P::YUV420P10LE, 10),
+        (P::YUV444P16LE, 16),
+        (P::YUVA420P10LE, 10),
+        (P::NV12, 8),
+        (P::P010LE, 10),
+        (P::RGB24, 8),
+        (P::RGB48LE, 16),
+        (P::RGBA64LE, 16),
+        (P::GBRP12LE, 12),
+        (P::RGB565LE, 5),
+        (P::PAL8, 8),
+    ];
+    for (format, bits) in cases {
+        assert_eq!(grey::component_depth_bits(format), bits, "{format:?}");
+    }
+}

@@ -5,18 +5,6 @@ use crate::pipeline::walls::test_support::{Rng, paper_geometry};
 
 mod reference;
 
-fn field(u: Image, frame_index: usize) -> FlowField {
-    let (w, h) = (u.width, u.height);
-    FlowField {
-        u,
-        v: Image::zeros(w, h),
-        confidence: Image::filled(w, h, 1.0),
-        iterations: 1,
-        converged: true,
-        frame_index,
-    }
-}
-
 /// Z seen at pixel (x, y) of frame k on the plane Z = z0 + ax·X_world + ay·Y, where the
 /// camera sits at X = k·U: 1/Z is linear in the pixel coordinates.
 fn plane_z(x: usize, y: usize, k: usize, w: usize, h: usize, g: &Geometry, p: [f64; 3]) -> f64 {
@@ -44,7 +32,7 @@ fn plane_flows(
                 let z = plane_z(x, y, k, w, h, g, p);
                 (-g.focal_px * g.frame_step_um / z + noise_px * rng.gauss()) as f32
             });
-            field(u, k + 3)
+            FlowField::exact(u, k + 3)
         })
         .collect()
 }

@@ -86,6 +86,21 @@ pub struct Derivatives {
 }
 
 impl Derivatives {
+    /// A set in which only ∂I/∂y is known (∂I/∂x, ∂I/∂t and the image are zero): all that the
+    /// stripe search reads, so an in-focus map can be fed to it directly.
+    #[must_use]
+    pub fn from_iy(iy: Image, frame_index: usize, base_flow_px: f32) -> Self {
+        let zeros = Image::zeros(iy.width, iy.height);
+        Self {
+            ix: zeros.clone(),
+            iy,
+            it: zeros.clone(),
+            image: zeros,
+            frame_index,
+            base_flow_px,
+        }
+    }
+
     /// A set from its four `width` × `height` planes `[ix, iy, it, image]`.
     fn from_planes(
         (width, height): (usize, usize),

@@ -501,6 +501,23 @@ pub fn fuse(
 
 type Masks = (Vec<bool>, Vec<bool>, Vec<bool>);
 
+/// The groups, in order, that samples `0..n` (at `start_um + i·spacing`) can fall in: each
+/// sample's group and its two neighbours, so that rounding at a boundary loses none. A
+/// group whose span holds a sample is always among them, and there are at most 3·n, however
+/// the metadata sizes the step (a step of 1e-300 µm once asked for 2⁶⁴ groups).
+fn candidate_groups(n: usize, start_um: f64, spacing: f64, step: f64) -> Vec<usize> {
+    let mut groups: Vec<usize> = Vec::new();
+    for i in 0..n {
+        let g = ((start_um + i as f64 * spacing) / step).floor().max(0.0) as usize;
+        for c in [g.saturating_sub(1), g, g.saturating_add(1)] {
+            if groups.last().is_none_or(|&l| c > l) {
+                groups.push(c);
+            }
+        }
+    }
+    groups
+}
+
 /// The blocks' crossovers and weights as they fell on each group of the scan.
 fn map_groups(
     masks: &[Masks],
@@ -516,13 +533,12 @@ fn map_groups(
     if step <= 0.0 || n == 0 {
         return Vec::new();
     }
-    let end_um = start_um + n as f64 * spacing;
-    let first = (start_um / step).floor().max(0.0) as usize;
-    let last = (end_um / step).floor().max(0.0) as usize;
-    (first..=last)
+    candidate_groups(n, start_um, spacing, step)
+        .into_iter()
         .filter_map(|g| {
             let lo = ((g as f64 * step - start_um) / spacing).max(0.0) as usize;
-            let hi = (((g + 1) as f64 * step - start_um) / spacing).max(0.0) as usize;
+            let hi = ((g as f64 + 1.0) * step - start_um) / spacing;
+            let hi = hi.max(0.0) as usize;
             let hi = hi.min(n);
             if lo >= hi {
                 return None;

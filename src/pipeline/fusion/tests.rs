@@ -153,3 +153,28 @@ fn mismatched_inputs_are_refused() {
     };
     assert!(fuse(&a, &a, None, &meta(), &bad).is_err());
 }
+
+#[test]
+fn the_group_report_covers_each_sampled_group_once_whatever_the_step() {
+    let n = 1000;
+    let (truth, _, _) = inputs(n, 0.0, 0.0);
+    let x: Vec<f32> = truth.iter().map(|&v| v as f32).collect();
+    let s = signal(3, vec![x]);
+    // 1000 samples of 21.3 µm from 63.9 µm on, in groups of 460.2 µm: groups 0 to 46.
+    let fused = fuse(&s, &s, None, &meta(), &FusionParams::default()).unwrap();
+    let groups: Vec<usize> = fused.groups.iter().map(|g| g.group).collect();
+    assert_eq!(groups, (0..=46).collect::<Vec<_>>());
+    // A step far shorter than a sample (the fuzzer's scan asked for 2⁶⁴ groups): the group
+    // numbers no longer fit a usize, so nothing is reported, with no overflow and no endless
+    // loop. At a step of 1 nm each sample is a group of its own (but perhaps the first, whose
+    // group's span the rounding of the boundaries can leave empty).
+    let fused = fuse(&s, &s, None, &scan_meta(1e-300), &FusionParams::default()).unwrap();
+    assert!(fused.groups.is_empty());
+    let fused = fuse(&s, &s, None, &scan_meta(1e-3), &FusionParams::default()).unwrap();
+    assert!(
+        (n - 1..=n).contains(&fused.groups.len()),
+        "{}",
+        fused.groups.len()
+    );
+    assert!(fused.groups.windows(2).all(|w| w[0].group < w[1].group));
+}

@@ -237,6 +237,23 @@ pub struct FlowField {
     pub frame_index: usize,
 }
 
+impl FlowField {
+    /// A field known exactly, from a model rather than a measurement: horizontal flow `u`, no
+    /// vertical flow, full confidence everywhere, converged in one iteration.
+    #[must_use]
+    pub fn exact(u: Image, frame_index: usize) -> Self {
+        let (w, h) = (u.width, u.height);
+        Self {
+            u,
+            v: Image::zeros(w, h),
+            confidence: Image::filled(w, h, 1.0),
+            iterations: 1,
+            converged: true,
+            frame_index,
+        }
+    }
+}
+
 /// Largest accepted Lucas–Kanade window side, px.
 pub const MAX_LK_WINDOW_PX: usize = 255;
 /// Box over which [`estimate_wall_sides`] averages u before differentiating (columns, along the groove).

@@ -379,14 +379,7 @@ mod end_to_end {
                     let z = g.z_px_from(x as f64, y as f64, w, h, cam);
                     (-fu / z + noise_px * rng.gauss()) as f32
                 });
-                FlowField {
-                    u,
-                    v: Image::zeros(w, h),
-                    confidence: Image::filled(w, h, 1.0),
-                    iterations: 1,
-                    converged: true,
-                    frame_index: k as usize,
-                }
+                FlowField::exact(u, k as usize)
             })
             .collect();
         let depth = estimate_depth(&flows, &geom, &DepthParams::default()).unwrap();
