@@ -1,7 +1,13 @@
 //! `groovescope import-video` end to end: a lossless clip encoded at test time becomes a loadable scan.
 #![allow(clippy::unwrap_used)] // tests may panic
 
+#[cfg(not(all(feature = "video", feature = "gui")))]
 mod common;
+/// The headless workbench harness (it brings the plain helpers with it).
+#[cfg(all(feature = "video", feature = "gui"))]
+mod gui_common;
+#[cfg(all(feature = "video", feature = "gui"))]
+use gui_common::common;
 
 use common::{groovescope, stderr};
 
@@ -133,38 +139,18 @@ fn import_video_without_the_feature_says_so() {
 #[cfg(all(feature = "video", feature = "gui"))]
 #[test]
 fn workbench_imports_a_clip_and_opens_the_scan() {
-    use egui_kittest::Harness;
     use egui_kittest::kittest::Queryable;
-    use groovescope::app::{Workbench, WorkbenchOptions};
+    use groovescope::app::WorkbenchOptions;
     use groovescope::playback::DeviceChoice;
 
-    struct App {
-        wb: Option<Workbench>,
-        frame: eframe::Frame,
-    }
     let dir = tempfile::tempdir().unwrap();
-    let mut h = Harness::builder()
-        .with_size(egui::vec2(1280.0, 800.0))
-        .build_ui_state(
-            |ui, app: &mut App| {
-                if let Some(wb) = &mut app.wb {
-                    eframe::App::logic(wb, ui.ctx(), &mut app.frame);
-                    eframe::App::ui(wb, ui, &mut app.frame);
-                }
-            },
-            App {
-                wb: None,
-                frame: eframe::Frame::_new_kittest(),
-            },
-        );
-    let ctx = h.ctx.clone();
     let opts = WorkbenchOptions {
         scan: None,
         config_dir: Some(dir.path().join("config")),
         audio: DeviceChoice::Off,
         ..WorkbenchOptions::default()
     };
-    h.state_mut().wb = Some(Workbench::new(&ctx, opts).unwrap());
+    let mut h = gui_common::harness(opts);
     h.run_steps(3);
     h.get_by_label("File").click();
     h.run_steps(2);
