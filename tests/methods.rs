@@ -9,17 +9,21 @@ use groovescope::accuracy::{
     render, render_tone, score_scan, small_lateral, sound_params, speak, two_sample_window_px,
 };
 use groovescope::io::wav::read_wav;
-use groovescope::pipeline::Method;
 use groovescope::pipeline::edges::EdgeParams;
 use groovescope::pipeline::fusion::FusionParams;
+use groovescope::pipeline::{Method, PipelineParams};
 use groovescope::synth::{SynthConfig, WallChunk};
 
 fn scores(scan: &Path, cfg: &SynthConfig) -> MethodScores {
-    let params = sound_params(two_sample_window_px(cfg), true);
+    score("case", scan, &sound_params(two_sample_window_px(cfg), true))
+}
+
+/// The three methods' scores on `scan` with `params`, printed.
+fn score(label: &str, scan: &Path, params: &PipelineParams) -> MethodScores {
     let m = score_methods(
-        "case",
+        label,
         scan,
-        &params,
+        params,
         &EdgeParams::default(),
         &FusionParams::default(),
     )
@@ -150,19 +154,9 @@ fn fused_beats_both_methods_on_speech_in_a_flaked_groove() {
     cfg.damage.chunks = right_wall_flakes();
     let scan = dir.path().join("flaked speech");
     render("flaked speech", &speech, &cfg, &scan).unwrap();
-    let mut params = groovescope::pipeline::PipelineParams::default();
+    let mut params = PipelineParams::default();
     params.dsp.lowpass = false;
-    let m = score_methods(
-        "flaked speech",
-        &scan,
-        &params,
-        &EdgeParams::default(),
-        &FusionParams::default(),
-    )
-    .unwrap();
-    for (name, s) in [("flow", &m.flow), ("edges", &m.edges), ("fused", &m.fused)] {
-        eprintln!("{name:6} r {:.4} SNR {:6.2} dB", s.r, s.snr_db);
-    }
+    let m = score("flaked speech", &scan, &params);
     // Measured: flow r 0.932 (8.8 dB), edges 0.897 (7.1 dB), fused 0.981 (14.2 dB).
     let best = m.flow.snr_db.max(m.edges.snr_db);
     assert!(

@@ -5,8 +5,8 @@
 use egui::{Color32, Ui};
 use egui_plot::{Bar, BarChart, Legend, Line, Plot, PlotPoints};
 
-use super::AXIS_WIDTH_PT;
 use super::waveform_ui::{PREVIOUS_COLOUR, RECOVERED_COLOUR, decimate};
+use super::{AXIS_WIDTH_PT, level_plot};
 use crate::app::compare::{Agreement, CompareState, METHODS, default_partner};
 use crate::pipeline::Method;
 use crate::playback::{AudioStatus, Player};
@@ -174,42 +174,35 @@ fn body(
     });
     let rate = f64::from(cmp.a.rate_hz());
     let height = (ui.available_height() - 150.0).max(180.0);
-    Plot::new("compare_waveforms")
-        .y_axis_min_width(AXIS_WIDTH_PT)
-        .height(height)
-        .legend(Legend::default())
-        .allow_boxed_zoom(false)
-        .x_axis_label("time (s)")
-        .y_axis_label("level")
-        .show(ui, |plot_ui| {
-            let b = plot_ui.plot_bounds();
-            let (t0, t1) = (b.min()[0], b.max()[0]);
-            let cols = (plot_ui.response().rect.width() as usize).clamp(64, 2000);
+    level_plot("compare_waveforms", height).show(ui, |plot_ui| {
+        let b = plot_ui.plot_bounds();
+        let (t0, t1) = (b.min()[0], b.max()[0]);
+        let cols = (plot_ui.response().rect.width() as usize).clamp(64, 2000);
+        plot_ui.line(
+            Line::new(
+                format!("A: {ma}"),
+                PlotPoints::from(decimate(&cmp.a.recovered, rate, t0, t1, cols)),
+            )
+            .color(RECOVERED_COLOUR),
+        );
+        plot_ui.line(
+            Line::new(
+                format!("B: {mb}"),
+                PlotPoints::from(decimate(&cmp.b_on_a, rate, t0, t1, cols)),
+            )
+            .color(PREVIOUS_COLOUR.gamma_multiply(0.85)),
+        );
+        if !state.hide_difference {
             plot_ui.line(
                 Line::new(
-                    format!("A: {ma}"),
-                    PlotPoints::from(decimate(&cmp.a.recovered, rate, t0, t1, cols)),
+                    "A − B",
+                    PlotPoints::from(decimate(&cmp.difference, rate, t0, t1, cols)),
                 )
-                .color(RECOVERED_COLOUR),
+                .color(DIFFERENCE_COLOUR)
+                .width(1.0),
             );
-            plot_ui.line(
-                Line::new(
-                    format!("B: {mb}"),
-                    PlotPoints::from(decimate(&cmp.b_on_a, rate, t0, t1, cols)),
-                )
-                .color(PREVIOUS_COLOUR.gamma_multiply(0.85)),
-            );
-            if !state.hide_difference {
-                plot_ui.line(
-                    Line::new(
-                        "A − B",
-                        PlotPoints::from(decimate(&cmp.difference, rate, t0, t1, cols)),
-                    )
-                    .color(DIFFERENCE_COLOUR)
-                    .width(1.0),
-                );
-            }
-        });
+        }
+    });
     ui.label("agreement per group (bar height and colour: r of B against A; SNR on hover)");
     let bars: Vec<Bar> = cmp
         .groups

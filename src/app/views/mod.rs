@@ -149,6 +149,19 @@ impl StageStatus {
 /// Room for the value labels of plot y axes (points): enough for "4030.5" or "-120".
 pub const AXIS_WIDTH_PT: f32 = 48.0;
 
+/// A sound plot (time in seconds against level) `height_pt` tall, with a legend and no boxed
+/// zoom, as the waveform and A/B views draw it.
+#[must_use]
+pub fn level_plot(id: &str, height_pt: f32) -> Plot<'static> {
+    Plot::new(id)
+        .y_axis_min_width(AXIS_WIDTH_PT)
+        .height(height_pt)
+        .legend(egui_plot::Legend::default())
+        .allow_boxed_zoom(false)
+        .x_axis_label("time (s)")
+        .y_axis_label("level")
+}
+
 /// Tint of stale images.
 pub const STALE_TINT: Color32 = Color32::from_gray(110);
 

@@ -10,7 +10,7 @@ use egui::{Color32, Ui};
 use egui_plot::{Legend, Line, LineStyle, Plot, PlotPoints, Span, VLine};
 
 use super::transport_ui::{WaveAction, WaveViewState, clip_controls_ui, transport_ui};
-use super::{AXIS_WIDTH_PT, empty_note};
+use super::{AXIS_WIDTH_PT, empty_note, level_plot};
 use crate::app::clip_state::ClipState;
 use crate::pipeline::audio_signal::GroupSignal;
 use crate::playback::Player;
@@ -198,14 +198,8 @@ pub fn waveform_ui(
     let playhead = player.position_secs();
     let playing = player.is_playing();
     let group_span = clip.and_then(|c| c.group_span_secs(current_group));
-    let resp = Plot::new("waveform")
-        .y_axis_min_width(AXIS_WIDTH_PT)
-        .height(wave_h)
-        .legend(Legend::default())
+    let resp = level_plot("waveform", wave_h)
         .allow_drag(false)
-        .allow_boxed_zoom(false)
-        .x_axis_label("time (s)")
-        .y_axis_label("level")
         .show(ui, |plot_ui| {
             let b = plot_ui.plot_bounds();
             let (t0, t1) = (b.min()[0], b.max()[0]);
