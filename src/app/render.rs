@@ -186,14 +186,7 @@ mod tests {
 
     #[test]
     fn flow_colour_reports_the_residual_magnitude() {
-        let flow = FlowField {
-            u: Image::from_vec(2, 1, vec![-2.0, -1.5]).unwrap(),
-            v: Image::zeros(2, 1),
-            confidence: Image::filled(2, 1, 1.0),
-            iterations: 1,
-            converged: true,
-            frame_index: 0,
-        };
+        let flow = FlowField::exact(Image::from_vec(2, 1, vec![-2.0, -1.5]).unwrap(), 0);
         let r = flow_colour(&flow, -2.0);
         assert!((r.hi - 0.5).abs() < 1e-6);
         assert_eq!(r.image.size, [2, 1]);
@@ -201,14 +194,7 @@ mod tests {
         // One wild pixel among 99 small ones does not set the scale.
         let mut u = vec![0.1_f32; 100];
         u[7] = 50.0;
-        let wild = FlowField {
-            u: Image::from_vec(100, 1, u).unwrap(),
-            v: Image::zeros(100, 1),
-            confidence: Image::filled(100, 1, 1.0),
-            iterations: 1,
-            converged: true,
-            frame_index: 0,
-        };
+        let wild = FlowField::exact(Image::from_vec(100, 1, u).unwrap(), 0);
         let r = flow_colour(&wild, 0.0);
         assert!((r.hi - 0.1).abs() < 1e-6, "{}", r.hi);
         assert_eq!(
