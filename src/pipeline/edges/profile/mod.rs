@@ -93,34 +93,46 @@ pub(crate) struct Column {
 }
 
 /// The columns of frame `cam_s_um` covering the task's stretch; None when it leaves the frame.
+#[cfg(test)]
 pub(crate) fn columns(
     geo: &FrameGeometry,
     cam_s_um: f64,
     task: &SampleTask,
 ) -> Option<Vec<Column>> {
+    let mut cols = Vec::new();
+    columns_into(geo, cam_s_um, task, &mut cols).then_some(cols)
+}
+
+/// [`columns`] into `cols` (emptied first, its buffer kept); false when the stretch leaves the
+/// frame.
+fn columns_into(
+    geo: &FrameGeometry,
+    cam_s_um: f64,
+    task: &SampleTask,
+    cols: &mut Vec<Column>,
+) -> bool {
+    cols.clear();
     let x_lo = geo.x_at(cam_s_um, task.s_lo_um, task.z_um);
     let x_hi = geo.x_at(cam_s_um, task.s_hi_um, task.z_um);
     if !(x_lo >= -0.5 && x_hi <= geo.width as f64 - 0.5 && x_hi > x_lo) {
-        return None;
+        return false;
     }
     let first = (x_lo + 0.5).floor().max(0.0) as usize;
     let last = ((x_hi + 0.5).ceil() as usize).min(geo.width);
-    let cols = (first..last)
-        .filter_map(|x| {
-            let xf = x as f64;
-            let share = (xf + 0.5).min(x_hi) - (xf - 0.5).max(x_lo);
-            (share > 0.0).then(|| {
-                let s_um = geo.s_at(cam_s_um, xf, task.z_um);
-                Column {
-                    x,
-                    share,
-                    row: geo.row_at((task.predict_y)(s_um), task.z_um),
-                    s_um,
-                }
-            })
+    cols.extend((first..last).filter_map(|x| {
+        let xf = x as f64;
+        let share = (xf + 0.5).min(x_hi) - (xf - 0.5).max(x_lo);
+        (share > 0.0).then(|| {
+            let s_um = geo.s_at(cam_s_um, xf, task.z_um);
+            Column {
+                x,
+                share,
+                row: geo.row_at((task.predict_y)(s_um), task.z_um),
+                s_um,
+            }
         })
-        .collect();
-    Some(cols)
+    }));
+    true
 }
 
 /// Sub-pixel bins of one frame's straightened profile: Σw, Σw·u, Σw·v per bin.
@@ -226,17 +238,24 @@ struct BandPixel {
 }
 
 /// One frame's band, read from the frame once: each column's pixels inside the band, in row
-/// order (`ends[k]` closes column `k`'s run of `pixels`).
-struct BandView<'c> {
+/// order (`ends[k]` closes column `k`'s run of `pixels`, `start` opens the first). The views of
+/// one fit share one pixel buffer.
+struct BandView<'c, 'p> {
     cols: &'c [Column],
-    ends: Vec<usize>,
-    pixels: Vec<BandPixel>,
+    start: usize,
+    ends: &'p [usize],
+    pixels: &'p [BandPixel],
 }
 
-/// Reads the band of `cols` from `frame`.
-fn gather<'c>(frame: &Image, cols: &'c [Column], band: Band) -> BandView<'c> {
-    let mut pixels = Vec::with_capacity(cols.len() * (2.0 * band.half_px + 1.0) as usize);
-    let mut ends = Vec::with_capacity(cols.len());
+/// Reads the band of `cols` from `frame`, appending the pixels to `pixels` and each column's
+/// end to `ends`.
+fn gather(
+    frame: &Image,
+    cols: &[Column],
+    band: Band,
+    pixels: &mut Vec<BandPixel>,
+    ends: &mut Vec<usize>,
+) {
     for c in cols {
         for (r, u) in band.rows(c.row, frame.height) {
             if let (Some(bin), Some(v)) = (band.bin(u), frame.get(c.x, r))
@@ -247,16 +266,15 @@ fn gather<'c>(frame: &Image, cols: &'c [Column], band: Band) -> BandView<'c> {
         }
         ends.push(pixels.len());
     }
-    BandView { cols, ends, pixels }
 }
 
-impl BandView<'_> {
+impl BandView<'_, '_> {
     /// Each column with its pixels.
     fn columns(&self) -> impl Iterator<Item = (&Column, &[BandPixel])> {
-        let starts = std::iter::once(0).chain(self.ends.iter().copied());
+        let starts = std::iter::once(self.start).chain(self.ends.iter().copied());
         self.cols
             .iter()
-            .zip(starts.zip(&self.ends))
+            .zip(starts.zip(self.ends))
             .map(|(c, (a, &b))| (c, self.pixels.get(a..b).unwrap_or(&[])))
     }
 
@@ -326,12 +344,12 @@ pub(super) trait BandReader {
 }
 
 /// Every view's band gathered once.
-struct Gathered<'c> {
+struct Gathered<'c, 'p> {
     band: Band,
-    views: Vec<Option<BandView<'c>>>,
+    views: Vec<Option<BandView<'c, 'p>>>,
 }
 
-impl BandReader for Gathered<'_> {
+impl BandReader for Gathered<'_, '_> {
     fn bins(&self, k: usize, weight: &dyn Fn(f64) -> f64) -> Option<Bins> {
         let mut out = Bins::new(self.band.bins);
         self.bins_into(k, weight, &mut out).then_some(out)
@@ -433,7 +451,9 @@ fn invert3(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     }))
 }
 
-/// The frames that see the whole stretch (index in `frames`, their columns).
+/// The frames that see the whole stretch (index in `frames`, their columns), as the plain
+/// reference reads them.
+#[cfg(test)]
 pub(super) fn frame_views(
     frames: &[(&Image, f64, usize)],
     geo: &FrameGeometry,
@@ -444,6 +464,22 @@ pub(super) fn frame_views(
         .enumerate()
         .filter_map(|(i, (_, cam, _))| columns(geo, *cam, task).map(|c| (i, c)))
         .collect()
+}
+
+/// The buffers of one thread's fine fits, reused from fit to fit: a fit would otherwise make
+/// some forty allocations of a few kB (every frame's columns and band), and with the
+/// allocator's single arena (`crate::alloc`) the fits running on every core queued on its lock
+/// (a dual-focus group's edge stage took as long on two cores as on one).
+#[derive(Default)]
+struct FitBuffers {
+    /// Frame views: `views[..used]` are this fit's, the rest keep their buffers.
+    views: Vec<(usize, Vec<Column>)>,
+    pixels: Vec<BandPixel>,
+    ends: Vec<usize>,
+}
+
+thread_local! {
+    static FIT_BUFFERS: std::cell::RefCell<FitBuffers> = std::cell::RefCell::default();
 }
 
 /// Fits one border of one sample over `frames` (each with its `cam_s_um` and index in the
@@ -482,25 +518,60 @@ fn fit_gathered(
     params: &EdgeParams,
     want_frames: bool,
 ) -> Option<SampleBorder> {
+    // Taken out for the fit and put back after, so the thread's buffers are never borrowed
+    // across the fit.
+    let mut buf = FIT_BUFFERS.with(|b| std::mem::take(&mut *b.borrow_mut()));
     let band = Band::new(params);
-    let views = frame_views(frames, geo, task);
+    let mut used = 0;
+    for (i, (_, cam, _)) in frames.iter().enumerate() {
+        if used == buf.views.len() {
+            buf.views.push((i, Vec::new()));
+        }
+        let view = &mut buf.views[used];
+        if columns_into(geo, *cam, task, &mut view.1) {
+            view.0 = i;
+            used += 1;
+        }
+    }
+    buf.pixels.clear();
+    buf.ends.clear();
+    // Each view's (first column end, first pixel) in the shared buffers.
+    let mut spans = Vec::with_capacity(used);
+    for (i, cols) in &buf.views[..used] {
+        spans.push((buf.ends.len(), buf.pixels.len()));
+        if let Some((img, _, _)) = frames.get(*i) {
+            gather(img, cols, band, &mut buf.pixels, &mut buf.ends);
+        }
+    }
+    let views = &buf.views[..used];
     let reader = Gathered {
         band,
         views: views
             .iter()
-            .map(|(i, cols)| frames.get(*i).map(|(img, _, _)| gather(img, cols, band)))
+            .zip(&spans)
+            .map(|((i, cols), &(first_end, start))| {
+                frames.get(*i).map(|_| BandView {
+                    cols,
+                    start,
+                    ends: &buf.ends[first_end..first_end + cols.len()],
+                    pixels: &buf.pixels,
+                })
+            })
             .collect(),
     };
-    fit_views(
+    let fit = fit_views(
         frames,
-        &views,
+        views,
         reference,
         geo,
         task,
         params,
         &reader,
         want_frames,
-    )
+    );
+    drop(reader);
+    FIT_BUFFERS.with(|b| *b.borrow_mut() = buf);
+    fit
 }
 
 /// The fit of [`fit_sample`] on the frames' `views`, their bands read through `reader`; with
