@@ -163,8 +163,8 @@ mod tests {
                     ..EdgeParams::default()
                 };
                 for reference in [0, 3, 5] {
-                    let fast = super::super::profile::fit_sample_with_frames(
-                        &list, reference, &geo, &task, &params,
+                    let fast = super::super::profile::fit_gathered(
+                        &list, reference, &geo, &task, &params, true,
                     );
                     let plain = fit_sample(&list, reference, &geo, &task, &params);
                     assert_eq!(

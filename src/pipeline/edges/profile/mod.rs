@@ -485,7 +485,7 @@ thread_local! {
 /// Fits one border of one sample over `frames` (each with its `cam_s_um` and index in the
 /// group); `reference` is the position in `frames` of the frame the robust column check reads.
 /// None when no frame sees the whole stretch or the fit finds no border. Each frame's own row
-/// is left out (`frames` empty); [`fit_sample_with_frames`] adds them.
+/// is left out (`frames` empty); `fit_gathered` adds them for the tests.
 #[must_use]
 pub fn fit_sample(
     frames: &[(&Image, f64, usize)],
@@ -497,20 +497,9 @@ pub fn fit_sample(
     fit_gathered(frames, reference, geo, task, params, false)
 }
 
-/// [`fit_sample`] with each frame's own row (`frames`): the same fit, plus one least-squares
-/// step per frame.
-#[must_use]
-pub fn fit_sample_with_frames(
-    frames: &[(&Image, f64, usize)],
-    reference: usize,
-    geo: &FrameGeometry,
-    task: &SampleTask,
-    params: &EdgeParams,
-) -> Option<SampleBorder> {
-    fit_gathered(frames, reference, geo, task, params, true)
-}
-
-fn fit_gathered(
+/// [`fit_sample`], with each frame's own row too (one least-squares step per frame) when
+/// `want_frames`.
+pub(super) fn fit_gathered(
     frames: &[(&Image, f64, usize)],
     reference: usize,
     geo: &FrameGeometry,

@@ -58,7 +58,7 @@ fn run(speck: usize, rounds: u32) -> (f64, SampleBorder, FrameGeometry) {
         column_rounds: rounds,
         ..EdgeParams::default()
     };
-    let got = fit_sample_with_frames(&list, 3, &geo, &task, &params).unwrap();
+    let got = fit_gathered(&list, 3, &geo, &task, &params, true).unwrap();
     // The truth: the border averaged over the stretch, in rows.
     let y_mean = y0 + slope * 20.65;
     (geo.row_at(y_mean, geo.working_distance_um), got, geo)
