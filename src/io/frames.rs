@@ -418,6 +418,34 @@ mod tests {
             .collect()
     }
 
+    /// Writes `bytes` over `frame` and asserts that loading `window` of `group` fails with
+    /// an error that contains every one of `parts`.
+    fn assert_refused(
+        group: &GroupEntry,
+        window: std::ops::Range<usize>,
+        frame: &Path,
+        bytes: &[u8],
+        parts: &[&str],
+    ) {
+        std::fs::write(frame, bytes).unwrap();
+        let err = load_group_frames(group, window).unwrap_err().to_string();
+        assert!(parts.iter().all(|p| err.contains(p)), "{parts:?}: {err}");
+    }
+
+    /// Puts the intact `good` bytes back in `frame` and asserts that `window` of `group` loads.
+    fn assert_loads_again(
+        group: &GroupEntry,
+        window: std::ops::Range<usize>,
+        frame: &Path,
+        good: &[u8],
+    ) {
+        std::fs::write(frame, good).unwrap();
+        assert_eq!(
+            load_group_frames(group, window.clone()).unwrap().len(),
+            window.len()
+        );
+    }
+
     #[test]
     fn sixteen_bit_png_round_trips_exactly() {
         let dir = tempfile::tempdir().unwrap();
@@ -471,9 +499,13 @@ mod tests {
         assert_eq!(load_group_frames(&group, 1..8).unwrap().len(), 7);
         let good = std::fs::read(&frames[0]).unwrap();
         // Cut short: here the directory sits after the image data, so it goes too.
-        std::fs::write(&frames[0], &good[..good.len() / 2]).unwrap();
-        let err = load_group_frames(&group, 1..8).unwrap_err().to_string();
-        assert!(err.contains("f000.tif"), "{err}");
+        assert_refused(
+            &group,
+            1..8,
+            &frames[0],
+            &good[..good.len() / 2],
+            &["f000.tif"],
+        );
         // A directory whose strip points past the end of the file (little-endian "II"): the
         // header still reads, the extent check catches it.
         let le16 = |b: &[u8], at: usize| usize::from(u16::from_le_bytes([b[at], b[at + 1]]));
@@ -485,14 +517,8 @@ mod tests {
         let mut moved = good.clone();
         let past_end = u32::try_from(good.len()).unwrap().to_le_bytes();
         moved[entry + 8..entry + 12].copy_from_slice(&past_end);
-        std::fs::write(&frames[0], &moved).unwrap();
-        let err = load_group_frames(&group, 1..8).unwrap_err().to_string();
-        assert!(
-            err.contains("f000.tif") && err.contains("truncated"),
-            "{err}"
-        );
-        std::fs::write(&frames[0], &good).unwrap();
-        assert_eq!(load_group_frames(&group, 1..8).unwrap().len(), 7);
+        assert_refused(&group, 1..8, &frames[0], &moved, &["f000.tif", "truncated"]);
+        assert_loads_again(&group, 1..8, &frames[0], &good);
     }
 
     #[test]
@@ -508,19 +534,17 @@ mod tests {
         let idat = good.windows(4).position(|w| w == b"IDAT").unwrap();
         let mut flipped = good.clone();
         flipped[idat + 10] ^= 0x10;
-        std::fs::write(&frames[1], &flipped).unwrap();
-        let err = load_group_frames(&group, 3..10).unwrap_err().to_string();
-        assert!(err.contains("f001.png") && err.contains("CRC"), "{err}");
+        assert_refused(&group, 3..10, &frames[1], &flipped, &["f001.png", "CRC"]);
         // Cut short after the header.
-        std::fs::write(&frames[1], &good[..good.len() / 2]).unwrap();
-        let err = load_group_frames(&group, 3..10).unwrap_err().to_string();
-        assert!(
-            err.contains("f001.png") && err.contains("truncated"),
-            "{err}"
+        assert_refused(
+            &group,
+            3..10,
+            &frames[1],
+            &good[..good.len() / 2],
+            &["f001.png", "truncated"],
         );
         // Intact again: the group loads.
-        std::fs::write(&frames[1], &good).unwrap();
-        assert_eq!(load_group_frames(&group, 3..10).unwrap().len(), 7);
+        assert_loads_again(&group, 3..10, &frames[1], &good);
     }
 
     #[test]
