@@ -7,6 +7,7 @@ use egui_plot::{Bar, BarChart, Legend, Line, Plot, PlotPoints};
 
 use super::waveform_ui::{PREVIOUS_COLOUR, RECOVERED_COLOUR, decimate};
 use super::{AXIS_WIDTH_PT, level_plot};
+use crate::app::background::Polled;
 use crate::app::compare::{Agreement, CompareState, METHODS, default_partner};
 use crate::pipeline::Method;
 use crate::playback::{AudioStatus, Player};

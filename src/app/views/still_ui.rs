@@ -7,6 +7,7 @@ use egui_plot::{Line, Plot, PlotPoints, VLine};
 
 use super::AXIS_WIDTH_PT;
 use super::waveform_ui::{RECOVERED_COLOUR, decimate};
+use crate::app::background::Polled;
 use crate::app::render::region_colour;
 use crate::app::still::{
     SetupSource, StillDoc, StillPicture, StillState, groove_at, pixel_of, stretch_picture,
