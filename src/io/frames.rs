@@ -351,6 +351,15 @@ pub fn save_grey_png(
     save_grey_as(img, path, sixteen_bit, overwrite, image::ImageFormat::Png)
 }
 
+/// The grey values of `img`, clamped to [0, 1], on a scale of 0 to `full`, rounded and made
+/// samples by `cast` (the PNG/TIFF writers' 8- and 16-bit quantisation).
+fn quantised<T>(img: &Image, full: f32, cast: impl Fn(f32) -> T) -> Vec<T> {
+    img.data
+        .iter()
+        .map(|v| cast((v.clamp(0.0, 1.0) * full).round()))
+        .collect()
+}
+
 /// Saves a grey image (values in `[0, 1]`, clamped, rounded to 8 or 16 bits) in `format`,
 /// atomically.
 ///
@@ -369,20 +378,12 @@ pub(crate) fn save_grey_as(
         path: path.to_path_buf(),
     };
     let encoded = if sixteen_bit {
-        let raw = img
-            .data
-            .iter()
-            .map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16)
-            .collect();
+        let raw = quantised(img, 65535.0, |q| q as u16);
         DynamicImage::ImageLuma16(
             ImageBuffer::<Luma<u16>, _>::from_raw(w, h, raw).ok_or_else(mismatch)?,
         )
     } else {
-        let raw = img
-            .data
-            .iter()
-            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-            .collect();
+        let raw = quantised(img, 255.0, |q| q as u8);
         DynamicImage::ImageLuma8(
             ImageBuffer::<Luma<u8>, _>::from_raw(w, h, raw).ok_or_else(mismatch)?,
         )
