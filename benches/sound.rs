@@ -20,16 +20,9 @@ fn one_second_of_groups() -> Vec<GroupSignal> {
         .map(|k| {
             let start = k as f64 * 460.0 + (k as f64 * 0.618_034).fract() * 21.3;
             let positions_um: Vec<f64> = (0..24).map(|j| start + j as f64 * 21.3).collect();
-            let ch = positions_um
-                .iter()
-                .map(|&p| (50.0 * (2.0 * PI * p / wavelength_um).sin()) as f32)
-                .collect();
-            GroupSignal {
-                group: k,
-                positions_um,
-                channels: vec![ch],
-                groove_speed_mm_s: VT_MM_S,
-            }
+            GroupSignal::mono_from_fn(k, positions_um, VT_MM_S, |p| {
+                (50.0 * (2.0 * PI * p / wavelength_um).sin()) as f32
+            })
         })
         .collect()
 }

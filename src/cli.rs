@@ -371,6 +371,13 @@ pub fn load_params(path: Option<&Path>) -> Result<PipelineParams> {
     Ok(params)
 }
 
+/// Prints each of a run's warnings to stderr, one `warning: …` line each.
+pub(crate) fn print_warnings(warnings: &[String]) {
+    for w in warnings {
+        eprintln!("warning: {w}");
+    }
+}
+
 pub(crate) fn progress_bar(total: usize, quiet: bool) -> ProgressBar {
     if quiet {
         return ProgressBar::hidden();

@@ -20,5 +20,7 @@ pub mod playback;
 pub mod side;
 pub mod still;
 pub mod synth;
+#[cfg(test)]
+pub(crate) mod test_support;
 pub mod video_cli;
 pub mod viz;

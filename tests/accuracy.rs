@@ -5,7 +5,7 @@ mod common;
 
 use common::{groovescope, stderr};
 use groovescope::accuracy::{
-    render_tone, scene_depth_table, score_scan, small_dual_focus, small_lateral, sound_params,
+    scene_depth_table, score_scan, small_dual_focus, small_lateral, sound_params,
     two_sample_window_px,
 };
 use groovescope::pipeline::walls::WallMethod;
@@ -34,10 +34,8 @@ fn sphere_depth_error_beats_the_papers_kalman() {
 
 #[test]
 fn dual_focus_tone_reaches_its_snr_bar() {
-    let dir = tempfile::tempdir().unwrap();
     let cfg = small_dual_focus(8);
-    let scan = dir.path().join("tone");
-    render_tone("1.5 kHz", 1500.0, &cfg, &scan).unwrap();
+    let (_dir, scan) = common::tone_scan("1.5 kHz", 1500.0, &cfg);
     let (s, _) = score_scan(
         "1.5 kHz",
         &scan,
@@ -55,9 +53,7 @@ fn dual_focus_tone_reaches_its_snr_bar() {
 #[test]
 fn depth_path_tone_reaches_its_bar() {
     // No cover glass: flow → Kalman depth → walls → orientation, with the default params.
-    let dir = tempfile::tempdir().unwrap();
-    let scan = dir.path().join("tone");
-    render_tone("1 kHz", 1000.0, &small_lateral(6), &scan).unwrap();
+    let (_dir, scan) = common::tone_scan("1 kHz", 1000.0, &small_lateral(6));
     let params = PipelineParams {
         path: PathChoice::Depth,
         method: Method::Flow,
@@ -78,13 +74,11 @@ fn depth_path_tone_reaches_its_bar() {
 #[test]
 fn robust_fit_beats_least_squares_on_a_missing_wall() {
     // Paper Fig. 20: the upper 45% of one wall missing from 300 to 1300 µm.
-    let dir = tempfile::tempdir().unwrap();
     let cfg = SynthConfig {
         max_groups: Some(4),
         ..SynthConfig::dual_focus_fig20()
     };
-    let scan = dir.path().join("fig20");
-    render_tone("Fig. 20", 1000.0, &cfg, &scan).unwrap();
+    let (_dir, scan) = common::tone_scan("Fig. 20", 1000.0, &cfg);
     let robust = score_scan("Fig. 20", &scan, &sound_params(100, true))
         .unwrap()
         .0;

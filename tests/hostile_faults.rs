@@ -58,13 +58,7 @@ fn a_frame_deleted_or_truncated_after_the_scan_opened_is_named_and_keep_going_fi
         let err = run(&scan, 0..4, false).unwrap_err().to_string();
         assert!(err.contains("g00002/f003.png"), "{damage}: {err}");
         let rec = run(&scan, 0..4, true).unwrap();
-        assert!(
-            rec.warnings
-                .iter()
-                .any(|w| w.contains("group 2") && w.contains("f003.png")),
-            "{damage}: {:?}",
-            rec.warnings
-        );
+        common::assert_warned(&rec.warnings, &["group 2", "f003.png"], damage);
         assert!(!rec.audio.is_empty());
     }
     std::fs::write(&frame, &good).unwrap();

@@ -2,11 +2,13 @@
 
 #![allow(clippy::unwrap_used)] // tests may panic
 
+mod common;
+
 use std::path::Path;
 
 use groovescope::accuracy::methods::{MethodScores, score_methods};
 use groovescope::accuracy::{
-    render, render_tone, score_scan, small_lateral, sound_params, speak, two_sample_window_px,
+    render, score_scan, small_lateral, sound_params, speak, two_sample_window_px,
 };
 use groovescope::io::wav::read_wav;
 use groovescope::pipeline::edges::EdgeParams;
@@ -36,10 +38,8 @@ fn score(label: &str, scan: &Path, params: &PipelineParams) -> MethodScores {
 
 #[test]
 fn edges_and_fused_read_a_lateral_tone_better_than_flow() {
-    let dir = tempfile::tempdir().unwrap();
     let cfg = small_lateral(6);
-    let scan = dir.path().join("tone");
-    render_tone("1 kHz", 1000.0, &cfg, &scan).unwrap();
+    let (_dir, scan) = common::tone_scan("1 kHz", 1000.0, &cfg);
     let m = scores(&scan, &cfg);
     // Measured: flow 3.8 dB, edges 17.5 dB, fused 15.6 dB (with each sample's own border
     // weights the edges read 12.9 dB and fused beat them at 13.6 dB).
@@ -56,7 +56,6 @@ fn edges_and_fused_read_a_lateral_tone_better_than_flow() {
 
 #[test]
 fn edges_and_fused_hold_a_wall_with_flakes_out() {
-    let dir = tempfile::tempdir().unwrap();
     let mut cfg = small_lateral(6);
     // The upper 60% of the right wall flaked away over a third of the scan.
     cfg.damage.chunks.push(WallChunk {
@@ -66,8 +65,7 @@ fn edges_and_fused_hold_a_wall_with_flakes_out() {
         wall_fraction: 0.6,
         depth_um: 8.0,
     });
-    let scan = dir.path().join("flaked");
-    render_tone("flaked 1 kHz", 1000.0, &cfg, &scan).unwrap();
+    let (_dir, scan) = common::tone_scan("flaked 1 kHz", 1000.0, &cfg);
     let m = scores(&scan, &cfg);
     // Measured: flow 3.6 dB, edges 16.5 dB, fused 15.1 dB. Fused beat both here (8.9 against
     // 7.5 dB) until the border weights followed stretches: the edges gained 9 dB and now win
@@ -87,15 +85,13 @@ fn edges_and_fused_hold_a_2_khz_tone_above_30_db_on_the_papers_pixels() {
     // The paper's optics (0.39 µm pixels, 78 rpm at 115 mm) on a smaller sensor, 16 groups
     // (≈ 3.4 ms). Measured: flow 6.7 dB, edges 35.0 dB (35.1 without the DC block), fused
     // 35.0 dB.
-    let dir = tempfile::tempdir().unwrap();
     let cfg = SynthConfig {
         width_px: 512,
         height_px: 640,
         max_groups: Some(16),
         ..SynthConfig::default()
     };
-    let scan = dir.path().join("tone");
-    render_tone("2 kHz", 2000.0, &cfg, &scan).unwrap();
+    let (_dir, scan) = common::tone_scan("2 kHz", 2000.0, &cfg);
     let m = scores(&scan, &cfg);
     let mut no_dc = sound_params(two_sample_window_px(&cfg), true);
     no_dc.dsp.dc_block = false;

@@ -42,17 +42,38 @@ fn random_pos(rng: &mut Rng) -> Pos2 {
     )
 }
 
-/// Clicks the `pick`-th widget of `role`, if there is one; returns its label.
-fn click_role(h: &H, role: Role, pick: usize) -> Option<String> {
+/// Does `act` on the `pick`-th widget of `role` (counting round), if there is one; returns
+/// its label, or None where `act` passed it over (returned false).
+fn act_on(
+    h: &H,
+    role: Role,
+    pick: usize,
+    act: impl FnOnce(&egui_kittest::Node<'_>, &str) -> bool,
+) -> Option<String> {
     let nodes: Vec<_> = h.query_all_by_role(role).collect();
     let node = nodes.get(pick % nodes.len().max(1))?;
     let label = node.accesskit_node().label().unwrap_or_default();
-    // Leaving the app or opening a system file dialog is not the monkey's business.
-    if label.contains("Quit") || label.ends_with('…') {
-        return None;
-    }
-    node.click();
-    Some(label)
+    act(node, &label).then_some(label)
+}
+
+/// Clicks the `pick`-th widget of `role`, if there is one; returns its label.
+fn click_role(h: &H, role: Role, pick: usize) -> Option<String> {
+    act_on(h, role, pick, |node, label| {
+        // Leaving the app or opening a system file dialog is not the monkey's business.
+        if label.contains("Quit") || label.ends_with('…') {
+            return false;
+        }
+        node.click();
+        true
+    })
+}
+
+/// Does `act` on the `pick`-th spin button (a knob), if one is shown; returns its label.
+fn on_knob(h: &H, pick: usize, act: impl FnOnce(&egui_kittest::Node<'_>)) -> Option<String> {
+    act_on(h, Role::SpinButton, pick, |node, _| {
+        act(node);
+        true
+    })
 }
 
 /// One random event; returns what it was, for the failure report.
@@ -88,26 +109,18 @@ fn event(h: &mut H, rng: &mut Rng, existing: &Path) -> String {
             format!("drag {from:?} -> {to:?}")
         }
         4 | 5 => {
-            let nodes: Vec<_> = h.query_all_by_role(Role::SpinButton).collect();
             let value = EXTREMES[rng.below(EXTREMES.len())];
             let pick = rng.below(64);
-            match nodes.get(pick % nodes.len().max(1)) {
-                Some(node) => {
-                    let label = node.accesskit_node().label().unwrap_or_default();
-                    node.set_value_accesskit(value);
-                    format!("set {label:?} to {value}")
-                }
+            match on_knob(h, pick, |node| node.set_value_accesskit(value)) {
+                Some(label) => format!("set {label:?} to {value}"),
                 None => "set a knob: none shown".into(),
             }
         }
         6 => {
-            let nodes: Vec<_> = h.query_all_by_role(Role::SpinButton).collect();
             let text = TYPED[rng.below(TYPED.len())];
             let pick = rng.below(64);
-            match nodes.get(pick % nodes.len().max(1)) {
-                Some(node) => {
-                    let label = node.accesskit_node().label().unwrap_or_default();
-                    node.click();
+            match on_knob(h, pick, |node| node.click()) {
+                Some(label) => {
                     h.step();
                     h.event(egui::Event::Text(text.into()));
                     h.key_press(Key::Enter);

@@ -95,6 +95,17 @@ fn merge(parts: &[PathBuf], out: &Path) -> std::process::Output {
     groovescope(&refs)
 }
 
+/// Merges `parts` into `out` and asserts it succeeds with the bytes `want` (the one-process
+/// WAV); `what` names the case in the failure message.
+fn assert_merges_to(parts: &[PathBuf], out: &Path, want: &[u8], what: &str) {
+    let o = merge(parts, out);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        std::fs::read(out).unwrap() == want,
+        "{what}: merged WAV differs from the one-process WAV"
+    );
+}
+
 #[test]
 fn merged_shards_are_byte_identical_to_one_process_for_1_2_3_and_7_shards() {
     let (_keep, scan, one) = shared();
@@ -113,12 +124,7 @@ fn merged_shards_are_byte_identical_to_one_process_for_1_2_3_and_7_shards() {
             })
             .collect();
         let out = tmp.path().join(format!("merged{n}.wav"));
-        let o = merge(&parts, &out);
-        assert!(o.status.success(), "{}", stderr(&o));
-        assert!(
-            std::fs::read(&out).unwrap() == *one,
-            "{n} shards: merged WAV differs from the one-process WAV"
-        );
+        assert_merges_to(&parts, &out, one, &format!("{n} shards"));
     }
 }
 
@@ -152,12 +158,7 @@ fn merged_shards_are_byte_identical_to_one_process_for_flow_and_edges() {
             })
             .collect();
         let out = tmp.path().join(format!("{method}-merged.wav"));
-        let o = merge(&parts, &out);
-        assert!(o.status.success(), "{}", stderr(&o));
-        assert!(
-            std::fs::read(&out).unwrap() == std::fs::read(&one).unwrap(),
-            "{method}: merged WAV differs from the one-process WAV"
-        );
+        assert_merges_to(&parts, &out, &std::fs::read(&one).unwrap(), method);
     }
     let flow = std::fs::read(tmp.path().join("flow-one.wav")).unwrap();
     let edges = std::fs::read(tmp.path().join("edges-one.wav")).unwrap();

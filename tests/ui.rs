@@ -56,11 +56,7 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
     std::fs::create_dir_all(&not_scan).unwrap();
     assert!(wb_mut(&mut h).open_scan(&not_scan).is_err());
     settle(&mut h);
-    assert!(
-        last_message(&h).contains("scan.toml is missing"),
-        "{}",
-        last_message(&h)
-    );
+    assert_last_message(&h, "scan.toml is missing");
     assert_eq!(wb(&h).scan().unwrap().dir, good);
     h.get_by_label_contains("scan.toml is missing");
     // A broken frame in the first group.
@@ -81,7 +77,7 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
     let before = wb(&h).params().clone();
     assert!(wb_mut(&mut h).load_preset_from(&preset).is_err());
     h.run_ok();
-    assert!(last_message(&h).contains("bad.toml"));
+    assert_last_message(&h, "bad.toml");
     assert_eq!(wb(&h).params(), &before);
 }
 
@@ -486,11 +482,7 @@ fn a_dialog_failure_shows_a_message_and_the_path_field() {
     h.run_ok();
     h.get_by_label("Save preset…").click();
     h.run_ok();
-    assert!(
-        last_message(&h).contains("no file dialog can open here"),
-        "{}",
-        last_message(&h)
-    );
+    assert_last_message(&h, "no file dialog can open here");
     assert!(
         h.get_all_by_label_contains("no file dialog can open here")
             .count()

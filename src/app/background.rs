@@ -99,15 +99,24 @@ impl<P, T> Background<P, T> {
     pub fn cancel(&self) {
         self.cancel.store(true, Ordering::Relaxed);
     }
+}
 
+/// Work the UI polls once a frame: it takes the progress reports, then the outcome once the
+/// work ended.
+pub trait Polled {
+    /// What the work ends with.
+    type Outcome;
+    /// Takes the waiting progress reports; returns the outcome once the work ended.
+    fn poll(&mut self) -> Option<Self::Outcome>;
     /// True once cancel was asked for.
     #[must_use]
-    pub fn cancelling(&self) -> bool {
-        self.cancel.load(Ordering::Relaxed)
-    }
+    fn cancelling(&self) -> bool;
+}
 
-    /// Takes the waiting progress reports; returns the outcome once the work ended.
-    pub fn poll(&mut self) -> Option<Result<T, String>> {
+impl<P, T> Polled for Background<P, T> {
+    type Outcome = Result<T, String>;
+
+    fn poll(&mut self) -> Option<Self::Outcome> {
         while let Ok(ev) = self.rx.try_recv() {
             match ev {
                 Event::Progress(p) => self.progress = p,
@@ -121,6 +130,20 @@ impl<P, T> Background<P, T> {
         }
         None
     }
+
+    fn cancelling(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+}
+
+/// The outcome of the work in `slot` once it ended, and whether cancel had been asked for;
+/// the slot is emptied then. None while it runs or when there is none.
+pub fn take_ended<W: Polled>(slot: &mut Option<W>) -> Option<(W::Outcome, bool)> {
+    let work = slot.as_mut()?;
+    let outcome = work.poll()?;
+    let cancelled = work.cancelling();
+    *slot = None;
+    Some((outcome, cancelled))
 }
 
 impl<P, T> Drop for Background<P, T> {

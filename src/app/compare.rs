@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use super::background::Background;
+use super::background::{Background, Polled};
 use super::health::GroupTrack;
 use super::recon::{Clip, make_clip};
 use super::tuning::ParamState;
@@ -265,17 +265,6 @@ impl CompareRun {
         self.job.cancel();
     }
 
-    /// True once cancel was asked for.
-    #[must_use]
-    pub fn cancelling(&self) -> bool {
-        self.job.cancelling()
-    }
-
-    /// Takes the waiting progress reports; returns the outcome once the run ended.
-    pub fn poll(&mut self) -> Option<Result<Box<MethodComparison>, String>> {
-        self.job.poll()
-    }
-
     /// The pass running (0: A, 1: B).
     #[must_use]
     pub fn pass(&self) -> usize {
@@ -296,6 +285,19 @@ impl CompareRun {
         } else {
             (self.pass() * self.total + self.done()) as f32 / (2 * self.total) as f32
         }
+    }
+}
+
+/// The run's outcome is the comparison of its two passes.
+impl Polled for CompareRun {
+    type Outcome = Result<Box<MethodComparison>, String>;
+
+    fn poll(&mut self) -> Option<Self::Outcome> {
+        self.job.poll()
+    }
+
+    fn cancelling(&self) -> bool {
+        self.job.cancelling()
     }
 }
 

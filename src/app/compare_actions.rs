@@ -3,6 +3,7 @@
 
 use std::sync::Arc;
 
+use super::background::take_ended;
 use super::compare::{CompareRun, MethodComparison};
 use super::views::compare_ui::{CompareAction, compare_window};
 use super::workbench::{Workbench, repaint_fn};
@@ -75,14 +76,9 @@ impl Workbench {
 
     /// Takes the running comparison's reports and its outcome.
     pub(super) fn poll_comparison(&mut self) {
-        let Some(run) = self.methods.run.as_mut() else {
+        let Some((outcome, cancelled)) = take_ended(&mut self.methods.run) else {
             return;
         };
-        let Some(outcome) = run.poll() else {
-            return;
-        };
-        let cancelled = run.cancelling();
-        self.methods.run = None;
         match outcome {
             Ok(cmp) => {
                 let [a, b] = cmp.methods.map(Method::name);

@@ -211,11 +211,11 @@ pub fn save_color_image(
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
+    use crate::test_support::path_in_temp_dir;
 
     #[test]
     fn png_capture_is_written_once() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("v.png");
+        let (_dir, p) = path_in_temp_dir("v.png");
         let img = egui::ColorImage::filled([4, 3], egui::Color32::RED);
         save_color_image(&img, &p, false).unwrap();
         assert!(save_color_image(&img, &p, false).is_err());

@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use super::background::take_ended;
 use super::still::{StillDoc, StillTask, setup_for, start_still};
 use super::views::still_ui::{StillAction, still_window};
 use super::workbench::{Workbench, repaint_fn};
@@ -134,14 +135,9 @@ impl Workbench {
 
     /// Takes the still decode's progress and outcome.
     pub(super) fn poll_still(&mut self) {
-        let Some(job) = self.still.job.as_mut() else {
+        let Some((outcome, cancelled)) = take_ended(&mut self.still.job) else {
             return;
         };
-        let Some(outcome) = job.poll() else {
-            return;
-        };
-        let cancelled = job.cancelling();
-        self.still.job = None;
         let outcome = match outcome {
             Ok(o) => o,
             Err(e) => {

@@ -233,11 +233,11 @@ impl Tuning {
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
+    use crate::test_support::path_in_temp_dir;
 
     #[test]
     fn preset_round_trips_and_bad_presets_name_the_key() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("disc.toml");
+        let (_dir, p) = path_in_temp_dir("disc.toml");
         let mut params = PipelineParams::default();
         params.flow.lambda = 0.25;
         params.hough.theta_min_deg = -30.0;

@@ -427,22 +427,38 @@ mod tests {
         Scan::open(dir).unwrap()
     }
 
-    #[test]
-    fn broken_frame_is_reported_with_its_file() {
-        let dir = tempfile::tempdir().unwrap();
-        let scan = tiny_scan(dir.path(), true);
+    /// A worker that has been told generation `generation` is the current one.
+    fn worker_at(generation: u64) -> Worker {
         let w = Worker::spawn(Box::new(|| {})).unwrap();
-        w.supersede(1);
-        w.try_submit(Box::new(Job {
-            from: Stage::Derivatives,
-            params: PipelineParams::default(),
-            generation: 1,
+        w.supersede(generation);
+        w
+    }
+
+    /// A job that loads the first group of `scan` and runs from `from` with `params`.
+    fn load_job(scan: &Scan, from: Stage, params: PipelineParams, generation: u64) -> Box<Job> {
+        Box::new(Job {
+            from,
+            params,
+            generation,
             input: JobInput::Load {
                 entry: scan.groups[0].clone(),
                 meta: Arc::new(scan.meta.clone()),
             },
             cache: StageCache::default(),
-        }))
+        })
+    }
+
+    #[test]
+    fn broken_frame_is_reported_with_its_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let scan = tiny_scan(dir.path(), true);
+        let w = worker_at(1);
+        w.try_submit(load_job(
+            &scan,
+            Stage::Derivatives,
+            PipelineParams::default(),
+            1,
+        ))
         .unwrap();
         let evs = wait_finished(&w, 1);
         let loaded = evs.iter().find_map(|e| match e {
@@ -464,22 +480,10 @@ mod tests {
     fn superseded_job_is_skipped_and_invalid_params_fail_at_the_first_stage() {
         let dir = tempfile::tempdir().unwrap();
         let scan = tiny_scan(dir.path(), false);
-        let w = Worker::spawn(Box::new(|| {})).unwrap();
-        w.supersede(2);
+        let w = worker_at(2);
         let mut bad = PipelineParams::default();
         bad.flow.lambda = f32::NAN;
-        let job = |generation| {
-            Box::new(Job {
-                from: Stage::Flow,
-                params: bad.clone(),
-                generation,
-                input: JobInput::Load {
-                    entry: scan.groups[0].clone(),
-                    meta: Arc::new(scan.meta.clone()),
-                },
-                cache: StageCache::default(),
-            })
-        };
+        let job = |generation| load_job(&scan, Stage::Flow, bad.clone(), generation);
         w.try_submit(job(1)).unwrap();
         let mut second = job(2);
         // The queue holds one job; wait until the worker took the first.

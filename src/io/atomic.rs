@@ -132,11 +132,11 @@ pub(crate) fn dir_is_missing_or_empty(dir: &Path) -> Result<bool, LoadError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_support::path_in_temp_dir;
 
     #[test]
     fn refuses_to_overwrite_and_leaves_no_temp_file() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("a.txt");
+        let (dir, p) = path_in_temp_dir("a.txt");
         write_atomic(&p, b"one", false).unwrap();
         let err = write_atomic(&p, b"two", false).unwrap_err();
         assert!(err.to_string().contains("a.txt"));

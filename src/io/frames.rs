@@ -351,6 +351,15 @@ pub fn save_grey_png(
     save_grey_as(img, path, sixteen_bit, overwrite, image::ImageFormat::Png)
 }
 
+/// The grey values of `img`, clamped to [0, 1], on a scale of 0 to `full`, rounded and made
+/// samples by `cast` (the PNG/TIFF writers' 8- and 16-bit quantisation).
+fn quantised<T>(img: &Image, full: f32, cast: impl Fn(f32) -> T) -> Vec<T> {
+    img.data
+        .iter()
+        .map(|v| cast((v.clamp(0.0, 1.0) * full).round()))
+        .collect()
+}
+
 /// Saves a grey image (values in `[0, 1]`, clamped, rounded to 8 or 16 bits) in `format`,
 /// atomically.
 ///
@@ -369,20 +378,12 @@ pub(crate) fn save_grey_as(
         path: path.to_path_buf(),
     };
     let encoded = if sixteen_bit {
-        let raw = img
-            .data
-            .iter()
-            .map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16)
-            .collect();
+        let raw = quantised(img, 65535.0, |q| q as u16);
         DynamicImage::ImageLuma16(
             ImageBuffer::<Luma<u16>, _>::from_raw(w, h, raw).ok_or_else(mismatch)?,
         )
     } else {
-        let raw = img
-            .data
-            .iter()
-            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-            .collect();
+        let raw = quantised(img, 255.0, |q| q as u8);
         DynamicImage::ImageLuma8(
             ImageBuffer::<Luma<u8>, _>::from_raw(w, h, raw).ok_or_else(mismatch)?,
         )
@@ -416,6 +417,34 @@ mod tests {
                 p
             })
             .collect()
+    }
+
+    /// Writes `bytes` over `frame` and asserts that loading `window` of `group` fails with
+    /// an error that contains every one of `parts`.
+    fn assert_refused(
+        group: &GroupEntry,
+        window: std::ops::Range<usize>,
+        frame: &Path,
+        bytes: &[u8],
+        parts: &[&str],
+    ) {
+        std::fs::write(frame, bytes).unwrap();
+        let err = load_group_frames(group, window).unwrap_err().to_string();
+        assert!(parts.iter().all(|p| err.contains(p)), "{parts:?}: {err}");
+    }
+
+    /// Puts the intact `good` bytes back in `frame` and asserts that `window` of `group` loads.
+    fn assert_loads_again(
+        group: &GroupEntry,
+        window: std::ops::Range<usize>,
+        frame: &Path,
+        good: &[u8],
+    ) {
+        std::fs::write(frame, good).unwrap();
+        assert_eq!(
+            load_group_frames(group, window.clone()).unwrap().len(),
+            window.len()
+        );
     }
 
     #[test]
@@ -471,9 +500,13 @@ mod tests {
         assert_eq!(load_group_frames(&group, 1..8).unwrap().len(), 7);
         let good = std::fs::read(&frames[0]).unwrap();
         // Cut short: here the directory sits after the image data, so it goes too.
-        std::fs::write(&frames[0], &good[..good.len() / 2]).unwrap();
-        let err = load_group_frames(&group, 1..8).unwrap_err().to_string();
-        assert!(err.contains("f000.tif"), "{err}");
+        assert_refused(
+            &group,
+            1..8,
+            &frames[0],
+            &good[..good.len() / 2],
+            &["f000.tif"],
+        );
         // A directory whose strip points past the end of the file (little-endian "II"): the
         // header still reads, the extent check catches it.
         let le16 = |b: &[u8], at: usize| usize::from(u16::from_le_bytes([b[at], b[at + 1]]));
@@ -485,14 +518,8 @@ mod tests {
         let mut moved = good.clone();
         let past_end = u32::try_from(good.len()).unwrap().to_le_bytes();
         moved[entry + 8..entry + 12].copy_from_slice(&past_end);
-        std::fs::write(&frames[0], &moved).unwrap();
-        let err = load_group_frames(&group, 1..8).unwrap_err().to_string();
-        assert!(
-            err.contains("f000.tif") && err.contains("truncated"),
-            "{err}"
-        );
-        std::fs::write(&frames[0], &good).unwrap();
-        assert_eq!(load_group_frames(&group, 1..8).unwrap().len(), 7);
+        assert_refused(&group, 1..8, &frames[0], &moved, &["f000.tif", "truncated"]);
+        assert_loads_again(&group, 1..8, &frames[0], &good);
     }
 
     #[test]
@@ -508,19 +535,17 @@ mod tests {
         let idat = good.windows(4).position(|w| w == b"IDAT").unwrap();
         let mut flipped = good.clone();
         flipped[idat + 10] ^= 0x10;
-        std::fs::write(&frames[1], &flipped).unwrap();
-        let err = load_group_frames(&group, 3..10).unwrap_err().to_string();
-        assert!(err.contains("f001.png") && err.contains("CRC"), "{err}");
+        assert_refused(&group, 3..10, &frames[1], &flipped, &["f001.png", "CRC"]);
         // Cut short after the header.
-        std::fs::write(&frames[1], &good[..good.len() / 2]).unwrap();
-        let err = load_group_frames(&group, 3..10).unwrap_err().to_string();
-        assert!(
-            err.contains("f001.png") && err.contains("truncated"),
-            "{err}"
+        assert_refused(
+            &group,
+            3..10,
+            &frames[1],
+            &good[..good.len() / 2],
+            &["f001.png", "truncated"],
         );
         // Intact again: the group loads.
-        std::fs::write(&frames[1], &good).unwrap();
-        assert_eq!(load_group_frames(&group, 3..10).unwrap().len(), 7);
+        assert_loads_again(&group, 3..10, &frames[1], &good);
     }
 
     #[test]

@@ -99,11 +99,11 @@ fn same_file(_file: &File, path: &Path) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_support::path_in_temp_dir;
 
     #[test]
     fn a_second_lock_on_the_same_output_is_refused_until_the_first_is_dropped() {
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("clip.wav");
+        let (dir, out) = path_in_temp_dir("clip.wav");
         let first = OutputLock::acquire(&out).unwrap();
         assert!(lock_path(&out).exists());
         let msg = OutputLock::acquire(&out).unwrap_err().to_string();

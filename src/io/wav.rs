@@ -68,6 +68,25 @@ impl Audio {
         }
     }
 
+    /// Length and rate as words, for summaries: `1.234 s at 44100 Hz`.
+    #[must_use]
+    pub fn length_label(&self) -> String {
+        format!(
+            "{:.3} s at {} Hz",
+            self.duration_secs(),
+            self.sample_rate_hz
+        )
+    }
+
+    /// The channel count as words: `1 channel`, `2 channels`.
+    #[must_use]
+    pub fn channels_label(&self) -> String {
+        match self.channels.len() {
+            1 => "1 channel".to_string(),
+            n => format!("{n} channels"),
+        }
+    }
+
     /// The mean of all channels.
     #[must_use]
     pub fn mono(&self) -> Vec<f32> {

@@ -318,20 +318,12 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
     let a = &run.analysis;
     let groove = &a.grooves.grooves[a.chosen];
     if !args.quiet {
-        for w in &run.warnings {
-            eprintln!("warning: {w}");
-        }
+        crate::cli::print_warnings(&run.warnings);
         println!(
-            "wrote {} ({:.3} s at {} Hz, {} channel{}) from groove {} of {} found ({:.1} s)",
+            "wrote {} ({}, {}) from groove {} of {} found ({:.1} s)",
             args.out.display(),
-            run.audio.duration_secs(),
-            run.audio.sample_rate_hz,
-            run.audio.channels.len(),
-            if run.audio.channels.len() == 1 {
-                ""
-            } else {
-                "s"
-            },
+            run.audio.length_label(),
+            run.audio.channels_label(),
             groove.number,
             a.grooves.grooves.len(),
             run.timings.total_secs

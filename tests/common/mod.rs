@@ -4,8 +4,10 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use groovescope::accuracy::render_tone;
 use groovescope::image::Image;
 use groovescope::io::save_grey_png;
+use groovescope::synth::SynthConfig;
 
 /// Minimal valid scan.toml text.
 pub const SCAN_TOML: &str = r#"format = 1
@@ -93,4 +95,22 @@ impl Rng {
     pub fn below(&mut self, n: usize) -> usize {
         (self.next() % n.max(1) as u64) as usize
     }
+}
+
+/// Asserts that one of `warnings` contains every one of `parts`; `context` leads the failure
+/// message.
+pub fn assert_warned(warnings: &[String], parts: &[&str], context: &str) {
+    assert!(
+        warnings.iter().any(|w| parts.iter().all(|p| w.contains(p))),
+        "{context}: no warning with {parts:?} in {warnings:?}"
+    );
+}
+
+/// A scan of a `hz` tone (case name `label`) rendered with `cfg` into a fresh temporary folder,
+/// which lives as long as the returned guard.
+pub fn tone_scan(label: &str, hz: f64, cfg: &SynthConfig) -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan");
+    render_tone(label, hz, cfg, &scan).unwrap();
+    (dir, scan)
 }

@@ -233,3 +233,12 @@ pub fn last_message(h: &H) -> String {
         .map(|m| m.text.clone())
         .unwrap_or_default()
 }
+
+/// Asserts that the workbench's last message contains `part`.
+pub fn assert_last_message(h: &H, part: &str) {
+    let last = last_message(h);
+    assert!(
+        last.contains(part),
+        "{part:?} not in the last message {last:?}"
+    );
+}

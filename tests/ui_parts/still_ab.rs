@@ -33,7 +33,7 @@ fn a_method_compared_with_itself_agrees_perfectly() {
         assert!(g.samples > 0);
     }
     assert!(cmp.difference.iter().all(|d| *d == 0.0));
-    assert!(last_message(&h).contains("r 1.000"), "{}", last_message(&h));
+    assert_last_message(&h, "r 1.000");
 }
 
 #[test]
@@ -71,11 +71,7 @@ fn fused_and_flow_on_the_clean_demo_agree_and_the_listen_buttons_switch() {
     assert_eq!(buffers.sources.len(), 2, "A and B");
     assert_eq!(buffers.sources[1][0].len(), buffers.sources[0][0].len());
     assert_eq!(wb(&h).player().source(), 1);
-    assert!(
-        last_message(&h).contains("audio unavailable"),
-        "{}",
-        last_message(&h)
-    );
+    assert_last_message(&h, "audio unavailable");
     h.get_by_label("Listen A: fused").click();
     h.run_ok();
     assert_eq!(wb(&h).player().source(), 0);

@@ -72,11 +72,7 @@ fn a_still_opens_its_grooves_are_found_and_another_one_picked() {
             "{axis:?}: {got} vs {}",
             tones[1]
         );
-        assert!(
-            last_message(&h).contains("groove 2 of 3 decoded"),
-            "{}",
-            last_message(&h)
-        );
+        assert_last_message(&h, "groove 2 of 3 decoded");
         // The groove buttons decode another groove, in the background, without finding the
         // grooves again.
         h.get_by_label("groove 3").click();
@@ -134,11 +130,7 @@ fn the_groove_plays_or_says_why_and_exports_without_overwriting() {
         samples,
         "the player holds the groove"
     );
-    assert!(
-        last_message(&h).contains("audio unavailable"),
-        "{}",
-        last_message(&h)
-    );
+    assert_last_message(&h, "audio unavailable");
     let wav = tmp.path().join("groove.wav");
     wb_mut(&mut h).export_still_to(&wav, false).unwrap();
     let back = groovescope::io::wav::read_wav(&wav).unwrap();

@@ -6,7 +6,8 @@ use egui::{Color32, Ui};
 use egui_plot::{Bar, BarChart, Legend, Line, Plot, PlotPoints};
 
 use super::waveform_ui::{PREVIOUS_COLOUR, RECOVERED_COLOUR, decimate};
-use super::{AXIS_WIDTH_PT, level_plot};
+use super::{AXIS_WIDTH_PT, cancel_button, level_plot, three_stop_colour, tool_window};
+use crate::app::background::Polled;
 use crate::app::compare::{Agreement, CompareState, METHODS, default_partner};
 use crate::pipeline::Method;
 use crate::playback::{AudioStatus, Player};
@@ -35,18 +36,15 @@ pub fn agreement_colour(r: f64) -> Color32 {
     } else {
         0.0
     };
-    let (lo, mid, hi) = (
-        [220.0, 60.0, 50.0],
-        [230.0, 200.0, 60.0],
-        [80.0, 200.0, 100.0],
-    );
-    let (from, to, u) = if t < 0.5 {
-        (lo, mid, t * 2.0)
-    } else {
-        (mid, hi, (t - 0.5) * 2.0)
-    };
-    let c = |k: usize| (from[k] + (to[k] - from[k]) * u).round() as u8;
-    Color32::from_rgb(c(0), c(1), c(2))
+    // Red, yellow, green.
+    three_stop_colour(
+        t,
+        [
+            [220.0, 60.0, 50.0],
+            [230.0, 200.0, 60.0],
+            [80.0, 200.0, 100.0],
+        ],
+    )
 }
 
 /// One line for an agreement: `r 0.998 · 27.3 dB`.
@@ -78,15 +76,14 @@ pub fn compare_window(
     heard: bool,
 ) -> Vec<CompareAction> {
     let mut actions = Vec::new();
-    let mut open = state.open;
-    egui::Window::new("Compare methods")
-        .open(&mut open)
-        .default_size([1100.0, 620.0])
-        .default_pos([300.0, 90.0])
-        .show(ctx, |ui| {
-            body(ui, state, current, player, heard, &mut actions)
-        });
-    state.open = open;
+    state.open = tool_window(
+        ctx,
+        "Compare methods",
+        state.open,
+        [1100.0, 620.0],
+        [300.0, 90.0],
+        |ui| body(ui, state, current, player, heard, &mut actions),
+    );
     actions
 }
 
@@ -116,15 +113,7 @@ fn body(
                     .desired_width(260.0)
                     .text(label),
             );
-            let text = if run.cancelling() {
-                "cancelling…"
-            } else {
-                "Cancel comparison"
-            };
-            if ui
-                .add_enabled(!run.cancelling(), egui::Button::new(text))
-                .clicked()
-            {
+            if cancel_button(ui, run.cancelling(), "Cancel comparison") {
                 actions.push(CompareAction::Cancel);
             }
         } else if ui

@@ -7,6 +7,7 @@ use std::ops::Range;
 
 use egui::{Color32, Rect, Sense, Stroke, Ui, pos2, vec2};
 
+use super::three_stop_colour;
 use crate::app::health::ClipHealth;
 
 /// Height of the strip (points).
@@ -24,18 +25,15 @@ pub fn severity_colour(severity: f32) -> Color32 {
     } else {
         1.0
     };
-    let (green, amber, red) = (
-        [70.0, 170.0, 90.0],
-        [230.0, 180.0, 50.0],
-        [220.0, 50.0, 45.0],
-    );
-    let (a, b, t) = if s < 0.5 {
-        (green, amber, s * 2.0)
-    } else {
-        (amber, red, (s - 0.5) * 2.0)
-    };
-    let mix = |i: usize| (a[i] + (b[i] - a[i]) * t).round() as u8;
-    Color32::from_rgb(mix(0), mix(1), mix(2))
+    // Green, amber, red.
+    three_stop_colour(
+        s,
+        [
+            [70.0, 170.0, 90.0],
+            [230.0, 180.0, 50.0],
+            [220.0, 50.0, 45.0],
+        ],
+    )
 }
 
 /// The strip's columns: the groups each stands for and its rectangle inside `rect`.

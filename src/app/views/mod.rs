@@ -277,6 +277,59 @@ pub fn stage_banner(ui: &mut Ui, stage: Stage, status: &StageStatus) {
     });
 }
 
+/// The colour at `t` in `[0, 1]` on a ramp through three colours: `stops[0]` at 0, `stops[1]`
+/// at 0.5, `stops[2]` at 1, each channel mixed linearly in the caller's float type.
+pub fn three_stop_colour<T>(t: T, stops: [[T; 3]; 3]) -> Color32
+where
+    T: Copy
+        + PartialOrd
+        + From<u8>
+        + Into<f64>
+        + std::ops::Add<Output = T>
+        + std::ops::Sub<Output = T>
+        + std::ops::Mul<Output = T>
+        + std::ops::Div<Output = T>,
+{
+    let two = T::from(2);
+    let half = T::from(1) / two;
+    let [lo, mid, hi] = stops;
+    let (from, to, u) = if t < half {
+        (lo, mid, t * two)
+    } else {
+        (mid, hi, (t - half) * two)
+    };
+    // Rounded in f64: the value converts exactly, so it rounds as in `T`.
+    let c = |k: usize| Into::<f64>::into(from[k] + (to[k] - from[k]) * u).round() as u8;
+    Color32::from_rgb(c(0), c(1), c(2))
+}
+
+/// The closable window `title` at its default size and place, drawing `body` while `open`;
+/// returns whether it is still open.
+pub fn tool_window(
+    ctx: &egui::Context,
+    title: &str,
+    open: bool,
+    size: [f32; 2],
+    pos: [f32; 2],
+    body: impl FnOnce(&mut Ui),
+) -> bool {
+    let mut open = open;
+    egui::Window::new(title)
+        .open(&mut open)
+        .default_size(size)
+        .default_pos(pos)
+        .show(ctx, body);
+    open
+}
+
+/// The cancel button of running work: `label` while it runs, a greyed "cancelling…" once
+/// cancel was asked for; true when clicked.
+pub fn cancel_button(ui: &mut Ui, cancelling: bool, label: &str) -> bool {
+    let text = if cancelling { "cancelling…" } else { label };
+    ui.add_enabled(!cancelling, egui::Button::new(text))
+        .clicked()
+}
+
 /// A centred notice inside a view that has nothing to draw yet.
 pub fn empty_note(ui: &mut Ui, text: &str) {
     ui.add_space(20.0);

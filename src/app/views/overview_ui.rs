@@ -35,23 +35,36 @@ fn image_thumb<'a>(id: &str, h: f32, w: f32) -> Plot<'a> {
     thumb(id, h, w).data_aspect(1.0).invert_y(true)
 }
 
-fn title(
-    ui: &mut Ui,
-    text: &str,
-    stage: Option<Stage>,
-    data: &StageData<'_>,
-    open: &mut Option<View>,
-    view: View,
-) {
-    ui.horizontal(|ui| {
-        if ui.link(text).clicked() {
-            *open = Some(view);
-        }
-        if let Some(s) = stage {
-            let st = data.status(s);
-            ui.colored_label(st.colour(), st.word());
-        }
-    });
+/// The cell titles of the overview: each a link to its view, most with the status of the
+/// view's stage beside it; remembers which was clicked.
+struct Titles<'a, 'd> {
+    data: &'a StageData<'d>,
+    /// The view whose title was clicked.
+    open: Option<View>,
+}
+
+impl Titles<'_, '_> {
+    /// The title `text` of `view`'s cell, with the status of [`View::stage`].
+    fn show(&mut self, ui: &mut Ui, text: &str, view: View) {
+        self.draw(ui, text, view, view.stage());
+    }
+
+    /// The title `text` of `view`'s cell, without a status.
+    fn plain(&mut self, ui: &mut Ui, text: &str, view: View) {
+        self.draw(ui, text, view, None);
+    }
+
+    fn draw(&mut self, ui: &mut Ui, text: &str, view: View, stage: Option<Stage>) {
+        ui.horizontal(|ui| {
+            if ui.link(text).clicked() {
+                self.open = Some(view);
+            }
+            if let Some(s) = stage {
+                let st = self.data.status(s);
+                ui.colored_label(st.colour(), st.word());
+            }
+        });
+    }
 }
 
 /// The overview grid; returns a view to switch to when a title is clicked.
@@ -62,7 +75,7 @@ pub fn overview_ui(
     clip: Option<&Clip>,
     height: f32,
 ) -> Option<View> {
-    let mut open = None;
+    let mut titles = Titles { data, open: None };
     let cell_h = (height / 2.0 - 40.0).max(80.0);
     let cell_w = (ui.available_width() / 3.0 - 12.0).max(80.0);
     let dual = data.cache.stripes().is_some();
@@ -96,12 +109,9 @@ pub fn overview_ui(
         .spacing([12.0, 8.0])
         .show(ui, |ui| {
             ui.vertical(|ui| {
-                title(
+                titles.plain(
                     ui,
                     &format!("frame {} (group {})", data.frame, data.group),
-                    None,
-                    data,
-                    &mut open,
                     View::Frame,
                 );
                 image_thumb("ov_frame", cell_h, cell_w).show(ui, |p| {
@@ -118,7 +128,7 @@ pub fn overview_ui(
                 });
             });
             ui.vertical(|ui| {
-                title(ui, "flow", Some(Stage::Flow), data, &mut open, View::Flow);
+                titles.show(ui, "flow", View::Flow);
                 let dim = data.status(Stage::Flow).dim();
                 image_thumb("ov_flow", cell_h, cell_w).show(ui, |p| {
                     if let Some(t) = &flow_tex {
@@ -132,7 +142,7 @@ pub fn overview_ui(
                 } else {
                     ("depth", Stage::Depth, View::Depth)
                 };
-                title(ui, name, Some(stage), data, &mut open, view);
+                titles.show(ui, name, view);
                 let dim = data.status(stage).dim();
                 image_thumb("ov_third", cell_h, cell_w).show(ui, |p| {
                     if let Some(t) = &third {
@@ -145,14 +155,7 @@ pub fn overview_ui(
             });
             ui.end_row();
             ui.vertical(|ui| {
-                title(
-                    ui,
-                    "Hough accumulator",
-                    Some(Stage::Stripes),
-                    data,
-                    &mut open,
-                    View::Hough,
-                );
+                titles.show(ui, "Hough accumulator", View::Hough);
                 match (&acc, data.cache.stripes()) {
                     (Some(t), Some(_)) => {
                         let [w, h] = t.size();
@@ -182,14 +185,7 @@ pub fn overview_ui(
                 }
             });
             ui.vertical(|ui| {
-                title(
-                    ui,
-                    "orientation (tan θ along x)",
-                    Some(Stage::Orientation),
-                    data,
-                    &mut open,
-                    View::Orientation,
-                );
+                titles.show(ui, "orientation (tan θ along x)", View::Orientation);
                 thumb("ov_orientation", cell_h, cell_w)
                     .show_axes(true)
                     .show(ui, |p| {
@@ -207,7 +203,7 @@ pub fn overview_ui(
                     });
             });
             ui.vertical(|ui| {
-                title(ui, "clip waveform", None, data, &mut open, View::Waveform);
+                titles.plain(ui, "clip waveform", View::Waveform);
                 thumb("ov_wave", cell_h, cell_w)
                     .show_axes([true, false])
                     .show(ui, |p| {
@@ -250,5 +246,5 @@ pub fn overview_ui(
             });
             ui.end_row();
         });
-    open
+    titles.open
 }

@@ -5,8 +5,9 @@
 use egui::{Color32, Pos2, Rect, Sense, Stroke, Ui, pos2};
 use egui_plot::{Line, Plot, PlotPoints, VLine};
 
-use super::AXIS_WIDTH_PT;
 use super::waveform_ui::{RECOVERED_COLOUR, decimate};
+use super::{AXIS_WIDTH_PT, cancel_button, tool_window};
+use crate::app::background::Polled;
 use crate::app::render::region_colour;
 use crate::app::still::{
     SetupSource, StillDoc, StillPicture, StillState, groove_at, pixel_of, stretch_picture,
@@ -54,13 +55,14 @@ pub fn still_window(
     playing: bool,
 ) -> Vec<StillAction> {
     let mut actions = Vec::new();
-    let mut open = state.open;
-    egui::Window::new("Still image")
-        .open(&mut open)
-        .default_size([1240.0, 800.0])
-        .default_pos([300.0, 60.0])
-        .show(ctx, |ui| body(ui, state, position, playing, &mut actions));
-    state.open = open;
+    state.open = tool_window(
+        ctx,
+        "Still image",
+        state.open,
+        [1240.0, 800.0],
+        [300.0, 60.0],
+        |ui| body(ui, state, position, playing, &mut actions),
+    );
     actions
 }
 
@@ -122,6 +124,12 @@ fn body(
     }
 }
 
+/// A label and the number field it names (the field is labelled by it for screen readers).
+fn labelled_value(ui: &mut Ui, label: &str, value: egui::DragValue<'_>) {
+    let l = ui.label(label);
+    ui.add(value).labelled_by(l.id);
+}
+
 fn settings_row(ui: &mut Ui, doc: &mut StillDoc, busy: bool, actions: &mut Vec<StillAction>) {
     ui.horizontal_wrapped(|ui| {
         let s = &mut doc.setup;
@@ -137,28 +145,21 @@ fn settings_row(ui: &mut Ui, doc: &mut StillDoc, busy: bool, actions: &mut Vec<S
             })
             .response
             .labelled_by(l.id);
-        let l = ui.label("µm/px");
-        ui.add(
+        labelled_value(
+            ui,
+            "µm/px",
             egui::DragValue::new(&mut s.um_per_px)
                 .range(1e-3..=1e3)
                 .speed(0.01)
                 .max_decimals(4),
-        )
-        .labelled_by(l.id);
-        let l = ui.label("rpm");
-        ui.add(
-            egui::DragValue::new(&mut s.rpm)
-                .range(1.0..=200.0)
-                .speed(0.1),
-        )
-        .labelled_by(l.id);
-        let l = ui.label("radius mm");
-        ui.add(
-            egui::DragValue::new(&mut s.radius_mm)
-                .range(1.0..=200.0)
-                .speed(0.1),
-        )
-        .labelled_by(l.id);
+        );
+        for (label, value) in [("rpm", &mut s.rpm), ("radius mm", &mut s.radius_mm)] {
+            labelled_value(
+                ui,
+                label,
+                egui::DragValue::new(value).range(1.0..=200.0).speed(0.1),
+            );
+        }
         let l = ui.label("cut");
         egui::ComboBox::from_id_salt("still_cut")
             .selected_text(if s.cut == Cut::Stereo {
@@ -196,18 +197,13 @@ fn progress_row(ui: &mut Ui, state: &StillState, actions: &mut Vec<StillAction>)
             let g = &a.grooves.grooves[a.chosen];
             let gaps: usize = a.signal.gaps.iter().map(|g| g.lines).sum();
             ui.label(format!(
-                "groove {} of {}: {:.2} s of sound at {} Hz, {} channel{}, {} line{} bridged, \
+                "groove {} of {}: {:.2} s of sound at {} Hz, {}, {} line{} bridged, \
                  decoded in {:.2} s",
                 g.number,
                 a.grooves.grooves.len(),
                 run.audio.duration_secs(),
                 run.audio.sample_rate_hz,
-                run.audio.channels.len(),
-                if run.audio.channels.len() == 1 {
-                    ""
-                } else {
-                    "s"
-                },
+                run.audio.channels_label(),
                 gaps,
                 if gaps == 1 { "" } else { "s" },
                 run.timings.total_secs
@@ -222,9 +218,7 @@ fn progress_row(ui: &mut Ui, state: &StillState, actions: &mut Vec<StillAction>)
                 .desired_width(360.0)
                 .text(format!("{} ({:.0} %)", p.what, 100.0 * p.fraction)),
         );
-        if job.cancelling() {
-            ui.add_enabled(false, egui::Button::new("cancelling…"));
-        } else if ui.button("Cancel").clicked() {
+        if cancel_button(ui, job.cancelling(), "Cancel") {
             actions.push(StillAction::Cancel);
         }
         ui.weak(format!("{:.1} s", job.started.elapsed().as_secs_f64()));

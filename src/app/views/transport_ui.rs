@@ -4,6 +4,7 @@
 
 use egui::{Color32, Ui};
 
+use super::cancel_button;
 use crate::app::clip_state::{ClipState, SOURCE_CLIP, SOURCE_PREVIOUS, SOURCE_REFERENCE};
 use crate::app::export::EXPORT_FORMATS;
 use crate::io::wav::WavBits;
@@ -189,15 +190,7 @@ pub fn clip_controls_ui(
                     .desired_width(240.0)
                     .text(format!("group {} / {} · {eta}", r.done, r.total)),
             );
-            let label = if r.cancelling() {
-                "cancelling…"
-            } else {
-                "Cancel"
-            };
-            if ui
-                .add_enabled(!r.cancelling(), egui::Button::new(label))
-                .clicked()
-            {
+            if cancel_button(ui, r.cancelling(), "Cancel") {
                 actions.push(WaveAction::Cancel);
             }
             let asked = r.partial_pending();

@@ -136,6 +136,26 @@ pub struct GroupSignal {
     pub groove_speed_mm_s: f64,
 }
 
+impl GroupSignal {
+    /// A one-channel signal of `group` whose sample at each of `positions_um` is
+    /// `velocity(position)` (mm/s), at groove speed `groove_speed_mm_s`.
+    #[must_use]
+    pub fn mono_from_fn(
+        group: usize,
+        positions_um: Vec<f64>,
+        groove_speed_mm_s: f64,
+        velocity: impl Fn(f64) -> f32,
+    ) -> Self {
+        let channel = positions_um.iter().map(|&p| velocity(p)).collect();
+        Self {
+            group,
+            positions_um,
+            channels: vec![channel],
+            groove_speed_mm_s,
+        }
+    }
+}
+
 /// One wall's samples as (column, tan θ) sorted by column; NaN tan θ marks a gap.
 fn wall_track(samples: &[OrientationSample]) -> Vec<(f64, f64)> {
     let mut track: Vec<(f64, f64)> = samples

@@ -166,16 +166,7 @@ fn groups_of(
             let positions_um: Vec<f64> = (0..per_group)
                 .map(|j| start + j as f64 * sample_um)
                 .collect();
-            let ch = positions_um
-                .iter()
-                .map(|&p| (velocity(p) + bias(k)) as f32)
-                .collect();
-            GroupSignal {
-                group: k,
-                positions_um,
-                channels: vec![ch],
-                groove_speed_mm_s: VT_MM_S,
-            }
+            GroupSignal::mono_from_fn(k, positions_um, VT_MM_S, |p| (velocity(p) + bias(k)) as f32)
         })
         .collect()
 }

@@ -13,6 +13,18 @@ fn simoncelli(prewarp: bool) -> DerivativeParams {
     }
 }
 
+/// `n` frames of `w` × `h` whose pixel (x, y) in frame k is `value(x, y, k)`.
+fn frames_from(
+    n: usize,
+    w: usize,
+    h: usize,
+    value: impl Fn(usize, usize, usize) -> f32,
+) -> Vec<Image> {
+    (0..n)
+        .map(|k| Image::from_fn(w, h, |x, y| value(x, y, k)))
+        .collect()
+}
+
 #[test]
 fn filters_are_normalised() {
     assert!((P5.iter().sum::<f32>() - 1.0).abs() < 1e-6);
@@ -35,13 +47,9 @@ fn filters_are_normalised() {
 #[test]
 fn ramps_give_positive_unit_derivatives() {
     let (w, h) = (20, 16);
-    let frames: Vec<Image> = (0..9)
-        .map(|k| {
-            Image::from_fn(w, h, |x, y| {
-                0.01 * x as f32 + 0.02 * y as f32 + 0.03 * k as f32
-            })
-        })
-        .collect();
+    let frames = frames_from(9, w, h, |x, y, k| {
+        0.01 * x as f32 + 0.02 * y as f32 + 0.03 * k as f32
+    });
     for mode in [DerivativeMode::Simoncelli, DerivativeMode::TwoFrame] {
         let p = DerivativeParams {
             mode,
@@ -82,13 +90,9 @@ fn analytic_translating_pattern() {
         0.5,
     );
     let (w, h) = (80, 64);
-    let frames: Vec<Image> = (0..7)
-        .map(|k| {
-            Image::from_fn(w, h, |x, y| {
-                ((a * (x as f64 - u * k as f64)).sin() * (b * y as f64).cos()) as f32
-            })
-        })
-        .collect();
+    let frames = frames_from(7, w, h, |x, y, k| {
+        ((a * (x as f64 - u * k as f64)).sin() * (b * y as f64).cos()) as f32
+    });
     let sets = compute_derivatives(&frames, 0.0, &simoncelli(false)).unwrap();
     assert_eq!(sets.len(), 1);
     let d = &sets[0];
@@ -124,13 +128,9 @@ fn analytic_translating_pattern() {
 fn integer_prewarp_aligns_exactly() {
     let (w, h) = (40, 12);
     // Content moves 2 px toward −x per frame.
-    let frames: Vec<Image> = (0..12)
-        .map(|k| {
-            Image::from_fn(w, h, |x, y| {
-                (0.37 * (x + 2 * k) as f32).sin() + 0.1 * y as f32
-            })
-        })
-        .collect();
+    let frames = frames_from(12, w, h, |x, y, k| {
+        (0.37 * (x + 2 * k) as f32).sin() + 0.1 * y as f32
+    });
     let sets = compute_derivatives(&frames, -2.0, &simoncelli(true)).unwrap();
     assert_eq!(sets.len(), 6);
     for d in &sets {
@@ -218,12 +218,10 @@ proptest! {
         two in any::<bool>(),
         seed in 0_u32..1000,
     ) {
-        let frames: Vec<Image> = (0..n)
-            .map(|k| Image::from_fn(w, h, |x, y| {
-                let v = (x * 31 + y * 17 + k * 7 + seed as usize) % 23;
-                v as f32 / 23.0
-            }))
-            .collect();
+        let frames = frames_from(n, w, h, |x, y, k| {
+            let v = (x * 31 + y * 17 + k * 7 + seed as usize) % 23;
+            v as f32 / 23.0
+        });
         let p = DerivativeParams {
             mode: if two { DerivativeMode::TwoFrame } else { DerivativeMode::Simoncelli },
             prewarp,

@@ -337,25 +337,19 @@ pub(crate) fn reject_stereo(
         let mid = 0.5 * (x[1][n] + x[2][n]) - bottom_mid_off[n];
         2.0 * mid - other[n]
     };
-    let lo: Vec<f64> = (0..lines)
-        .map(|n| {
-            if x[0][n].is_finite() {
-                x[0][n]
-            } else {
-                rebuild(&x[3], n)
-            }
-        })
-        .collect();
-    let hi: Vec<f64> = (0..lines)
-        .map(|n| {
-            if x[3][n].is_finite() {
-                x[3][n]
-            } else {
-                rebuild(&x[0], n)
-            }
-        })
-        .collect();
-    [lo, hi]
+    // Land border `own` where it was found, else rebuilt from land border `other`.
+    let kept_or_rebuilt = |own: usize, other: usize| -> Vec<f64> {
+        (0..lines)
+            .map(|n| {
+                if x[own][n].is_finite() {
+                    x[own][n]
+                } else {
+                    rebuild(&x[other], n)
+                }
+            })
+            .collect()
+    };
+    [kept_or_rebuilt(0, 3), kept_or_rebuilt(3, 0)]
 }
 
 /// |x[n] − q(n)| for the least-squares quadratic q through the finite values within

@@ -258,6 +258,47 @@ pub fn lines_and_cross(width: usize, height: usize, axis: Axis) -> (usize, usize
     }
 }
 
+/// A [`StageError::BadInput`] of the still stage, as a [`StillError`].
+pub(crate) fn bad_input(problem: String) -> StillError {
+    StageError::BadInput {
+        stage: "still",
+        problem,
+    }
+    .into()
+}
+
+/// Checks that `values` grey values are whole rows of `width` that fit in an image of
+/// `height` rows after the `rows_seen` already fed (the streaming builders' `push_rows`).
+///
+/// # Errors
+/// [`bad_input`] saying what does not fit.
+pub(crate) fn check_whole_rows(
+    values: usize,
+    width: usize,
+    rows_seen: usize,
+    height: usize,
+) -> Result<(), StillError> {
+    if !values.is_multiple_of(width) || rows_seen + values / width > height {
+        return Err(bad_input(format!(
+            "{values} values are not whole rows of {width} inside the image's {height} rows"
+        )));
+    }
+    Ok(())
+}
+
+/// Checks that all `height` rows of the image were fed (the streaming builders' `finish`).
+///
+/// # Errors
+/// [`bad_input`] saying how many were.
+pub(crate) fn check_all_rows(rows_seen: usize, height: usize) -> Result<(), StillError> {
+    if rows_seen != height {
+        return Err(bad_input(format!(
+            "only {rows_seen} of the image's {height} rows were read"
+        )));
+    }
+    Ok(())
+}
+
 /// Decodes groove `groove` (1-based; `None`: the most complete near the centre) of an
 /// in-memory image, running both passes over it.
 ///

@@ -3,8 +3,9 @@
 
 use rayon::prelude::*;
 
-use super::{Axis, StillError, StillParams, lines_and_cross};
-use crate::pipeline::StageError;
+use super::{
+    Axis, StillError, StillParams, bad_input, check_all_rows, check_whole_rows, lines_and_cross,
+};
 
 /// Most profile values kept (blocks × cross samples); longer stills get longer blocks.
 pub const PROFILE_BUDGET: usize = 1 << 25;
@@ -89,11 +90,9 @@ impl ProfileBuilder {
     ) -> Result<Self, StillError> {
         params.validate()?;
         if width < 2 || height < 2 {
-            return Err(StageError::BadInput {
-                stage: "still",
-                problem: format!("a {width} × {height} px image is too small for a still"),
-            }
-            .into());
+            return Err(bad_input(format!(
+                "a {width} × {height} px image is too small for a still"
+            )));
         }
         let (lines, cross) = lines_and_cross(width, height, axis);
         let max_blocks = (PROFILE_BUDGET / cross).max(1);
@@ -126,17 +125,7 @@ impl ProfileBuilder {
     /// [`StillError::Param`] when `rows` is not whole rows or runs past the image's height.
     pub fn push_rows(&mut self, rows: &[f32]) -> Result<(), StillError> {
         let w = self.width;
-        if !rows.len().is_multiple_of(w) || self.rows_seen + rows.len() / w > self.height {
-            return Err(StageError::BadInput {
-                stage: "still",
-                problem: format!(
-                    "{} values are not whole rows of {w} inside the image's {} rows",
-                    rows.len(),
-                    self.height
-                ),
-            }
-            .into());
-        }
+        check_whole_rows(rows.len(), w, self.rows_seen, self.height)?;
         for row in rows.chunks_exact(w) {
             self.add_energy(row);
         }
@@ -228,16 +217,7 @@ impl ProfileBuilder {
     /// # Errors
     /// [`StillError::Param`] when rows are missing.
     pub fn finish(mut self) -> Result<Profiles, StillError> {
-        if self.rows_seen != self.height {
-            return Err(StageError::BadInput {
-                stage: "still",
-                problem: format!(
-                    "only {} of the image's {} rows were read",
-                    self.rows_seen, self.height
-                ),
-            }
-            .into());
-        }
+        check_all_rows(self.rows_seen, self.height)?;
         self.flush_band();
         Ok(self.out)
     }

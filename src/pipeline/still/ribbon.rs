@@ -2,8 +2,7 @@
 //! predicted path on every line, from rows fed in order.
 
 use super::detect::GrooveMap;
-use super::{Axis, StillError, StillParams};
-use crate::pipeline::StageError;
+use super::{Axis, StillError, StillParams, bad_input, check_all_rows, check_whole_rows};
 
 /// Widest band kept around a groove, px.
 pub const MAX_RIBBON_PX: usize = 2048;
@@ -63,15 +62,8 @@ impl RibbonBuilder {
         height: usize,
         params: &StillParams,
     ) -> Result<Self, StillError> {
-        let bad = |problem: String| -> StillError {
-            StageError::BadInput {
-                stage: "still",
-                problem,
-            }
-            .into()
-        };
         let Some(track) = map.grooves.get(chosen) else {
-            return Err(bad(format!("no groove index {chosen}")));
+            return Err(bad_input(format!("no groove index {chosen}")));
         };
         let predicted: Vec<[f64; 4]> = (0..map.lines)
             .map(|n| track.predict(map, n as f64))
@@ -80,7 +72,10 @@ impl RibbonBuilder {
             .iter()
             .any(|p| !(p[0].is_finite() && p[3].is_finite()))
         {
-            return Err(bad(format!("groove {} was never found", track.number)));
+            return Err(bad_input(format!(
+                "groove {} was never found",
+                track.number
+            )));
         }
         let share = params.search_share;
         let walls = crate::pipeline::median(
@@ -101,7 +96,7 @@ impl RibbonBuilder {
         let span = predicted.iter().fold(0.0f64, |m, p| m.max(p[3] - p[0]));
         let w = (span + 2.0 * reach).ceil() as usize + 1;
         if w > MAX_RIBBON_PX {
-            return Err(bad(format!(
+            return Err(bad_input(format!(
                 "groove {} would need a band {w} px wide (more than {MAX_RIBBON_PX})",
                 track.number
             )));
@@ -132,17 +127,7 @@ impl RibbonBuilder {
     /// [`StillError::Param`] when `rows` is not whole rows or runs past the image's height.
     pub fn push_rows(&mut self, rows: &[f32]) -> Result<(), StillError> {
         let iw = self.image_width;
-        if !rows.len().is_multiple_of(iw) || self.rows_seen + rows.len() / iw > self.image_height {
-            return Err(StageError::BadInput {
-                stage: "still",
-                problem: format!(
-                    "{} values are not whole rows of {iw} inside the image's {} rows",
-                    rows.len(),
-                    self.image_height
-                ),
-            }
-            .into());
-        }
+        check_whole_rows(rows.len(), iw, self.rows_seen, self.image_height)?;
         let r = &mut self.ribbon;
         let w = r.width;
         for row in rows.chunks_exact(iw) {
@@ -178,16 +163,7 @@ impl RibbonBuilder {
     /// # Errors
     /// [`StillError::Param`] when rows are missing.
     pub fn finish(self) -> Result<Ribbon, StillError> {
-        if self.rows_seen != self.image_height {
-            return Err(StageError::BadInput {
-                stage: "still",
-                problem: format!(
-                    "only {} of the image's {} rows were read",
-                    self.rows_seen, self.image_height
-                ),
-            }
-            .into());
-        }
+        check_all_rows(self.rows_seen, self.image_height)?;
         Ok(self.ribbon)
     }
 }

@@ -1,7 +1,8 @@
 //! Tests of the still decoder on small generated stills with known wall tones.
 
 use super::*;
-use crate::synth::still::{StillConfig, StillScene, render_still};
+use crate::synth::still::StillConfig;
+use crate::synth::test_support::still_scene_and_image;
 
 fn dominant_hz(x: &[f32], rate: f64) -> f64 {
     measure::dominant_frequency_hz(x, rate).unwrap()
@@ -23,8 +24,7 @@ fn small(axis: Axis, cut: Cut) -> StillConfig {
 fn every_groove_of_a_small_still_gives_its_tone() {
     for axis in [Axis::Vertical, Axis::Horizontal] {
         let cfg = small(axis, Cut::Lateral);
-        let scene = StillScene::new(&cfg, None).unwrap();
-        let img = render_still(&scene).image;
+        let (scene, img) = still_scene_and_image(&cfg);
         for k in 0..3 {
             let setup = scene.setup(k).unwrap();
             let a = analyse_still(&img, &setup, Some(k + 1), &StillParams::default()).unwrap();
@@ -42,8 +42,7 @@ fn every_groove_of_a_small_still_gives_its_tone() {
 #[test]
 fn stereo_walls_keep_their_own_tones() {
     let cfg = small(Axis::Vertical, Cut::Stereo);
-    let scene = StillScene::new(&cfg, None).unwrap();
-    let img = render_still(&scene).image;
+    let (scene, img) = still_scene_and_image(&cfg);
     let k = 1;
     let a = analyse_still(
         &img,
@@ -63,8 +62,7 @@ fn stereo_walls_keep_their_own_tones() {
 #[test]
 fn the_wrong_axis_an_empty_image_and_a_missing_groove_are_reported() {
     let cfg = small(Axis::Vertical, Cut::Lateral);
-    let scene = StillScene::new(&cfg, None).unwrap();
-    let img = render_still(&scene).image;
+    let (scene, img) = still_scene_and_image(&cfg);
     let mut setup = scene.setup(0).unwrap();
     setup.axis = Axis::Horizontal;
     let e = analyse_still(&img, &setup, None, &StillParams::default()).unwrap_err();

@@ -391,14 +391,11 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
     if args.quiet {
         return;
     }
-    for w in &rec.warnings {
-        eprintln!("warning: {w}");
-    }
+    crate::cli::print_warnings(&rec.warnings);
     let text = format!(
-        "wrote {} ({:.3} s at {} Hz, {} groups in {:.1} s, {:.1} groups/s)",
+        "wrote {} ({}, {} groups in {:.1} s, {:.1} groups/s)",
         args.out.display(),
-        rec.audio.duration_secs(),
-        rec.audio.sample_rate_hz,
+        rec.audio.length_label(),
         rec.groups.len(),
         rec.timings.total_secs,
         p.groups_per_sec

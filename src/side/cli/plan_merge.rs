@@ -101,14 +101,11 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         write_json_atomic(report_path, &report, args.force)?;
     }
     if !args.quiet {
-        for w in &rec.warnings {
-            eprintln!("warning: {w}");
-        }
+        crate::cli::print_warnings(&rec.warnings);
         println!(
-            "wrote {} ({:.3} s at {} Hz from {} parts, {} groups)",
+            "wrote {} ({} from {} parts, {} groups)",
             args.out.display(),
-            rec.audio.duration_secs(),
-            rec.audio.sample_rate_hz,
+            rec.audio.length_label(),
             merged.parts.len(),
             rec.groups.len()
         );

@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::synth::noise::Rng;
+use crate::synth::test_support::still_scene_and_image;
 
 /// A small clean still: 3 grooves, no artefacts, levels 0 (walls) and 1 (land, bottom).
 fn clean(axis: Axis, cut: Cut) -> StillConfig {
@@ -39,8 +40,7 @@ fn dominant_cycles(x: &[f64]) -> f64 {
 fn walls_cover_exactly_their_width() {
     for axis in [Axis::Vertical, Axis::Horizontal] {
         let cfg = clean(axis, Cut::Lateral);
-        let scene = StillScene::new(&cfg, None).unwrap();
-        let img = render_still(&scene).image;
+        let (scene, img) = still_scene_and_image(&cfg);
         assert_eq!(
             (img.width, img.height),
             match axis {
