@@ -41,7 +41,7 @@ fn edges_and_fused_read_a_lateral_tone_better_than_flow() {
     let cfg = small_lateral(6);
     let (_dir, scan) = common::tone_scan("1 kHz", 1000.0, &cfg);
     let m = scores(&scan, &cfg);
-    // Measured: flow 3.8 dB, edges 17.5 dB, fused 15.6 dB (with each sample's own border
+    // Measured: flow 3.8 dB, edges 17.9 dB, fused 16.3 dB (with each sample's own border
     // weights the edges read 12.9 dB and fused beat them at 13.6 dB).
     assert!(m.edges.snr_db > 15.0, "edges SNR {:.1} dB", m.edges.snr_db);
     assert!(m.edges.snr_db > m.flow.snr_db + 5.0);
@@ -67,7 +67,7 @@ fn edges_and_fused_hold_a_wall_with_flakes_out() {
     });
     let (_dir, scan) = common::tone_scan("flaked 1 kHz", 1000.0, &cfg);
     let m = scores(&scan, &cfg);
-    // Measured: flow 3.6 dB, edges 16.5 dB, fused 15.1 dB. Fused beat both here (8.9 against
+    // Measured: flow 3.6 dB, edges 16.7 dB, fused 15.6 dB. Fused beat both here (8.9 against
     // 7.5 dB) until the border weights followed stretches: the edges gained 9 dB and now win
     // (docs/ACCURACY.md).
     assert!(m.edges.snr_db > 14.0, "edges SNR {:.1} dB", m.edges.snr_db);
@@ -83,8 +83,8 @@ fn edges_and_fused_hold_a_wall_with_flakes_out() {
 #[test]
 fn edges_and_fused_hold_a_2_khz_tone_above_30_db_on_the_papers_pixels() {
     // The paper's optics (0.39 µm pixels, 78 rpm at 115 mm) on a smaller sensor, 16 groups
-    // (≈ 3.4 ms). Measured: flow 6.7 dB, edges 35.0 dB (35.1 without the DC block), fused
-    // 35.0 dB.
+    // (≈ 3.4 ms). Measured: flow 6.7 dB, edges 35.2 dB, fused
+    // 35.2 dB.
     let cfg = SynthConfig {
         width_px: 512,
         height_px: 640,
@@ -153,7 +153,7 @@ fn fused_beats_both_methods_on_speech_in_a_flaked_groove() {
     let mut params = PipelineParams::default();
     params.dsp.lowpass = false;
     let m = score("flaked speech", &scan, &params);
-    // Measured: flow r 0.932 (8.8 dB), edges 0.897 (7.1 dB), fused 0.981 (14.2 dB).
+    // Measured: flow r 0.932 (8.8 dB), edges 0.917 (8.0 dB), fused 0.982 (14.4 dB).
     let best = m.flow.snr_db.max(m.edges.snr_db);
     assert!(
         m.fused.r > m.flow.r.max(m.edges.r) && m.fused.r > 0.95 && m.fused.snr_db > best + 3.0,

@@ -344,7 +344,26 @@ fn fit_usable(points: &[ProfilePoint], seed: BorderSeed, params: &BorderParams) 
         for (i, row) in damped.iter_mut().enumerate() {
             row[i] += damping * a[i][i].max(1e-12);
         }
-        let Some(step) = solve4(&damped, g) else {
+        let mut step = solve4(&damped, g);
+        let (at_min, at_max) = (
+            theta[3] <= params.min_width_px,
+            theta[3] >= params.max_width_px,
+        );
+        if step.is_some_and(|s| (at_max && s[3] > 0.0) || (at_min && s[3] < 0.0)) {
+            // The width sits on its bound and the step would push it beyond: step the levels
+            // and position alone, the width held. Clamping the full step instead would keep a
+            // position step solved for a width change that never happens, and the fit would
+            // zigzag until `max_iterations` (as it did on every blurred or sharp border).
+            let mut held = damped;
+            let mut g_held = *g;
+            for row in &mut held {
+                row[3] = 0.0;
+            }
+            held[3] = [0.0, 0.0, 0.0, 1.0];
+            g_held[3] = 0.0;
+            step = solve4(&held, &g_held);
+        }
+        let Some(step) = step else {
             damping *= LM_DAMPING_FACTOR;
             if damping > LM_DAMPING_MAX {
                 break;
