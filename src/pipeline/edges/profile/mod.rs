@@ -346,7 +346,7 @@ pub(super) trait BandReader {
 /// Every view's band gathered once.
 struct Gathered<'c, 'p> {
     band: Band,
-    views: Vec<Option<BandView<'c, 'p>>>,
+    views: Vec<BandView<'c, 'p>>,
 }
 
 impl BandReader for Gathered<'_, '_> {
@@ -356,7 +356,7 @@ impl BandReader for Gathered<'_, '_> {
     }
 
     fn bins_into(&self, k: usize, weight: &dyn Fn(f64) -> f64, out: &mut Bins) -> bool {
-        let Some(view) = self.views.get(k).and_then(Option::as_ref) else {
+        let Some(view) = self.views.get(k) else {
             return false;
         };
         if out.sums.len() == self.band.bins {
@@ -374,7 +374,7 @@ impl BandReader for Gathered<'_, '_> {
         table: &[(f64, f64)],
         sigma_px: f64,
     ) -> Option<Vec<(usize, f64, f64)>> {
-        let view = self.views.get(k)?.as_ref()?;
+        let view = self.views.get(k)?;
         Some(view.column_weights(table, sigma_px))
     }
 }
@@ -511,25 +511,22 @@ pub(super) fn fit_gathered(
     // across the fit.
     let mut buf = FIT_BUFFERS.with(|b| std::mem::take(&mut *b.borrow_mut()));
     let band = Band::new(params);
+    buf.pixels.clear();
+    buf.ends.clear();
+    // The frames that see the stretch, each with its columns and band; `spans` holds each
+    // view's first column end and first pixel in the shared buffers.
+    let mut spans = Vec::with_capacity(frames.len());
     let mut used = 0;
-    for (i, (_, cam, _)) in frames.iter().enumerate() {
+    for (i, (img, cam, _)) in frames.iter().enumerate() {
         if used == buf.views.len() {
             buf.views.push((i, Vec::new()));
         }
         let view = &mut buf.views[used];
         if columns_into(geo, *cam, task, &mut view.1) {
             view.0 = i;
+            spans.push((buf.ends.len(), buf.pixels.len()));
+            gather(img, &view.1, band, &mut buf.pixels, &mut buf.ends);
             used += 1;
-        }
-    }
-    buf.pixels.clear();
-    buf.ends.clear();
-    // Each view's (first column end, first pixel) in the shared buffers.
-    let mut spans = Vec::with_capacity(used);
-    for (i, cols) in &buf.views[..used] {
-        spans.push((buf.ends.len(), buf.pixels.len()));
-        if let Some((img, _, _)) = frames.get(*i) {
-            gather(img, cols, band, &mut buf.pixels, &mut buf.ends);
         }
     }
     let views = &buf.views[..used];
@@ -538,13 +535,11 @@ pub(super) fn fit_gathered(
         views: views
             .iter()
             .zip(&spans)
-            .map(|((i, cols), &(first_end, start))| {
-                frames.get(*i).map(|_| BandView {
-                    cols,
-                    start,
-                    ends: &buf.ends[first_end..first_end + cols.len()],
-                    pixels: &buf.pixels,
-                })
+            .map(|((_, cols), &(first_end, start))| BandView {
+                cols,
+                start,
+                ends: &buf.ends[first_end..first_end + cols.len()],
+                pixels: &buf.pixels,
             })
             .collect(),
     };
