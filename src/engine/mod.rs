@@ -402,7 +402,9 @@ pub fn aligned_reference(
     if needed.is_nan() || needed > MAX_RESAMPLED_REFERENCE {
         return Err(LoadError::Sound {
             problem: format!(
-                "the clip starts {start_secs:.0} s into the reference, which would take                  {needed:.3e} samples at {out_rate} Hz to score (at most {MAX_RESAMPLED_REFERENCE:.3e})"
+                "the clip starts {start_secs:.0} s into the reference, which would take \
+                 {needed:.3e} samples at {out_rate} Hz to score (at most \
+                 {MAX_RESAMPLED_REFERENCE:.3e})"
             ),
             path: path.to_path_buf(),
         });

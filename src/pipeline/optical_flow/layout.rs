@@ -162,15 +162,17 @@ impl SplitState {
                     from_lanes(m, or, part, odd);
                     // Interleaves the halves: ⌊w/2⌋ pairs, then for an odd width the last even
                     // column.
-                    for (&e, &o) in even[..odd_cols].iter().zip(&odd[..odd_cols]) {
-                        row.push(e + base);
-                        row.push(o + base);
-                    }
-                    if even_cols > odd_cols
-                        && let Some(&e) = even.get(even_cols - 1)
-                    {
-                        row.push(e + base);
-                    }
+                    row.with_local(|row| {
+                        for (&e, &o) in even[..odd_cols].iter().zip(&odd[..odd_cols]) {
+                            row.push(e + base);
+                            row.push(o + base);
+                        }
+                        if even_cols > odd_cols
+                            && let Some(&e) = even.get(even_cols - 1)
+                        {
+                            row.push(e + base);
+                        }
+                    });
                 }
             },
         );
@@ -277,18 +279,20 @@ impl CoefRow {
     /// (the half's column i is image column 2i + `half`); the padding gets zeros. `C` is the
     /// coefficient count, `c`.
     pub(super) fn scatter<const C: usize>(self, rows: &[Vec<f32>; C], dst: &mut RowWriter) {
-        for k in 0..self.m {
-            for row in rows {
-                for lane in 0..LANES {
-                    let i = lane * self.m + k;
-                    let x = if i < self.n {
-                        row.get(2 * i + self.half)
-                    } else {
-                        None
-                    };
-                    dst.push(x.copied().unwrap_or(0.0));
+        dst.with_local(|dst| {
+            for k in 0..self.m {
+                for row in rows {
+                    for lane in 0..LANES {
+                        let i = lane * self.m + k;
+                        let x = if i < self.n {
+                            row.get(2 * i + self.half)
+                        } else {
+                            None
+                        };
+                        dst.push(x.copied().unwrap_or(0.0));
+                    }
                 }
             }
-        }
+        });
     }
 }

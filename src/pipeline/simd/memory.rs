@@ -46,6 +46,18 @@ impl<'a> RowWriter<'a> {
         }
     }
 
+    /// Runs `write` on a copy of this writer held in a local and then takes back what it left,
+    /// so that a loop of [`RowWriter::push`] keeps the write position in a register instead of
+    /// storing it through `self` at every value.
+    #[inline(always)]
+    pub fn with_local(&mut self, write: impl FnOnce(&mut RowWriter<'a>)) {
+        let mut local = RowWriter {
+            rest: std::mem::take(&mut self.rest),
+        };
+        write(&mut local);
+        self.rest = local.rest;
+    }
+
     /// Zeroes what is left.
     fn finish(self) {
         for slot in self.rest {
@@ -229,7 +241,8 @@ mod tests {
             || (),
             |(), y, first, second| {
                 first.push(y as f32);
-                for _ in 0..7 {
+                second.with_local(|w| w.push(-(y as f32) - 1.0));
+                for _ in 0..6 {
                     second.push(-(y as f32) - 1.0);
                 }
             },
