@@ -347,8 +347,12 @@ fn random_operator_sequences_never_panic_hang_or_show_stale_stages_as_fresh() {
             Some((a.parse().ok()?, b.parse().ok()?))
         })
         .unwrap_or(SHORT_RUN);
+    // One seed, or a range "A-B" to replay the sequences before a failure in one process.
     let seeds: Vec<u64> = match std::env::var("GROOVESCOPE_MONKEY_SEED") {
-        Ok(s) => vec![s.parse().unwrap()],
+        Ok(s) => match s.split_once('-') {
+            Some((a, b)) => (a.parse().unwrap()..=b.parse().unwrap()).collect(),
+            None => vec![s.parse().unwrap()],
+        },
         Err(_) => (1..=sequences as u64).collect(),
     };
     let started = Instant::now();
