@@ -513,9 +513,7 @@ pub(super) fn fit_gathered(
     let band = Band::new(params);
     buf.pixels.clear();
     buf.ends.clear();
-    // The frames that see the stretch, each with its columns and band; `spans` holds each
-    // view's first column end and first pixel in the shared buffers.
-    let mut spans = Vec::with_capacity(frames.len());
+    // The frames that see the stretch, each with its columns and band.
     let mut used = 0;
     for (i, (img, cam, _)) in frames.iter().enumerate() {
         if used == buf.views.len() {
@@ -524,22 +522,32 @@ pub(super) fn fit_gathered(
         let view = &mut buf.views[used];
         if columns_into(geo, *cam, task, &mut view.1) {
             view.0 = i;
-            spans.push((buf.ends.len(), buf.pixels.len()));
             gather(img, &view.1, band, &mut buf.pixels, &mut buf.ends);
             used += 1;
         }
     }
     let views = &buf.views[..used];
+    // The views' column ends follow one another in `ends` (one per column), and each view's
+    // pixels start where the previous view's last column ended.
+    let mut first_end = 0usize;
     let reader = Gathered {
         band,
         views: views
             .iter()
-            .zip(&spans)
-            .map(|((_, cols), &(first_end, start))| BandView {
-                cols,
-                start,
-                ends: &buf.ends[first_end..first_end + cols.len()],
-                pixels: &buf.pixels,
+            .map(|(_, cols)| {
+                let start = first_end
+                    .checked_sub(1)
+                    .and_then(|e| buf.ends.get(e))
+                    .copied()
+                    .unwrap_or(0);
+                let ends = &buf.ends[first_end..first_end + cols.len()];
+                first_end += cols.len();
+                BandView {
+                    cols,
+                    start,
+                    ends,
+                    pixels: &buf.pixels,
+                }
             })
             .collect(),
     };
