@@ -313,6 +313,15 @@ fn bad_stills_get_one_clear_line() {
     assert!(err.contains("counts from 1"), "{err}");
     let err = still_error(&image, "0", &[]);
     assert!(err.contains("radius_mm"), "{err}");
+    // 33⅓ rpm at 0.01 mm over 1 µm pixels: 34.9 samples a second, refused (not ten minutes
+    // of interpolated silence).
+    let err = still_error(&image, "0.01", &[]);
+    assert!(
+        err.contains("gives 34.9066 samples per second")
+            && err.contains("below the minimum of 1000")
+            && err.contains("still.png"),
+        "{err}"
+    );
 
     let flat = dir.path().join("flat.png");
     groovescope::io::save_grey_png(&Image::filled(300, 200, 0.4), &flat, false, false).unwrap();

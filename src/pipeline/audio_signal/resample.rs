@@ -15,6 +15,19 @@ pub(super) const SINC_OVERSAMPLING: usize = 128;
 pub(super) const RESAMPLE_CHUNK: usize = 4096;
 /// Leading zeros tried so that the resampler's delay is a whole number of output samples.
 pub(super) const DELAY_PAD_SEARCH: usize = 4096;
+/// Most output samples the leading zeros may cost. Each zero costs `ratio` output samples, so
+/// upsampling by more than 16 tries fewer counts (without this, 0.002 rpm typed for a still
+/// made the resampler compute 20 million samples of leading silence). The delay left over is
+/// still under half an output sample, which is under 1/(2·ratio) of an *input* sample, and
+/// the signal's band lies below half the input rate.
+pub(super) const DELAY_PAD_MAX_OUTPUT: f64 = 65_536.0;
+
+/// How many leading-zero counts to try at `ratio` (output rate / input rate).
+pub(super) fn pad_search_len(ratio: f64) -> usize {
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // at most the search
+    let affordable = (DELAY_PAD_MAX_OUTPUT / ratio).floor().max(1.0) as usize;
+    affordable.min(DELAY_PAD_SEARCH)
+}
 /// Delay of rubato's `SincFixedIn` (cubic sinc-table interpolation) in input samples: output n
 /// is the input at time n/ratio − delay, with delay = 1 − 1/ratio − 1/oversampling (its first
 /// output lies one output step after its start index, and the cubic table lookup is one table
@@ -30,7 +43,8 @@ pub(super) fn resampler_delay_in(ratio: f64) -> f64 {
 /// cubic between table entries). The output has round(n·to/from) samples, aligned with the
 /// input (output k is the input at time k/to): the resampler's latency is removed, its fractional
 /// part by leading zeros chosen so that the delay is a whole number of output samples (to within
-/// 1/`DELAY_PAD_SEARCH` sample for irrational ratios). Non-finite samples count as 0.
+/// 1/`DELAY_PAD_SEARCH` sample for irrational ratios, or of an input sample when upsampling by
+/// more than 16). Non-finite samples count as 0.
 ///
 /// # Errors
 /// [`StageError`] on non-positive or NaN rates, or a resampler failure.
@@ -83,7 +97,7 @@ pub fn resample(samples: &[f32], from_hz: f64, to_hz: u32) -> Result<Vec<f32>, S
         let d = (delay_in + pad as f64) * ratio;
         (d - d.round()).abs()
     };
-    let pad = (min_pad..min_pad + DELAY_PAD_SEARCH)
+    let pad = (min_pad..min_pad + pad_search_len(ratio))
         .min_by(|&a, &b| frac_off(a).total_cmp(&frac_off(b)))
         .unwrap_or(min_pad);
     #[allow(

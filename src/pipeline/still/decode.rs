@@ -336,7 +336,7 @@ pub fn decode_borders(
         displacement_px.push(d);
     }
     Ok(StillSignal {
-        native_rate_hz: setup.groove_speed_um_s() / setup.um_per_px,
+        native_rate_hz: setup.native_rate_hz(),
         channels,
         displacement_px,
         gaps,

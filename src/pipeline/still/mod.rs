@@ -154,6 +154,13 @@ impl StillParams {
     }
 }
 
+/// Fewest samples of sound a second a still may give (the groove speed over the pixel size).
+/// Below it nothing audible is resolved, and the output would be almost all interpolation: a
+/// turntable speed typed as 0.002 rpm makes 126 µm of groove last ten seconds. It also bounds
+/// the sound a still can make: the longest still, [`crate::io::still::MAX_STILL_SIDE_PX`]
+/// pixels along the groove, lasts at most 70 minutes.
+pub const MIN_STILL_RATE_HZ: f64 = 1000.0;
+
 /// What the caller knows about the still (the command line's settings).
 #[derive(Clone, Debug, PartialEq)]
 pub struct StillSetup {
@@ -178,14 +185,34 @@ impl StillSetup {
         std::f64::consts::TAU * self.rpm / 60.0 * self.radius_mm * 1000.0
     }
 
+    /// Samples of sound per second that one pixel along the groove gives: Vt / pixel size.
+    #[must_use]
+    pub fn native_rate_hz(&self) -> f64 {
+        self.groove_speed_um_s() / self.um_per_px
+    }
+
     /// Checks the numbers.
     ///
     /// # Errors
-    /// [`StageError::InvalidParam`] for a non-positive or non-finite value or a vertical cut.
+    /// [`StageError::InvalidParam`] for a non-positive or non-finite value, settings that give
+    /// fewer than [`MIN_STILL_RATE_HZ`] samples a second, or a vertical cut.
     pub fn validate(&self) -> Result<(), StageError> {
         check_range("um_per_px", self.um_per_px, 1e-6, 1e6)?;
         check_range("rpm", self.rpm, 1e-3, 1e4)?;
         check_range("radius_mm", self.radius_mm, 1e-3, 1e4)?;
+        let rate_hz = self.native_rate_hz();
+        if rate_hz < MIN_STILL_RATE_HZ {
+            return Err(StageError::InvalidParam {
+                name: "rpm, radius_mm and um_per_px".into(),
+                problem: format!(
+                    "a groove speed of {:.4} mm/s over {} µm pixels gives {rate_hz:.4} samples \
+                     per second of sound, below the minimum of {MIN_STILL_RATE_HZ}: nothing \
+                     audible is resolved (check the turntable speed, radius and pixel size)",
+                    self.groove_speed_um_s() / 1000.0,
+                    self.um_per_px
+                ),
+            });
+        }
         if self.cut == Cut::Vertical {
             return Err(StageError::InvalidParam {
                 name: "cut".into(),
