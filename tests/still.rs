@@ -313,8 +313,8 @@ fn bad_stills_get_one_clear_line() {
     assert!(err.contains("counts from 1"), "{err}");
     let err = still_error(&image, "0", &[]);
     assert!(err.contains("radius_mm"), "{err}");
-    // 33⅓ rpm at 0.01 mm over 1 µm pixels: 34.9 samples a second, refused (not ten minutes
-    // of interpolated silence).
+    // 33⅓ rpm at 0.01 mm over 1 µm pixels: 34.9 samples a second, refused (otherwise the
+    // 1,200-px still would become 34 s of interpolated sound).
     let err = still_error(&image, "0.01", &[]);
     assert!(
         err.contains("gives 34.9066 samples per second")

@@ -379,7 +379,7 @@ pub fn write_still_report(
 ) -> Result<()> {
     let a = &run.analysis;
     let groove = &a.grooves.grooves[a.chosen];
-    let line_ms = 1000.0 * setup.um_per_px / setup.groove_speed_um_s();
+    let line_ms = 1000.0 / setup.native_rate_hz();
     let names = ["land|wall", "wall|bottom", "bottom|wall", "wall|land"];
     let report = StillReport {
         version: env!("CARGO_PKG_VERSION"),

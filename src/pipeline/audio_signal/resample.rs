@@ -28,6 +28,7 @@ pub(super) fn pad_search_len(ratio: f64) -> usize {
     let affordable = (DELAY_PAD_MAX_OUTPUT / ratio).floor().max(1.0) as usize;
     affordable.min(DELAY_PAD_SEARCH)
 }
+
 /// Delay of rubato's `SincFixedIn` (cubic sinc-table interpolation) in input samples: output n
 /// is the input at time n/ratio − delay, with delay = 1 − 1/ratio − 1/oversampling (its first
 /// output lies one output step after its start index, and the cubic table lookup is one table
@@ -43,8 +44,9 @@ pub(super) fn resampler_delay_in(ratio: f64) -> f64 {
 /// cubic between table entries). The output has round(n·to/from) samples, aligned with the
 /// input (output k is the input at time k/to): the resampler's latency is removed, its fractional
 /// part by leading zeros chosen so that the delay is a whole number of output samples (to within
-/// 1/`DELAY_PAD_SEARCH` sample for irrational ratios, or of an input sample when upsampling by
-/// more than 16). Non-finite samples count as 0.
+/// about 1/`DELAY_PAD_SEARCH` sample for irrational ratios; upsampling by more than 16 tries
+/// fewer counts, so that the zeros cost at most `DELAY_PAD_MAX_OUTPUT` output samples).
+/// Non-finite samples count as 0.
 ///
 /// # Errors
 /// [`StageError`] on non-positive or NaN rates, or a resampler failure.
