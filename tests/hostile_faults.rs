@@ -220,6 +220,8 @@ fn a_second_reconstruct_to_an_output_in_use_is_refused_and_racing_runs_never_tea
     );
 }
 
+// The workbench's preset saving exists only in the gui build.
+#[cfg(feature = "gui")]
 #[test]
 fn two_windows_saving_one_preset_or_exporting_one_file_do_not_interleave() {
     let dir = tempfile::tempdir().unwrap();

@@ -24,6 +24,16 @@ impl Report {
         self.md.push_str(s);
         self.md.push('\n');
     }
+
+    /// The head of a tone table: a column `r (…)`, SNR and SNR(r) per `runs` label.
+    fn tone_table_head(&mut self, runs: &[String]) {
+        let mut head = String::from("| tone |");
+        for run in runs {
+            head.push_str(&format!(" r ({run}) | SNR dB | SNR(r) dB |"));
+        }
+        self.line(&head);
+        self.line(&format!("|---:|{}", "---:|".repeat(3 * runs.len())));
+    }
 }
 
 /// r, SNR and SNR(r), for steady tones (whose envelope is flat, so envelope r says nothing).
@@ -114,10 +124,11 @@ pub fn run_suite(
         w2
     ));
     rep.line("");
-    rep.line(&format!(
-        "| tone | r (100 px) | SNR dB | SNR(r) dB | r ({w2} px) | SNR dB | SNR(r) dB | r ({w2} px, 3 kHz LP) | SNR dB | SNR(r) dB |"
-    ));
-    rep.line("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    rep.tone_table_head(&[
+        "100 px".into(),
+        format!("{w2} px"),
+        format!("{w2} px, 3 kHz LP"),
+    ]);
     for &f in freqs {
         let case = format!("{f} Hz tone (dual focus)");
         let dir = work.join(format!("tone_df_{f}"));
@@ -159,10 +170,12 @@ pub fn run_suite(
          slope runs (the method before 29 Nov 2026) at {wl} px, low-pass off."
     ));
     rep.line("");
-    rep.line(&format!(
-        "| tone | r (100 px) | SNR dB | SNR(r) dB | r ({wl} px) | SNR dB | SNR(r) dB | r ({wl} px, 3 kHz LP) | SNR dB | SNR(r) dB | r (slope runs, {wl} px) | SNR dB | SNR(r) dB |"
-    ));
-    rep.line("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    rep.tone_table_head(&[
+        "100 px".into(),
+        format!("{wl} px"),
+        format!("{wl} px, 3 kHz LP"),
+        format!("slope runs, {wl} px"),
+    ]);
     for &f in depth_freqs {
         let case = format!("{f} Hz tone (depth path)");
         let dir = work.join(format!("tone_depth_{f}"));

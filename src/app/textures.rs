@@ -78,6 +78,21 @@ impl Textures {
         self.views.get(&key)
     }
 
+    /// The texture of `key`; when none was uploaded, `missing` is drawn as the view's note
+    /// instead.
+    pub fn get_or_note(
+        &self,
+        ui: &mut egui::Ui,
+        key: ViewImage,
+        missing: &str,
+    ) -> Option<&ViewTexture> {
+        let tex = self.get(key);
+        if tex.is_none() {
+            super::views::empty_note(ui, missing);
+        }
+        tex
+    }
+
     /// The flow-colour texture of field `index` (residual after `land_px`) of the flow output
     /// with identity `source`, rendered here when the worker did not (the operator picked
     /// another window).

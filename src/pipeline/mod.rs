@@ -295,3 +295,32 @@ pub(crate) fn median_in_place<T: TotalOrder>(v: &mut [T]) -> Option<T> {
 pub(crate) fn median(mut v: Vec<f64>) -> Option<f64> {
     median_in_place(&mut v)
 }
+
+/// Lagrange interpolation at `p` through the nodes `(x, y)` (distinct `x`): the one polynomial
+/// interpolant of the pipeline (stitching, gap bridging, still resampling).
+pub(crate) fn lagrange(nodes: &[(f64, f64)], p: f64) -> f64 {
+    let mut sum = 0.0;
+    for (i, &(xi, yi)) in nodes.iter().enumerate() {
+        let mut basis = 1.0;
+        for (j, &(xj, _)) in nodes.iter().enumerate() {
+            if i != j {
+                basis *= (p - xj) / (xi - xj);
+            }
+        }
+        sum += basis * yi;
+    }
+    sum
+}
+
+/// `ranges` sorted by start, with overlapping or touching ones merged.
+pub(crate) fn merge_ranges(mut ranges: Vec<std::ops::Range<usize>>) -> Vec<std::ops::Range<usize>> {
+    ranges.sort_by_key(|r| r.start);
+    let mut out: Vec<std::ops::Range<usize>> = Vec::new();
+    for r in ranges {
+        match out.last_mut() {
+            Some(last) if r.start <= last.end => last.end = last.end.max(r.end),
+            _ => out.push(r),
+        }
+    }
+    out
+}

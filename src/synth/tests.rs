@@ -48,37 +48,32 @@ fn shift_between(
     rows: std::ops::Range<usize>,
     cols: std::ops::Range<usize>,
 ) -> f64 {
-    let forward = shift_one_way(a, b, rows.clone(), cols.clone());
-    let back_cols = (cols.start + 3)..(cols.end + 3).min(a.width);
-    let backward = shift_one_way(b, a, rows, back_cols);
-    0.5 * (forward - backward)
-}
-
-fn shift_one_way(
-    a: &Image,
-    b: &Image,
-    rows: std::ops::Range<usize>,
-    cols: std::ops::Range<usize>,
-) -> f64 {
-    let mut delta = 0.0;
-    for _ in 0..20 {
-        let (mut num, mut den) = (0.0, 0.0);
-        for y in rows.clone() {
-            for x in cols.clone() {
-                let xf = x as f64 + delta;
-                let g = 0.5 * (cubic(a, xf + 1.0, y) - cubic(a, xf - 1.0, y));
-                let r = f64::from(b.get(x, y).unwrap()) - cubic(a, xf, y);
-                num += g * r;
-                den += g * g;
+    // Gauss–Newton for δ with `to(x) ≈ from(x + δ)` over `rows` × `cols`.
+    let one_way = |from: &Image, to: &Image, cols: std::ops::Range<usize>| {
+        let mut delta = 0.0;
+        for _ in 0..20 {
+            let (mut num, mut den) = (0.0, 0.0);
+            for y in rows.clone() {
+                for x in cols.clone() {
+                    let xf = x as f64 + delta;
+                    let g = 0.5 * (cubic(from, xf + 1.0, y) - cubic(from, xf - 1.0, y));
+                    let r = f64::from(to.get(x, y).unwrap()) - cubic(from, xf, y);
+                    num += g * r;
+                    den += g * g;
+                }
+            }
+            let step = num / den;
+            delta += step;
+            if step.abs() < 1e-7 {
+                break;
             }
         }
-        let step = num / den;
-        delta += step;
-        if step.abs() < 1e-7 {
-            break;
-        }
-    }
-    delta
+        delta
+    };
+    let forward = one_way(a, b, cols.clone());
+    let back_cols = (cols.start + 3)..(cols.end + 3).min(a.width);
+    let backward = one_way(b, a, back_cols);
+    0.5 * (forward - backward)
 }
 
 #[test]

@@ -4,13 +4,11 @@ use egui::{Color32, Rect, Sense, Stroke, Ui, vec2};
 use egui_plot::{Line, LineStyle, Plot, PlotPoints, VLine};
 
 use super::frame_ui::StageData;
-use super::{
-    AXIS_WIDTH_PT, empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines,
-};
+use super::{AXIS_WIDTH_PT, hovered_pixel, image_item, image_plot, wall_lines};
 use crate::app::render::heat_colour;
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
-use crate::pipeline::Stage;
+use crate::pipeline::{Stage, StageCache};
 use crate::viz::robust_range;
 
 /// Colour bands in the colour bar.
@@ -63,17 +61,15 @@ pub fn depth_ui(
     state: &mut DepthViewState,
     height: f32,
 ) {
-    let status = data.status(Stage::Depth).clone();
-    stage_banner(ui, Stage::Depth, &status);
-    let Some(depth) = data.cache.depth().cloned() else {
-        empty_note(
-            ui,
-            "no depth map: the depth path has not run (dual-focus scans use stripes instead)",
-        );
+    let status = data.banner(ui, Stage::Depth);
+    let Some(depth) = data.output_or_note(
+        ui,
+        StageCache::depth,
+        "no depth map: the depth path has not run (dual-focus scans use stripes instead)",
+    ) else {
         return;
     };
-    let Some(tex) = textures.get(ViewImage::Depth) else {
-        empty_note(ui, "depth map not rendered yet");
+    let Some(tex) = textures.get_or_note(ui, ViewImage::Depth, "depth map not rendered yet") else {
         return;
     };
     let (lo, hi) = (tex.rendered.lo, tex.rendered.hi);

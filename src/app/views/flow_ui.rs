@@ -3,12 +3,12 @@
 use egui::Ui;
 
 use super::frame_ui::{ArrowOptions, StageData, arrow_controls, flow_arrows};
-use super::{empty_note, hovered_pixel, image_item, image_plot, stage_banner};
+use super::{empty_note, hovered_pixel, image_item, image_plot};
 use crate::app::textures::Textures;
-use crate::pipeline::Stage;
 use crate::pipeline::optical_flow::{
     FlowField, FlowMethod, FlowParams, WALL_PRESOLVE_MAX_ITERATIONS, WALL_PRESOLVE_TOLERANCE_PX,
 };
+use crate::pipeline::{Stage, StageCache};
 
 /// State of the flow view.
 #[derive(Clone, Debug, Default)]
@@ -94,10 +94,8 @@ pub fn flow_ui(
     state: &mut FlowViewState,
     height: f32,
 ) {
-    let status = data.status(Stage::Flow).clone();
-    stage_banner(ui, Stage::Flow, &status);
-    let Some(flows) = data.cache.flows().cloned() else {
-        empty_note(ui, "no flow yet");
+    let status = data.banner(ui, Stage::Flow);
+    let Some(flows) = data.output_or_note(ui, StageCache::flows, "no flow yet") else {
         return;
     };
     if flows.is_empty() {

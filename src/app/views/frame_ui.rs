@@ -5,7 +5,7 @@ use std::sync::Arc;
 use egui::Ui;
 use egui_plot::{Arrows, PlotPoints, PlotUi};
 
-use super::{StageStatus, empty_note, hovered_pixel, image_item, image_plot};
+use super::{StageStatus, empty_note, hovered_pixel, image_item, image_plot, stage_banner};
 use crate::app::render::heat_colour;
 use crate::app::textures::Textures;
 use crate::image::Image;
@@ -44,6 +44,28 @@ impl StageData<'_> {
     #[must_use]
     pub fn status(&self, stage: Stage) -> &StageStatus {
         &self.status[stage.index()]
+    }
+
+    /// Draws `stage`'s status banner and returns the status (a view dims a stale result).
+    pub fn banner(&self, ui: &mut Ui, stage: Stage) -> StageStatus {
+        let status = self.status(stage).clone();
+        stage_banner(ui, stage, &status);
+        status
+    }
+
+    /// A stage output of the cache, cloned; when there is none, `missing` is drawn as the
+    /// view's note instead.
+    pub fn output_or_note<T: Clone>(
+        &self,
+        ui: &mut Ui,
+        output: impl FnOnce(&StageCache) -> Option<&T>,
+        missing: &str,
+    ) -> Option<T> {
+        let out = output(self.cache).cloned();
+        if out.is_none() {
+            empty_note(ui, missing);
+        }
+        out
     }
 
     /// The flow field computed on `frame` (or the middle one when none matches).

@@ -4,12 +4,12 @@ use egui::{Color32, Stroke, Ui};
 use egui_plot::{LineStyle, Plot, PlotImage, PlotPoint, PlotPoints, Points, Polygon, VLine};
 
 use super::frame_ui::StageData;
-use super::{empty_note, stage_banner, tint};
+use super::{empty_note, tint};
 use crate::app::render::region_colour;
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
-use crate::pipeline::Stage;
 use crate::pipeline::hough::HoughParams;
+use crate::pipeline::{Stage, StageCache};
 
 /// Pointer distance (screen points) that grabs a window edge.
 pub const GRAB_PT: f32 = 6.0;
@@ -100,18 +100,14 @@ pub fn hough_ui(
     draft: &mut HoughParams,
     height: f32,
 ) {
-    let status = data.status(Stage::Stripes).clone();
-    stage_banner(ui, Stage::Stripes, &status);
+    let status = data.banner(ui, Stage::Stripes);
     hough_controls(ui, draft);
-    let Some(stripes) = data.cache.stripes().cloned() else {
-        empty_note(
-            ui,
-            "no Hough accumulator: the dual-focus path has not run (scan without [dual_focus], or path = depth)",
-        );
+    let Some(stripes) = data.output_or_note(ui, StageCache::stripes, "no Hough accumulator: the dual-focus path has not run (scan without [dual_focus], or path = depth)") else {
         return;
     };
-    let Some(tex) = textures.get(ViewImage::Accumulator) else {
-        empty_note(ui, "accumulator not rendered yet");
+    let Some(tex) =
+        textures.get_or_note(ui, ViewImage::Accumulator, "accumulator not rendered yet")
+    else {
         return;
     };
     let acc = &stripes.accumulator;

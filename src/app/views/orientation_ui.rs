@@ -4,14 +4,12 @@ use egui::{Color32, Ui};
 use egui_plot::{Legend, Line, Plot, PlotPoints};
 
 use super::frame_ui::StageData;
-use super::{
-    AXIS_WIDTH_PT, empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines,
-};
+use super::{AXIS_WIDTH_PT, hovered_pixel, image_item, image_plot, wall_lines};
 use crate::app::render::{NO_FIT_COLOUR, region_colour};
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
-use crate::pipeline::Stage;
 use crate::pipeline::orientation::WallOrientation;
+use crate::pipeline::{Stage, StageCache};
 
 /// State of the orientation view.
 #[derive(Clone, Debug, Default)]
@@ -60,10 +58,8 @@ pub fn orientation_ui(
     state: &mut OrientationViewState,
     height: f32,
 ) {
-    let status = data.status(Stage::Orientation).clone();
-    stage_banner(ui, Stage::Orientation, &status);
-    let Some(out) = data.cache.orientation().cloned() else {
-        empty_note(ui, "no orientation yet");
+    let status = data.banner(ui, Stage::Orientation);
+    let Some(out) = data.output_or_note(ui, StageCache::orientation, "no orientation yet") else {
         return;
     };
     let o = &out.orientation;
@@ -101,8 +97,8 @@ pub fn orientation_ui(
                 }
             }
         });
-    let Some(tex) = textures.get(ViewImage::Weights) else {
-        empty_note(ui, "weight map not rendered yet");
+    let Some(tex) = textures.get_or_note(ui, ViewImage::Weights, "weight map not rendered yet")
+    else {
         return;
     };
     ui.horizontal(|ui| {

@@ -4,11 +4,11 @@ use egui::{Color32, Ui};
 use egui_plot::{HLine, LineStyle};
 
 use super::frame_ui::StageData;
-use super::{empty_note, hovered_pixel, image_item, image_plot, stage_banner, wall_lines};
+use super::{empty_note, hovered_pixel, image_item, image_plot, wall_lines};
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
-use crate::pipeline::Stage;
 use crate::pipeline::hough::label;
+use crate::pipeline::{Stage, StageCache};
 
 /// What the stripes view shows under the lines.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -39,13 +39,12 @@ pub fn stripes_ui(
     state: &mut StripesViewState,
     height: f32,
 ) {
-    let status = data.status(Stage::Stripes).clone();
-    stage_banner(ui, Stage::Stripes, &status);
-    let Some(stripes) = data.cache.stripes().cloned() else {
-        empty_note(
-            ui,
-            "no stripes: the dual-focus path has not run (scan without [dual_focus], or path = depth)",
-        );
+    let status = data.banner(ui, Stage::Stripes);
+    let Some(stripes) = data.output_or_note(
+        ui,
+        StageCache::stripes,
+        "no stripes: the dual-focus path has not run (scan without [dual_focus], or path = depth)",
+    ) else {
         return;
     };
     ui.horizontal(|ui| {

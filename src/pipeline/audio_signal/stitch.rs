@@ -24,21 +24,6 @@ pub struct StitchedSignal {
     pub gaps: Vec<Range<usize>>,
 }
 
-/// Lagrange interpolation at `p` through the nodes `(x, y)` (2 to 4 of them).
-pub(super) fn lagrange(nodes: &[(f64, f64)], p: f64) -> f64 {
-    let mut sum = 0.0;
-    for (i, &(xi, yi)) in nodes.iter().enumerate() {
-        let mut basis = 1.0;
-        for (j, &(xj, _)) in nodes.iter().enumerate() {
-            if i != j {
-                basis *= (p - xj) / (xi - xj);
-            }
-        }
-        sum += basis * yi;
-    }
-    sum
-}
-
 /// Value of one group channel at `p`, which lies in segment `[pos[j], pos[j+1]]`: a cubic through
 /// four consecutive finite samples around the segment (centred j−1..=j+2 where possible,
 /// one-sided at a group end or next to a gap), else a quadratic, else linear. None when either
@@ -60,7 +45,7 @@ pub(super) fn interpolate(pos: &[f64], val: &[f32], j: usize, p: f64) -> Option<
     for (node, k) in nodes.iter_mut().zip(lo..lo + len) {
         *node = (*pos.get(k)?, f64::from(*val.get(k)?));
     }
-    Some(lagrange(&nodes[..len], p))
+    Some(crate::pipeline::lagrange(&nodes[..len], p))
 }
 
 /// Stitches group signals onto one uniform grid from the smallest to the largest sample

@@ -330,19 +330,10 @@ fn tone(n: usize, freq: f64, rate: f64, amp: f64) -> Vec<f32> {
 
 /// Least-squares amplitude and phase of `freq` in `x` at `rate`, over `range`.
 fn fit_sine(x: &[f32], freq: f64, rate: f64, range: Range<usize>) -> (f64, f64, f64) {
-    let (mut ss, mut sc, mut cc, mut xs, mut xc) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for i in range.clone() {
+    let (a, b) = crate::pipeline::test_support::two_gains(range.clone().map(|i| {
         let (s, c) = (2.0 * PI * freq * i as f64 / rate).sin_cos();
-        let v = f64::from(x[i]);
-        ss += s * s;
-        sc += s * c;
-        cc += c * c;
-        xs += v * s;
-        xc += v * c;
-    }
-    let det = ss * cc - sc * sc;
-    let a = (xs * cc - xc * sc) / det;
-    let b = (xc * ss - xs * sc) / det;
+        ((s, c), f64::from(x[i]))
+    }));
     let mut resid = 0.0f64;
     for i in range {
         let (s, c) = (2.0 * PI * freq * i as f64 / rate).sin_cos();

@@ -5,8 +5,8 @@
 use super::EdgeParams;
 use super::geometry::FrameGeometry;
 use super::profile::{
-    Band, BandReader, Bins, Column, SampleBorder, SampleTask, fit_views, frame_views,
-    lorentzian_weight,
+    Band, BandReader, Bins, Column, ColumnWeights, SampleBorder, SampleTask, fit_views,
+    frame_views, lorentzian_weight,
 };
 use crate::image::Image;
 
@@ -48,7 +48,7 @@ fn column_weights(
     band: Band,
     table: &[(f64, f64)],
     sigma_px: f64,
-) -> Vec<(usize, f64, f64)> {
+) -> ColumnWeights {
     cols.iter()
         .map(|c| {
             let (mut num, mut den) = (0.0, 0.0);
@@ -82,15 +82,10 @@ impl BandReader for PlainReader<'_> {
         Some(accumulate(img, cols, self.band, weight))
     }
 
-    fn column_weights(
-        &self,
-        k: usize,
-        table: &[(f64, f64)],
-        sigma_px: f64,
-    ) -> Option<Vec<(usize, f64, f64)>> {
+    fn column_weights(&self, k: usize, table: &[(f64, f64)], sigma: f64) -> Option<ColumnWeights> {
         let (i, cols) = self.views.get(k)?;
         let (img, _, _) = self.frames.get(*i)?;
-        Some(column_weights(img, cols, self.band, table, sigma_px))
+        Some(column_weights(img, cols, self.band, table, sigma))
     }
 }
 

@@ -335,18 +335,7 @@ pub fn bridge_gaps(v: &mut [f64], max_len: usize) -> (Vec<Range<usize>>, Vec<Ran
         }
         let pts: Vec<(f64, f64)> = nodes.iter().flatten().map(|&i| (i as f64, v[i])).collect();
         for i in run.clone() {
-            let x = i as f64;
-            let mut sum = 0.0;
-            for (a, &(xa, ya)) in pts.iter().enumerate() {
-                let mut basis = 1.0;
-                for (b, &(xb, _)) in pts.iter().enumerate() {
-                    if a != b {
-                        basis *= (x - xb) / (xa - xb);
-                    }
-                }
-                sum += basis * ya;
-            }
-            v[i] = sum;
+            v[i] = crate::pipeline::lagrange(&pts, i as f64);
         }
         bridged.push(run);
     }

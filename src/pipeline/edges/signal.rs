@@ -114,19 +114,6 @@ pub struct DecodedEdges {
     pub channel_gaps: Vec<Vec<Range<usize>>>,
 }
 
-/// Merges overlapping or touching ranges (sorted by start).
-fn merge(mut v: Vec<Range<usize>>) -> Vec<Range<usize>> {
-    v.sort_by_key(|r| r.start);
-    let mut out: Vec<Range<usize>> = Vec::new();
-    for r in v {
-        match out.last_mut() {
-            Some(last) if r.start <= last.end => last.end = last.end.max(r.end),
-            _ => out.push(r),
-        }
-    }
-    out
-}
-
 /// Combines and differentiates border tracks stitched over a clip (eight channels as
 /// [`Edges::border_signal`] gives them; the stitcher's gap fill, a zero standard error, counts
 /// as not seen) into velocity by `cut`.
@@ -196,7 +183,7 @@ pub fn decode_border_signal(
             }
         }
     }
-    let gaps = merge(channel_gaps.iter().flatten().cloned().collect());
+    let gaps = crate::pipeline::merge_ranges(channel_gaps.iter().flatten().cloned().collect());
     Ok(DecodedEdges {
         combined,
         velocity: StitchedSignal {

@@ -123,19 +123,11 @@ fn stereo_walls_with_different_tones_are_kept_apart() {
     let vt = e.groove_speed_mm_s;
     let inside = 2..sig.positions_um.len() - 2;
     let gains = |ch: usize| {
-        let (mut a, mut b, mut c, mut u, mut v) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for i in inside.clone() {
+        crate::pipeline::test_support::two_gains(inside.clone().map(|i| {
             let t = g.truth(sig.positions_um[i]);
-            let (l, r) = (t.left_tan_theta * vt, t.right_tan_theta * vt);
-            let y = f64::from(sig.channels[ch][i]);
-            a += l * l;
-            b += l * r;
-            c += r * r;
-            u += l * y;
-            v += r * y;
-        }
-        let det = a * c - b * b;
-        ((u * c - v * b) / det, (v * a - u * b) / det)
+            let lr = (t.left_tan_theta * vt, t.right_tan_theta * vt);
+            (lr, f64::from(sig.channels[ch][i]))
+        }))
     };
     let (ll, lr) = gains(0);
     let (rl, rr) = gains(1);

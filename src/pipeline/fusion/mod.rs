@@ -468,14 +468,7 @@ pub fn fuse(
     for (_, _, any) in &masks {
         gaps.extend(false_runs(any.iter().copied()));
     }
-    gaps.sort_by_key(|r| r.start);
-    let mut merged: Vec<Range<usize>> = Vec::new();
-    for g in gaps {
-        match merged.last_mut() {
-            Some(last) if g.start <= last.end => last.end = last.end.max(g.end),
-            _ => merged.push(g),
-        }
-    }
+    let merged = crate::pipeline::merge_ranges(gaps);
     let start_um = origin as f64 * spacing;
     let groups = map_groups(
         &masks,

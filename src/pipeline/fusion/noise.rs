@@ -210,12 +210,16 @@ pub fn fit_noise(
 mod tests {
     use super::*;
 
+    /// The angular frequencies (rad/sample) of bins 1 to `n − 1` of a `2n`-point spectrum.
+    fn bin_frequencies(n: usize) -> Vec<f64> {
+        (1..n)
+            .map(|k| std::f64::consts::PI * k as f64 / n as f64)
+            .collect()
+    }
+
     #[test]
     fn recovers_both_levels_and_ignores_a_tone_peak() {
-        let n = 128;
-        let omega: Vec<f64> = (1..n)
-            .map(|k| std::f64::consts::PI * k as f64 / n as f64)
-            .collect();
+        let omega = bin_frequencies(128);
         let mut power: Vec<f64> = omega
             .iter()
             .enumerate()
@@ -240,10 +244,7 @@ mod tests {
     fn disagreement_that_follows_the_signal_is_the_flows() {
         // A tone at bin 20 that the flow reads 10% low: its difference power is 1% of the
         // signal's there, on top of both noises.
-        let n = 128;
-        let omega: Vec<f64> = (1..n)
-            .map(|k| std::f64::consts::PI * k as f64 / n as f64)
-            .collect();
+        let omega = bin_frequencies(128);
         let mut signal = vec![0.5; omega.len()];
         signal[20] = 1e6;
         let power: Vec<f64> = omega

@@ -10,6 +10,11 @@ fn meta() -> ScanMeta {
     scan_meta(460.2)
 }
 
+/// [`fuse`] of `flow` and `edges` with no edge noise track, the test scan and default params.
+fn fuse_default(flow: &StitchedSignal, edges: &StitchedSignal) -> Result<Fused, StageError> {
+    fuse(flow, edges, None, &meta(), &FusionParams::default())
+}
+
 fn signal(start_sample: i64, channels: Vec<Vec<f32>>) -> StitchedSignal {
     StitchedSignal {
         start_um: start_sample as f64 * 21.3,
@@ -59,12 +64,9 @@ fn error_power(x: &[f32], truth: &[f64], range: Range<usize>) -> f64 {
 fn fusion_beats_both_inputs() {
     let n = 8192;
     let (truth, flow, edges) = inputs(n, 2.0, 2.0);
-    let fused = fuse(
+    let fused = fuse_default(
         &signal(100, vec![flow.clone()]),
         &signal(100, vec![edges.clone()]),
-        None,
-        &meta(),
-        &FusionParams::default(),
     )
     .unwrap();
     let inner = 300..n - 300;
@@ -93,14 +95,7 @@ fn agreeing_inputs_come_back_unchanged() {
     let n = 1000;
     let (truth, _, _) = inputs(n, 0.0, 0.0);
     let x: Vec<f32> = truth.iter().map(|&v| v as f32).collect();
-    let fused = fuse(
-        &signal(7, vec![x.clone()]),
-        &signal(7, vec![x.clone()]),
-        None,
-        &meta(),
-        &FusionParams::default(),
-    )
-    .unwrap();
+    let fused = fuse_default(&signal(7, vec![x.clone()]), &signal(7, vec![x.clone()])).unwrap();
     assert_eq!(fused.signal.channels[0].len(), n);
     for (a, b) in fused.signal.channels[0].iter().zip(&x) {
         assert!((a - b).abs() < 1e-3, "{a} vs {b}");
@@ -124,7 +119,7 @@ fn each_method_fills_the_others_gaps() {
         gaps: vec![2990..3090],
         ..e
     };
-    let fused = fuse(&f, &e_late, None, &meta(), &FusionParams::default()).unwrap();
+    let fused = fuse_default(&f, &e_late).unwrap();
     let out = &fused.signal.channels[0];
     assert_eq!(out.len(), n);
     // Deep inside the flow's gap the output is the edge signal.
@@ -143,10 +138,10 @@ fn each_method_fills_the_others_gaps() {
 fn mismatched_inputs_are_refused() {
     let a = signal(0, vec![vec![0.0; 100]]);
     let two = signal(0, vec![vec![0.0; 100], vec![0.0; 100]]);
-    assert!(fuse(&a, &two, None, &meta(), &FusionParams::default()).is_err());
+    assert!(fuse_default(&a, &two).is_err());
     let mut other = a.clone();
     other.spacing_um = 20.0;
-    assert!(fuse(&a, &other, None, &meta(), &FusionParams::default()).is_err());
+    assert!(fuse_default(&a, &other).is_err());
     let bad = FusionParams {
         block_samples: 100,
         ..FusionParams::default()
@@ -161,7 +156,7 @@ fn the_group_report_covers_each_sampled_group_once_whatever_the_step() {
     let x: Vec<f32> = truth.iter().map(|&v| v as f32).collect();
     let s = signal(3, vec![x]);
     // 1000 samples of 21.3 µm from 63.9 µm on, in groups of 460.2 µm: groups 0 to 46.
-    let fused = fuse(&s, &s, None, &meta(), &FusionParams::default()).unwrap();
+    let fused = fuse_default(&s, &s).unwrap();
     let groups: Vec<usize> = fused.groups.iter().map(|g| g.group).collect();
     assert_eq!(groups, (0..=46).collect::<Vec<_>>());
     // A step far shorter than a sample (the fuzzer's scan asked for 2⁶⁴ groups): the group

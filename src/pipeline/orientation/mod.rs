@@ -282,8 +282,7 @@ pub fn orient_from_depth(
     Ok(fit_walls(
         &sides,
         sample_columns,
-        width,
-        height,
+        (width, height),
         params,
         gather,
     ))
@@ -390,8 +389,7 @@ pub fn orient_from_lines(
     Ok(fit_walls(
         &sides,
         sample_columns,
-        width,
-        height,
+        (width, height),
         params,
         gather,
     ))

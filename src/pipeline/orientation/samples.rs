@@ -84,12 +84,11 @@ impl Workspace {
 }
 
 /// The orientation of the walls `sides`: [`fit_samples`] with `gather`, then [`assemble`] on a
-/// `width` × `height` weight map.
+/// weight map of `(width, height)`.
 pub(super) fn fit_walls(
     sides: &[WallSide],
     sample_columns: &[f32],
-    width: usize,
-    height: usize,
+    (width, height): (usize, usize),
     params: &OrientationParams,
     gather: impl Fn(&mut Workspace, usize, f32) -> usize + Sync,
 ) -> Orientation {

@@ -131,17 +131,11 @@ fn lagrange(s: &[f64], v: &[f64], q: f64) -> f64 {
     let i = s.partition_point(|x| *x <= q).clamp(1, n.max(2) - 1);
     let lo = i.saturating_sub(2).min(n.saturating_sub(4));
     let hi = (lo + 4).min(n);
-    let mut out = 0.0;
-    for j in lo..hi {
-        let mut w = 1.0;
-        for m in lo..hi {
-            if m != j {
-                w *= (q - s[m]) / (s[j] - s[m]);
-            }
-        }
-        out += w * v[j];
+    let mut nodes = [(0.0, 0.0); 4];
+    for (node, j) in nodes.iter_mut().zip(lo..hi) {
+        *node = (s[j], v[j]);
     }
-    out
+    crate::pipeline::lagrange(&nodes[..hi - lo], q)
 }
 
 /// Least-squares quadratic through `v[range]`, evaluated there: (values, slopes per sample).

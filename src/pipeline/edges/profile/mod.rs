@@ -299,7 +299,7 @@ impl BandView<'_, '_> {
 
     /// Per-column offsets against the fitted model and their Lorentzian weights (see
     /// [`column_table`]).
-    fn column_weights(&self, table: &[(f64, f64)], sigma_px: f64) -> Vec<(usize, f64, f64)> {
+    fn column_weights(&self, table: &[(f64, f64)], sigma_px: f64) -> ColumnWeights {
         self.columns()
             .map(|(c, pixels)| {
                 let (mut num, mut den) = (0.0, 0.0);
@@ -318,6 +318,9 @@ impl BandView<'_, '_> {
     }
 }
 
+/// Per column of a view: (column, groove position in µm, Lorentzian weight).
+pub(super) type ColumnWeights = Vec<(usize, f64, f64)>;
+
 /// How a fit reads its frames' bands: view `k` is the `k`-th frame that sees the stretch.
 pub(super) trait BandReader {
     /// View `k`'s columns accumulated into bins, each weighted by `weight(s)`.
@@ -333,14 +336,9 @@ pub(super) trait BandReader {
             None => false,
         }
     }
-    /// View `k`'s per-column (column, groove position, Lorentzian weight) against the model
-    /// `table` (see [`column_table`]).
-    fn column_weights(
-        &self,
-        k: usize,
-        table: &[(f64, f64)],
-        sigma_px: f64,
-    ) -> Option<Vec<(usize, f64, f64)>>;
+    /// View `k`'s per-column (column, groove position, Lorentzian weight at scale `sigma`,
+    /// px) against the model `table` (see [`column_table`]).
+    fn column_weights(&self, k: usize, table: &[(f64, f64)], sigma: f64) -> Option<ColumnWeights>;
 }
 
 /// Every view's band gathered once.
@@ -368,14 +366,9 @@ impl BandReader for Gathered<'_, '_> {
         true
     }
 
-    fn column_weights(
-        &self,
-        k: usize,
-        table: &[(f64, f64)],
-        sigma_px: f64,
-    ) -> Option<Vec<(usize, f64, f64)>> {
+    fn column_weights(&self, k: usize, table: &[(f64, f64)], sigma: f64) -> Option<ColumnWeights> {
         let view = self.views.get(k)?;
-        Some(view.column_weights(table, sigma_px))
+        Some(view.column_weights(table, sigma))
     }
 }
 
