@@ -28,23 +28,18 @@ pub enum CompareAction {
     Stop,
 }
 
+/// Red, yellow, green: the colours of an agreement r of 0, 0.5 and 1.
+const AGREEMENT_RAMP: [[f64; 3]; 3] = [
+    [220.0, 60.0, 50.0],
+    [230.0, 200.0, 60.0],
+    [80.0, 200.0, 100.0],
+];
+
 /// Colour of an agreement r: green at 1, through yellow at 0.5, to red at 0 and below.
 #[must_use]
 pub fn agreement_colour(r: f64) -> Color32 {
-    let t = if r.is_finite() {
-        r.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    // Red, yellow, green.
-    three_stop_colour(
-        t,
-        [
-            [220.0, 60.0, 50.0],
-            [230.0, 200.0, 60.0],
-            [80.0, 200.0, 100.0],
-        ],
-    )
+    // An unknown r is no agreement.
+    three_stop_colour(r, 0.0, AGREEMENT_RAMP)
 }
 
 /// One line for an agreement: `r 0.998 · 27.3 dB`.

@@ -17,23 +17,18 @@ pub const MIN_CELL_PT: f32 = 2.0;
 /// Colour of groups not reconstructed yet.
 pub const NOT_RUN_COLOUR: Color32 = Color32::from_gray(70);
 
+/// Green, amber, red: the colours of a severity of 0, 0.5 and 1.
+const SEVERITY_RAMP: [[f32; 3]; 3] = [
+    [70.0, 170.0, 90.0],
+    [230.0, 180.0, 50.0],
+    [220.0, 50.0, 45.0],
+];
+
 /// Colour of a severity in `[0, 1]`: green, amber at 0.5, red at 1.
 #[must_use]
 pub fn severity_colour(severity: f32) -> Color32 {
-    let s = if severity.is_finite() {
-        severity.clamp(0.0, 1.0)
-    } else {
-        1.0
-    };
-    // Green, amber, red.
-    three_stop_colour(
-        s,
-        [
-            [70.0, 170.0, 90.0],
-            [230.0, 180.0, 50.0],
-            [220.0, 50.0, 45.0],
-        ],
-    )
+    // An unknown severity is the worst.
+    three_stop_colour(severity, 1.0, SEVERITY_RAMP)
 }
 
 /// The strip's columns: the groups each stands for and its rectangle inside `rect`.

@@ -277,9 +277,10 @@ pub fn stage_banner(ui: &mut Ui, stage: Stage, status: &StageStatus) {
     });
 }
 
-/// The colour at `t` in `[0, 1]` on a ramp through three colours: `stops[0]` at 0, `stops[1]`
-/// at 0.5, `stops[2]` at 1, each channel mixed linearly in the caller's float type.
-pub fn three_stop_colour<T>(t: T, stops: [[T; 3]; 3]) -> Color32
+/// The colour at `t` on a ramp through three colours: `stops[0]` at 0 (and below), `stops[1]`
+/// at 0.5, `stops[2]` at 1 (and above), each channel mixed linearly in the caller's float
+/// type; a `t` that is not finite is read as `if_not_finite`.
+pub fn three_stop_colour<T>(t: T, if_not_finite: T, stops: [[T; 3]; 3]) -> Color32
 where
     T: Copy
         + PartialOrd
@@ -290,8 +291,17 @@ where
         + std::ops::Mul<Output = T>
         + std::ops::Div<Output = T>,
 {
-    let two = T::from(2);
-    let half = T::from(1) / two;
+    let (zero, one, two) = (T::from(0), T::from(1), T::from(2));
+    let t = if !Into::<f64>::into(t).is_finite() {
+        if_not_finite
+    } else if t < zero {
+        zero
+    } else if t > one {
+        one
+    } else {
+        t
+    };
+    let half = one / two;
     let [lo, mid, hi] = stops;
     let (from, to, u) = if t < half {
         (lo, mid, t * two)
