@@ -1,7 +1,7 @@
 //! The whole accuracy suite: every case rendered, reconstructed and scored into one markdown report.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::{
@@ -24,21 +24,60 @@ impl Report {
         self.md.push_str(s);
         self.md.push('\n');
     }
-
-    /// The head of a tone table: a column `r (…)`, SNR and SNR(r) per `runs` label.
-    fn tone_table_head(&mut self, runs: &[String]) {
-        let mut head = String::from("| tone |");
-        for run in runs {
-            head.push_str(&format!(" r ({run}) | SNR dB | SNR(r) dB |"));
-        }
-        self.line(&head);
-        self.line(&format!("|---:|{}", "---:|".repeat(3 * runs.len())));
-    }
 }
 
 /// r, SNR and SNR(r), for steady tones (whose envelope is flat, so envelope r says nothing).
 fn tone_cells(s: &Scores) -> String {
     format!("{:.3} | {:.1} | {:.1}", s.r, s.snr_db, snr_from_r_db(s.r))
+}
+
+/// Where a tone table's scans go and what they are: case `"{f} Hz tone ({name})"`, folder
+/// `work/{folder}_{f}`, rendered with `cfg`.
+struct ToneScans<'a> {
+    name: &'a str,
+    folder: &'a str,
+    work: &'a Path,
+    cfg: SynthConfig,
+}
+
+/// A tone table: its head, then per frequency one scan rendered and scored with each of `runs`
+/// (column label, params), a row of r, SNR and SNR(r) per run, and one log line.
+fn tone_table(
+    rep: &mut Report,
+    log: &mut dyn FnMut(&str),
+    scans: &ToneScans<'_>,
+    freqs: &[f64],
+    runs: &[(String, PipelineParams)],
+) -> Result<(), AccuracyError> {
+    let mut head = String::from("| tone |");
+    for (label, _) in runs {
+        head.push_str(&format!(" r ({label}) | SNR dB | SNR(r) dB |"));
+    }
+    rep.line(&head);
+    rep.line(&format!("|---:|{}", "---:|".repeat(3 * runs.len())));
+    for &f in freqs {
+        let case = format!("{f} Hz tone ({})", scans.name);
+        let dir = scans.work.join(format!("{}_{f}", scans.folder));
+        render_tone(&case, f, &scans.cfg, &dir)?;
+        let mut cells = Vec::new();
+        for (_, params) in runs {
+            cells.push(score_scan(&case, &dir, params)?.0);
+        }
+        rep.line(&format!(
+            "| {f} Hz | {} |",
+            cells.iter().map(tone_cells).collect::<Vec<_>>().join(" | ")
+        ));
+        let joined = |cell: &dyn Fn(&Scores) -> String| {
+            cells.iter().map(cell).collect::<Vec<_>>().join(" / ")
+        };
+        log(&format!(
+            "{case}: r {}, SNR {} dB",
+            joined(&|s| format!("{:.3}", s.r)),
+            joined(&|s| format!("{:.1}", s.snr_db))
+        ));
+    }
+    rep.line("");
+    Ok(())
 }
 
 fn score_cells(s: &Scores) -> String {
@@ -124,32 +163,20 @@ pub fn run_suite(
         w2
     ));
     rep.line("");
-    rep.tone_table_head(&[
-        "100 px".into(),
-        format!("{w2} px"),
-        format!("{w2} px, 3 kHz LP"),
-    ]);
-    for &f in freqs {
-        let case = format!("{f} Hz tone (dual focus)");
-        let dir = work.join(format!("tone_df_{f}"));
-        render_tone(&case, f, &small_dual_focus(tone_groups), &dir)?;
-        let (a, _) = score_scan(&case, &dir, &sound_params(100, true))?;
-        let (b, _) = score_scan(&case, &dir, &sound_params(w2, true))?;
-        let mut lp = sound_params(w2, true);
-        lp.dsp.lowpass = true;
-        let (c, _) = score_scan(&case, &dir, &lp)?;
-        rep.line(&format!(
-            "| {f} Hz | {} | {} | {} |",
-            tone_cells(&a),
-            tone_cells(&b),
-            tone_cells(&c)
-        ));
-        log(&format!(
-            "{case}: r {:.3} / {:.3} / {:.3}, SNR {:.1} / {:.1} / {:.1} dB",
-            a.r, b.r, c.r, a.snr_db, b.snr_db, c.snr_db
-        ));
-    }
-    rep.line("");
+    let mut lp = sound_params(w2, true);
+    lp.dsp.lowpass = true;
+    let runs = [
+        ("100 px".to_string(), sound_params(100, true)),
+        (format!("{w2} px"), sound_params(w2, true)),
+        (format!("{w2} px, 3 kHz LP"), lp),
+    ];
+    let scans = ToneScans {
+        name: "dual focus",
+        folder: "tone_df",
+        work: &work,
+        cfg: small_dual_focus(tone_groups),
+    };
+    tone_table(&mut rep, log, &scans, freqs, &runs)?;
 
     // --- Tones, depth path.
     let lat = small_lateral(1);
@@ -170,47 +197,38 @@ pub fn run_suite(
          slope runs (the method before 29 Nov 2026) at {wl} px, low-pass off."
     ));
     rep.line("");
-    rep.tone_table_head(&[
-        "100 px".into(),
-        format!("{wl} px"),
-        format!("{wl} px, 3 kHz LP"),
-        format!("slope runs, {wl} px"),
-    ]);
-    for &f in depth_freqs {
-        let case = format!("{f} Hz tone (depth path)");
-        let dir = work.join(format!("tone_depth_{f}"));
-        render_tone(&case, f, &small_lateral(depth_groups), &dir)?;
-        let depth_params = |window: usize, lowpass: bool, walls: WallMethod| {
-            let mut p = sound_params(window, true);
-            p.path = PathChoice::Depth;
-            p.dsp.lowpass = lowpass;
-            p.walls.method = walls;
-            p
-        };
-        let mut cells = Vec::new();
-        for (window, lowpass, walls) in [
-            (100, false, WallMethod::DepthLevels),
-            (wl, false, WallMethod::DepthLevels),
-            (wl, true, WallMethod::DepthLevels),
-            (wl, false, WallMethod::SlopeRuns),
-        ] {
-            let (s, _) = score_scan(&case, &dir, &depth_params(window, lowpass, walls))?;
-            cells.push(s);
-        }
-        rep.line(&format!(
-            "| {f} Hz | {} |",
-            cells.iter().map(tone_cells).collect::<Vec<_>>().join(" | ")
-        ));
-        log(&format!(
-            "{case}: r {}",
-            cells
-                .iter()
-                .map(|s| format!("{:.3}", s.r))
-                .collect::<Vec<_>>()
-                .join(" / ")
-        ));
-    }
-    rep.line("");
+    let depth_params = |window: usize, lowpass: bool, walls: WallMethod| {
+        let mut p = sound_params(window, true);
+        p.path = PathChoice::Depth;
+        p.dsp.lowpass = lowpass;
+        p.walls.method = walls;
+        p
+    };
+    let runs = [
+        (
+            "100 px".to_string(),
+            depth_params(100, false, WallMethod::DepthLevels),
+        ),
+        (
+            format!("{wl} px"),
+            depth_params(wl, false, WallMethod::DepthLevels),
+        ),
+        (
+            format!("{wl} px, 3 kHz LP"),
+            depth_params(wl, true, WallMethod::DepthLevels),
+        ),
+        (
+            format!("slope runs, {wl} px"),
+            depth_params(wl, false, WallMethod::SlopeRuns),
+        ),
+    ];
+    let scans = ToneScans {
+        name: "depth path",
+        folder: "tone_depth",
+        work: &work,
+        cfg: small_lateral(depth_groups),
+    };
+    tone_table(&mut rep, log, &scans, depth_freqs, &runs)?;
 
     // --- Speech, clean and damaged.
     let speech_groups = if opts.quick { 45 } else { 228 };
