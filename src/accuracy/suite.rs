@@ -67,13 +67,12 @@ fn tone_table(
             "| {f} Hz | {} |",
             cells.iter().map(tone_cells).collect::<Vec<_>>().join(" | ")
         ));
-        let joined = |cell: &dyn Fn(&Scores) -> String| {
-            cells.iter().map(cell).collect::<Vec<_>>().join(" / ")
-        };
+        let r: Vec<String> = cells.iter().map(|s| format!("{:.3}", s.r)).collect();
+        let snr: Vec<String> = cells.iter().map(|s| format!("{:.1}", s.snr_db)).collect();
         log(&format!(
             "{case}: r {}, SNR {} dB",
-            joined(&|s| format!("{:.3}", s.r)),
-            joined(&|s| format!("{:.1}", s.snr_db))
+            r.join(" / "),
+            snr.join(" / ")
         ));
     }
     rep.line("");

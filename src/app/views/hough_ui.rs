@@ -102,7 +102,9 @@ pub fn hough_ui(
 ) {
     let status = data.banner(ui, Stage::Stripes);
     hough_controls(ui, draft);
-    let Some(stripes) = data.output_or_note(ui, StageCache::stripes, "no Hough accumulator: the dual-focus path has not run (scan without [dual_focus], or path = depth)") else {
+    let missing = "no Hough accumulator: the dual-focus path has not run (scan without \
+                   [dual_focus], or path = depth)";
+    let Some(stripes) = data.output_or_note(ui, StageCache::stripes, missing) else {
         return;
     };
     let Some(tex) =

@@ -282,7 +282,8 @@ pub fn orient_from_depth(
     Ok(fit_walls(
         &sides,
         sample_columns,
-        (width, height),
+        width,
+        height,
         params,
         gather,
     ))
@@ -389,7 +390,8 @@ pub fn orient_from_lines(
     Ok(fit_walls(
         &sides,
         sample_columns,
-        (width, height),
+        width,
+        height,
         params,
         gather,
     ))

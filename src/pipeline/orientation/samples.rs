@@ -84,11 +84,12 @@ impl Workspace {
 }
 
 /// The orientation of the walls `sides`: [`fit_samples`] with `gather`, then [`assemble`] on a
-/// weight map of `(width, height)`.
+/// `width` × `height` weight map.
 pub(super) fn fit_walls(
     sides: &[WallSide],
     sample_columns: &[f32],
-    (width, height): (usize, usize),
+    width: usize,
+    height: usize,
     params: &OrientationParams,
     gather: impl Fn(&mut Workspace, usize, f32) -> usize + Sync,
 ) -> Orientation {

@@ -125,8 +125,9 @@ fn differentiate(x: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// 4-point Lagrange interpolation of `(s, v)` (s increasing) at `q`.
-fn lagrange(s: &[f64], v: &[f64], q: f64) -> f64 {
+/// [`crate::pipeline::lagrange`] of `(s, v)` (s increasing) at `q` through the (up to) four
+/// samples around it.
+fn lagrange_near(s: &[f64], v: &[f64], q: f64) -> f64 {
     let n = s.len();
     let i = s.partition_point(|x| *x <= q).clamp(1, n.max(2) - 1);
     let lo = i.saturating_sub(2).min(n.saturating_sub(4));
@@ -324,7 +325,7 @@ pub fn decode_borders(
             .map(|(g, s)| g / (s * s) * vt_mm_s * wall_gain)
             .collect();
         let uniform: Vec<f32> = (0..grid)
-            .map(|q| lagrange(&arc, &v, q as f64) as f32)
+            .map(|q| lagrange_near(&arc, &v, q as f64) as f32)
             .collect();
         channels.push(uniform);
         displacement_px.push(d);
