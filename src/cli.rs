@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::io::wav::{WavBits, read_wav};
+use crate::job::Job;
 use crate::pipeline::PipelineParams;
 use crate::pipeline::{Method, PathChoice};
 pub use crate::side::cli::{Report, make_report, run_reconstruct};
@@ -225,7 +226,7 @@ pub struct SynthArgs {
 
 fn run_synth(args: &SynthArgs) -> Result<()> {
     use crate::synth::{
-        BUILTIN_RATE_HZ, SynthConfig, arpeggio, render_scan, render_scan_wav, sweep, tone,
+        BUILTIN_RATE_HZ, Groove, SynthConfig, arpeggio, render_scan, sweep, tone, write_scan,
     };
     let base = match args.preset.as_str() {
         "quick" => SynthConfig::quick_test(),
@@ -275,6 +276,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         pb.set_position(done as u64);
     };
     let cancel = AtomicBool::new(false);
+    let job = Job::new(&progress, &cancel);
     let builtin = if let Some(f) = args.tone {
         if !(f.is_finite() && f > 0.0) {
             bail!("--tone must be a positive frequency, got {f}");
@@ -294,8 +296,8 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         None
     };
     let summary = match (builtin, &args.sound) {
-        (Some(sound), _) => render_scan(&sound, &cfg, &args.out, &progress, &cancel)?,
-        (None, Some(path)) => render_scan_wav(path, &cfg, &args.out, &progress, &cancel)?,
+        (Some(sound), _) => render_scan(&sound, &cfg, &args.out, job)?,
+        (None, Some(path)) => write_scan(&Groove::from_wav(path, &cfg)?, &args.out, job)?,
         (None, None) => bail!("give a sound file, --tone HZ, --sweep F0:F1 or --melody"),
     };
     pb.finish_and_clear();

@@ -12,6 +12,7 @@ pub mod engine;
 pub mod image;
 pub mod inspect;
 pub mod io;
+pub mod job;
 pub mod meta;
 pub mod pack_cli;
 pub mod pipeline;

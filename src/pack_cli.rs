@@ -9,6 +9,7 @@ use anyhow::{Result, bail};
 use crate::cli::progress_bar;
 use crate::io::Scan;
 use crate::io::zarr::{DEFAULT_ZSTD_LEVEL, pack_scan};
+use crate::job::Job;
 use crate::side::scan_fingerprint;
 
 /// Arguments of `pack`.
@@ -44,8 +45,7 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
         &scan,
         &args.out,
         args.zstd_level,
-        &mut |done, _| pb.set_position(done as u64),
-        &cancel,
+        Job::new(&|done, _| pb.set_position(done as u64), &cancel),
     );
     pb.finish_and_clear();
     let summary = summary?;

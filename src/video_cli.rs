@@ -70,6 +70,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
 
     use crate::io::Cut;
     use crate::io::video::{ClipMeta, GroupLayout, import_video};
+    use crate::job::Job;
 
     let cut = match args.cut.as_str() {
         "stereo" => Cut::Stereo,
@@ -126,8 +127,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
         &folder,
         &layout,
         &meta,
-        &progress,
-        &AtomicBool::new(false),
+        Job::new(&progress, &AtomicBool::new(false)),
     )?;
     if zarr {
         let packed = crate::io::Scan::open(&folder).and_then(|scan| {
@@ -135,8 +135,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
                 &scan,
                 &args.out,
                 crate::io::zarr::DEFAULT_ZSTD_LEVEL,
-                &mut |_, _| {},
-                &AtomicBool::new(false),
+                Job::unwatched(),
             )
         });
         let _ = std::fs::remove_dir_all(&folder);

@@ -3,10 +3,9 @@
 
 mod common;
 
-use std::sync::atomic::AtomicBool;
-
 use common::{groovescope, stderr};
 use groovescope::accuracy::small_dual_focus;
+use groovescope::job::Job;
 use groovescope::synth::{BUILTIN_RATE_HZ, render_scan, tone};
 
 #[test]
@@ -14,14 +13,7 @@ fn dual_focus_tone_scan_reconstructs_the_tone() {
     let dir = tempfile::tempdir().unwrap();
     let scan = dir.path().join("scan");
     let sound = tone(700.0, 0.03, BUILTIN_RATE_HZ);
-    render_scan(
-        &sound,
-        &small_dual_focus(8),
-        &scan,
-        &|_, _| {},
-        &AtomicBool::new(false),
-    )
-    .unwrap();
+    render_scan(&sound, &small_dual_focus(8), &scan, Job::unwatched()).unwrap();
     let wav = dir.path().join("out.wav");
     let report = dir.path().join("report.json");
     let out = groovescope(&[
@@ -55,8 +47,7 @@ fn inspect_dumps_every_stage_and_the_accumulator_when_segmentation_fails() {
         &tone(700.0, 0.01, BUILTIN_RATE_HZ),
         &small_dual_focus(1),
         &scan,
-        &|_, _| {},
-        &AtomicBool::new(false),
+        Job::unwatched(),
     )
     .unwrap();
     let inspect = |out: &std::path::Path, extra: &[&str]| {

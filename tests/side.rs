@@ -8,9 +8,9 @@ use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::OnceLock;
-use std::sync::atomic::AtomicBool;
 
 use common::{groovescope, stderr};
+use groovescope::job::Job;
 use groovescope::synth::{BUILTIN_RATE_HZ, SynthConfig, render_scan, tone};
 
 /// Groups in the shared scan: enough that 2 and 3 shards start past the 64-group slope history.
@@ -42,7 +42,7 @@ fn shared() -> &'static (tempfile::TempDir, PathBuf, Vec<u8>) {
         let scan = dir.path().join("scan");
         let cfg = small_side_config(GROUPS);
         let sound = tone(1000.0, 0.03, BUILTIN_RATE_HZ);
-        render_scan(&sound, &cfg, &scan, &|_, _| {}, &AtomicBool::new(false)).unwrap();
+        render_scan(&sound, &cfg, &scan, Job::unwatched()).unwrap();
         let out = dir.path().join("one.wav");
         let o = groovescope(&["reconstruct", s(&scan), "--out", s(&out), "--quiet"]);
         assert!(o.status.success(), "{}", stderr(&o));

@@ -5,11 +5,11 @@
 mod common;
 
 use std::path::Path;
-use std::sync::atomic::AtomicBool;
 
 use common::{groovescope, stderr};
 use groovescope::image::Image;
 use groovescope::io::{Scan, load_group, save_grey_png};
+use groovescope::job::Job;
 use groovescope::side::scan_fingerprint;
 use groovescope::synth::{BUILTIN_RATE_HZ, SynthConfig, render_scan, tone};
 
@@ -126,7 +126,7 @@ fn a_store_reconstructs_to_the_same_wav_and_a_missing_chunk_is_named_or_a_gap() 
         ..SynthConfig::dual_focus_demo()
     };
     let sound = tone(1000.0, 0.01, BUILTIN_RATE_HZ);
-    render_scan(&sound, &cfg, &folder, &|_, _| {}, &AtomicBool::new(false)).unwrap();
+    render_scan(&sound, &cfg, &folder, Job::unwatched()).unwrap();
     let store = tmp.path().join("scan.zarr");
     assert!(
         groovescope(&["pack", s(&folder), "--out", s(&store), "--quiet"])

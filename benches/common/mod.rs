@@ -2,9 +2,9 @@
 
 use std::path::Path;
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 
 use groovescope::io::{Scan, load_group};
+use groovescope::job::Job;
 use groovescope::pipeline::GroupInput;
 use groovescope::synth::{SynthConfig, render_scan, tone};
 
@@ -15,14 +15,7 @@ pub fn render_group(dir: &Path, cfg: SynthConfig, tone_hz: f64) -> (Scan, GroupI
         max_groups: Some(1),
         ..cfg
     };
-    render_scan(
-        &tone(tone_hz, 0.05, 44_100),
-        &cfg,
-        dir,
-        &|_, _| {},
-        &AtomicBool::new(false),
-    )
-    .expect("synthetic scan");
+    render_scan(&tone(tone_hz, 0.05, 44_100), &cfg, dir, Job::unwatched()).expect("synthetic scan");
     let scan = Scan::open(dir).expect("scan");
     let frames = load_group(&scan.groups[0]).expect("frames");
     let input = GroupInput {

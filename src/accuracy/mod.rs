@@ -21,6 +21,7 @@ use std::time::Instant;
 use crate::engine::{ReconstructOptions, reconstruct};
 use crate::io::wav::Audio;
 use crate::io::{Scan, write_atomic};
+use crate::job::Job;
 use crate::pipeline::PipelineParams;
 use crate::pipeline::audio_signal::SoundParams;
 use crate::pipeline::eval::Scores;
@@ -155,7 +156,7 @@ pub fn render(
     cfg: &SynthConfig,
     dir: &Path,
 ) -> Result<(), AccuracyError> {
-    render_scan(sound, cfg, dir, &|_, _| {}, &AtomicBool::new(false))
+    render_scan(sound, cfg, dir, Job::unwatched())
         .map(|_| ())
         .map_err(|e| case_err(case, e))
 }

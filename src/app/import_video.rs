@@ -13,6 +13,7 @@ use super::dialogs::DialogKind;
 use super::views::meta_ui::number_row;
 use crate::io::Cut;
 use crate::io::video::{ClipMeta, GroupLayout, ImportSummary, import_video};
+use crate::job::Job;
 
 /// The form's draft: everything [`import_video`] needs.
 #[derive(Clone, Debug, PartialEq)]
@@ -162,8 +163,7 @@ impl ImportRun {
                         &req.out,
                         &req.layout,
                         &req.meta,
-                        &progress,
-                        &flag,
+                        Job::new(&progress, &flag),
                     )
                 }));
                 let outcome = match result {

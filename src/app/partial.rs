@@ -38,6 +38,7 @@ pub fn partial_sound(
 mod tests {
     use super::*;
     use crate::engine::{ReconstructOptions, reconstruct};
+    use crate::job::Job;
     use std::sync::atomic::AtomicBool;
 
     #[test]
@@ -49,14 +50,7 @@ mod tests {
             ..crate::synth::SynthConfig::quick_test()
         };
         let sound = crate::synth::tone(440.0, 0.2, 44_100);
-        crate::synth::render_scan(
-            &sound,
-            &cfg,
-            dir.path(),
-            &|_, _| {},
-            &AtomicBool::new(false),
-        )
-        .unwrap();
+        crate::synth::render_scan(&sound, &cfg, dir.path(), Job::unwatched()).unwrap();
         let scan = crate::io::Scan::open(dir.path()).unwrap();
         // The flow method: its group signals are the clip's (the edge methods finish from the
         // border tracks, which partial_sound does not read yet).

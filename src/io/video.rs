@@ -17,7 +17,6 @@
 //! clip and the grouping (the format keeps such tables and ignores them).
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use ffmpeg::media::Type;
 use ffmpeg::util::frame::video::Video as VideoFrame;
@@ -26,6 +25,7 @@ use serde::Serialize;
 
 use super::LoadError;
 use super::atomic::{dir_is_missing_or_empty, write_atomic};
+use crate::job::Job;
 use grey::{GreyConverter, Splitter, component_depth_bits, estimated_frames};
 
 mod encode;
@@ -270,9 +270,9 @@ fn check_out_dir(out_dir: &Path) -> Result<(), VideoError> {
 
 /// Imports `clip` as a scan in `out_dir` (missing or empty; created).
 ///
-/// `progress(decoded, total)` is called with 0 first and after every decoded frame; `total` is
-/// the number of frames expected to be decoded (0 when the container does not say). Raising
-/// `cancel` stops before the next frame with [`VideoError::Cancelled`]; nothing is left behind
+/// `job` is told `(decoded, total)` with 0 first and after every decoded frame; `total` is
+/// the number of frames expected to be decoded (0 when the container does not say). Cancelling
+/// `job` stops before the next frame with [`VideoError::Cancelled`]; nothing is left behind
 /// then, nor after any other error.
 ///
 /// # Errors
@@ -283,8 +283,7 @@ pub fn import_video(
     out_dir: &Path,
     layout: &GroupLayout,
     meta: &ClipMeta,
-    progress: &(dyn Fn(usize, usize) + Sync),
-    cancel: &AtomicBool,
+    job: Job<'_>,
 ) -> Result<ImportSummary, VideoError> {
     layout
         .validate()
@@ -358,7 +357,7 @@ pub fn import_video(
     let mut size: Option<(usize, usize)> = None;
     let mut decoded = 0usize;
     let mut frame = VideoFrame::empty();
-    progress(0, total);
+    job.report(0, total);
 
     // Sends a packet (or, with `None`, the end of stream) and takes every frame the decoder has
     // ready; returns false once enough groups are full.
@@ -376,7 +375,7 @@ pub fn import_video(
         };
         sent.map_err(|e| decode_err(decoded, e.to_string()))?;
         while decoder.receive_frame(&mut frame).is_ok() {
-            if cancel.load(Ordering::Relaxed) {
+            if job.is_cancelled() {
                 return Err(VideoError::Cancelled);
             }
             if decoded >= layout.first_frame {
@@ -401,7 +400,7 @@ pub fn import_video(
                 splitter.push(&img)?;
             }
             decoded += 1;
-            progress(decoded, total.max(decoded));
+            job.report(decoded, total.max(decoded));
             if splitter.done() {
                 return Ok(false);
             }
@@ -410,7 +409,7 @@ pub fn import_video(
     };
     let mut more = true;
     for (stream, packet) in input.packets() {
-        if cancel.load(Ordering::Relaxed) {
+        if job.is_cancelled() {
             return Err(VideoError::Cancelled);
         }
         if stream.index() == stream_index {
@@ -425,7 +424,7 @@ pub fn import_video(
         feed(&mut decoder, None)?;
     }
     // The container's frame count is only an estimate; end the bar at what was decoded.
-    progress(decoded, decoded);
+    job.report(decoded, decoded);
 
     if decoded == 0 {
         return Err(VideoError::NoFrames {
@@ -463,7 +462,7 @@ pub fn import_video(
             problem: format!("cannot write scan.toml: {e}"),
         })?;
     write_atomic(&tmp.path.join("scan.toml"), meta_text.as_bytes(), false)?;
-    if cancel.load(Ordering::Relaxed) {
+    if job.is_cancelled() {
         return Err(VideoError::Cancelled);
     }
     let bit_depth = if splitter.sixteen_bit { 16 } else { 8 };

@@ -300,15 +300,14 @@ mod tests {
 
     /// One group of `frames` frames of the small dual-focus camera, rendered by the generator.
     fn dual_focus_group(frames: usize) -> GroupInput {
-        use std::sync::atomic::AtomicBool;
+        use crate::job::Job;
         let dir = tempfile::tempdir().unwrap();
         let cfg = crate::synth::SynthConfig {
             frames_per_group: frames,
             ..crate::accuracy::small_dual_focus(1)
         };
         let tone = crate::synth::tone(1000.0, 0.01, crate::synth::BUILTIN_RATE_HZ);
-        crate::synth::render_scan(&tone, &cfg, dir.path(), &|_, _| {}, &AtomicBool::new(false))
-            .unwrap();
+        crate::synth::render_scan(&tone, &cfg, dir.path(), Job::unwatched()).unwrap();
         let scan = crate::io::Scan::open(dir.path()).unwrap();
         let frames = crate::io::load_group(&scan.groups[0]).unwrap();
         GroupInput {

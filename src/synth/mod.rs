@@ -45,7 +45,6 @@ pub mod track;
 mod tests;
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -62,6 +61,7 @@ use crate::io::scan::{
     CameraMeta, DualFocusMeta, FORMAT_VERSION, GlassSide, MotionMeta, RecordMeta, ScanMeta,
 };
 use crate::io::wav::{Audio, WavBits, read_wav, write_wav};
+use crate::job::Job;
 
 /// Why a scan or scene could not be generated.
 #[derive(Debug, thiserror::Error)]
@@ -167,9 +167,10 @@ pub(crate) fn digits(count: usize, min: usize) -> usize {
 
 /// Renders `sound` as a scan into `out_dir` (created, or empty) and returns what was written.
 ///
-/// `progress(done, total)` is called with 0 first and after every finished group; raising
-/// `cancel` stops before the next frame with [`SynthError::Cancelled`] (no `scan.toml` is
-/// written then). Frames of a group render in parallel, rows in parallel within a frame.
+/// `job` is told 0 first and then each finished group; cancelling it stops before the next
+/// frame with [`SynthError::Cancelled`] (no `scan.toml` is written then). Frames of a group
+/// render in parallel, rows in parallel within a frame. A WAV file's sound renders with
+/// [`Groove::from_wav`] and [`write_scan`].
 ///
 /// # Errors
 /// [`SynthError::Config`] / [`SynthError::Sound`] from [`Groove::new`], [`SynthError::OutputExists`]
@@ -179,35 +180,29 @@ pub fn render_scan(
     sound: &Audio,
     cfg: &SynthConfig,
     out_dir: &Path,
-    progress: &(dyn Fn(usize, usize) + Sync),
-    cancel: &AtomicBool,
+    job: Job<'_>,
 ) -> Result<SynthSummary, SynthError> {
     let groove = Groove::new(sound, cfg)?;
-    write_scan(&groove, out_dir, progress, cancel)
+    write_scan(&groove, out_dir, job)
 }
 
-/// [`render_scan`] for a WAV file; sound problems name the file.
-///
-/// # Errors
-/// As [`render_scan`]; an unreadable, non-WAV, empty or too short sound is a
-/// [`SynthError::Load`] whose message ends with the file path.
-pub fn render_scan_wav(
-    sound_path: &Path,
-    cfg: &SynthConfig,
-    out_dir: &Path,
-    progress: &(dyn Fn(usize, usize) + Sync),
-    cancel: &AtomicBool,
-) -> Result<SynthSummary, SynthError> {
-    cfg.validate()?;
-    let sound = read_wav(sound_path)?;
-    let groove = Groove::new(&sound, cfg).map_err(|e| match e {
-        SynthError::Sound { problem } => SynthError::Load(LoadError::Sound {
-            problem,
-            path: sound_path.to_path_buf(),
-        }),
-        other => other,
-    })?;
-    write_scan(&groove, out_dir, progress, cancel)
+impl Groove {
+    /// [`Groove::new`] for the sound of a WAV file; sound problems name the file.
+    ///
+    /// # Errors
+    /// As [`Groove::new`]; an unreadable, non-WAV, empty or too short sound is a
+    /// [`SynthError::Load`] whose message ends with the file path.
+    pub fn from_wav(sound_path: &Path, cfg: &SynthConfig) -> Result<Self, SynthError> {
+        cfg.validate()?;
+        let sound = read_wav(sound_path)?;
+        Self::new(&sound, cfg).map_err(|e| match e {
+            SynthError::Sound { problem } => SynthError::Load(LoadError::Sound {
+                problem,
+                path: sound_path.to_path_buf(),
+            }),
+            other => other,
+        })
+    }
 }
 
 /// The `scan.toml` metadata of a groove's scan.
@@ -281,8 +276,7 @@ pub fn scan_meta(groove: &Groove) -> Result<ScanMeta, SynthError> {
 pub fn write_scan(
     groove: &Groove,
     out_dir: &Path,
-    progress: &(dyn Fn(usize, usize) + Sync),
-    cancel: &AtomicBool,
+    job: Job<'_>,
 ) -> Result<SynthSummary, SynthError> {
     let cfg = groove.config();
     let meta = scan_meta(groove)?;
@@ -300,9 +294,9 @@ pub fn write_scan(
     let groups = groove.groups();
     let gw = digits(groups, 5);
     let fw = digits(cfg.frames_per_group, 3);
-    progress(0, groups);
+    job.report(0, groups);
     for g in 0..groups {
-        if cancel.load(Ordering::Relaxed) {
+        if job.is_cancelled() {
             return Err(SynthError::Cancelled);
         }
         let gdir = out_dir.join(format!("g{g:0gw$}"));
@@ -311,7 +305,7 @@ pub fn write_scan(
         (0..cfg.frames_per_group)
             .into_par_iter()
             .try_for_each(|k| -> Result<(), SynthError> {
-                if cancel.load(Ordering::Relaxed) {
+                if job.is_cancelled() {
                     return Err(SynthError::Cancelled);
                 }
                 let img = groove.render_frame(g, k);
@@ -323,7 +317,7 @@ pub fn write_scan(
                 )?;
                 Ok(())
             })?;
-        progress(g + 1, groups);
+        job.report(g + 1, groups);
     }
     crate::io::write_atomic(&out_dir.join("scan.toml"), meta_text.as_bytes(), false)?;
     let reference = groove.reference();

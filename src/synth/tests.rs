@@ -9,6 +9,7 @@ use super::*;
 use crate::image::Image;
 use crate::io::Cut;
 use crate::io::scan::Scan;
+use crate::job::Job;
 
 mod probes;
 
@@ -329,8 +330,20 @@ fn scans_are_deterministic_and_seeds_matter() {
     let sound = tone(440.0, 0.01, 44_100);
     let cancel = AtomicBool::new(false);
     let cfg = tiny_damaged();
-    render_scan(&sound, &cfg, &dir.path().join("a"), &no_progress, &cancel).unwrap();
-    render_scan(&sound, &cfg, &dir.path().join("b"), &no_progress, &cancel).unwrap();
+    render_scan(
+        &sound,
+        &cfg,
+        &dir.path().join("a"),
+        Job::new(&no_progress, &cancel),
+    )
+    .unwrap();
+    render_scan(
+        &sound,
+        &cfg,
+        &dir.path().join("b"),
+        Job::new(&no_progress, &cancel),
+    )
+    .unwrap();
     let (a, b) = (
         files_of(&dir.path().join("a")),
         files_of(&dir.path().join("b")),
@@ -357,7 +370,13 @@ fn scan_folder_loads_and_reference_matches_the_scanned_length() {
         frames_per_group: 7,
         ..SynthConfig::quick_test()
     };
-    let sum = render_scan(&sound, &cfg, &out, &progress, &AtomicBool::new(false)).unwrap();
+    let sum = render_scan(
+        &sound,
+        &cfg,
+        &out,
+        Job::new(&progress, &AtomicBool::new(false)),
+    )
+    .unwrap();
     assert_eq!(*calls.lock().unwrap(), vec![(0, 3), (1, 3), (2, 3), (3, 3)]);
     let scan = Scan::open(&out).unwrap();
     assert_eq!(scan.groups.len(), 3);
@@ -396,8 +415,7 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
         &sound,
         &SynthConfig::quick_test(),
         &busy,
-        &no_progress,
-        &cancel,
+        Job::new(&no_progress, &cancel),
     )
     .unwrap_err();
     assert!(matches!(e, SynthError::OutputExists { .. }), "{e}");
@@ -406,21 +424,28 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
         frame_step_um: -1.0,
         ..SynthConfig::quick_test()
     };
-    let e = render_scan(&sound, &bad, &dir.path().join("x"), &no_progress, &cancel).unwrap_err();
+    let e = render_scan(
+        &sound,
+        &bad,
+        &dir.path().join("x"),
+        Job::new(&no_progress, &cancel),
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("synth.frame_step_um"), "{e}");
     assert!(!dir.path().join("x").exists());
     let not_wav = dir.path().join("song.wav");
     std::fs::write(&not_wav, b"RIFF but not really").unwrap();
     // The quick-test scan of the sound in `wav`, to `out`: refused.
     let refused_wav = |wav: &Path, out: &str| {
-        render_scan_wav(
-            wav,
-            &SynthConfig::quick_test(),
-            &dir.path().join(out),
-            &no_progress,
-            &cancel,
-        )
-        .unwrap_err()
+        Groove::from_wav(wav, &SynthConfig::quick_test())
+            .and_then(|groove| {
+                write_scan(
+                    &groove,
+                    &dir.path().join(out),
+                    Job::new(&no_progress, &cancel),
+                )
+            })
+            .unwrap_err()
     };
     let e = refused_wav(&not_wav, "y");
     assert!(e.to_string().contains("song.wav"), "{e}");
@@ -444,8 +469,7 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
         &sound,
         &SynthConfig::quick_test(),
         &c,
-        &no_progress,
-        &AtomicBool::new(true),
+        Job::new(&|_, _| {}, &AtomicBool::new(true)),
     )
     .unwrap_err();
     assert!(matches!(e, SynthError::Cancelled));
@@ -464,7 +488,7 @@ fn stereo_and_vertical_scans_write_their_channels() {
         ..SynthConfig::quick_test()
     };
     let out = dir.path().join("st");
-    render_scan(&s, &cfg, &out, &no_progress, &cancel).unwrap();
+    render_scan(&s, &cfg, &out, Job::new(&no_progress, &cancel)).unwrap();
     let r = read_wav(&out.join("reference.wav")).unwrap();
     assert_eq!(r.channels.len(), 2);
     let scan = Scan::open(&out).unwrap();
@@ -491,14 +515,7 @@ fn dual_focus_scan_metadata_and_a_missing_chunk_render_dark() {
         max_groups: Some(1),
         ..SynthConfig::dual_focus_fig20()
     };
-    let sum = render_scan(
-        &silence(0.01),
-        &cfg,
-        &out,
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap();
+    let sum = render_scan(&silence(0.01), &cfg, &out, Job::unwatched()).unwrap();
     let text = std::fs::read_to_string(out.join("scan.toml")).unwrap();
     if std::env::var("SYNTH_DEBUG").is_ok() {
         eprintln!("{text}");

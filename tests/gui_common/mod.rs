@@ -5,7 +5,6 @@
 #![allow(clippy::unwrap_used)] // tests may panic
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
 use std::sync::{Once, OnceLock};
 use std::time::{Duration, Instant};
 
@@ -16,6 +15,7 @@ pub mod common;
 use egui_kittest::Harness;
 use groovescope::app::{Workbench, WorkbenchOptions};
 use groovescope::image::Image;
+use groovescope::job::Job;
 use groovescope::playback::DeviceChoice;
 use groovescope::synth::SynthConfig;
 
@@ -97,8 +97,7 @@ pub fn rendered_scan(name: &str, cfg: SynthConfig) -> PathBuf {
         .join(name);
     let _ = std::fs::remove_dir_all(&dir);
     let sound = groovescope::synth::tone(440.0, 0.2, 44_100);
-    groovescope::synth::render_scan(&sound, &cfg, &dir, &|_, _| {}, &AtomicBool::new(false))
-        .unwrap();
+    groovescope::synth::render_scan(&sound, &cfg, &dir, Job::unwatched()).unwrap();
     dir
 }
 

@@ -45,8 +45,7 @@ fn import_with(
         out,
         layout,
         meta,
-        &no_progress,
-        &AtomicBool::new(cancel),
+        Job::new(&no_progress, &AtomicBool::new(cancel)),
     )
 }
 
@@ -83,8 +82,7 @@ fn eight_bit_clip_imports_into_exact_overlapping_groups() {
         &out,
         &layout(7, Some(5)),
         &ClipMeta::default(),
-        &progress,
-        &AtomicBool::new(false),
+        Job::new(&progress, &AtomicBool::new(false)),
     )
     .unwrap();
     eprintln!("import of a 20-frame {W}x{H} clip: {:?}", started.elapsed());

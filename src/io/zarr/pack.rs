@@ -1,7 +1,6 @@
 //! `pack`: a scan folder converted to a Zarr store, each chunk read back and checked, then renamed into place.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use rayon::prelude::*;
 
@@ -9,6 +8,7 @@ use super::{SampleType, ZarrGroup, ZarrWriter, load_group_raw};
 use crate::io::atomic::dir_is_missing_or_empty;
 use crate::io::frames::{RawFrame, load_frame_raw};
 use crate::io::{LoadError, Scan};
+use crate::job::Job;
 
 /// What `pack` did.
 #[derive(Clone, Debug)]
@@ -53,7 +53,7 @@ fn dir_bytes(dir: &Path) -> u64 {
 /// group becomes one zstd chunk (at `level`) which is read back and compared sample for sample
 /// before the next; the store is written beside `out` and renamed into place, so a failed or
 /// cancelled pack leaves nothing. `reference.wav` and `preset.toml` are copied in.
-/// `progress(done, total)` follows the groups.
+/// `job` is told each finished group; cancelling it stops before the next.
 ///
 /// # Errors
 /// [`LoadError`] naming the file: an unreadable frame, groups of different frame counts,
@@ -62,8 +62,7 @@ pub fn pack_scan(
     scan: &Scan,
     out: &Path,
     level: i32,
-    progress: &mut dyn FnMut(usize, usize),
-    cancel: &AtomicBool,
+    job: Job<'_>,
 ) -> Result<PackSummary, LoadError> {
     if scan.groups.iter().any(|g| g.zarr.is_some()) {
         return Err(LoadError::Io {
@@ -80,7 +79,7 @@ pub fn pack_scan(
     let tmp = crate::io::atomic::beside(out, "scan.zarr", |name| {
         format!(".{name}.pack-{}.tmp", std::process::id())
     });
-    let result = pack_into(scan, &tmp, level, progress, cancel);
+    let result = pack_into(scan, &tmp, level, job);
     let finished = result.and_then(|mut summary| {
         if out.exists() {
             std::fs::remove_dir(out).map_err(|e| LoadError::Io {
@@ -101,13 +100,7 @@ pub fn pack_scan(
     finished
 }
 
-fn pack_into(
-    scan: &Scan,
-    tmp: &Path,
-    level: i32,
-    progress: &mut dyn FnMut(usize, usize),
-    cancel: &AtomicBool,
-) -> Result<PackSummary, LoadError> {
+fn pack_into(scan: &Scan, tmp: &Path, level: i32, job: Job<'_>) -> Result<PackSummary, LoadError> {
     let _ = std::fs::remove_dir_all(tmp);
     let total = scan.groups.len();
     let Some(first_group) = scan.groups.first() else {
@@ -130,7 +123,7 @@ fn pack_into(
     let mut folder_bytes = 0;
     let mut pending = Some(first);
     for (g, entry) in scan.groups.iter().enumerate() {
-        if cancel.load(Ordering::Relaxed) {
+        if job.is_cancelled() {
             return Err(LoadError::Io {
                 problem: "pack cancelled".into(),
                 path: scan.dir.clone(),
@@ -160,7 +153,7 @@ fn pack_into(
                 path: stored.chunk_path(),
             });
         }
-        progress(g + 1, total);
+        job.report(g + 1, total);
     }
     for side_file in ["reference.wav", "preset.toml"] {
         let from = scan.dir.join(side_file);

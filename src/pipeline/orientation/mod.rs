@@ -170,8 +170,9 @@ pub fn validate(p: &OrientationParams) -> Result<(), StageError> {
     p.validate()
 }
 
-/// Checks the camera geometry the back-projection needs.
-fn check_geometry(geom: &Geometry) -> Result<(), StageError> {
+/// Checks the knobs and the camera geometry the back-projection needs.
+fn check_setup(params: &OrientationParams, geom: &Geometry) -> Result<(), StageError> {
+    params.validate()?;
     check_range("geometry.focal_px", geom.focal_px, 1e-9, 1e12)
 }
 /// The wall tilt at one sample column.
@@ -230,8 +231,7 @@ pub fn orient_from_depth(
     geom: &Geometry,
     params: &OrientationParams,
 ) -> Result<Orientation, StageError> {
-    params.validate()?;
-    check_geometry(geom)?;
+    check_setup(params, geom)?;
     let z = &depth.z_um;
     let (width, height) = (z.width, z.height);
     if z.data.len() != width * height || u32::try_from(z.data.len()).is_err() {
@@ -279,14 +279,8 @@ pub fn orient_from_depth(
         }
         MIN_SAMPLE_POINTS
     };
-    Ok(fit_walls(
-        &sides,
-        sample_columns,
-        width,
-        height,
-        params,
-        gather,
-    ))
+    let orientation = fit_walls(&sides, sample_columns, width, height, params, gather);
+    Ok(orientation)
 }
 /// Orientation from iso-depth lines (dual-focus path): a plane per sample column through the
 /// 3-D points of the lines of each wall within the neighbourhood.
@@ -308,8 +302,7 @@ pub fn orient_from_lines(
     geom: &Geometry,
     params: &OrientationParams,
 ) -> Result<Orientation, StageError> {
-    params.validate()?;
-    check_geometry(geom)?;
+    check_setup(params, geom)?;
     if lines.iter().any(|l| l.rows.len() != width) {
         return Err(StageError::BadInput {
             stage: STAGE,
@@ -387,12 +380,6 @@ pub fn orient_from_lines(
             usize::MAX
         }
     };
-    Ok(fit_walls(
-        &sides,
-        sample_columns,
-        width,
-        height,
-        params,
-        gather,
-    ))
+    let orientation = fit_walls(&sides, sample_columns, width, height, params, gather);
+    Ok(orientation)
 }

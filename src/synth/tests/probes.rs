@@ -142,7 +142,13 @@ fn preview_scans() {
             },
         ),
     ] {
-        let sum = render_scan(&sound, &cfg, &dir.join(name), &no_progress, &cancel).unwrap();
+        let sum = render_scan(
+            &sound,
+            &cfg,
+            &dir.join(name),
+            Job::new(&no_progress, &cancel),
+        )
+        .unwrap();
         eprintln!("{name}: {sum:?}");
         // A half-size 8-bit copy of one frame, and a full-resolution crop of its centre.
         let g = if sum.groups > 1 { "g00001" } else { "g00000" };

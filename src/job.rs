@@ -1,0 +1,83 @@
+//! The handle a long piece of work (rendering, importing or packing a scan) reports its progress
+//! to and is cancelled through.
+
+use std::fmt;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// The flag of [`Job::unwatched`]: never raised.
+static NEVER: AtomicBool = AtomicBool::new(false);
+
+/// Ignores a progress report.
+fn ignore(_done: usize, _total: usize) {}
+
+/// Where a long job reports `progress(done, total)` and the flag that cancels it.
+///
+/// It is `Copy` and `Sync`, so parallel workers can each hold one.
+#[derive(Clone, Copy)]
+pub struct Job<'a> {
+    progress: &'a (dyn Fn(usize, usize) + Sync),
+    cancel: &'a AtomicBool,
+}
+
+impl<'a> Job<'a> {
+    /// A job that reports to `progress` and stops once `cancel` is raised.
+    #[must_use]
+    pub fn new(progress: &'a (dyn Fn(usize, usize) + Sync), cancel: &'a AtomicBool) -> Self {
+        Self { progress, cancel }
+    }
+
+    /// A job nobody watches: its reports go nowhere and it is never cancelled.
+    #[must_use]
+    pub fn unwatched() -> Job<'static> {
+        Job {
+            progress: &ignore,
+            cancel: &NEVER,
+        }
+    }
+
+    /// Reports that `done` of `total` units are finished.
+    pub fn report(&self, done: usize, total: usize) {
+        (self.progress)(done, total);
+    }
+
+    /// True once the job has been asked to stop.
+    #[must_use]
+    pub fn is_cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+}
+
+impl fmt::Debug for Job<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Job")
+            .field("cancelled", &self.is_cancelled())
+            .finish_non_exhaustive()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Mutex;
+
+    #[test]
+    fn reports_reach_the_callback_and_the_flag_cancels() {
+        let seen = Mutex::new(Vec::new());
+        let record = |done, total| seen.lock().unwrap().push((done, total));
+        let cancel = AtomicBool::new(false);
+        let job = Job::new(&record, &cancel);
+        job.report(0, 3);
+        job.report(3, 3);
+        assert!(!job.is_cancelled());
+        cancel.store(true, Ordering::Relaxed);
+        assert!(job.is_cancelled());
+        assert_eq!(*seen.lock().unwrap(), [(0, 3), (3, 3)]);
+    }
+
+    #[test]
+    fn an_unwatched_job_is_never_cancelled() {
+        let job = Job::unwatched();
+        job.report(1, 2);
+        assert!(!job.is_cancelled());
+    }
+}
