@@ -8,18 +8,13 @@ use super::dialogs::DialogKind;
 use super::files::{Confirm, typed_path};
 use super::stages::STAGES;
 use super::symptoms::symptom_presets;
-use super::views::depth_ui::depth_ui;
-use super::views::flow_ui::flow_ui;
-use super::views::frame_ui::{StageData, frame_ui};
+use super::views::frame_ui::StageData;
 use super::views::guidance::guidance_ui;
 use super::views::health_ui::health_strip_ui;
-use super::views::hough_ui::hough_ui;
 use super::views::meta_ui::{MetaAction, MetaForm, meta_ui};
 use super::views::nav_ui::{NavAction, nav_ui, stages_ui};
-use super::views::orientation_ui::orientation_ui;
 use super::views::overview_ui::overview_ui;
 use super::views::params_ui::{params_ui, toml_ui};
-use super::views::stripes_ui::stripes_ui;
 use super::views::transport_ui::WaveAction;
 use super::views::waveform_ui::waveform_ui;
 use super::views::{StageStatus, View, empty_note};
@@ -284,8 +279,8 @@ impl Workbench {
             status: statuses,
             params: &params,
             meta: self.nav.meta.as_deref(),
+            height: (ui.available_height() - 60.0).max(200.0),
         };
-        let height = (ui.available_height() - 60.0).max(200.0);
         let top = ui.cursor().min;
         let textures = &mut self.stages.textures;
         let v = &mut self.views;
@@ -301,29 +296,20 @@ impl Workbench {
         } else {
             match self.view {
                 View::Overview => {
-                    open_view = overview_ui(ui, &data, textures, self.clip.clip.as_deref(), height);
+                    open_view = overview_ui(ui, &data, textures, self.clip.clip.as_deref());
                 }
-                View::Frame => frame_ui(ui, &data, textures, &mut v.frame, height),
-                View::Flow => flow_ui(ui, &data, textures, &mut v.flow, height),
+                View::Frame => v.frame.ui(ui, &data, textures),
+                View::Flow => v.flow.ui(ui, &data, textures),
                 View::Hough => {
                     let mut draft = params.hough.clone();
-                    hough_ui(
-                        ui,
-                        &data,
-                        textures,
-                        &mut v.hough,
-                        &mut draft,
-                        height - 130.0,
-                    );
+                    v.hough.ui(ui, &data, textures, &mut draft);
                     if draft != params.hough {
                         new_hough = Some(draft);
                     }
                 }
-                View::Stripes => stripes_ui(ui, &data, textures, &mut v.stripes, height),
-                View::Depth => depth_ui(ui, &data, textures, &mut v.depth, height),
-                View::Orientation => {
-                    orientation_ui(ui, &data, textures, &mut v.orientation, height);
-                }
+                View::Stripes => v.stripes.ui(ui, &data, textures),
+                View::Depth => v.depth.ui(ui, &data, textures),
+                View::Orientation => v.orientation.ui(ui, &data, textures),
                 View::Waveform => {
                     wave_actions = waveform_ui(
                         ui,
@@ -332,7 +318,7 @@ impl Workbench {
                         self.nav.group,
                         &mut self.player,
                         &mut v.wave,
-                        height,
+                        data.height,
                     );
                 }
                 View::Metadata => {

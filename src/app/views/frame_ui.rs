@@ -37,6 +37,8 @@ pub struct StageData<'a> {
     pub params: &'a PipelineParams,
     /// The scan's metadata.
     pub meta: Option<&'a ScanMeta>,
+    /// Height the view may fill (points).
+    pub height: f32,
 }
 
 impl StageData<'_> {
@@ -66,6 +68,19 @@ impl StageData<'_> {
             empty_note(ui, missing);
         }
         out
+    }
+
+    /// What a stage view starts with: `stage`'s [`Self::banner`], then its output
+    /// ([`Self::output_or_note`]) with the status.
+    pub fn stage_output<T: Clone>(
+        &self,
+        ui: &mut Ui,
+        stage: Stage,
+        output: impl FnOnce(&StageCache) -> Option<&T>,
+        missing: &str,
+    ) -> Option<(StageStatus, T)> {
+        let status = self.banner(ui, stage);
+        Some((status, self.output_or_note(ui, output, missing)?))
     }
 
     /// The flow field computed on `frame` (or the middle one when none matches).
@@ -214,47 +229,42 @@ pub struct FrameViewState {
     pub readout: Option<String>,
 }
 
-/// The frame viewer.
-pub fn frame_ui(
-    ui: &mut Ui,
-    data: &StageData<'_>,
-    textures: &mut Textures,
-    state: &mut FrameViewState,
-    height: f32,
-) {
-    let Some(frames) = data.frames else {
-        match data.load_error {
-            Some(e) => {
-                ui.colored_label(StageStatus::Failed(String::new()).colour(), e);
+impl FrameViewState {
+    /// The frame viewer.
+    pub fn ui(&mut self, ui: &mut Ui, data: &StageData<'_>, textures: &mut Textures) {
+        let Some(frames) = data.frames else {
+            match data.load_error {
+                Some(e) => {
+                    ui.colored_label(StageStatus::Failed(String::new()).colour(), e);
+                }
+                None => empty_note(ui, "loading frames…"),
             }
-            None => empty_note(ui, "loading frames…"),
+            return;
+        };
+        let Some(tex) = textures
+            .frame(ui.ctx(), data.group, data.frame, frames)
+            .cloned()
+        else {
+            empty_note(ui, "no such frame");
+            return;
+        };
+        arrow_controls(ui, &mut self.arrows);
+        let flow = data.flow_for_frame(data.frame).map(|(_, f)| f);
+        let dim_flow = data.status(Stage::Flow).dim();
+        let land = data.land_flow_px();
+        let resp = image_plot("frame_view", data.height).show(ui, |plot_ui| {
+            plot_ui.image(image_item("frame", &tex, false));
+            if let Some(f) = flow.filter(|_| !dim_flow || self.arrows.show) {
+                flow_arrows(plot_ui, f, &self.arrows, land);
+            }
+        });
+        if let Some((x, y)) = hovered_pixel(&resp, tex.size()) {
+            self.readout = Some(data.readout(x, y));
         }
-        return;
-    };
-    let Some(tex) = textures
-        .frame(ui.ctx(), data.group, data.frame, frames)
-        .cloned()
-    else {
-        empty_note(ui, "no such frame");
-        return;
-    };
-    arrow_controls(ui, &mut state.arrows);
-    let flow = data.flow_for_frame(data.frame).map(|(_, f)| f);
-    let dim_flow = data.status(Stage::Flow).dim();
-    let land = data.land_flow_px();
-    let resp = image_plot("frame_view", height).show(ui, |plot_ui| {
-        plot_ui.image(image_item("frame", &tex, false));
-        if let Some(f) = flow.filter(|_| !dim_flow || state.arrows.show) {
-            flow_arrows(plot_ui, f, &state.arrows, land);
-        }
-    });
-    if let Some((x, y)) = hovered_pixel(&resp, tex.size()) {
-        state.readout = Some(data.readout(x, y));
+        ui.label(
+            self.readout
+                .as_deref()
+                .unwrap_or("hover the image for a read-out"),
+        );
     }
-    ui.label(
-        state
-            .readout
-            .as_deref()
-            .unwrap_or("hover the image for a read-out"),
-    );
 }

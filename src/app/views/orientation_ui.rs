@@ -50,111 +50,109 @@ pub fn outlier_note(p: &crate::pipeline::PipelineParams) -> String {
     )
 }
 
-/// The orientation view.
-pub fn orientation_ui(
-    ui: &mut Ui,
-    data: &StageData<'_>,
-    textures: &Textures,
-    state: &mut OrientationViewState,
-    height: f32,
-) {
-    let status = data.banner(ui, Stage::Orientation);
-    let Some(out) = data.output_or_note(ui, StageCache::orientation, "no orientation yet") else {
-        return;
-    };
-    let o = &out.orientation;
-    let walls = o.walls.len();
-    ui.horizontal(|ui| {
-        ui.label(format!(
-            "{walls} wall{}  ·  {} sample columns  ·  {:.4} µm per column  ·  ",
-            if walls == 1 { "" } else { "s" },
-            out.grid.columns.len(),
-            out.grid.um_per_px
-        ));
-        ui.label(format!(
-            "outliers {:.1} % of fit points (what?)",
-            100.0 * o.outlier_fraction
-        ))
-        .on_hover_text(outlier_note(data.params));
-    });
-    let plot_h = height * 0.4;
-    Plot::new("orientation_plot")
-        .y_axis_min_width(AXIS_WIDTH_PT)
-        .height(plot_h)
-        .legend(Legend::default())
-        .x_axis_label("x (px)")
-        .y_axis_label("tan θ (= V / Vt)")
+impl OrientationViewState {
+    /// The orientation view.
+    pub fn ui(&mut self, ui: &mut Ui, data: &StageData<'_>, textures: &Textures) {
+        let missing = "no orientation yet";
+        let Some((status, out)) =
+            data.stage_output(ui, Stage::Orientation, StageCache::orientation, missing)
+        else {
+            return;
+        };
+        let o = &out.orientation;
+        let walls = o.walls.len();
+        ui.horizontal(|ui| {
+            ui.label(format!(
+                "{walls} wall{}  ·  {} sample columns  ·  {:.4} µm per column  ·  ",
+                if walls == 1 { "" } else { "s" },
+                out.grid.columns.len(),
+                out.grid.um_per_px
+            ));
+            ui.label(format!(
+                "outliers {:.1} % of fit points (what?)",
+                100.0 * o.outlier_fraction
+            ))
+            .on_hover_text(outlier_note(data.params));
+        });
+        let plot_h = data.height * 0.4;
+        Plot::new("orientation_plot")
+            .y_axis_min_width(AXIS_WIDTH_PT)
+            .height(plot_h)
+            .legend(Legend::default())
+            .x_axis_label("x (px)")
+            .y_axis_label("tan θ (= V / Vt)")
+            .show(ui, |plot_ui| {
+                for (i, w) in o.walls.iter().enumerate() {
+                    let c = region_colour(i);
+                    let name = format!("{:?} wall", w.side);
+                    for (k, seg) in tan_segments(w).into_iter().enumerate() {
+                        plot_ui.line(
+                            Line::new(name.clone(), PlotPoints::from(seg))
+                                .id(format!("{name}/{k}"))
+                                .color(c),
+                        );
+                    }
+                }
+            });
+        let Some(tex) = textures.get_or_note(ui, ViewImage::Weights, "weight map not rendered yet")
+        else {
+            return;
+        };
+        ui.horizontal(|ui| {
+            ui.weak("robust-fit weight per pixel: bright = trusted, dark = outlier,");
+            super::guidance::swatch(ui, NO_FIT_COLOUR);
+            ui.weak("not in any fit; lines: walls");
+        });
+        let handle = tex.handle.clone();
+        let dim = status.dim();
+        let lines = data
+            .cache
+            .depth()
+            .as_ref()
+            .map(|d| d.walls.clone())
+            .or_else(|| data.cache.stripes().map(|s| s.lines.clone()))
+            .unwrap_or_default();
+        let resp = image_plot(
+            "orientation_weights",
+            (data.height - plot_h - 70.0).max(100.0),
+        )
         .show(ui, |plot_ui| {
-            for (i, w) in o.walls.iter().enumerate() {
-                let c = region_colour(i);
-                let name = format!("{:?} wall", w.side);
-                for (k, seg) in tan_segments(w).into_iter().enumerate() {
-                    plot_ui.line(
-                        Line::new(name.clone(), PlotPoints::from(seg))
-                            .id(format!("{name}/{k}"))
-                            .color(c),
+            plot_ui.image(image_item("weights", &handle, dim));
+            wall_lines(plot_ui, &lines, Color32::WHITE);
+        });
+        if let Some((x, y)) = hovered_pixel(&resp, handle.size()) {
+            let weight = match o.weight_map.get(x, y) {
+                Some(w) if w.is_finite() => format!("weight {w:.3}"),
+                _ => "not in any fit".into(),
+            };
+            let near = o.walls.iter().filter_map(|wall| {
+                wall.samples
+                    .iter()
+                    .min_by(|a, b| {
+                        (a.x_px - x as f32)
+                            .abs()
+                            .total_cmp(&(b.x_px - x as f32).abs())
+                    })
+                    .map(|s| (wall.side, s))
+            });
+            let mut text = format!("x {x}  y {y}  ·  {weight}");
+            for (side, s) in near {
+                text += &format!("  ·  {side:?}: tan θ {:+.5}", s.tan_theta);
+                if let Some(f) = s.fit {
+                    text += &format!(
+                        " ({:?}, {} rounds, {:.0} % outliers)",
+                        f.stop,
+                        f.iterations,
+                        100.0 * f.outlier_fraction
                     );
                 }
             }
-        });
-    let Some(tex) = textures.get_or_note(ui, ViewImage::Weights, "weight map not rendered yet")
-    else {
-        return;
-    };
-    ui.horizontal(|ui| {
-        ui.weak("robust-fit weight per pixel: bright = trusted, dark = outlier,");
-        super::guidance::swatch(ui, NO_FIT_COLOUR);
-        ui.weak("not in any fit; lines: walls");
-    });
-    let handle = tex.handle.clone();
-    let dim = status.dim();
-    let lines = data
-        .cache
-        .depth()
-        .as_ref()
-        .map(|d| d.walls.clone())
-        .or_else(|| data.cache.stripes().map(|s| s.lines.clone()))
-        .unwrap_or_default();
-    let resp = image_plot("orientation_weights", (height - plot_h - 70.0).max(100.0)).show(
-        ui,
-        |plot_ui| {
-            plot_ui.image(image_item("weights", &handle, dim));
-            wall_lines(plot_ui, &lines, Color32::WHITE);
-        },
-    );
-    if let Some((x, y)) = hovered_pixel(&resp, handle.size()) {
-        let weight = match o.weight_map.get(x, y) {
-            Some(w) if w.is_finite() => format!("weight {w:.3}"),
-            _ => "not in any fit".into(),
-        };
-        let near = o.walls.iter().filter_map(|wall| {
-            wall.samples
-                .iter()
-                .min_by(|a, b| {
-                    (a.x_px - x as f32)
-                        .abs()
-                        .total_cmp(&(b.x_px - x as f32).abs())
-                })
-                .map(|s| (wall.side, s))
-        });
-        let mut text = format!("x {x}  y {y}  ·  {weight}");
-        for (side, s) in near {
-            text += &format!("  ·  {side:?}: tan θ {:+.5}", s.tan_theta);
-            if let Some(f) = s.fit {
-                text += &format!(
-                    " ({:?}, {} rounds, {:.0} % outliers)",
-                    f.stop,
-                    f.iterations,
-                    100.0 * f.outlier_fraction
-                );
-            }
+            self.readout = Some(text);
         }
-        state.readout = Some(text);
+        ui.label(
+            self.readout
+                .as_deref()
+                .unwrap_or("hover the map for a read-out"),
+        );
     }
-    ui.label(
-        state
-            .readout
-            .as_deref()
-            .unwrap_or("hover the map for a read-out"),
-    );
 }

@@ -73,10 +73,9 @@ pub fn overview_ui(
     data: &StageData<'_>,
     textures: &mut Textures,
     clip: Option<&Clip>,
-    height: f32,
 ) -> Option<View> {
     let mut titles = Titles { data, open: None };
-    let cell_h = (height / 2.0 - 40.0).max(80.0);
+    let cell_h = (data.height / 2.0 - 40.0).max(80.0);
     let cell_w = (ui.available_width() / 3.0 - 12.0).max(80.0);
     let dual = data.cache.stripes().is_some();
     let frame_tex = data
