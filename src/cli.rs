@@ -7,7 +7,7 @@ use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::io::wav::{WavBits, read_wav};
+use crate::io::wav::{Audio, WavBits, read_wav};
 use crate::job::Job;
 use crate::pipeline::PipelineParams;
 use crate::pipeline::{Method, PathChoice};
@@ -302,13 +302,9 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
     };
     pb.finish_and_clear();
     if !args.quiet {
-        println!(
-            "wrote {} ({} groups of {} frames, {:.4} s of sound)",
-            summary.out_dir.display(),
-            summary.groups,
-            summary.frames_per_group,
-            summary.reference_secs
-        );
+        let (groups, frames) = (summary.groups, summary.frames_per_group);
+        let details = format!("{:.4} s of sound", summary.reference_secs);
+        println!("{}", wrote_scan(&summary.out_dir, groups, frames, &details));
     }
     Ok(())
 }
@@ -378,6 +374,26 @@ pub(crate) fn print_warnings(warnings: &[String]) {
     for w in warnings {
         eprintln!("warning: {w}");
     }
+}
+
+/// The line a command that wrote a scan says it with: `wrote OUT (N groups of M frames, DETAILS)`.
+pub(crate) fn wrote_scan(
+    out: &Path,
+    groups: usize,
+    frames_per_group: usize,
+    details: &str,
+) -> String {
+    let what = format!("{groups} groups of {frames_per_group} frames");
+    format!("wrote {} ({what}, {details})", out.display())
+}
+
+/// The line a command that wrote a WAV says it with: `wrote OUT (LENGTH, DETAILS)`.
+pub(crate) fn wrote_sound(out: &Path, audio: &Audio, details: &str) -> String {
+    format!(
+        "wrote {} ({}, {details})",
+        out.display(),
+        audio.length_label()
+    )
 }
 
 pub(crate) fn progress_bar(total: usize, quiet: bool) -> ProgressBar {

@@ -57,17 +57,18 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
         );
     }
     if !args.quiet {
-        println!(
-            "wrote {} ({} groups of {} {:?} frames; {:.1} MB of frames in, {:.1} MB stored, {:.0}%; {:.1} s); every chunk read back and checked",
-            summary.out.display(),
-            summary.groups,
-            summary.frames_per_group,
+        let (groups, frames) = (summary.groups, summary.frames_per_group);
+        let (bytes_in, bytes_stored) = (summary.folder_bytes as f64, summary.store_bytes as f64);
+        let details = format!(
+            "{:?} samples, {:.1} MB of frames in, {:.1} MB stored, {:.0}%, {:.1} s",
             summary.sample_type,
-            summary.folder_bytes as f64 / 1e6,
-            summary.store_bytes as f64 / 1e6,
-            100.0 * summary.store_bytes as f64 / summary.folder_bytes.max(1) as f64,
+            bytes_in / 1e6,
+            bytes_stored / 1e6,
+            100.0 * bytes_stored / bytes_in.max(1.0),
             started.elapsed().as_secs_f64()
         );
+        let line = crate::cli::wrote_scan(&summary.out, groups, frames, &details);
+        println!("{line}; every chunk read back and checked");
     }
     Ok(())
 }

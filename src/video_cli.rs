@@ -144,17 +144,19 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
     }
     pb.finish_and_clear();
     if !args.quiet {
-        println!(
-            "wrote {} ({} groups of {} frames, stride {}, {}x{} {}-bit grey, {} frames decoded, {})",
-            summary.out_dir.display(),
-            summary.groups,
-            summary.frames_per_group,
+        let (groups, frames) = (summary.groups, summary.frames_per_group);
+        let details = format!(
+            "stride {}, {}x{} {}-bit grey, {} frames decoded, {}",
             summary.group_stride_frames,
             summary.width,
             summary.height,
             summary.bit_depth,
             summary.frames_decoded,
             summary.codec
+        );
+        println!(
+            "{}",
+            crate::cli::wrote_scan(&summary.out_dir, groups, frames, &details)
         );
     }
     for path in &summary.removed_stale {

@@ -53,6 +53,14 @@ impl Scores {
             |e| format!("{e:.decimals$}"),
         )
     }
+
+    /// The scores on one line: `r = 0.973, envelope r = 0.991, SNR = 12.7 dB`.
+    #[must_use]
+    pub fn line(&self) -> String {
+        let (r, snr_db) = (self.r, self.snr_db);
+        let envelope_r = self.envelope_r_text(3);
+        format!("r = {r:.3}, envelope r = {envelope_r}, SNR = {snr_db:.1} dB")
+    }
 }
 
 /// Pearson correlation of `a` and `b` over their common length (the shorter one's). 0 when it

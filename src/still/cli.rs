@@ -319,28 +319,25 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
     let groove = &a.grooves.grooves[a.chosen];
     if !args.quiet {
         crate::cli::print_warnings(&run.warnings);
-        println!(
-            "wrote {} ({}, {}) from groove {} of {} found ({:.1} s)",
-            args.out.display(),
-            run.audio.length_label(),
+        let details = format!(
+            "{}, groove {} of {} found, {:.1} s",
             run.audio.channels_label(),
             groove.number,
             a.grooves.grooves.len(),
             run.timings.total_secs
         );
+        println!(
+            "{}",
+            crate::cli::wrote_sound(&args.out, &run.audio, &details)
+        );
         for (c, s) in scores.iter().flatten().enumerate() {
             if let Some(s) = s {
-                println!(
-                    "vs reference{}: r = {:.3}, envelope r = {}, SNR = {:.1} dB",
-                    if run.audio.channels.len() > 1 {
-                        format!(" (channel {c})")
-                    } else {
-                        String::new()
-                    },
-                    s.r,
-                    s.envelope_r_text(3),
-                    s.snr_db
-                );
+                let channel = if run.audio.channels.len() > 1 {
+                    format!(" (channel {c})")
+                } else {
+                    String::new()
+                };
+                println!("vs reference{channel}: {}", s.line());
             }
         }
     }

@@ -13,8 +13,6 @@ use crate::job::Job;
 
 mod probes;
 
-fn no_progress(_: usize, _: usize) {}
-
 fn silence(secs: f64) -> Audio {
     Audio {
         sample_rate_hz: 48_000,
@@ -328,22 +326,10 @@ fn tiny_damaged() -> SynthConfig {
 fn scans_are_deterministic_and_seeds_matter() {
     let dir = tempfile::tempdir().unwrap();
     let sound = tone(440.0, 0.01, 44_100);
-    let cancel = AtomicBool::new(false);
     let cfg = tiny_damaged();
-    render_scan(
-        &sound,
-        &cfg,
-        &dir.path().join("a"),
-        Job::new(&no_progress, &cancel),
-    )
-    .unwrap();
-    render_scan(
-        &sound,
-        &cfg,
-        &dir.path().join("b"),
-        Job::new(&no_progress, &cancel),
-    )
-    .unwrap();
+    for name in ["a", "b"] {
+        render_scan(&sound, &cfg, &dir.path().join(name), Job::unwatched()).unwrap();
+    }
     let (a, b) = (
         files_of(&dir.path().join("a")),
         files_of(&dir.path().join("b")),
@@ -406,31 +392,18 @@ fn scan_folder_loads_and_reference_matches_the_scanned_length() {
 #[test]
 fn errors_name_the_problem_and_nothing_is_overwritten() {
     let dir = tempfile::tempdir().unwrap();
-    let cancel = AtomicBool::new(false);
     let sound = tone(1000.0, 0.01, 44_100);
     let busy = dir.path().join("busy");
     std::fs::create_dir(&busy).unwrap();
     std::fs::write(busy.join("keep.txt"), b"mine").unwrap();
-    let e = render_scan(
-        &sound,
-        &SynthConfig::quick_test(),
-        &busy,
-        Job::new(&no_progress, &cancel),
-    )
-    .unwrap_err();
+    let e = render_scan(&sound, &SynthConfig::quick_test(), &busy, Job::unwatched()).unwrap_err();
     assert!(matches!(e, SynthError::OutputExists { .. }), "{e}");
     assert_eq!(files_of(&busy).len(), 1);
     let bad = SynthConfig {
         frame_step_um: -1.0,
         ..SynthConfig::quick_test()
     };
-    let e = render_scan(
-        &sound,
-        &bad,
-        &dir.path().join("x"),
-        Job::new(&no_progress, &cancel),
-    )
-    .unwrap_err();
+    let e = render_scan(&sound, &bad, &dir.path().join("x"), Job::unwatched()).unwrap_err();
     assert!(e.to_string().contains("synth.frame_step_um"), "{e}");
     assert!(!dir.path().join("x").exists());
     let not_wav = dir.path().join("song.wav");
@@ -438,13 +411,7 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
     // The quick-test scan of the sound in `wav`, to `out`: refused.
     let refused_wav = |wav: &Path, out: &str| {
         Groove::from_wav(wav, &SynthConfig::quick_test())
-            .and_then(|groove| {
-                write_scan(
-                    &groove,
-                    &dir.path().join(out),
-                    Job::new(&no_progress, &cancel),
-                )
-            })
+            .and_then(|groove| write_scan(&groove, &dir.path().join(out), Job::unwatched()))
             .unwrap_err()
     };
     let e = refused_wav(&not_wav, "y");
@@ -479,7 +446,6 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
 #[test]
 fn stereo_and_vertical_scans_write_their_channels() {
     let dir = tempfile::tempdir().unwrap();
-    let cancel = AtomicBool::new(false);
     let s = stereo(&tone(500.0, 0.01, 44_100), &tone(800.0, 0.01, 44_100));
     let cfg = SynthConfig {
         cut: Cut::Stereo,
@@ -488,7 +454,7 @@ fn stereo_and_vertical_scans_write_their_channels() {
         ..SynthConfig::quick_test()
     };
     let out = dir.path().join("st");
-    render_scan(&s, &cfg, &out, Job::new(&no_progress, &cancel)).unwrap();
+    render_scan(&s, &cfg, &out, Job::unwatched()).unwrap();
     let r = read_wav(&out.join("reference.wav")).unwrap();
     assert_eq!(r.channels.len(), 2);
     let scan = Scan::open(&out).unwrap();

@@ -392,22 +392,10 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
         return;
     }
     crate::cli::print_warnings(&rec.warnings);
-    let text = format!(
-        "wrote {} ({}, {} groups in {:.1} s, {:.1} groups/s)",
-        args.out.display(),
-        rec.audio.length_label(),
-        rec.groups.len(),
-        rec.timings.total_secs,
-        p.groups_per_sec
-    );
-    let scores = rec.scores.map(|s| {
-        format!(
-            "vs reference: r = {:.3}, envelope r = {}, SNR = {:.1} dB",
-            s.r,
-            s.envelope_r_text(3),
-            s.snr_db
-        )
-    });
+    let (groups, secs, rate) = (rec.groups.len(), rec.timings.total_secs, p.groups_per_sec);
+    let details = format!("{groups} groups in {secs:.1} s, {rate:.1} groups/s");
+    let text = crate::cli::wrote_sound(&args.out, &rec.audio, &details);
+    let scores = rec.scores.map(|s| format!("vs reference: {}", s.line()));
     for line in std::iter::once(text).chain(scores) {
         if args.side.progress_json {
             eprintln!("{line}");

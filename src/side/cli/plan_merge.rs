@@ -102,12 +102,14 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     }
     if !args.quiet {
         crate::cli::print_warnings(&rec.warnings);
-        println!(
-            "wrote {} ({} from {} parts, {} groups)",
-            args.out.display(),
-            rec.audio.length_label(),
+        let details = format!(
+            "from {} parts, {} groups",
             merged.parts.len(),
             rec.groups.len()
+        );
+        println!(
+            "{}",
+            crate::cli::wrote_sound(&args.out, &rec.audio, &details)
         );
     }
     Ok(())

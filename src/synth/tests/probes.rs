@@ -124,7 +124,6 @@ fn preview_scans() {
     };
     let dir = Path::new(&dir);
     let sound = chord(&[440.0, 1320.0], 0.05, 44_100);
-    let cancel = AtomicBool::new(false);
     for (name, cfg) in [
         ("demo", SynthConfig::demo()),
         (
@@ -142,13 +141,7 @@ fn preview_scans() {
             },
         ),
     ] {
-        let sum = render_scan(
-            &sound,
-            &cfg,
-            &dir.join(name),
-            Job::new(&no_progress, &cancel),
-        )
-        .unwrap();
+        let sum = render_scan(&sound, &cfg, &dir.join(name), Job::unwatched()).unwrap();
         eprintln!("{name}: {sum:?}");
         // A half-size 8-bit copy of one frame, and a full-resolution crop of its centre.
         let g = if sum.groups > 1 { "g00001" } else { "g00000" };
