@@ -372,20 +372,26 @@ fn large_upsampling_stays_in_phase_and_pads_little() {
         let ratio = f64::from(to) / from;
         let padding_out = super::resample::pad_search_len(ratio) as f64 * ratio;
         assert!(padding_out <= super::resample::DELAY_PAD_MAX_OUTPUT + ratio);
-        let n = 120;
         let f = from / 8.0;
-        let x = tone(n, f, from, 1.0);
-        let y = resample(&x, from, to).unwrap();
-        assert_eq!(y.len(), (n as f64 * ratio).round() as usize);
-        let m = y.len();
-        let (amp, phase, _) = fit_sine(&y, f, f64::from(to), m / 4..3 * m / 4);
-        let shift_in = phase / (2.0 * PI * f) * from;
+        let (amp, shift_out) = resampled_tone(120, f, from, to);
+        let shift_in = shift_out / ratio;
         assert!(
             shift_in.abs() < 0.005,
             "{from}->{to}: {shift_in} input samples"
         );
         assert!((amp - 1.0).abs() < 0.01, "{from}->{to}: amplitude {amp}");
     }
+}
+
+/// Resamples `n` samples of a unit tone of `f` Hz from `from` to `to` Hz, checks the output
+/// length, and returns the output's amplitude and phase shift (output samples) over its middle
+/// half.
+fn resampled_tone(n: usize, f: f64, from: f64, to: u32) -> (f64, f64) {
+    let y = resample(&tone(n, f, from, 1.0), from, to).unwrap();
+    assert_eq!(y.len(), (n as f64 * f64::from(to) / from).round() as usize);
+    let m = y.len();
+    let (amp, phase, _) = fit_sine(&y, f, f64::from(to), m / 4..3 * m / 4);
+    (amp, phase / (2.0 * PI * f) * f64::from(to))
 }
 
 #[test]
@@ -397,14 +403,7 @@ fn resampler_delay_is_exact() {
         (96_000.0, 44_100),
         (200_000.0, 44_100),
     ] {
-        let n = (from * 0.5) as usize;
-        let x = tone(n, 500.0, from, 1.0);
-        let y = resample(&x, from, to).unwrap();
-        let expected = (n as f64 * f64::from(to) / from).round() as usize;
-        assert_eq!(y.len(), expected);
-        let m = y.len();
-        let (amp, phase, _) = fit_sine(&y, 500.0, f64::from(to), m / 4..3 * m / 4);
-        let shift_samples = phase / (2.0 * PI * 500.0) * f64::from(to);
+        let (amp, shift_samples) = resampled_tone((from * 0.5) as usize, 500.0, from, to);
         assert!(
             shift_samples.abs() < 0.01,
             "{from}->{to}: {shift_samples} samples"
