@@ -279,8 +279,14 @@ pub fn orient_from_depth(
         }
         MIN_SAMPLE_POINTS
     };
-    let orientation = fit_walls(&sides, sample_columns, width, height, params, gather);
-    Ok(orientation)
+    Ok(fit_walls(
+        &sides,
+        sample_columns,
+        width,
+        height,
+        params,
+        gather,
+    ))
 }
 /// Orientation from iso-depth lines (dual-focus path): a plane per sample column through the
 /// 3-D points of the lines of each wall within the neighbourhood.
@@ -380,6 +386,12 @@ pub fn orient_from_lines(
             usize::MAX
         }
     };
-    let orientation = fit_walls(&sides, sample_columns, width, height, params, gather);
-    Ok(orientation)
+    Ok(fit_walls(
+        &sides,
+        sample_columns,
+        width,
+        height,
+        params,
+        gather,
+    ))
 }
