@@ -45,6 +45,9 @@ pub enum AccuracyError {
     /// The report file exists and overwriting was not asked for.
     #[error("the report already exists (use --force to replace it): {}", .0.display())]
     ReportExists(PathBuf),
+    /// The folder the report is to go in does not exist.
+    #[error("the report's folder does not exist: {}", .0.display())]
+    NoReportFolder(PathBuf),
     /// A case failed; the message names the case.
     #[error("{case}: {problem}")]
     Case {
@@ -248,11 +251,13 @@ pub struct AccuracyOptions {
 }
 
 /// Runs the suite and writes the report to `out` atomically; refuses an existing file unless
-/// `force`. The check comes first, so nothing runs for a refused report. A replaced report's
+/// `force`, and a folder that does not exist. The checks come first, so nothing runs for a
+/// refused report. A replaced report's
 /// hand-run sections (between [`KEPT_BEGIN`] and [`KEPT_END`]) are kept verbatim ([`with_kept`]).
 ///
 /// # Errors
-/// [`AccuracyError::ReportExists`], or the suite's or the write's error.
+/// [`AccuracyError::ReportExists`], [`AccuracyError::NoReportFolder`], or the suite's or the
+/// write's error.
 pub fn write_report(
     out: &Path,
     force: bool,
@@ -261,6 +266,11 @@ pub fn write_report(
 ) -> Result<(), AccuracyError> {
     if out.exists() && !force {
         return Err(AccuracyError::ReportExists(out.to_path_buf()));
+    }
+    if let Some(folder) = out.parent().filter(|f| !f.as_os_str().is_empty())
+        && !folder.is_dir()
+    {
+        return Err(AccuracyError::NoReportFolder(folder.to_path_buf()));
     }
     let md = run_suite(opts, log)?;
     let md = match std::fs::read_to_string(out) {
@@ -283,6 +293,20 @@ pub fn write_report(
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_report_in_a_missing_folder_is_refused_before_the_suite_runs() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("missing").join("report.md");
+        let mut logged = Vec::new();
+        let e = write_report(&out, false, &AccuracyOptions::default(), &mut |l| {
+            logged.push(l.to_string());
+        })
+        .unwrap_err();
+        assert!(matches!(e, AccuracyError::NoReportFolder(_)), "{e}");
+        assert!(e.to_string().ends_with("missing"), "{e}");
+        assert!(logged.is_empty(), "the suite ran: {logged:?}");
+    }
 
     #[test]
     fn snr_from_r_and_window() {
