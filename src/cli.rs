@@ -1,7 +1,6 @@
 //! The command-line front end: clap subcommands over the engine (reconstruct, plan, merge, eval, flow, params, synth, inspect, gui).
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
 
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
@@ -275,8 +274,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         pb.set_length(total as u64);
         pb.set_position(done as u64);
     };
-    let cancel = AtomicBool::new(false);
-    let job = Job::new(&progress, &cancel);
+    let job = Job::reporting(&progress);
     let builtin = if let Some(f) = args.tone {
         if !(f.is_finite() && f > 0.0) {
             bail!("--tone must be a positive frequency, got {f}");
@@ -302,9 +300,14 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
     };
     pb.finish_and_clear();
     if !args.quiet {
-        let (groups, frames) = (summary.groups, summary.frames_per_group);
         let details = format!("{:.4} s of sound", summary.reference_secs);
-        println!("{}", wrote_scan(&summary.out_dir, groups, frames, &details));
+        let line = wrote_scan(
+            &summary.out_dir,
+            summary.groups,
+            summary.frames_per_group,
+            &details,
+        );
+        println!("{line}");
     }
     Ok(())
 }
@@ -383,8 +386,8 @@ pub(crate) fn wrote_scan(
     frames_per_group: usize,
     details: &str,
 ) -> String {
-    let what = format!("{groups} groups of {frames_per_group} frames");
-    format!("wrote {} ({what}, {details})", out.display())
+    let out = out.display();
+    format!("wrote {out} ({groups} groups of {frames_per_group} frames, {details})")
 }
 
 /// The line a command that wrote a WAV says it with: `wrote OUT (LENGTH, DETAILS)`.

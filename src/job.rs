@@ -4,7 +4,7 @@
 use std::fmt;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// The flag of [`Job::unwatched`]: never raised.
+/// The flag of [`Job::unwatched`] and [`Job::reporting`]: never raised.
 static NEVER: AtomicBool = AtomicBool::new(false);
 
 /// Ignores a progress report.
@@ -24,6 +24,12 @@ impl<'a> Job<'a> {
     #[must_use]
     pub fn new(progress: &'a (dyn Fn(usize, usize) + Sync), cancel: &'a AtomicBool) -> Self {
         Self { progress, cancel }
+    }
+
+    /// A job that reports to `progress` and is never cancelled (a command line's progress bar).
+    #[must_use]
+    pub fn reporting(progress: &'a (dyn Fn(usize, usize) + Sync)) -> Self {
+        Self::new(progress, &NEVER)
     }
 
     /// A job nobody watches: its reports go nowhere and it is never cancelled.
@@ -79,5 +85,15 @@ mod tests {
         let job = Job::unwatched();
         job.report(1, 2);
         assert!(!job.is_cancelled());
+    }
+
+    #[test]
+    fn a_reporting_job_reports_and_is_never_cancelled() {
+        let seen = Mutex::new(Vec::new());
+        let record = |done, total| seen.lock().unwrap().push((done, total));
+        let job = Job::reporting(&record);
+        job.report(2, 5);
+        assert!(!job.is_cancelled());
+        assert_eq!(*seen.lock().unwrap(), [(2, 5)]);
     }
 }

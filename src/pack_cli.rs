@@ -1,7 +1,6 @@
 //! The `pack` subcommand: a scan folder converted to a Zarr store and checked.
 
 use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use anyhow::{Result, bail};
@@ -40,12 +39,11 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
     let scan = Scan::open(&args.scan)?;
     let started = Instant::now();
     let pb = progress_bar(scan.groups.len(), args.quiet);
-    let cancel = AtomicBool::new(false);
     let summary = pack_scan(
         &scan,
         &args.out,
         args.zstd_level,
-        Job::new(&|done, _| pb.set_position(done as u64), &cancel),
+        Job::reporting(&|done, _| pb.set_position(done as u64)),
     );
     pb.finish_and_clear();
     let summary = summary?;
@@ -57,7 +55,6 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
         );
     }
     if !args.quiet {
-        let (groups, frames) = (summary.groups, summary.frames_per_group);
         let (bytes_in, bytes_stored) = (summary.folder_bytes as f64, summary.store_bytes as f64);
         let details = format!(
             "{:?} samples, {:.1} MB of frames in, {:.1} MB stored, {:.0}%, {:.1} s",
@@ -67,7 +64,12 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
             100.0 * bytes_stored / bytes_in.max(1.0),
             started.elapsed().as_secs_f64()
         );
-        let line = crate::cli::wrote_scan(&summary.out, groups, frames, &details);
+        let line = crate::cli::wrote_scan(
+            &summary.out,
+            summary.groups,
+            summary.frames_per_group,
+            &details,
+        );
         println!("{line}; every chunk read back and checked");
     }
     Ok(())

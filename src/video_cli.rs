@@ -64,8 +64,6 @@ pub struct ImportVideoArgs {
 /// One line naming the clip or folder and the problem; without the `video` feature, always.
 #[cfg(feature = "video")]
 pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
-    use std::sync::atomic::AtomicBool;
-
     use indicatif::{ProgressBar, ProgressStyle};
 
     use crate::io::Cut;
@@ -127,7 +125,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
         &folder,
         &layout,
         &meta,
-        Job::new(&progress, &AtomicBool::new(false)),
+        Job::reporting(&progress),
     )?;
     if zarr {
         let packed = crate::io::Scan::open(&folder).and_then(|scan| {
@@ -144,7 +142,6 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
     }
     pb.finish_and_clear();
     if !args.quiet {
-        let (groups, frames) = (summary.groups, summary.frames_per_group);
         let details = format!(
             "stride {}, {}x{} {}-bit grey, {} frames decoded, {}",
             summary.group_stride_frames,
@@ -156,7 +153,12 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
         );
         println!(
             "{}",
-            crate::cli::wrote_scan(&summary.out_dir, groups, frames, &details)
+            crate::cli::wrote_scan(
+                &summary.out_dir,
+                summary.groups,
+                summary.frames_per_group,
+                &details
+            )
         );
     }
     for path in &summary.removed_stale {

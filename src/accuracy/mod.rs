@@ -252,8 +252,8 @@ pub struct AccuracyOptions {
 
 /// Runs the suite and writes the report to `out` atomically; refuses an existing file unless
 /// `force`, and a folder that does not exist. The checks come first, so nothing runs for a
-/// refused report. A replaced report's
-/// hand-run sections (between [`KEPT_BEGIN`] and [`KEPT_END`]) are kept verbatim ([`with_kept`]).
+/// refused report. A replaced report's hand-run sections (between [`KEPT_BEGIN`] and
+/// [`KEPT_END`]) are kept verbatim ([`with_kept`]).
 ///
 /// # Errors
 /// [`AccuracyError::ReportExists`], [`AccuracyError::NoReportFolder`], or the suite's or the

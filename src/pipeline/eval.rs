@@ -57,9 +57,12 @@ impl Scores {
     /// The scores on one line: `r = 0.973, envelope r = 0.991, SNR = 12.7 dB`.
     #[must_use]
     pub fn line(&self) -> String {
-        let (r, snr_db) = (self.r, self.snr_db);
-        let envelope_r = self.envelope_r_text(3);
-        format!("r = {r:.3}, envelope r = {envelope_r}, SNR = {snr_db:.1} dB")
+        format!(
+            "r = {:.3}, envelope r = {}, SNR = {:.1} dB",
+            self.r,
+            self.envelope_r_text(3),
+            self.snr_db
+        )
     }
 }
 

@@ -17,13 +17,15 @@
 //! normal by `m_L`. For a lateral cut `h = 0` and each wall reads `tan θ = (V/Vt)·sin α`; for a
 //! vertical cut `d = 0`, `tan θ_L = −(V/Vt)·cos α`, `tan θ_R = +(V/Vt)·cos α` (positive V = deeper).
 
+use std::path::Path;
+
 use super::SynthError;
 use super::config::SynthConfig;
 use super::damage::Damage;
 use super::noise::marble;
 use super::track::{Track, TrackPoint};
-use crate::io::Cut;
-use crate::io::wav::Audio;
+use crate::io::wav::{Audio, read_wav};
+use crate::io::{Cut, LoadError};
 
 /// Iteration stops when the ray parameter moves by less than this (µm).
 pub const RAY_TOLERANCE_UM: f64 = 1e-6;
@@ -420,6 +422,23 @@ impl Groove {
             optics,
             reference,
             warnings,
+        })
+    }
+
+    /// [`Groove::new`] for the sound of a WAV file; sound problems name the file.
+    ///
+    /// # Errors
+    /// As [`Groove::new`]; an unreadable, non-WAV, empty or too short sound is a
+    /// [`SynthError::Load`] whose message ends with the file path.
+    pub fn from_wav(sound_path: &Path, cfg: &SynthConfig) -> Result<Self, SynthError> {
+        cfg.validate()?;
+        let sound = read_wav(sound_path)?;
+        Self::new(&sound, cfg).map_err(|e| match e {
+            SynthError::Sound { problem } => SynthError::Load(LoadError::Sound {
+                problem,
+                path: sound_path.to_path_buf(),
+            }),
+            other => other,
         })
     }
 

@@ -60,7 +60,7 @@ use crate::io::frames::save_grey_png;
 use crate::io::scan::{
     CameraMeta, DualFocusMeta, FORMAT_VERSION, GlassSide, MotionMeta, RecordMeta, ScanMeta,
 };
-use crate::io::wav::{Audio, WavBits, read_wav, write_wav};
+use crate::io::wav::{Audio, WavBits, write_wav};
 use crate::job::Job;
 
 /// Why a scan or scene could not be generated.
@@ -184,25 +184,6 @@ pub fn render_scan(
 ) -> Result<SynthSummary, SynthError> {
     let groove = Groove::new(sound, cfg)?;
     write_scan(&groove, out_dir, job)
-}
-
-impl Groove {
-    /// [`Groove::new`] for the sound of a WAV file; sound problems name the file.
-    ///
-    /// # Errors
-    /// As [`Groove::new`]; an unreadable, non-WAV, empty or too short sound is a
-    /// [`SynthError::Load`] whose message ends with the file path.
-    pub fn from_wav(sound_path: &Path, cfg: &SynthConfig) -> Result<Self, SynthError> {
-        cfg.validate()?;
-        let sound = read_wav(sound_path)?;
-        Self::new(&sound, cfg).map_err(|e| match e {
-            SynthError::Sound { problem } => SynthError::Load(LoadError::Sound {
-                problem,
-                path: sound_path.to_path_buf(),
-            }),
-            other => other,
-        })
-    }
 }
 
 /// The `scan.toml` metadata of a groove's scan.

@@ -9,6 +9,7 @@ use super::*;
 use crate::image::Image;
 use crate::io::Cut;
 use crate::io::scan::Scan;
+use crate::io::wav::read_wav;
 use crate::job::Job;
 
 mod probes;
@@ -354,13 +355,7 @@ fn scan_folder_loads_and_reference_matches_the_scanned_length() {
         frames_per_group: 7,
         ..SynthConfig::quick_test()
     };
-    let sum = render_scan(
-        &sound,
-        &cfg,
-        &out,
-        Job::new(&progress, &AtomicBool::new(false)),
-    )
-    .unwrap();
+    let sum = render_scan(&sound, &cfg, &out, Job::reporting(&progress)).unwrap();
     assert_eq!(*calls.lock().unwrap(), vec![(0, 3), (1, 3), (2, 3), (3, 3)]);
     let scan = Scan::open(&out).unwrap();
     assert_eq!(scan.groups.len(), 3);

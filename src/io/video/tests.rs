@@ -82,7 +82,7 @@ fn eight_bit_clip_imports_into_exact_overlapping_groups() {
         &out,
         &layout(7, Some(5)),
         &ClipMeta::default(),
-        Job::new(&progress, &AtomicBool::new(false)),
+        Job::reporting(&progress),
     )
     .unwrap();
     eprintln!("import of a 20-frame {W}x{H} clip: {:?}", started.elapsed());

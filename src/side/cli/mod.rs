@@ -392,8 +392,12 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
         return;
     }
     crate::cli::print_warnings(&rec.warnings);
-    let (groups, secs, rate) = (rec.groups.len(), rec.timings.total_secs, p.groups_per_sec);
-    let details = format!("{groups} groups in {secs:.1} s, {rate:.1} groups/s");
+    let details = format!(
+        "{} groups in {:.1} s, {:.1} groups/s",
+        rec.groups.len(),
+        rec.timings.total_secs,
+        p.groups_per_sec
+    );
     let text = crate::cli::wrote_sound(&args.out, &rec.audio, &details);
     let scores = rec.scores.map(|s| format!("vs reference: {}", s.line()));
     for line in std::iter::once(text).chain(scores) {
