@@ -6,8 +6,8 @@
 # waveform view under the "Compare methods" window, fused against flow.
 #
 # usage: scripts/screenshots.sh [SCAN] [DEPTH_SCAN]
-#   SCAN        scan for overview, flow, hough, stripes and waveform (default assets/demo, a
-#               dual-focus scan)
+#   SCAN        scan for every view but depth and still (default assets/demo, a dual-focus
+#               scan)
 #   DEPTH_SCAN  scan on the depth path (no [dual_focus]) for the depth view; default: one rendered
 #               now with `groovescope synth --preset demo` (6 groups of a 440 Hz tone)
 # env: SCREENSHOT_DIR (default screenshots), GROOVESCOPE_BIN (default target/debug/groovescope, built when missing), VIEWS (names).
@@ -37,7 +37,7 @@ trap 'kill "$xvfb_pid" 2>/dev/null || true; rm -rf "$XDG_RUNTIME_DIR" "$GROOVESC
 export DISPLAY="$display"
 sleep 1
 status=0
-for view in ${VIEWS:-overview flow hough stripes depth waveform ab still}; do
+for view in ${VIEWS:-overview frame flow hough stripes depth orientation waveform metadata ab still}; do
     s="$scan"
     if [ "$view" = depth ]; then
         if [ -z "$depth" ]; then
