@@ -234,26 +234,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         _ => SynthConfig::default(),
     };
     let mut cfg = match &args.config {
-        Some(p) => {
-            let text = crate::io::limits::read_toml_text(p, "synth settings")?;
-            let mut table: toml::Table = toml::to_string(&base)
-                .ok()
-                .and_then(|t| toml::from_str(&t).ok())
-                .unwrap_or_default();
-            let user: toml::Table = toml::from_str(&text).map_err(|e| {
-                anyhow::anyhow!("invalid synth settings: {}: {}", e.message(), p.display())
-            })?;
-            let user = match user.get("synth") {
-                Some(toml::Value::Table(t)) => t.clone(),
-                _ => user,
-            };
-            table.extend(user);
-            toml::Value::Table(table)
-                .try_into::<SynthConfig>()
-                .map_err(|e| {
-                    anyhow::anyhow!("invalid synth settings: {}: {}", e.message(), p.display())
-                })?
-        }
+        Some(p) => overlay_toml(&base, p, "synth", "synth settings")?,
         None => base,
     };
     if let Some(n) = args.max_groups {
@@ -323,7 +304,8 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
         Some(p) => {
             let text = crate::io::limits::read_toml_text(p, "scene settings")?;
             toml::from_str::<SceneConfig>(&text).map_err(|e| {
-                anyhow::anyhow!("invalid scene settings: {}: {}", e.message(), p.display())
+                let e = crate::toml_error::located(&text, &e);
+                anyhow::anyhow!("invalid scene settings: {e}: {}", p.display())
             })?
         }
         None => SceneConfig::default(),
@@ -370,6 +352,43 @@ pub fn load_params(path: Option<&Path>) -> Result<PipelineParams> {
         }
     }
     Ok(params)
+}
+
+/// `base` with the keys of the TOML file `path` (optionally under a `[table]`) laid over it.
+///
+/// # Errors
+/// When the file cannot be read or a key or value is invalid: one line naming the key (and
+/// its line, where the file's syntax is at fault) and the file.
+pub(crate) fn overlay_toml<T>(base: &T, path: &Path, table: &str, what: &str) -> Result<T>
+where
+    T: serde::Serialize + serde::de::DeserializeOwned,
+{
+    let text = crate::io::limits::read_toml_text(path, what)?;
+    let fail = |problem: String| anyhow::anyhow!("invalid {what}: {problem}: {}", path.display());
+    let base: toml::Table = toml::Table::try_from(base).map_err(|e| fail(e.to_string()))?;
+    let user: toml::Table =
+        toml::from_str(&text).map_err(|e| fail(crate::toml_error::located(&text, &e)))?;
+    let user = match user.get(table) {
+        Some(toml::Value::Table(t)) => t.clone(),
+        _ => user,
+    };
+    let over = |keys: &toml::Table| {
+        let mut merged = base.clone();
+        merged.extend(keys.clone());
+        toml::Value::Table(merged).try_into::<T>()
+    };
+    over(&user).map_err(|e| {
+        // The merged table has no positions: name the first of the user's keys that fails
+        // on its own.
+        let key = user.iter().find_map(|(k, v)| {
+            let one = toml::Table::from_iter([(k.clone(), v.clone())]);
+            over(&one).is_err().then_some(k.as_str())
+        });
+        match key {
+            Some(k) => fail(format!("{k}: {}", e.message())),
+            None => fail(e.message().to_string()),
+        }
+    })
 }
 
 /// Prints each of a run's warnings to stderr, one `warning: …` line each.

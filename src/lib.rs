@@ -23,5 +23,6 @@ pub mod still;
 pub mod synth;
 #[cfg(test)]
 pub(crate) mod test_support;
+pub mod toml_error;
 pub mod video_cli;
 pub mod viz;

@@ -22,7 +22,7 @@ impl ScanMeta {
     /// A [`LoadError::Metadata`] naming the file and the missing or invalid key.
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, LoadError> {
         let meta: ScanMeta = toml::from_str(text).map_err(|e| LoadError::Metadata {
-            problem: e.message().to_string(),
+            problem: crate::toml_error::located(text, &e),
             path: path.to_path_buf(),
         })?;
         meta.validate().map_err(|problem| LoadError::Metadata {

@@ -185,7 +185,7 @@ impl PipelineParams {
     /// # Errors
     /// A message naming the bad key.
     pub fn from_toml_str(text: &str) -> Result<Self, String> {
-        toml::from_str(text).map_err(|e| e.message().to_string())
+        toml::from_str(text).map_err(|e| crate::toml_error::located(text, &e))
     }
 
     /// TOML text of these params.
@@ -217,7 +217,8 @@ impl PipelineParams {
     }
 
     /// Checks every knob: each stage's table through its params' `validate` (the same checks
-    /// the stages make).
+    /// the stages make), and the DSP corners against the output rate's Nyquist, so that a
+    /// filter the clip's finishing would refuse is refused before any group runs.
     ///
     /// # Errors
     /// [`StageError::InvalidParam`] naming the first bad key.
@@ -228,6 +229,7 @@ impl PipelineParams {
         self.orientation.validate()?;
         self.sound.validate()?;
         self.dsp.validate()?;
+        dsp::dsp_chain(f64::from(self.sound.output_rate_hz), &self.dsp)?;
         self.edges.validate()?;
         self.fusion.validate()?;
         self.hough.validate()?;

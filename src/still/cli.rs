@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 
 use crate::io::Cut;
 use crate::pipeline::still::Axis;
@@ -44,32 +44,6 @@ pub struct SynthStillArgs {
     pub quiet: bool,
 }
 
-/// `base` with the keys of the TOML file `path` (optionally under a `[table]`) laid over it.
-///
-/// # Errors
-/// When the file cannot be read or a key or value is invalid (the message names the file).
-pub fn overlay_toml<T>(base: &T, path: &Path, table: &str, what: &str) -> Result<T>
-where
-    T: serde::Serialize + serde::de::DeserializeOwned,
-{
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read {what}: {}", path.display()))?;
-    let mut merged: toml::Table = toml::to_string(base)
-        .ok()
-        .and_then(|t| toml::from_str(&t).ok())
-        .unwrap_or_default();
-    let user: toml::Table = toml::from_str(&text)
-        .map_err(|e| anyhow::anyhow!("invalid {what}: {}: {}", e.message(), path.display()))?;
-    let user = match user.get(table) {
-        Some(toml::Value::Table(t)) => t.clone(),
-        _ => user,
-    };
-    merged.extend(user);
-    toml::Value::Table(merged)
-        .try_into::<T>()
-        .map_err(|e| anyhow::anyhow!("invalid {what}: {}: {}", e.message(), path.display()))
-}
-
 /// Runs `synth-still`.
 ///
 /// # Errors
@@ -81,7 +55,7 @@ pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
         StillConfig::default()
     };
     let mut cfg = match &args.config {
-        Some(p) => overlay_toml(&base, p, "still", "still settings")?,
+        Some(p) => crate::cli::overlay_toml(&base, p, "still", "still settings")?,
         None => base,
     };
     match args.axis.as_deref() {

@@ -48,8 +48,10 @@ pub struct DemoStill {
 pub fn read_generated_still(dir: &Path) -> Result<DemoStill> {
     let path = dir.join("truth.toml");
     let text = crate::io::limits::read_toml_text(&path, "still sidecar")?;
-    let sidecar: StillSidecar = toml::from_str(&text)
-        .map_err(|e| anyhow!("invalid still sidecar: {}: {}", e.message(), path.display()))?;
+    let sidecar: StillSidecar = toml::from_str(&text).map_err(|e| {
+        let e = crate::toml_error::located(&text, &e);
+        anyhow!("invalid still sidecar: {e}: {}", path.display())
+    })?;
     let (t, cfg) = (&sidecar.truth, &sidecar.still);
     let groove = t
         .grooves

@@ -136,7 +136,7 @@ impl SceneMeta {
         })?;
         toml::from_str(&text).map_err(|e| {
             SynthError::Load(LoadError::Metadata {
-                problem: e.message().to_string(),
+                problem: crate::toml_error::located(&text, &e),
                 path: path.to_path_buf(),
             })
         })

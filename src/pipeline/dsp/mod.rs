@@ -75,7 +75,8 @@ impl DspParams {
     /// # Errors
     /// [`StageError::InvalidParam`] naming the bad key.
     pub fn validate(&self) -> Result<(), StageError> {
-        check_range("dsp.lowpass_hz", self.lowpass_hz, 1.0, 1e6)
+        check_range("dsp.lowpass_hz", self.lowpass_hz, 1.0, 1e6)?;
+        check_range("dsp.dc_block_hz", self.dc_block_hz, 1e-6, 1e6)
     }
 }
 

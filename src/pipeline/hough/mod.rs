@@ -70,6 +70,11 @@ const MIN_MEDIAN_HALF_PX: usize = 3;
 const VOTE_BATCH: usize = 8;
 /// Micrometres per millimetre.
 const UM_PER_MM: f64 = 1000.0;
+/// Largest accepted `window_rho_px` and `peak_rho_band_px`: ρ runs over the image height, so
+/// any window past a sensor's size suppresses (or sums) the whole ρ range already.
+const MAX_RHO_WINDOW_PX: f64 = 1e5;
+/// Largest accepted `line_smoothing_px` (a half-window along the image width).
+const MAX_LINE_SMOOTHING_PX: usize = 100_000;
 
 /// Knobs of [`segment_stripes`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -365,8 +370,23 @@ impl HoughParams {
             "hough.window_rho_px",
             f64::from(p.window_rho_px),
             0.0,
-            f64::MAX,
+            MAX_RHO_WINDOW_PX,
         )?;
+        check_range(
+            "hough.peak_rho_band_px",
+            f64::from(p.peak_rho_band_px),
+            0.0,
+            MAX_RHO_WINDOW_PX,
+        )?;
+        if p.line_smoothing_px > MAX_LINE_SMOOTHING_PX {
+            return Err(invalid(
+                "hough.line_smoothing_px",
+                format!(
+                    "{} is not in [0, {MAX_LINE_SMOOTHING_PX}]",
+                    p.line_smoothing_px
+                ),
+            ));
+        }
         check_range(
             "hough.min_peak_ratio",
             f64::from(p.min_peak_ratio),

@@ -1,0 +1,72 @@
+//! One line for a TOML read error: the `table.key` it stands at and its line number, since the
+//! parser's own message ("invalid value: integer `-1`, expected u32") names neither.
+
+/// `message` located in `text`: `table.key (line N): message` where the error has a position,
+/// else `message` alone.
+#[must_use]
+pub fn located(text: &str, error: &toml::de::Error) -> String {
+    let message = error.message().trim_end();
+    let Some(start) = error.span().map(|s| s.start) else {
+        return message.to_string();
+    };
+    let Some(before) = text.get(..start) else {
+        return message.to_string();
+    };
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let line_no = before.matches('\n').count() + 1;
+    let line = text[line_start..].lines().next().unwrap_or("");
+    // The key of a `key = value` line, under the last `[table]` header above it.
+    let key = line
+        .split_once('=')
+        .map(|(k, _)| k.trim())
+        .filter(|k| !k.is_empty() && !k.starts_with('['));
+    let table = text[..line_start].lines().rev().find_map(|l| {
+        let l = l.trim();
+        l.strip_prefix('[')
+            .and_then(|r| r.strip_suffix(']'))
+            .map(|t| t.trim_matches(['[', ']']).trim().to_string())
+    });
+    match (table, key) {
+        (Some(t), Some(k)) => format!("{t}.{k} (line {line_no}): {message}"),
+        (None, Some(k)) => format!("{k} (line {line_no}): {message}"),
+        _ => format!("line {line_no}: {message}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn error_of(text: &str) -> String {
+        #[derive(Debug, serde::Deserialize)]
+        #[allow(dead_code)] // read only to fail
+        struct Flow {
+            max_iterations: u32,
+        }
+        #[derive(Debug, serde::Deserialize)]
+        #[allow(dead_code)]
+        struct Doc {
+            flow: Flow,
+        }
+        let e = toml::from_str::<Doc>(text).unwrap_err();
+        located(text, &e)
+    }
+
+    #[test]
+    fn a_bad_value_is_named_by_table_key_and_line() {
+        let text = "# my settings\n[flow]\nmax_iterations = -1\n";
+        let line = error_of(text);
+        assert!(
+            line.starts_with("flow.max_iterations (line 3): ") && line.contains("u32"),
+            "{line}"
+        );
+    }
+
+    #[test]
+    fn a_wrong_type_is_named_too_and_a_broken_file_gets_its_line() {
+        let line = error_of("[flow]\nmax_iterations = \"many\"\n");
+        assert!(line.starts_with("flow.max_iterations (line 2): "), "{line}");
+        let line = error_of("[flow\nmax_iterations = 3\n");
+        assert!(line.starts_with("line 1: "), "{line}");
+    }
+}
