@@ -152,7 +152,7 @@ pub struct ReconstructArgs {
     /// Replace existing output files.
     #[arg(long)]
     pub force: bool,
-    /// No progress bar.
+    /// No progress bar and no summary line (warnings still go to stderr).
     #[arg(long)]
     pub quiet: bool,
     /// Shards, resume, progress lines.
@@ -391,6 +391,37 @@ where
     })
 }
 
+/// Checks the files a command is about to write, before any work: none is a folder, each
+/// one's folder exists, no two are the same file, and none exists unless `force` says to
+/// replace it.
+///
+/// # Errors
+/// One line naming the path at fault.
+pub(crate) fn check_outputs(paths: &[&Path], force: bool) -> Result<()> {
+    let mut seen = Vec::with_capacity(paths.len());
+    for &out in paths {
+        if out.is_dir() {
+            bail!("the output is a folder, not a file name: {}", out.display());
+        }
+        let folder = out.parent().filter(|p| !p.as_os_str().is_empty());
+        if let Some(folder) = folder.filter(|f| !f.is_dir()) {
+            bail!("the output's folder does not exist: {}", folder.display());
+        }
+        let absolute = std::path::absolute(out).unwrap_or_else(|_| out.to_path_buf());
+        if seen.contains(&absolute) {
+            bail!("two outputs name the same file: {}", out.display());
+        }
+        seen.push(absolute);
+        if out.exists() && !force {
+            bail!(
+                "refusing to overwrite an existing file (use --force): {}",
+                out.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Prints each of a run's warnings to stderr, one `warning: …` line each.
 pub(crate) fn print_warnings(warnings: &[String]) {
     for w in warnings {
@@ -525,6 +556,14 @@ fn run_flow(args: &FlowArgs) -> Result<()> {
 /// # Errors
 /// Any failure, with the file named.
 pub fn run(command: Command) -> Result<()> {
+    // The commands whose jobs stop cleanly on Ctrl-C; the others are ended by it as before.
+    let stoppable = matches!(
+        command,
+        Command::Reconstruct(_) | Command::Pack(_) | Command::Synth(_) | Command::ImportVideo(_)
+    );
+    if stoppable {
+        crate::job::catch_interrupts().map_err(|e| anyhow::anyhow!("cannot catch Ctrl-C: {e}"))?;
+    }
     match command {
         Command::Reconstruct(args) => crate::side::cli::run_reconstruct_command(&args),
         Command::Plan(args) => crate::side::cli::run_plan(&args),

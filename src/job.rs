@@ -1,11 +1,41 @@
 //! The handle a long piece of work (rendering, importing or packing a scan) reports its progress
-//! to and is cancelled through.
+//! to and is cancelled through, and the command line's Ctrl-C that cancels it.
 
 use std::fmt;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
 
-/// The flag of [`Job::unwatched`] and [`Job::reporting`]: never raised.
+/// The flag of [`Job::unwatched`]: never raised.
 static NEVER: AtomicBool = AtomicBool::new(false);
+
+/// The flag the first Ctrl-C (SIGINT) or SIGTERM raises once [`catch_interrupts`] has run.
+fn interrupt_flag() -> &'static Arc<AtomicBool> {
+    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+    FLAG.get_or_init(|| Arc::new(AtomicBool::new(false)))
+}
+
+/// Makes Ctrl-C and SIGTERM cancel the command line's jobs instead of killing the process:
+/// the first raises [`interrupted`], so a job stops at its next unit of work, removes what it
+/// had not finished (or keeps its journal) and says so; a second one exits at once (status 130).
+///
+/// # Errors
+/// When the handlers cannot be installed.
+pub fn catch_interrupts() -> std::io::Result<()> {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let flag = interrupt_flag();
+    for signal in [SIGINT, SIGTERM] {
+        // In this order: the exit only fires when the flag is already up.
+        signal_hook::flag::register_conditional_shutdown(signal, 130, Arc::clone(flag))?;
+        signal_hook::flag::register(signal, Arc::clone(flag))?;
+    }
+    Ok(())
+}
+
+/// Raised once the operator pressed Ctrl-C (see [`catch_interrupts`]).
+#[must_use]
+pub fn interrupted() -> &'static AtomicBool {
+    interrupt_flag()
+}
 
 /// Ignores a progress report.
 fn ignore(_done: usize, _total: usize) {}
@@ -26,10 +56,11 @@ impl<'a> Job<'a> {
         Self { progress, cancel }
     }
 
-    /// A job that reports to `progress` and is never cancelled (a command line's progress bar).
+    /// A job that reports to `progress` (a command line's progress bar) and is cancelled by
+    /// Ctrl-C once [`catch_interrupts`] has run.
     #[must_use]
     pub fn reporting(progress: &'a (dyn Fn(usize, usize) + Sync)) -> Self {
-        Self::new(progress, &NEVER)
+        Self::new(progress, interrupted())
     }
 
     /// A job nobody watches: its reports go nowhere and it is never cancelled.
@@ -88,7 +119,7 @@ mod tests {
     }
 
     #[test]
-    fn a_reporting_job_reports_and_is_never_cancelled() {
+    fn a_reporting_job_reports_and_is_not_cancelled_without_an_interrupt() {
         let seen = Mutex::new(Vec::new());
         let record = |done, total| seen.lock().unwrap().push((done, total));
         let job = Job::reporting(&record);

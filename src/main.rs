@@ -15,16 +15,16 @@ fn display_available() -> bool {
         .any(|k| std::env::var_os(k).is_some_and(|v| !v.is_empty()))
 }
 
-/// A file name in the current folder that does not exist yet: `stem.ext`, `stem-2.ext`, ...
-fn fresh_name(stem: &str, ext: &str) -> PathBuf {
-    let first = PathBuf::from(format!("{stem}.{ext}"));
-    if !first.exists() {
-        return first;
-    }
-    (2..)
-        .map(|i| PathBuf::from(format!("{stem}-{i}.{ext}")))
-        .find(|p| !p.exists())
-        .unwrap_or(first)
+/// A stem in the current folder under which none of `exts` exists yet: `stem`, `stem-2`, ...
+fn fresh_stem(stem: &str, exts: &[&str]) -> String {
+    let free = |s: &str| {
+        exts.iter()
+            .all(|e| !PathBuf::from(format!("{s}.{e}")).exists())
+    };
+    std::iter::once(stem.to_string())
+        .chain((2..).map(|i| format!("{stem}-{i}")))
+        .find(|s| free(s))
+        .unwrap_or_else(|| stem.to_string())
 }
 
 fn default_action() -> anyhow::Result<()> {
@@ -34,8 +34,10 @@ fn default_action() -> anyhow::Result<()> {
         let demo = read_generated_still(&demo_still_dir())?;
         return run_gui(Some(demo.image));
     }
-    let out = fresh_name("groovescope-demo", "wav");
-    let report = out.with_extension("report.json");
+    // The WAV and its report share a stem that neither file has yet: nothing is overwritten.
+    let stem = fresh_stem("groovescope-demo", &["wav", "report.json"]);
+    let out = PathBuf::from(format!("{stem}.wav"));
+    let report = PathBuf::from(format!("{stem}.report.json"));
     let demo = read_generated_still(&demo_still_dir())?;
     println!(
         "no display: decoding groove {} of the demo still {} to {}",

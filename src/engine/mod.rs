@@ -42,13 +42,28 @@ pub enum EngineError {
     #[error("reconstruction cancelled")]
     Cancelled,
     /// No group produced sound.
-    #[error("no group produced any sound (see the per-group warnings): {}", path.display())]
+    #[error(
+        "no group produced any sound by {decoder} ({}): {}",
+        first_problem(warnings),
+        path.display()
+    )]
     NoSound {
         /// The scan folder.
         path: PathBuf,
+        /// The decoder that had nothing: "the flow method" or "the edge method".
+        decoder: &'static str,
         /// What went wrong per group.
         warnings: Vec<String>,
     },
+}
+
+/// The first of a run's per-group problems, for the one line of [`EngineError::NoSound`].
+fn first_problem(warnings: &[String]) -> String {
+    match warnings {
+        [] => "no group reported a problem".into(),
+        [only] => only.clone(),
+        [first, rest @ ..] => format!("{first}; and {} more", rest.len()),
+    }
 }
 
 /// Which groups to run and how to treat unreadable ones.
@@ -289,8 +304,14 @@ pub fn finish_reconstruction(
         Method::Fused => signals.is_empty() || borders.is_empty(),
     };
     if empty {
+        let decoder = if matches!(params.method, Method::Edges) || !signals.is_empty() {
+            "the edge method"
+        } else {
+            "the flow method"
+        };
         return Err(EngineError::NoSound {
             path: scan_dir.to_path_buf(),
+            decoder,
             warnings,
         });
     }

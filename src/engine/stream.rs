@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use super::{EngineError, GroupReport, SlopeEntry, run_group};
 use crate::image::Image;
-use crate::io::{LoadError, Scan, load_group_frames};
+use crate::io::{GroupEntry, LoadError, Scan, load_group_frames};
 use crate::pipeline::audio_signal::GroupSignal;
 use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
 use crate::pipeline::{GroupInput, PipelineParams, Stage, StageError, frames_read};
@@ -78,6 +78,26 @@ pub struct GroupStream<'a> {
     pub mode: SlopeMode,
 }
 
+/// `frames` of group `entry` (its first frame the group's `first`), refused when they are not
+/// the scan's `size`: a group of another camera's frames would run and make wrong sound.
+fn sized_as_scan(
+    frames: Vec<Image>,
+    entry: &GroupEntry,
+    first: usize,
+    size: (usize, usize),
+) -> Result<Vec<Image>, LoadError> {
+    match frames.first() {
+        Some(f) if (f.width, f.height) != size => Err(LoadError::GroupSize {
+            found_w: f.width,
+            found_h: f.height,
+            want_w: size.0,
+            want_h: size.1,
+            path: entry.frames.get(first).unwrap_or(&entry.dir).clone(),
+        }),
+        _ => Ok(frames),
+    }
+}
+
 /// Runs the groups `range` of `stream.scan` in order, one group decoded ahead on a named
 /// loader thread, and hands each outcome to `on_group`. Memory stays at about two groups.
 ///
@@ -122,7 +142,8 @@ pub fn run_groups(
                     let t = Instant::now();
                     let window = frames_read(entry.frame_count(), &scan.meta, params);
                     let first = window.start;
-                    let frames = load_group_frames(entry, window);
+                    let frames = load_group_frames(entry, window)
+                        .and_then(|f| sized_as_scan(f, entry, first, scan.frame_size));
                     if tx
                         .send((entry.index, first, frames, t.elapsed().as_secs_f64()))
                         .is_err()

@@ -55,6 +55,20 @@ pub enum LoadError {
         /// The frame file.
         path: PathBuf,
     },
+    /// A group's frames differ in size from the scan's (its first group's).
+    #[error("this group's frames are {found_w}x{found_h} but the scan's are {want_w}x{want_h}: {}", path.display())]
+    GroupSize {
+        /// Width found.
+        found_w: usize,
+        /// Height found.
+        found_h: usize,
+        /// The scan's width.
+        want_w: usize,
+        /// The scan's height.
+        want_h: usize,
+        /// The group's first frame read.
+        path: PathBuf,
+    },
     /// A frame differs in size from the first frame of its group.
     #[error("frame is {found_w}x{found_h} but the group's first frame is {want_w}x{want_h}: {}", path.display())]
     MixedSizes {

@@ -92,6 +92,9 @@ pub struct Scan {
     pub groups: Vec<GroupEntry>,
     /// `reference.wav`, when present.
     pub reference: Option<PathBuf>,
+    /// Width and height of every frame (px): the first frame's, which all the others must
+    /// match.
+    pub frame_size: (usize, usize),
 }
 
 fn is_frame_file(p: &Path) -> bool {
@@ -195,6 +198,7 @@ impl Scan {
             meta,
             groups,
             reference,
+            frame_size,
         })
     }
 

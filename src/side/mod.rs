@@ -196,7 +196,7 @@ impl RunIdentity {
         }
         if other.groups != self.groups {
             return Some(format!(
-                "covers groups {}..{}, expected {}..{}",
+                "made for groups {}..{}, expected {}..{}",
                 other.groups.0, other.groups.1, self.groups.0, self.groups.1
             ));
         }

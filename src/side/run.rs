@@ -206,11 +206,14 @@ pub fn run_range(
         &mut |outcome| {
             journal
                 .append(&Record::Group(outcome.clone()))
-                .map_err(|e| {
-                    EngineError::Load(crate::io::LoadError::Io {
-                        problem: e.to_string(),
-                        path: run.journal.to_path_buf(),
-                    })
+                .map_err(|e| match e {
+                    // The engine's callback speaks EngineError; the journal's load error
+                    // already names its file.
+                    SideError::Load(load) => EngineError::Load(load),
+                    SideError::Engine(engine) => engine,
+                    SideError::Refused { problem, path } => {
+                        EngineError::Load(crate::io::LoadError::Io { problem, path })
+                    }
                 })?;
             done += 1;
             on_event(RunEvent::Group {

@@ -162,7 +162,7 @@ pub struct StillArgs {
     /// Replace existing output files.
     #[arg(long)]
     pub force: bool,
-    /// No summary on stdout.
+    /// No summary on stdout (warnings still go to stderr).
     #[arg(long)]
     pub quiet: bool,
 }
@@ -235,14 +235,10 @@ struct StillReport<'a> {
 /// # Errors
 /// Any failure as one line naming the file.
 pub fn run_still(args: &StillArgs) -> Result<()> {
-    for out in std::iter::once(&args.out).chain(args.report.as_ref()) {
-        if out.exists() && !args.force {
-            bail!(
-                "refusing to overwrite an existing file (use --force): {}",
-                out.display()
-            );
-        }
-    }
+    let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
+        .chain(args.report.as_deref())
+        .collect();
+    crate::cli::check_outputs(&outputs, args.force)?;
     let params = crate::cli::load_params(args.params.as_deref())?;
     let axis = if args.axis == "horizontal" {
         Axis::Horizontal
@@ -291,8 +287,8 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
     }
     let a = &run.analysis;
     let groove = &a.grooves.grooves[a.chosen];
+    crate::cli::print_warnings(&run.warnings);
     if !args.quiet {
-        crate::cli::print_warnings(&run.warnings);
         let details = format!(
             "{}, groove {} of {} found, {:.1} s",
             run.audio.channels_label(),

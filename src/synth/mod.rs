@@ -89,8 +89,8 @@ pub enum SynthError {
         /// The folder.
         path: PathBuf,
     },
-    /// The cancel flag was raised.
-    #[error("cancelled")]
+    /// The cancel flag was raised (the unfinished scan is removed).
+    #[error("cancelled: the unfinished scan was removed")]
     Cancelled,
 }
 
@@ -160,6 +160,21 @@ pub(crate) fn prepare_out_dir(dir: &Path) -> Result<(), SynthError> {
     }
 }
 
+/// Empties an output folder that [`prepare_out_dir`] found new (`created`: removes it) or empty.
+pub(crate) fn clear_out_dir(dir: &Path, created: bool) {
+    if created {
+        let _ = std::fs::remove_dir_all(dir);
+    } else if let Ok(entries) = std::fs::read_dir(dir) {
+        for path in entries.flatten().map(|e| e.path()) {
+            let _ = if path.is_dir() {
+                std::fs::remove_dir_all(&path)
+            } else {
+                std::fs::remove_file(&path)
+            };
+        }
+    }
+}
+
 /// Zero-padded width for `count` indices (at least `min` digits).
 pub(crate) fn digits(count: usize, min: usize) -> usize {
     count.saturating_sub(1).max(1).to_string().len().max(min)
@@ -168,7 +183,8 @@ pub(crate) fn digits(count: usize, min: usize) -> usize {
 /// Renders `sound` as a scan into `out_dir` (created, or empty) and returns what was written.
 ///
 /// `job` is told 0 first and then each finished group; cancelling it stops before the next
-/// frame with [`SynthError::Cancelled`] (no `scan.toml` is written then). Frames of a group
+/// frame with [`SynthError::Cancelled`]. A run that fails or is cancelled leaves the folder as it
+/// found it (a new one removed, an empty one emptied). Frames of a group
 /// render in parallel, rows in parallel within a frame. A WAV file's sound renders with
 /// [`Groove::from_wav`] and [`write_scan`].
 ///
@@ -250,22 +266,15 @@ pub fn scan_meta(groove: &Groove) -> Result<ScanMeta, SynthError> {
     })
 }
 
-/// Writes a prepared groove's scan (see [`render_scan`]).
-///
-/// # Errors
-/// As [`render_scan`].
-pub fn write_scan(
+/// Writes the reference, every group's frames and, last, `scan.toml` into `out_dir`; returns
+/// the group count.
+fn write_scan_files(
     groove: &Groove,
     out_dir: &Path,
+    meta_text: &str,
     job: Job<'_>,
-) -> Result<SynthSummary, SynthError> {
+) -> Result<usize, SynthError> {
     let cfg = groove.config();
-    let meta = scan_meta(groove)?;
-    let meta_text = meta.to_toml_string().map_err(|e| SynthError::Config {
-        key: "synth".into(),
-        problem: format!("cannot be written as TOML: {e}"),
-    })?;
-    prepare_out_dir(out_dir)?;
     write_wav(
         &out_dir.join("reference.wav"),
         groove.reference(),
@@ -301,6 +310,33 @@ pub fn write_scan(
         job.report(g + 1, groups);
     }
     crate::io::write_atomic(&out_dir.join("scan.toml"), meta_text.as_bytes(), false)?;
+    Ok(groups)
+}
+
+/// Writes a prepared groove's scan (see [`render_scan`]).
+///
+/// # Errors
+/// As [`render_scan`].
+pub fn write_scan(
+    groove: &Groove,
+    out_dir: &Path,
+    job: Job<'_>,
+) -> Result<SynthSummary, SynthError> {
+    let cfg = groove.config();
+    let meta = scan_meta(groove)?;
+    let meta_text = meta.to_toml_string().map_err(|e| SynthError::Config {
+        key: "synth".into(),
+        problem: format!("cannot be written as TOML: {e}"),
+    })?;
+    let created = !out_dir.exists();
+    prepare_out_dir(out_dir)?;
+    let written = write_scan_files(groove, out_dir, &meta_text, job);
+    if written.is_err() {
+        // The folder was new or empty: everything in it is this run's, and a scan cut short
+        // (cancelled, a full disk) is no use to anyone.
+        clear_out_dir(out_dir, created);
+    }
+    let groups = written?;
     let reference = groove.reference();
     Ok(SynthSummary {
         out_dir: out_dir.to_path_buf(),

@@ -423,7 +423,7 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
         msg.contains("too short") && msg.contains("short.wav"),
         "{msg}"
     );
-    // Cancelled: no scan.toml, so the folder is not a loadable scan.
+    // Cancelled: the new folder is gone again, and an empty one is left empty.
     let c = dir.path().join("cancelled");
     let e = render_scan(
         &sound,
@@ -433,7 +433,25 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
     )
     .unwrap_err();
     assert!(matches!(e, SynthError::Cancelled));
-    assert!(!c.join("scan.toml").exists());
+    assert!(!c.exists());
+    std::fs::create_dir(&c).unwrap();
+    let cancel_later = AtomicBool::new(false);
+    let e = render_scan(
+        &sound,
+        &SynthConfig::quick_test(),
+        &c,
+        Job::new(
+            &|done, _| {
+                if done == 1 {
+                    cancel_later.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
+            },
+            &cancel_later,
+        ),
+    )
+    .unwrap_err();
+    assert!(matches!(e, SynthError::Cancelled));
+    assert_eq!(std::fs::read_dir(&c).unwrap().count(), 0, "emptied");
 }
 
 #[test]

@@ -210,6 +210,7 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
         meta,
         groups: entries,
         reference: Some(dir.join("reference.wav")).filter(|p| p.is_file()),
+        frame_size: (width, height),
     })
 }
 

@@ -125,7 +125,7 @@ fn pack_into(scan: &Scan, tmp: &Path, level: i32, job: Job<'_>) -> Result<PackSu
     for (g, entry) in scan.groups.iter().enumerate() {
         if job.is_cancelled() {
             return Err(LoadError::Io {
-                problem: "pack cancelled".into(),
+                problem: "packing this scan was cancelled; the unfinished store is removed".into(),
                 path: scan.dir.clone(),
             });
         }

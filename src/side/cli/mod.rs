@@ -2,7 +2,6 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use anyhow::{Result, bail};
@@ -264,18 +263,6 @@ fn check_hough(params: &PipelineParams, scan: &Scan, file: Option<&Path>) -> Res
     Ok(())
 }
 
-pub(crate) fn refuse_existing(paths: &[&Path], force: bool) -> Result<()> {
-    for out in paths {
-        if out.exists() && !force {
-            bail!(
-                "refusing to overwrite an existing file (use --force): {}",
-                out.display()
-            );
-        }
-    }
-    Ok(())
-}
-
 /// Runs `run` with the terminal progress `args` ask for, each finished group to `sink`;
 /// returns its result and rate.
 fn run_with_progress(
@@ -284,8 +271,12 @@ fn run_with_progress(
     sink: &mut dyn FnMut(GroupOutcome),
 ) -> Result<(crate::side::run::RangeResult, RunProgress)> {
     let mut progress = ProgressOut::new(run.range.len(), args);
-    let cancel = AtomicBool::new(false);
-    let result = run_range(run, &mut |e| progress.event(e), sink, &cancel);
+    let result = run_range(
+        run,
+        &mut |e| progress.event(e),
+        sink,
+        crate::job::interrupted(),
+    );
     match result {
         Ok(r) => {
             let p = progress.summary(r.groups - r.resumed);
@@ -317,8 +308,11 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
         .chain(args.report.as_deref())
         .collect();
+    crate::cli::check_outputs(&outputs, args.force)?;
+    if args.groups == Some(0) {
+        bail!("--groups must be at least 1: {}", args.scan.display());
+    }
     let _locks = lock_outputs(&outputs)?;
-    refuse_existing(&outputs, args.force)?;
     let mut params = load_params(args.params.as_deref())?;
     params.path = path_choice(&args.path, params.path);
     params.method = method_choice(args.method.as_deref(), params.method);
@@ -348,35 +342,66 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         resume: args.side.resume,
         force: args.force,
     };
-    let started = Instant::now();
-    // Each group goes into the clip as it finishes: the clip keeps its signals packed and
-    // drops the rest (timings summed, slope entries already in the history).
-    let mut clip = ClipGroups::with_capacity(run.range.len());
-    let (result, run_progress) = run_with_progress(&run, args, &mut |g| clip.add(g))?;
-    let mut rec = finish_reconstruction(
-        clip,
-        &scan.meta,
-        scan.reference.as_deref(),
-        &params,
-        &scan.dir,
-    )?;
-    rec.timings.total_secs = started.elapsed().as_secs_f64();
-    write_wav(&args.out, &rec.audio, args.bits, args.force)?;
-    if let Some(report_path) = &args.report {
-        let mut report = make_report(
-            &scan.dir,
+    let had_journal = journal.exists();
+    let mut finished = 0usize;
+    let outcome = (|| -> Result<Reconstruction> {
+        let started = Instant::now();
+        // Each group goes into the clip as it finishes: the clip keeps its signals packed and
+        // drops the rest (timings summed, slope entries already in the history).
+        let mut clip = ClipGroups::with_capacity(run.range.len());
+        let (result, run_progress) = run_with_progress(&run, args, &mut |g| {
+            finished += 1;
+            clip.add(g);
+        })?;
+        let mut rec = finish_reconstruction(
+            clip,
             &scan.meta,
-            &args.out,
-            args.params.as_deref(),
+            scan.reference.as_deref(),
             &params,
-            &rec,
-        );
-        report.progress = Some(run_progress.clone());
-        write_json_atomic(report_path, &report, args.force)?;
+            &scan.dir,
+        )?;
+        rec.timings.total_secs = started.elapsed().as_secs_f64();
+        write_wav(&args.out, &rec.audio, args.bits, args.force)?;
+        if let Some(report_path) = &args.report {
+            let mut report = make_report(
+                &scan.dir,
+                &scan.meta,
+                &args.out,
+                args.params.as_deref(),
+                &params,
+                &rec,
+            );
+            report.progress = Some(run_progress.clone());
+            write_json_atomic(report_path, &report, args.force)?;
+        }
+        result.journal.remove()?;
+        finish_message(args, &rec, &run_progress);
+        Ok(rec)
+    })();
+    let ours = !had_journal || args.side.resume || args.force;
+    outcome.map_err(|e| after_failure(e, &journal, ours, finished))
+}
+
+/// A failed run's error, and what becomes of its journal: one this run did not start or
+/// continue is left alone; one holding no finished group, or only groups that made no sound,
+/// is removed (nothing to go on from); otherwise it is kept and the line says how to go on.
+fn after_failure(e: anyhow::Error, journal: &Path, ours: bool, finished: usize) -> anyhow::Error {
+    if !ours || !journal.exists() {
+        return e;
     }
-    result.journal.remove()?;
-    finish_message(args, &rec, &run_progress);
-    Ok(rec)
+    let no_sound = matches!(
+        e.downcast_ref::<crate::engine::EngineError>(),
+        Some(crate::engine::EngineError::NoSound { .. })
+    );
+    if finished == 0 || no_sound {
+        let _ = std::fs::remove_file(journal);
+        return e;
+    }
+    anyhow::anyhow!(
+        "{e:#} ({finished} finished groups are kept in {}: the same command with --resume goes on \
+         from them)",
+        journal.display()
+    )
 }
 
 fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress) {
@@ -388,10 +413,11 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
         });
         json_line(&line);
     }
+    // Warnings are printed even with --quiet: a gap filled with silence must not pass unseen.
+    crate::cli::print_warnings(&rec.warnings);
     if args.quiet {
         return;
     }
-    crate::cli::print_warnings(&rec.warnings);
     let details = format!(
         "{} groups in {:.1} s, {:.1} groups/s",
         rec.groups.len(),

@@ -6,7 +6,8 @@ use std::time::Instant;
 
 use anyhow::Result;
 
-use super::{lock_outputs, make_report, refuse_existing};
+use super::{lock_outputs, make_report};
+use crate::cli::check_outputs;
 use crate::cli::{load_params, path_choice};
 use crate::engine::{GroupOutcome, GroupStream, SlopeMode, run_groups};
 use crate::io::wav::{WavBits, write_wav};
@@ -68,7 +69,7 @@ pub struct MergeArgs {
     /// Replace existing output files.
     #[arg(long)]
     pub force: bool,
-    /// No summary line.
+    /// No summary line (warnings still go to stderr).
     #[arg(long)]
     pub quiet: bool,
 }
@@ -81,8 +82,8 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
         .chain(args.report.as_deref())
         .collect();
+    check_outputs(&outputs, args.force)?;
     let _locks = lock_outputs(&outputs)?;
-    refuse_existing(&outputs, args.force)?;
     let started = Instant::now();
     let merged = merge_parts(&args.parts)?;
     let mut rec = merged.reconstruction;
@@ -100,8 +101,8 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         );
         write_json_atomic(report_path, &report, args.force)?;
     }
+    crate::cli::print_warnings(&rec.warnings);
     if !args.quiet {
-        crate::cli::print_warnings(&rec.warnings);
         let details = format!(
             "from {} parts, {} groups",
             merged.parts.len(),
@@ -158,7 +159,7 @@ fn probe_secs_per_group(
 /// # Errors
 /// An unreadable scan or params, a shard count out of range, an existing plan file.
 pub fn run_plan(args: &PlanArgs) -> Result<()> {
-    refuse_existing(&[args.out.as_path()], args.force)?;
+    check_outputs(&[args.out.as_path()], args.force)?;
     let mut params = load_params(args.params.as_deref())?;
     params.path = path_choice(&args.path, params.path);
     let scan = Scan::open(&args.scan)?;
@@ -187,16 +188,28 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
     }
     if args.slurm {
         let last = plan.shards.len() - 1;
-        let parts = args.parts.display();
+        let parts = shell_quoted(&args.parts);
         println!(
             "# submit the shards as a job array, then the merge once every shard has finished:\n\
              jid=$(sbatch --parsable --array=0-{last} scripts/slurm/reconstruct-side.sbatch {} {} {parts})\n\
              sbatch --dependency=afterok:$jid scripts/slurm/merge-side.sbatch {parts} side.wav",
-            scan.dir.display(),
-            args.out.display(),
+            shell_quoted(&scan.dir),
+            shell_quoted(&args.out),
         );
     }
     Ok(())
+}
+
+/// `path` as one word for a POSIX shell: bare when it holds only safe characters, else in
+/// single quotes (a quote inside written as `'\''`).
+fn shell_quoted(path: &Path) -> String {
+    let text = path.to_string_lossy();
+    let safe = |c: char| c.is_ascii_alphanumeric() || "/._-+:,=@%".contains(c);
+    if !text.is_empty() && text.chars().all(safe) {
+        text.into_owned()
+    } else {
+        format!("'{}'", text.replace('\'', r"'\''"))
+    }
 }
 
 /// `s` as "1 h 05 min", "3 min 20 s" or "4.2 s".
@@ -211,5 +224,28 @@ fn human_secs(s: f64) -> String {
         format!("{} min {:02} s", (s / 60.0) as u64, (s % 60.0) as u64)
     } else {
         format!("{s:.1} s")
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quoted_paths_reach_the_shell_as_one_word() {
+        for p in [
+            "plain/path.zarr",
+            "ü dir/z ø.zarr",
+            "it's here",
+            "a$b`c\"d e",
+        ] {
+            let out = std::process::Command::new("sh")
+                .arg("-c")
+                .arg(format!("printf %s {}", shell_quoted(Path::new(p))))
+                .output()
+                .unwrap();
+            assert_eq!(String::from_utf8(out.stdout).unwrap(), p);
+        }
     }
 }

@@ -1,0 +1,157 @@
+//! What a failed or refused run leaves behind: outputs checked before any work, a journal kept
+//! only when it holds groups to go on from (and the line says so), a group of another frame
+//! size named, warnings printed even with `--quiet`.
+#![allow(clippy::unwrap_used)] // tests may panic
+
+mod common;
+
+use std::path::Path;
+
+use common::{demo_copy, groovescope, stderr};
+use groovescope::image::Image;
+use groovescope::io::save_grey_png;
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Every entry of `dir`, sorted.
+fn listing(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// Runs `reconstruct SCAN --out OUT` with `extra`; the run must fail with one line holding
+/// every `wanted`.
+fn refused(scan: &Path, out: &Path, extra: &[&str], wanted: &[&str]) {
+    let mut args = vec!["reconstruct", s(scan), "--out", s(out), "--quiet"];
+    args.extend_from_slice(extra);
+    let o = groovescope(&args);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(wanted.iter().all(|w| err.contains(w)), "{err}");
+}
+
+#[test]
+fn outputs_are_checked_before_any_group_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    let folder = work.join("a-folder");
+    std::fs::create_dir(&folder).unwrap();
+    refused(&scan, &folder, &["--force"], &["is a folder", "a-folder"]);
+    let report = work.join("r.json");
+    refused(
+        &scan,
+        &work.join("x.wav"),
+        &["--report", s(&folder), "--force"],
+        &["is a folder", "a-folder"],
+    );
+    refused(
+        &scan,
+        &work.join("nodir/x.wav"),
+        &[],
+        &["folder does not exist", "nodir"],
+    );
+    let same = work.join("same.wav");
+    refused(
+        &scan,
+        &same,
+        &["--report", s(&same)],
+        &["same file", "same.wav"],
+    );
+    refused(
+        &scan,
+        &work.join("g.wav"),
+        &["--groups", "0"],
+        &["--groups must be at least 1"],
+    );
+    assert!(!report.exists());
+    assert_eq!(listing(&work), ["a-folder"], "nothing written, no journal");
+}
+
+#[test]
+fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    // Group 4 unreadable without --keep-going: groups 0..4 are done and journaled first.
+    std::fs::write(demo.join("g00004/f003.png"), b"not a png").unwrap();
+    let out = work.join("a.wav");
+    let o = groovescope(&["reconstruct", s(&demo), "--out", s(&out), "--quiet"]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("f003.png")
+            && err.contains("4 finished groups are kept in")
+            && err.contains("a.wav.journal")
+            && err.contains("--resume"),
+        "{err}"
+    );
+    assert_eq!(listing(&work), ["a.wav.journal"]);
+    // Mended, the same command with --resume goes on from them.
+    std::fs::copy(demo.join("g00005/f003.png"), demo.join("g00004/f003.png")).unwrap();
+    let o = groovescope(&[
+        "reconstruct",
+        s(&demo),
+        "--out",
+        s(&out),
+        "--quiet",
+        "--resume",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(listing(&work), ["a.wav"]);
+    // A run that fails on its first group has nothing to go on from: no journal stays.
+    std::fs::write(demo.join("g00000/f003.png"), b"not a png").unwrap();
+    let first = work.join("b.wav");
+    let o = groovescope(&["reconstruct", s(&demo), "--out", s(&first), "--quiet"]);
+    assert!(!o.status.success());
+    assert!(!stderr(&o).contains("kept in"), "{}", stderr(&o));
+    assert_eq!(listing(&work), ["a.wav"]);
+}
+
+#[test]
+fn a_group_of_another_frame_size_is_named_or_with_keep_going_a_gap_that_quiet_still_shows() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    let group = demo.join("g00003");
+    for entry in std::fs::read_dir(&group).unwrap() {
+        let path = entry.unwrap().path();
+        let img = Image::from_fn(200, 100, |x, y| ((x * 7 + y * 3) % 11) as f32 / 11.0);
+        save_grey_png(&img, &path, false, true).unwrap();
+    }
+    let out = dir.path().join("o.wav");
+    refused(
+        &demo,
+        &out,
+        &[],
+        &["200x100", "the scan's are 320x384", "g00003"],
+    );
+    // (The refused run kept its 3 finished groups for --resume: this one writes elsewhere.)
+    let out = dir.path().join("gap.wav");
+    let o = groovescope(&[
+        "reconstruct",
+        s(&demo),
+        "--out",
+        s(&out),
+        "--quiet",
+        "--keep-going",
+        "--groups",
+        "5",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("warning: group 3") && err.contains("200x100") && err.contains("silence"),
+        "--quiet keeps the warning: {err}"
+    );
+    assert!(o.stdout.is_empty());
+}
