@@ -256,9 +256,12 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         pb.set_position(done as u64);
     };
     let job = Job::reporting(&progress);
+    // The built-in sounds are made at 48 kHz: a frequency at or past its Nyquist would alias.
+    let nyquist_hz = f64::from(BUILTIN_RATE_HZ) / 2.0;
+    let audible = |f: f64| f.is_finite() && f > 0.0 && f < nyquist_hz;
     let builtin = if let Some(f) = args.tone {
-        if !(f.is_finite() && f > 0.0) {
-            bail!("--tone must be a positive frequency, got {f}");
+        if !audible(f) {
+            bail!("--tone must be a frequency above 0 and below {nyquist_hz} Hz, got {f}");
         }
         Some(tone(f, args.duration, BUILTIN_RATE_HZ))
     } else if let Some(spec) = &args.sweep {
@@ -268,6 +271,9 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         let (Ok(f0), Ok(f1)) = (a.parse::<f64>(), b.parse::<f64>()) else {
             bail!("--sweep takes F0:F1 in Hz, got {spec}");
         };
+        if !(audible(f0) && audible(f1)) {
+            bail!("--sweep frequencies must be above 0 and below {nyquist_hz} Hz, got {spec}");
+        }
         Some(sweep(f0, f1, args.duration, BUILTIN_RATE_HZ))
     } else if args.melody {
         Some(arpeggio(args.duration / 4.0, BUILTIN_RATE_HZ))

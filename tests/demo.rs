@@ -73,6 +73,10 @@ fn no_subcommand_without_a_display_writes_the_demo_wav_and_report_here() {
     assert!(read_wav(&wav).unwrap().duration_secs() >= 3.0);
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(json["groove"], 2);
+    // The strip holds three turns (truth.toml); the third one's last blocks, by the image's
+    // edge, once counted as a fourth groove.
+    let found = json["grooves_found"].as_array().unwrap();
+    assert_eq!(found.len(), 3, "{:?}", json["grooves_found"]);
     assert!(json["scores"][0]["r"].as_f64().unwrap() >= MIN_R, "{json}");
 }
 

@@ -145,8 +145,13 @@ impl Scan {
             return super::zarr::open_scan(dir);
         }
         if !dir.is_dir() {
+            let problem = if dir.exists() {
+                "not a scan: a scan is a folder (of group folders, or a Zarr store), not a file"
+            } else {
+                "no such folder"
+            };
             return Err(LoadError::NotAScan {
-                problem: "no such folder".into(),
+                problem: problem.into(),
                 path: dir.to_path_buf(),
             });
         }

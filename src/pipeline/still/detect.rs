@@ -27,6 +27,8 @@ const GAP_CLUSTER_RATIO: f64 = 1.6;
 const GAP_CLUSTER_SHARE: f64 = 0.2;
 /// Without two clusters, gaps under this share of the median wall are bottoms.
 const LONE_BOTTOM_SHARE: f64 = 0.5;
+/// Most blocks a piece of a groove may share with the track it joins (see `absorb_pieces`).
+const MAX_SHARED_BLOCKS: usize = 2;
 /// Linking tolerance as a share of the groove spacing (or of the width for a lone groove).
 const LINK_SHARE: f64 = 0.3;
 /// A groove in a block whose width is off the image's median by more than this share is a
@@ -354,6 +356,61 @@ fn merge_fragments(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64, max_gap: u
     }
 }
 
+/// Joins a shorter track to a longer one it runs along (within `tol` of where the longer one
+/// runs, interpolated) while sharing at most [`MAX_SHARED_BLOCKS`] blocks with it: a piece of
+/// the same groove that [`merge_fragments`] does not join, either cut off on both sides by a
+/// stretch longer than the gap allowance (text burnt in across it) or overlapping the longer
+/// track's end by more than one block (a groove near the image edge found twice in a few
+/// blocks). Left alone it counts as a groove of its own, lying on top of the real one.
+fn absorb_pieces(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64) {
+    let centre = |g: &[f64; 4]| 0.5 * (g[0] + g[3]);
+    let found = |t: &[Option<[f64; 4]>]| -> Vec<(f64, [f64; 4])> {
+        t.iter()
+            .enumerate()
+            .filter_map(|(b, g)| g.map(|g| (b as f64, g)))
+            .collect()
+    };
+    loop {
+        let mut join = None;
+        'search: for (b, piece) in tracks.iter().enumerate() {
+            let own = found(piece);
+            for (a, track) in tracks.iter().enumerate() {
+                let host = found(track);
+                if a == b || host.len() <= own.len() {
+                    continue;
+                }
+                let shared = piece
+                    .iter()
+                    .zip(track)
+                    .filter(|(p, t)| p.is_some() && t.is_some())
+                    .count();
+                let near = own.iter().all(|(block, g)| {
+                    (centre(g) - centre(&interpolate(&host, *block))).abs() < tol
+                });
+                if shared <= MAX_SHARED_BLOCKS && near {
+                    join = Some((a, b));
+                    break 'search;
+                }
+            }
+        }
+        let Some((a, b)) = join else { return };
+        let piece = tracks.remove(b);
+        let a = if b < a { a - 1 } else { a };
+        let w = median(tracks[a].iter().flatten().map(|g| g[3] - g[0]).collect()).unwrap_or(0.0);
+        for (slot, g) in tracks[a].iter_mut().zip(piece) {
+            match (slot.as_ref(), g) {
+                (None, Some(g)) => *slot = Some(g),
+                // A block both hold: the groove nearer the host's median width, as in
+                // `merge_fragments`.
+                (Some(s), Some(g)) if ((g[3] - g[0]) - w).abs() < ((s[3] - s[0]) - w).abs() => {
+                    *slot = Some(g);
+                }
+                _ => {}
+            }
+        }
+    }
+}
+
 /// Least-squares slope of centre against block over the found blocks.
 fn slope(blocks: &[Option<[f64; 4]>]) -> Option<f64> {
     let pts: Vec<(f64, f64)> = blocks
@@ -484,6 +541,7 @@ pub fn detect_grooves(
     let tol = spacing.map_or(0.5 * width, |s| LINK_SHARE * s).max(2.0);
     let mut tracks: Vec<Vec<Option<[f64; 4]>>> = link(&per_block, tol, params.max_gap_blocks);
     merge_fragments(&mut tracks, tol, params.max_gap_blocks);
+    absorb_pieces(&mut tracks, tol);
     tracks.retain(|t| t.iter().flatten().count() >= params.min_track_blocks);
     if tracks.is_empty() {
         let (lines_name, cross_name) = match profiles.axis {
@@ -588,4 +646,45 @@ pub fn choose_groove(map: &GrooveMap, asked: Option<usize>) -> Result<usize, Sti
             found,
             side,
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A groove at `centre` px (4 px wide) in `blocks`.
+    fn track(centre: f64, blocks: &[usize], len: usize) -> Vec<Option<[f64; 4]>> {
+        (0..len)
+            .map(|b| {
+                blocks.contains(&b).then_some([
+                    centre - 2.0,
+                    centre - 1.0,
+                    centre + 1.0,
+                    centre + 2.0,
+                ])
+            })
+            .collect()
+    }
+
+    #[test]
+    fn pieces_of_a_groove_join_it_and_other_grooves_do_not() {
+        let host: Vec<usize> = (0..10).chain(20..28).collect();
+        let mut tracks = vec![
+            track(50.0, &host, 30),
+            // In the host's hole.
+            track(50.5, &[13, 14, 15], 30),
+            // The next groove, 20 px on: apart in blocks but not near.
+            track(70.0, &[12, 13], 30),
+            // Sharing three of the host's blocks: another groove, whatever its position.
+            track(51.0, &[7, 8, 9, 10], 30),
+            // Past the host's end, sharing its last two blocks: the same groove.
+            track(49.5, &[26, 27, 28, 29], 30),
+        ];
+        absorb_pieces(&mut tracks, 6.0);
+        assert_eq!(tracks.len(), 3, "{tracks:?}");
+        let joined = tracks[0].iter().flatten().count();
+        assert_eq!(joined, host.len() + 3 + 2);
+        assert!(tracks[0][14].is_some_and(|g| (g[0] - 48.5).abs() < 1e-9));
+        assert!(tracks[0][29].is_some_and(|g| (g[0] - 47.5).abs() < 1e-9));
+    }
 }

@@ -378,23 +378,34 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         finish_message(args, &rec, &run_progress);
         Ok(rec)
     })();
-    let ours = !had_journal || args.side.resume || args.force;
-    outcome.map_err(|e| after_failure(e, &journal, ours, finished))
+    // The journal is this run's own when it was not there, or when --force (without
+    // --resume) started it over; a refused or failed --resume never loses the one it was given.
+    let created = !had_journal || (args.force && !args.side.resume);
+    outcome.map_err(|e| after_failure(e, &journal, created, finished))
 }
 
-/// A failed run's error, and what becomes of its journal: one this run did not start or
-/// continue is left alone; one holding no finished group, or only groups that made no sound,
-/// is removed (nothing to go on from); otherwise it is kept and the line says how to go on.
-fn after_failure(e: anyhow::Error, journal: &Path, ours: bool, finished: usize) -> anyhow::Error {
-    if !ours || !journal.exists() {
+/// A failed run's error, and what becomes of its journal: one this run `created` is removed
+/// when it holds no finished group, or only groups that made no sound (nothing to go on
+/// from); a journal holding finished groups is kept and the line says how to go on; one the
+/// run was given (--resume) is never removed.
+fn after_failure(
+    e: anyhow::Error,
+    journal: &Path,
+    created: bool,
+    finished: usize,
+) -> anyhow::Error {
+    if !journal.exists() {
         return e;
     }
     let no_sound = matches!(
         e.downcast_ref::<crate::engine::EngineError>(),
         Some(crate::engine::EngineError::NoSound { .. })
     );
-    if finished == 0 || no_sound {
+    if created && (finished == 0 || no_sound) {
         let _ = std::fs::remove_file(journal);
+        return e;
+    }
+    if finished == 0 {
         return e;
     }
     anyhow::anyhow!(
