@@ -7,7 +7,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{demo_copy, groovescope, stderr};
+use common::{demo_copy, groovescope, names, stderr};
 use groovescope::image::Image;
 use groovescope::io::save_grey_png;
 
@@ -15,22 +15,16 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// Every entry of `dir`, sorted.
-fn listing(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
-}
-
-/// Runs `reconstruct SCAN --out OUT` with `extra`; the run must fail with one line holding
-/// every `wanted`.
-fn refused(scan: &Path, out: &Path, extra: &[&str], wanted: &[&str]) {
+/// Runs `reconstruct SCAN --out OUT --quiet` with `extra`.
+fn reconstruct(scan: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
     let mut args = vec!["reconstruct", s(scan), "--out", s(out), "--quiet"];
     args.extend_from_slice(extra);
-    let o = groovescope(&args);
+    groovescope(&args)
+}
+
+/// [`reconstruct`], which must fail with one line holding every `wanted`.
+fn refused(scan: &Path, out: &Path, extra: &[&str], wanted: &[&str]) {
+    let o = reconstruct(scan, out, extra);
     assert!(!o.status.success());
     let err = stderr(&o);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
@@ -73,7 +67,7 @@ fn outputs_are_checked_before_any_group_runs() {
         &["--groups must be at least 1"],
     );
     assert!(!report.exists());
-    assert_eq!(listing(&work), ["a-folder"], "nothing written, no journal");
+    assert_eq!(names(&work), ["a-folder"], "nothing written, no journal");
 }
 
 #[test]
@@ -85,7 +79,7 @@ fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
     // Group 4 unreadable without --keep-going: groups 0..4 are done and journaled first.
     std::fs::write(demo.join("g00004/f003.png"), b"not a png").unwrap();
     let out = work.join("a.wav");
-    let o = groovescope(&["reconstruct", s(&demo), "--out", s(&out), "--quiet"]);
+    let o = reconstruct(&demo, &out, &[]);
     assert!(!o.status.success());
     let err = stderr(&o);
     assert_eq!(err.trim().lines().count(), 1, "{err}");
@@ -96,26 +90,19 @@ fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
             && err.contains("--resume"),
         "{err}"
     );
-    assert_eq!(listing(&work), ["a.wav.journal"]);
+    assert_eq!(names(&work), ["a.wav.journal"]);
     // Mended, the same command with --resume goes on from them.
     std::fs::copy(demo.join("g00005/f003.png"), demo.join("g00004/f003.png")).unwrap();
-    let o = groovescope(&[
-        "reconstruct",
-        s(&demo),
-        "--out",
-        s(&out),
-        "--quiet",
-        "--resume",
-    ]);
+    let o = reconstruct(&demo, &out, &["--resume"]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert_eq!(listing(&work), ["a.wav"]);
+    assert_eq!(names(&work), ["a.wav"]);
     // A run that fails on its first group has nothing to go on from: no journal stays.
     std::fs::write(demo.join("g00000/f003.png"), b"not a png").unwrap();
     let first = work.join("b.wav");
-    let o = groovescope(&["reconstruct", s(&demo), "--out", s(&first), "--quiet"]);
+    let o = reconstruct(&demo, &first, &[]);
     assert!(!o.status.success());
     assert!(!stderr(&o).contains("kept in"), "{}", stderr(&o));
-    assert_eq!(listing(&work), ["a.wav"]);
+    assert_eq!(names(&work), ["a.wav"]);
 }
 
 #[test]
@@ -137,16 +124,7 @@ fn a_group_of_another_frame_size_is_named_or_with_keep_going_a_gap_that_quiet_st
     );
     // (The refused run kept its 3 finished groups for --resume: this one writes elsewhere.)
     let out = dir.path().join("gap.wav");
-    let o = groovescope(&[
-        "reconstruct",
-        s(&demo),
-        "--out",
-        s(&out),
-        "--quiet",
-        "--keep-going",
-        "--groups",
-        "5",
-    ]);
+    let o = reconstruct(&demo, &out, &["--keep-going", "--groups", "5"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let err = stderr(&o);
     assert!(

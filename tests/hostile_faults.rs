@@ -9,7 +9,7 @@ use std::process::{Command, Stdio};
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use common::{demo_copy, stderr};
+use common::{demo_copy, names, stderr};
 use groovescope::engine::{EngineError, ReconstructOptions, reconstruct};
 use groovescope::io::Scan;
 use groovescope::io::lock::{OutputLock, lock_path};
@@ -30,16 +30,6 @@ fn run(
         ..ReconstructOptions::default()
     };
     reconstruct(scan, &opts, &mut |_| {}, &AtomicBool::new(false))
-}
-
-/// Names in `dir`, sorted.
-fn names(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
 }
 
 #[test]
