@@ -201,6 +201,15 @@ impl ScanMeta {
                 ));
             }
         }
+        // The land moves f·U/Z = U / pitch px a frame: past the frame's width, consecutive
+        // frames share nothing and neither flow nor the borders can be followed.
+        let land_shift_px = self.motion.frame_step_um / self.camera.pixel_pitch_um;
+        if land_shift_px >= width as f64 {
+            return Err(format!(
+                "motion.frame_step_um = {} µm moves the land {land_shift_px:.4e} px between frames, not less than the frame's {width} px width (at {} µm a pixel), so consecutive frames would share nothing",
+                self.motion.frame_step_um, self.camera.pixel_pitch_um
+            ));
+        }
         let margin_px = crate::pipeline::sampling::SAMPLE_MARGIN_PX;
         let view_um = (width as f64 - 1.0 - 2.0 * margin_px) * self.camera.pixel_pitch_um;
         if groups > 1 && self.motion.group_step_um > view_um {

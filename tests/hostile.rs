@@ -107,6 +107,27 @@ fn a_group_step_longer_than_a_group_sees_names_the_key_and_both_numbers() {
 }
 
 #[test]
+fn a_frame_step_past_the_frame_width_names_the_key_and_both_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    // 32 px frames of 0.39 µm: a 12.48 µm step moves the land the whole 32 px.
+    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    for step in ["12.48", "1e30"] {
+        let text = SCAN_TOML.replace("frame_step_um = 0.78", &format!("frame_step_um = {step}"));
+        std::fs::write(scan.join("scan.toml"), &text).unwrap();
+        let msg = open_err(&scan);
+        assert!(
+            msg.contains("motion.frame_step_um")
+                && msg.contains("32 px")
+                && msg.contains("scan.toml"),
+            "{msg}"
+        );
+    }
+    let text = SCAN_TOML.replace("frame_step_um = 0.78", "frame_step_um = 12.0");
+    std::fs::write(scan.join("scan.toml"), &text).unwrap();
+    assert!(Scan::open(&scan).is_ok());
+}
+
+#[test]
 fn an_unreadable_reference_is_a_warning_naming_it_and_the_reconstruction_goes_on() {
     let dir = tempfile::tempdir().unwrap();
     let demo = demo_copy(dir.path());

@@ -402,3 +402,57 @@ fn copy_dir(from: &Path, to: &Path) {
         }
     }
 }
+
+#[test]
+fn ctrl_c_stops_at_the_next_group_keeps_the_journal_and_says_so() {
+    let (_keep, scan, one) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("side.wav");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+        .args(["reconstruct", s(scan), "--out", s(&out), "--progress-json"])
+        .env_remove("DISPLAY")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let reader = BufReader::new(child.stdout.take().unwrap());
+    for line in reader.lines() {
+        let v: serde_json::Value = serde_json::from_str(&line.unwrap()).unwrap();
+        if v["event"] == "group" && v["done"].as_u64().unwrap() >= 5 {
+            let pid = child.id().to_string();
+            assert!(
+                Command::new("kill")
+                    .args(["-INT", &pid])
+                    .status()
+                    .unwrap()
+                    .success()
+            );
+            break;
+        }
+    }
+    let o = child.wait_with_output().unwrap();
+    let err = stderr(&o);
+    // An exit of its own (status 1), not death by the signal.
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("cancelled")
+            && err.contains("finished groups are kept in")
+            && err.contains("--resume"),
+        "{err}"
+    );
+    assert_eq!(
+        common::names(tmp.path()),
+        ["side.wav.journal"],
+        "no WAV, no lock file"
+    );
+    let o = groovescope(&[
+        "reconstruct",
+        s(scan),
+        "--out",
+        s(&out),
+        "--resume",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::read(&out).unwrap() == *one, "resumed WAV differs");
+}

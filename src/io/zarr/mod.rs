@@ -187,6 +187,11 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
             path: dir.join("frames"),
         });
     }
+    meta.check_against_scan(groups, (width, height))
+        .map_err(|problem| LoadError::Metadata {
+            problem,
+            path: dir.join("zarr.json"),
+        })?;
     let entries = attrs
         .groups
         .iter()
