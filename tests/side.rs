@@ -284,28 +284,36 @@ fn a_plan_for_another_scan_and_a_shard_out_of_range_are_refused() {
     assert!(e.contains("edited or is damaged"), "{e}");
 }
 
-/// Spawns `args`, reads its `--progress-json` lines and kills it (SIGKILL) once `done` reaches
-/// `kill_at`; returns whether it was killed before finishing.
-fn kill_at(args: &[&str], kill_at: usize) -> bool {
+/// Spawns `args` with `--progress-json` (its stderr to `stderr`) and reads its progress lines
+/// until `done` reaches `at`; returns the child and whether it got there before finishing.
+fn spawn_until(args: &[&str], at: usize, stderr: Stdio) -> (std::process::Child, bool) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
         .args(args)
         .arg("--progress-json")
         .env_remove("DISPLAY")
         .stdout(Stdio::piped())
-        .stderr(Stdio::null())
+        .stderr(stderr)
         .spawn()
         .unwrap();
     let reader = BufReader::new(child.stdout.take().unwrap());
     for line in reader.lines() {
         let v: serde_json::Value = serde_json::from_str(&line.unwrap()).unwrap();
-        if v["event"] == "group" && v["done"].as_u64().unwrap() as usize >= kill_at {
-            child.kill().unwrap();
-            let status = child.wait().unwrap();
-            return !status.success();
+        if v["event"] == "group" && v["done"].as_u64().unwrap() as usize >= at {
+            return (child, true);
         }
     }
-    child.wait().unwrap();
-    false
+    (child, false)
+}
+
+/// Kills `args` (SIGKILL) once its `done` reaches `kill_at`; returns whether it was killed
+/// before finishing.
+fn kill_at(args: &[&str], kill_at: usize) -> bool {
+    let (mut child, reached) = spawn_until(args, kill_at, Stdio::null());
+    if reached {
+        child.kill().unwrap();
+    }
+    let status = child.wait().unwrap();
+    reached && !status.success()
 }
 
 /// A group to kill at, from the clock (the test is the same whichever it is).
@@ -408,28 +416,17 @@ fn ctrl_c_stops_at_the_next_group_keeps_the_journal_and_says_so() {
     let (_keep, scan, one) = shared();
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("side.wav");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
-        .args(["reconstruct", s(scan), "--out", s(&out), "--progress-json"])
-        .env_remove("DISPLAY")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let reader = BufReader::new(child.stdout.take().unwrap());
-    for line in reader.lines() {
-        let v: serde_json::Value = serde_json::from_str(&line.unwrap()).unwrap();
-        if v["event"] == "group" && v["done"].as_u64().unwrap() >= 5 {
-            let pid = child.id().to_string();
-            assert!(
-                Command::new("kill")
-                    .args(["-INT", &pid])
-                    .status()
-                    .unwrap()
-                    .success()
-            );
-            break;
-        }
-    }
+    let args = ["reconstruct", s(scan), "--out", s(&out)];
+    let (child, reached) = spawn_until(&args, 5, Stdio::piped());
+    assert!(reached);
+    let pid = child.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-INT", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
     let o = child.wait_with_output().unwrap();
     let err = stderr(&o);
     // An exit of its own (status 1), not death by the signal.
