@@ -7,7 +7,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{demo_copy, groovescope, names, stderr};
+use common::{demo_copy, names, reconstruct, stderr};
 use groovescope::image::Image;
 use groovescope::io::save_grey_png;
 
@@ -15,14 +15,7 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-/// Runs `reconstruct SCAN --out OUT --quiet` with `extra`.
-fn reconstruct(scan: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
-    let mut args = vec!["reconstruct", s(scan), "--out", s(out), "--quiet"];
-    args.extend_from_slice(extra);
-    groovescope(&args)
-}
-
-/// [`reconstruct`], which must fail with one line holding every `wanted`.
+/// `reconstruct`, which must fail with one line holding every `wanted`.
 fn refused(scan: &Path, out: &Path, extra: &[&str], wanted: &[&str]) {
     let o = reconstruct(scan, out, extra);
     assert!(!o.status.success());

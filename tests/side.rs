@@ -346,15 +346,7 @@ fn a_run_killed_at_a_random_group_resumes_to_the_same_bytes() {
     // A journal from other params is refused, never mixed.
     let params = tmp.path().join("params.toml");
     std::fs::write(&params, "[flow]\nlambda = 0.3\n").unwrap();
-    let o = groovescope(&[
-        "reconstruct",
-        s(scan),
-        "--out",
-        s(&out),
-        "--resume",
-        "--params",
-        s(&params),
-    ]);
+    let o = common::reconstruct(scan, &out, &["--resume", "--params", s(&params)]);
     let e = stderr(&o);
     assert!(
         !o.status.success() && e.contains("other params") && e.contains(s(&journal)),
@@ -442,14 +434,7 @@ fn ctrl_c_stops_at_the_next_group_keeps_the_journal_and_says_so() {
         ["side.wav.journal"],
         "no WAV, no lock file"
     );
-    let o = groovescope(&[
-        "reconstruct",
-        s(scan),
-        "--out",
-        s(&out),
-        "--resume",
-        "--quiet",
-    ]);
+    let o = common::reconstruct(scan, &out, &["--resume"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(std::fs::read(&out).unwrap() == *one, "resumed WAV differs");
 }

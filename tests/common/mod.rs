@@ -51,6 +51,14 @@ pub fn groovescope(args: &[&str]) -> Output {
         .unwrap()
 }
 
+/// Runs `groovescope reconstruct SCAN --out OUT --quiet` with `extra`.
+pub fn reconstruct(scan: &Path, out: &Path, extra: &[&str]) -> Output {
+    let (scan, out) = (scan.to_str().unwrap(), out.to_str().unwrap());
+    let mut args = vec!["reconstruct", scan, "--out", out, "--quiet"];
+    args.extend_from_slice(extra);
+    groovescope(&args)
+}
+
 /// The names in `dir`, sorted.
 pub fn names(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
