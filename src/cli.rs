@@ -351,7 +351,7 @@ pub fn load_params(path: Option<&Path>) -> Result<PipelineParams> {
         }
         None => PipelineParams::default(),
     };
-    if let Err(e) = params.validate() {
+    if let Err(e) = params.validate_for_clip() {
         match path {
             Some(p) => bail!("{e}: {}", p.display()),
             None => bail!("{e}"),

@@ -1,5 +1,5 @@
 //! Every knob at extreme values (NaN, ±∞, −1, 0, tiny, huge): either refused up front by
-//! `PipelineParams::validate`, naming a key, or run through the whole pipeline (a dual-focus
+//! `PipelineParams::validate_for_clip`, naming a key, or run through the whole pipeline (a dual-focus
 //! group, a depth-path group and a still) without a panic.
 #![allow(clippy::unwrap_used)] // tests may panic
 
@@ -117,7 +117,7 @@ fn every_knob_at_an_extreme_is_refused_by_name_or_runs_without_a_panic() {
                     continue;
                 }
             };
-            if let Err(e) = params.validate() {
+            if let Err(e) = params.validate_for_clip() {
                 refused += 1;
                 let e = e.to_string();
                 if e.lines().count() != 1 || !KNOB_DOCS.iter().any(|(k, _)| e.contains(k)) {

@@ -180,7 +180,7 @@ pub fn reconstruct(
 ) -> Result<Reconstruction, EngineError> {
     let started = Instant::now();
     let params = &opts.params;
-    params.validate()?;
+    params.validate_for_clip()?;
     let range = opts.groups.clone().unwrap_or(0..scan.groups.len());
     let range = range.start.min(scan.groups.len())..range.end.min(scan.groups.len());
     let total = range.len();

@@ -217,8 +217,8 @@ impl PipelineParams {
     }
 
     /// Checks every knob: each stage's table through its params' `validate` (the same checks
-    /// the stages make), and the DSP corners against the output rate's Nyquist, so that a
-    /// filter the clip's finishing would refuse is refused before any group runs.
+    /// the stages make). The clip-only checks are [`PipelineParams::validate_for_clip`]'s, so
+    /// that a DSP setting never stops the per-group stages of the workbench.
     ///
     /// # Errors
     /// [`StageError::InvalidParam`] naming the first bad key.
@@ -229,11 +229,21 @@ impl PipelineParams {
         self.orientation.validate()?;
         self.sound.validate()?;
         self.dsp.validate()?;
-        dsp::dsp_chain(f64::from(self.sound.output_rate_hz), &self.dsp)?;
         self.edges.validate()?;
         self.fusion.validate()?;
         self.hough.validate()?;
         self.still.validate()
+    }
+
+    /// [`PipelineParams::validate`], then what finishing a clip needs of the knobs together:
+    /// the DSP corners below the output rate's Nyquist. Run before a clip's first group, so a
+    /// filter the finishing would refuse is refused before hours of groups, not after them.
+    ///
+    /// # Errors
+    /// [`StageError::InvalidParam`] naming the first bad key.
+    pub fn validate_for_clip(&self) -> Result<(), StageError> {
+        self.validate()?;
+        dsp::dsp_chain(f64::from(self.sound.output_rate_hz), &self.dsp).map(|_| ())
     }
 }
 

@@ -143,7 +143,7 @@ pub fn run_range(
     sink: &mut dyn FnMut(GroupOutcome),
     cancel: &AtomicBool,
 ) -> Result<RangeResult, SideError> {
-    run.params.validate().map_err(EngineError::from)?;
+    run.params.validate_for_clip().map_err(EngineError::from)?;
     let exists = run.journal.exists();
     let (mut journal, records) = if exists && run.resume {
         Journal::resume(run.journal, &run.identity)?

@@ -286,3 +286,16 @@ fn spectrum_finds_a_tone_at_its_level() {
     assert!(magnitude_spectrum(&[], fs).is_empty());
     assert!(magnitude_spectrum(&x, f64::NAN).is_empty());
 }
+
+#[test]
+fn a_corner_past_nyquist_is_refused_for_the_clip_but_never_stops_the_stages() {
+    let mut p = crate::pipeline::PipelineParams::default();
+    p.dsp.lowpass_hz = 25_000.0;
+    assert!(p.validate().is_ok(), "the workbench's stages still run");
+    let e = p.validate_for_clip().unwrap_err().to_string();
+    assert!(e.contains("dsp.lowpass_hz") && e.contains("22050"), "{e}");
+    p.dsp.lowpass_hz = 3000.0;
+    p.dsp.dc_block_hz = 30_000.0;
+    let e = p.validate_for_clip().unwrap_err().to_string();
+    assert!(e.contains("dsp.dc_block_hz"), "{e}");
+}
