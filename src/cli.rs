@@ -244,12 +244,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         cfg.seed = seed;
         cfg.damage.seed = seed;
     }
-    if !(args.duration.is_finite() && args.duration > 0.0) {
-        bail!(
-            "--duration must be a positive number of seconds, got {}",
-            args.duration
-        );
-    }
+    check_duration(args.duration)?;
     let pb = progress_bar(0, args.quiet);
     let progress = |done: usize, total: usize| {
         pb.set_length(total as u64);
@@ -397,13 +392,40 @@ where
     })
 }
 
+/// Checks a built-in sound's `--duration`: positive, and no longer than the longest
+/// reference WAV groovescope reads back ([`crate::io::limits::MAX_WAV_SAMPLES`] at the
+/// built-in rate), which also bounds the memory the sound takes.
+///
+/// # Errors
+/// One line with the limit.
+pub(crate) fn check_duration(secs: f64) -> Result<()> {
+    let max_secs =
+        crate::io::limits::MAX_WAV_SAMPLES as f64 / f64::from(crate::synth::BUILTIN_RATE_HZ);
+    if !(secs.is_finite() && secs > 0.0 && secs <= max_secs) {
+        bail!("--duration must be above 0 and at most {max_secs:.0} s, got {secs}");
+    }
+    Ok(())
+}
+
 /// Checks the files a command is about to write, before any work: none is a folder, each
-/// one's folder exists, no two are the same file, and none exists unless `force` says to
+/// one's folder exists, no two are the same file, none is one of the command's `inputs`
+/// (`--force` or not: an input overwritten is lost), and none exists unless `force` says to
 /// replace it.
 ///
 /// # Errors
 /// One line naming the path at fault.
-pub(crate) fn check_outputs(paths: &[&Path], force: bool) -> Result<()> {
+pub(crate) fn check_outputs(paths: &[&Path], inputs: &[&Path], force: bool) -> Result<()> {
+    // Existing files by their canonical path (links and `..` resolved), others as given.
+    let identity = |p: &Path| {
+        std::fs::canonicalize(p)
+            .or_else(|_| std::path::absolute(p))
+            .unwrap_or_else(|_| p.to_path_buf())
+    };
+    let inputs: Vec<PathBuf> = inputs
+        .iter()
+        .filter(|p| p.exists())
+        .map(|p| identity(p))
+        .collect();
     let mut seen = Vec::with_capacity(paths.len());
     for &out in paths {
         if out.is_dir() {
@@ -413,11 +435,17 @@ pub(crate) fn check_outputs(paths: &[&Path], force: bool) -> Result<()> {
         if let Some(folder) = folder.filter(|f| !f.is_dir()) {
             bail!("the output's folder does not exist: {}", folder.display());
         }
-        let absolute = std::path::absolute(out).unwrap_or_else(|_| out.to_path_buf());
-        if seen.contains(&absolute) {
+        let id = identity(out);
+        if seen.contains(&id) {
             bail!("two outputs name the same file: {}", out.display());
         }
-        seen.push(absolute);
+        if inputs.contains(&id) {
+            bail!(
+                "the output is one of this command's inputs, which it would destroy: {}",
+                out.display()
+            );
+        }
+        seen.push(id);
         if out.exists() && !force {
             bail!(
                 "refusing to overwrite an existing file (use --force): {}",
@@ -507,12 +535,13 @@ fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64) -> 
 fn run_flow(args: &FlowArgs) -> Result<()> {
     use crate::pipeline::derivatives::{DerivativeMode, compute_derivatives};
     use crate::pipeline::optical_flow::compute_flow;
-    if args.out.exists() && !args.force {
-        bail!(
-            "refusing to overwrite an existing file (use --force): {}",
-            args.out.display()
-        );
-    }
+    let inputs: Vec<&Path> = args
+        .frames
+        .iter()
+        .map(PathBuf::as_path)
+        .chain(args.params.as_deref())
+        .collect();
+    check_outputs(&[args.out.as_path()], &inputs, args.force)?;
     if !(args.land_flow_px.is_finite() && args.focal_px.is_finite() && args.focal_px > 0.0) {
         bail!("--land-flow-px and --focal-px must be finite (focal length positive)");
     }

@@ -27,12 +27,31 @@ fn fresh_stem(stem: &str, exts: &[&str]) -> String {
         .unwrap_or_else(|| stem.to_string())
 }
 
+/// True when `e` says the workbench window could not be opened at all.
+fn no_window(e: &anyhow::Error) -> bool {
+    #[cfg(feature = "gui")]
+    {
+        e.downcast_ref::<groovescope::app::NoWindow>().is_some()
+    }
+    #[cfg(not(feature = "gui"))]
+    {
+        let _ = e;
+        false
+    }
+}
+
 fn default_action() -> anyhow::Result<()> {
     if cfg!(feature = "gui") && display_available() {
         // The workbench (on the last scan, else the demo scan) with the demo still open in the
         // still window, its speech groove decoded and ready to play.
         let demo = read_generated_still(&demo_still_dir())?;
-        return run_gui(Some(demo.image));
+        match run_gui(Some(demo.image)) {
+            Err(e) if no_window(&e) => {
+                // A display variable with nothing behind it (ssh): decode as with no display.
+                eprintln!("{e}; decoding the demo still instead");
+            }
+            other => return other,
+        }
     }
     // The WAV and its report share a stem that neither file has yet: nothing is overwritten.
     let stem = fresh_stem("groovescope-demo", &["wav", "report.json"]);

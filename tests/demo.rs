@@ -81,6 +81,27 @@ fn no_subcommand_without_a_display_writes_the_demo_wav_and_report_here() {
 }
 
 #[test]
+fn a_display_variable_with_no_server_behind_it_still_decodes_the_demo() {
+    // As over ssh with a stale DISPLAY: nothing listens on display 87.
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+        .current_dir(dir.path())
+        .env("DISPLAY", ":87")
+        .env_remove("WAYLAND_DISPLAY")
+        .env("XDG_RUNTIME_DIR", dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("cannot open the workbench window") && stderr.contains("instead"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains(".rs:"), "no source paths: {stderr}");
+    assert!(dir.path().join("groovescope-demo.wav").is_file());
+}
+
+#[test]
 fn synth_still_with_the_committed_config_remakes_the_demo_byte_for_byte() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = tempfile::tempdir().unwrap();

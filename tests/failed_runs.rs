@@ -7,7 +7,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{demo_copy, names, reconstruct, stderr};
+use common::{demo_copy, groovescope, names, reconstruct, stderr};
 use groovescope::image::Image;
 use groovescope::io::save_grey_png;
 
@@ -125,4 +125,58 @@ fn a_group_of_another_frame_size_is_named_or_with_keep_going_a_gap_that_quiet_st
         "--quiet keeps the warning: {err}"
     );
     assert!(o.stdout.is_empty());
+}
+
+#[test]
+fn force_never_turns_an_input_into_an_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    let reference = demo.join("reference.wav");
+    let before = std::fs::read(&reference).unwrap();
+    refused(
+        &demo,
+        &reference,
+        &["--force"],
+        &["one of this command's inputs", "reference.wav"],
+    );
+    let params = dir.path().join("p.toml");
+    std::fs::write(&params, "[flow]\nlambda = 0.05\n").unwrap();
+    let wav = dir.path().join("x.wav");
+    refused(
+        &demo,
+        &wav,
+        &["--params", s(&params), "--report", s(&params), "--force"],
+        &["one of this command's inputs", "p.toml"],
+    );
+    assert_eq!(std::fs::read(&reference).unwrap(), before);
+    // The still decoder's image, by another spelling of its path.
+    let still = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo-still/still.png");
+    let image = dir.path().join("still.png");
+    std::fs::copy(&still, &image).unwrap();
+    let again = dir.path().join(".").join("still.png");
+    let o = groovescope(&[
+        "still",
+        s(&image),
+        "--um-per-px",
+        "6",
+        "--rpm",
+        "16.667",
+        "--radius-mm",
+        "75",
+        "--out",
+        s(&again),
+        "--force",
+        "--quiet",
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("one of this command's inputs"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::read(&image).unwrap(),
+        std::fs::read(&still).unwrap()
+    );
+    assert!(!wav.exists());
 }

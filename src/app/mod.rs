@@ -63,6 +63,27 @@ pub const COMPARE_ENV: &str = "GROOVESCOPE_COMPARE";
 /// Env var: open "Compare methods" and run it with these two methods (`fused,flow`) as soon as
 /// the scan opens, so a screenshot shows the comparison.
 pub const COMPARE_METHODS_ENV: &str = "GROOVESCOPE_COMPARE_METHODS";
+/// The workbench window could not be opened at all: no usable display (a `DISPLAY` with no X
+/// server behind it, as over ssh, or a Wayland variable with no compositor).
+#[derive(Debug, thiserror::Error)]
+#[error("cannot open the workbench window: {0}")]
+pub struct NoWindow(pub String);
+
+/// `text` without the ` at /path/file.rs:LINE:` that winit's errors carry (the build's own
+/// source paths, of no use to the operator).
+fn without_source_location(text: &str) -> String {
+    let Some(start) = text.find(" at /") else {
+        return text.to_string();
+    };
+    match text[start..].find(".rs:").and_then(|i| {
+        let rest = &text[start + i + 4..];
+        rest.find(": ").map(|j| start + i + 4 + j)
+    }) {
+        Some(end) => format!("{}{}", &text[..start], &text[end..]),
+        None => text[..start].to_string(),
+    }
+}
+
 /// Window size (points): also the size of screenshots.
 pub const WINDOW_SIZE: [f32; 2] = [1600.0, 1000.0];
 
@@ -186,7 +207,12 @@ pub fn run(scan: Option<PathBuf>) -> anyhow::Result<()> {
         native,
         Box::new(move |cc| Ok(Box::new(Workbench::new(&cc.egui_ctx, opts)?))),
     )
-    .map_err(|e| anyhow::anyhow!("cannot open the workbench window: {e}"))?;
+    .map_err(|e| match e {
+        eframe::Error::Winit(_) | eframe::Error::WinitEventLoop(_) => {
+            anyhow::Error::new(NoWindow(without_source_location(&e.to_string())))
+        }
+        other => anyhow::anyhow!("cannot open the workbench window: {other}"),
+    })?;
     if let Some(p) = screenshot {
         anyhow::ensure!(p.is_file(), "no screenshot was written to {}", p.display());
     }

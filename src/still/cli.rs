@@ -71,12 +71,7 @@ pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
     if let Some(seed) = args.seed {
         cfg.seed = seed;
     }
-    if !(args.duration.is_finite() && args.duration > 0.0) {
-        bail!(
-            "--duration must be a positive number of seconds, got {}",
-            args.duration
-        );
-    }
+    crate::cli::check_duration(args.duration)?;
     let sound = if args.melody {
         Some(crate::synth::arpeggio(
             args.duration / 4.0,
@@ -238,7 +233,11 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
         .chain(args.report.as_deref())
         .collect();
-    crate::cli::check_outputs(&outputs, args.force)?;
+    let inputs: Vec<&Path> = std::iter::once(args.image.as_path())
+        .chain(args.reference.as_deref())
+        .chain(args.params.as_deref())
+        .collect();
+    crate::cli::check_outputs(&outputs, &inputs, args.force)?;
     let params = crate::cli::load_params(args.params.as_deref())?;
     let axis = if args.axis == "horizontal" {
         Axis::Horizontal

@@ -308,7 +308,12 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
         .chain(args.report.as_deref())
         .collect();
-    crate::cli::check_outputs(&outputs, args.force)?;
+    let (reference, meta) = (args.scan.join("reference.wav"), args.scan.join("scan.toml"));
+    let inputs: Vec<&Path> = [reference.as_path(), meta.as_path()]
+        .into_iter()
+        .chain(args.params.as_deref())
+        .collect();
+    crate::cli::check_outputs(&outputs, &inputs, args.force)?;
     if args.groups == Some(0) {
         bail!("--groups must be at least 1: {}", args.scan.display());
     }

@@ -82,7 +82,7 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
         .chain(args.report.as_deref())
         .collect();
-    check_outputs(&outputs, args.force)?;
+    check_outputs(&outputs, &[], args.force)?;
     let _locks = lock_outputs(&outputs)?;
     let started = Instant::now();
     let merged = merge_parts(&args.parts)?;
@@ -159,7 +159,8 @@ fn probe_secs_per_group(
 /// # Errors
 /// An unreadable scan or params, a shard count out of range, an existing plan file.
 pub fn run_plan(args: &PlanArgs) -> Result<()> {
-    check_outputs(&[args.out.as_path()], args.force)?;
+    let inputs: Vec<&Path> = args.params.as_deref().into_iter().collect();
+    check_outputs(&[args.out.as_path()], &inputs, args.force)?;
     let mut params = load_params(args.params.as_deref())?;
     params.path = path_choice(&args.path, params.path);
     let scan = Scan::open(&args.scan)?;
