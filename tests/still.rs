@@ -288,6 +288,10 @@ fn still_error(image: &Path, radius: &str, extra: &[&str]) -> String {
     assert!(!out.status.success());
     let err = stderr(&out);
     assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+    // Said once: the problem is not repeated after the file's name.
+    let problem = err.trim().trim_start_matches("error: ");
+    let head: String = problem.chars().take(24).collect();
+    assert_eq!(err.matches(head.as_str()).count(), 1, "said twice: {err}");
     assert!(!wav.exists());
     err
 }
@@ -308,6 +312,13 @@ fn bad_stills_get_one_clear_line() {
     assert!(
         err.contains("use --axis vertical") && err.contains("still.png"),
         "{err}"
+    );
+    let params = dir.path().join("short-window.toml");
+    std::fs::write(&params, "[still]\npath_window_um = 20.0\n").unwrap();
+    let err = still_error(&image, &radius, &["--params", s(&params)]);
+    assert!(
+        err.contains("still.path_window_um") && err.contains("at least 64"),
+        "a window that would take the sound out with the path: {err}"
     );
     let err = still_error(&image, &radius, &["--groove", "0"]);
     assert!(err.contains("counts from 1"), "{err}");

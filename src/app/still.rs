@@ -295,11 +295,11 @@ fn run_task(task: StillTask, r: &Reporter<StillProgressNow, StillOutcome>) -> St
     };
     let chosen = match choose_groove(&found.grooves, task.groove) {
         Ok(c) => c,
-        Err(source) => {
+        Err(problem) => {
             return fail(
                 Some(found.clone()),
                 StillRunError::Still {
-                    source,
+                    problem,
                     path: task.path.clone(),
                 },
             );

@@ -39,10 +39,10 @@ pub enum StillRunError {
     #[error("cancelled")]
     Cancelled,
     /// The decoder refused it.
-    #[error("{source}: {}", path.display())]
+    #[error("{problem}: {}", path.display())]
     Still {
-        /// What went wrong.
-        source: StillError,
+        /// What went wrong (not an error source: the line holds it once).
+        problem: StillError,
         /// The image.
         path: PathBuf,
     },
@@ -126,8 +126,8 @@ fn feed(
         if got == 0 {
             return Ok(());
         }
-        push(&band).map_err(|source| StillRunError::Still {
-            source,
+        push(&band).map_err(|problem| StillRunError::Still {
+            problem,
             path: path.clone(),
         })?;
     }
@@ -168,8 +168,8 @@ pub fn decode_still_file(
     let mut open = || StillReader::open(path);
     let mut go_on = |_: StillPhase, _: f64| true;
     let found = find_grooves(&mut open, setup, &params.still, &mut go_on)?;
-    let chosen = choose_groove(&found.grooves, groove).map_err(|source| StillRunError::Still {
-        source,
+    let chosen = choose_groove(&found.grooves, groove).map_err(|problem| StillRunError::Still {
+        problem,
         path: path.to_path_buf(),
     })?;
     decode_groove(
@@ -205,8 +205,8 @@ pub fn find_grooves(
         let r = open()?;
         (r.width(), r.height(), r.path().to_path_buf())
     };
-    let wrap = |source: StillError| StillRunError::Still {
-        source,
+    let wrap = |problem: StillError| StillRunError::Still {
+        problem,
         path: path.clone(),
     };
     setup.validate().map_err(|e| wrap(StillError::Param(e)))?;
@@ -243,8 +243,8 @@ pub fn decode_groove(
     progress: StillProgress<'_>,
     started: Instant,
 ) -> Result<StillRun, StillRunError> {
-    let wrap = |source: StillError| StillRunError::Still {
-        source,
+    let wrap = |problem: StillError| StillRunError::Still {
+        problem,
         path: found.path.clone(),
     };
     let sp = &params.still;

@@ -19,9 +19,12 @@ use super::clean::{reject_jumps, reject_lateral, reject_stereo, screened};
 use super::track::BorderTracks;
 use super::{Axis, StillError, StillParams, StillSetup};
 use crate::meta::Cut;
+use crate::pipeline::StageError;
 
 /// Path windows overlap by half; a window's weight falls linearly from its centre.
 const PATH_WINDOW_OVERLAP: usize = 2;
+/// Fewest lines the slow-path window may span (`still.path_window_um` over the pixel size).
+const MIN_PATH_WINDOW_LINES: usize = 64;
 
 /// Lines of one channel without a value, bridged by interpolation.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
@@ -284,6 +287,17 @@ pub fn decode_borders(
         }
     }
     let window = (params.path_window_um / setup.um_per_px).round() as usize;
+    if window < MIN_PATH_WINDOW_LINES {
+        // A quadratic over so few lines follows the sound itself and takes it all out.
+        return Err(StillError::Param(StageError::InvalidParam {
+            name: "still.path_window_um".into(),
+            problem: format!(
+                "{} µm spans {window} lines of {} µm; the slow-path fit needs at least \
+                 {MIN_PATH_WINDOW_LINES}, or it removes the sound with the path",
+                params.path_window_um, setup.um_per_px
+            ),
+        }));
+    }
     let paths: Vec<(Vec<f64>, Vec<f64>)> = channels_cross
         .iter()
         .map(|c| slow_path(c, window))

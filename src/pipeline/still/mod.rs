@@ -142,7 +142,7 @@ impl StillParams {
         check_range("still.min_contrast", self.min_contrast, 0.0, 1.0)?;
         check_range("still.search_share", self.search_share, 0.05, 2.0)?;
         check_range("still.outlier_sigmas", self.outlier_sigmas, 1.0, 1e3)?;
-        check_range("still.path_window_um", self.path_window_um, 0.0, 1e9)?;
+        check_range("still.path_window_um", self.path_window_um, 1.0, 1e9)?;
         check_range("still.wall_angle_deg", self.wall_angle_deg, 10.0, 80.0)?;
         if self.min_track_blocks == 0 {
             return Err(StageError::InvalidParam {
