@@ -172,3 +172,48 @@ fn eval_rejects_non_wav() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("a.wav"), "{}", stderr(&out));
 }
+
+#[test]
+fn eval_scores_stereo_per_channel_and_refuses_nan_samples() {
+    use groovescope::io::wav::{Audio, WavBits, write_wav};
+    let dir = tempfile::tempdir().unwrap();
+    let sine: Vec<f32> = (0..22_050)
+        .map(|i| (i as f32 * 0.0713).sin() * (1.0 + (i as f32 * 0.0004).sin()) * 0.4)
+        .collect();
+    let minus: Vec<f32> = sine.iter().map(|v| -v).collect();
+    // Left = −right: mixed to mono this pair is silence.
+    let pair = dir.path().join("pair.wav");
+    let audio = Audio {
+        sample_rate_hz: 44_100,
+        channels: vec![sine.clone(), minus],
+    };
+    write_wav(&pair, &audio, WavBits::Float32, false).unwrap();
+    let out = groovescope(&["eval", s(&pair), s(&pair), "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let channels = json.as_array().unwrap();
+    assert_eq!(channels.len(), 2);
+    assert!(
+        channels.iter().all(|c| c["r"].as_f64().unwrap() > 0.9999),
+        "{json}"
+    );
+    let mut bad = sine;
+    bad[100] = f32::NAN;
+    // Written raw: groovescope's own writer never writes a NaN.
+    let nan = dir.path().join("nan.wav");
+    let spec = hound::WavSpec {
+        channels: 1,
+        sample_rate: 44_100,
+        bits_per_sample: 32,
+        sample_format: hound::SampleFormat::Float,
+    };
+    let mut w = hound::WavWriter::create(&nan, spec).unwrap();
+    for v in bad {
+        w.write_sample(v).unwrap();
+    }
+    w.finalize().unwrap();
+    let out = groovescope(&["eval", s(&nan), s(&pair)]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(err.contains("NaN") && err.contains("nan.wav"), "{err}");
+}
