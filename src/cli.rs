@@ -311,7 +311,7 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
         }
         None => SceneConfig::default(),
     };
-    let meta = render_scene(kind, &cfg, out)?;
+    let meta = render_scene(kind, &cfg, out, Job::reporting(&|_, _| {}))?;
     println!(
         "wrote {} ({} frames with true depth)",
         out.display(),
@@ -641,7 +641,11 @@ pub fn run(command: Command) -> Result<()> {
     // The commands whose jobs stop cleanly on Ctrl-C; the others are ended by it as before.
     let stoppable = matches!(
         command,
-        Command::Reconstruct(_) | Command::Pack(_) | Command::Synth(_) | Command::ImportVideo(_)
+        Command::Reconstruct(_)
+            | Command::Pack(_)
+            | Command::Synth(_)
+            | Command::SynthScene { .. }
+            | Command::ImportVideo(_)
     );
     if stoppable {
         crate::job::catch_interrupts().map_err(|e| anyhow::anyhow!("cannot catch Ctrl-C: {e}"))?;

@@ -465,14 +465,17 @@ pub fn load_true_depth(path: &Path) -> Result<Image, SynthError> {
 }
 
 /// Renders a scene into `out_dir` (created, or empty): frames, true depths and `scene.toml`.
+/// Cancelling `job` stops before the next frame; a run that fails or is cancelled leaves the
+/// folder as it found it (a new one removed, an empty one emptied).
 ///
 /// # Errors
 /// [`SynthError::Config`] for invalid settings, [`SynthError::OutputExists`] for a non-empty
-/// folder, [`SynthError::Load`] for write failures.
+/// folder, [`SynthError::Load`] for write failures, [`SynthError::Cancelled`].
 pub fn render_scene(
     kind: SceneKind,
     cfg: &SceneConfig,
     out_dir: &Path,
+    job: crate::job::Job<'_>,
 ) -> Result<SceneMeta, SynthError> {
     cfg.validate()?;
     let geom = cfg.geometry();
@@ -489,17 +492,32 @@ pub fn render_scene(
         key: "scene".into(),
         problem: format!("cannot be written as TOML: {e}"),
     })?;
+    let created = !out_dir.exists();
     prepare_out_dir(out_dir)?;
     let fw = super::digits(cfg.frames, 3);
-    (0..cfg.frames)
+    let written = (0..cfg.frames)
         .into_par_iter()
         .try_for_each(|k| -> Result<(), SynthError> {
+            if job.is_cancelled() {
+                return Err(SynthError::Cancelled);
+            }
             let (img, depth) = render_scene_frame(kind, cfg, k)?;
             save_grey_png(&img, &out_dir.join(format!("f{k:0fw$}.png")), true, false)?;
-            save_true_depth(&depth, &out_dir.join(format!("depth_{k:0fw$}.f32")))
-        })?;
-    write_atomic(&out_dir.join("scene.toml"), text.as_bytes(), false)?;
-    Ok(meta)
+            save_true_depth(&depth, &out_dir.join(format!("depth_{k:0fw$}.f32")))?;
+            job.report(k + 1, cfg.frames);
+            Ok(())
+        })
+        .and_then(|()| {
+            Ok(write_atomic(
+                &out_dir.join("scene.toml"),
+                text.as_bytes(),
+                false,
+            )?)
+        });
+    if written.is_err() {
+        super::clear_out_dir(out_dir, created);
+    }
+    written.map(|()| meta)
 }
 
 #[cfg(test)]
@@ -556,7 +574,13 @@ mod tests {
     fn files_round_trip_and_bad_settings_fail() {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("cube");
-        let meta = render_scene(SceneKind::Cube, &small(), &out).unwrap();
+        let meta = render_scene(
+            SceneKind::Cube,
+            &small(),
+            &out,
+            crate::job::Job::unwatched(),
+        )
+        .unwrap();
         let back = SceneMeta::load(&out.join("scene.toml")).unwrap();
         assert_eq!(meta, back);
         assert!((back.geometry().land_flow_px() + 1.0).abs() < 1e-12);
@@ -567,7 +591,12 @@ mod tests {
         assert_eq!(f.width, 96);
         // A second run into the same folder is refused.
         assert!(matches!(
-            render_scene(SceneKind::Cube, &small(), &out),
+            render_scene(
+                SceneKind::Cube,
+                &small(),
+                &out,
+                crate::job::Job::unwatched()
+            ),
             Err(SynthError::OutputExists { .. })
         ));
         std::fs::write(dir.path().join("junk.f32"), b"GSDEPTH1\x02\0\0\0").unwrap();
