@@ -117,13 +117,13 @@ pub struct StillArgs {
     /// The still: a PNG or TIFF (8/16 bit, grey or colour) of grooves seen from above.
     pub image: PathBuf,
     /// Pixel size on the record, µm.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub um_per_px: f64,
     /// Turntable speed the disc was cut at.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub rpm: f64,
     /// Radius of the groove decoded, mm.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub radius_mm: f64,
     /// Grooves run down the image (vertical: time runs down) or across it (horizontal:
     /// time runs rightward).

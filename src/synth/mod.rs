@@ -147,6 +147,12 @@ fn io_err(problem: String, path: &Path) -> SynthError {
 
 /// Creates `dir` or accepts it when empty; anything else is an error and nothing is touched.
 pub(crate) fn prepare_out_dir(dir: &Path) -> Result<(), SynthError> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(io_err(
+            "the output is a file; give a folder that is new or empty".into(),
+            dir,
+        ));
+    }
     if !crate::io::atomic::dir_is_missing_or_empty(dir)? {
         return Err(SynthError::OutputExists {
             path: dir.to_path_buf(),
