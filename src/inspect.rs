@@ -43,6 +43,20 @@ fn save(
     Ok(())
 }
 
+/// Every file [`run_inspect`] can write.
+const OUTPUT_NAMES: [&str; 10] = [
+    "frame.png",
+    "flow.png",
+    "flow_u.png",
+    "confidence.png",
+    "depth.png",
+    "stripes.png",
+    "in_focus.png",
+    "hough.png",
+    "weights.png",
+    "samples.csv",
+];
+
 /// Runs group `group` of `scan_dir` and writes PNGs and `samples.csv` into `out_dir`.
 ///
 /// Stages that fail are reported, and the outputs of the stages before them are still written,
@@ -186,12 +200,26 @@ pub fn run_inspect(
         write_atomic(&out_dir.join("samples.csv"), csv.as_bytes(), force)?;
         written.push("samples.csv".into());
     }
+    // What an earlier inspect left here and this one did not write (a stage that failed or
+    // did not run on this path) would pass for this group's; it is named, never removed.
+    let stale: Vec<&str> = OUTPUT_NAMES
+        .iter()
+        .copied()
+        .filter(|name| !written.iter().any(|w| w == name) && out_dir.join(name).is_file())
+        .collect();
     println!(
         "wrote {} files into {}: {}",
         written.len(),
         out_dir.display(),
         written.join(", ")
     );
+    if !stale.is_empty() {
+        eprintln!(
+            "warning: {} in {} are not from this run (an earlier inspect left them)",
+            stale.join(", "),
+            out_dir.display()
+        );
+    }
     if let Err(e) = outcome {
         bail!("group {group}: {e}");
     }

@@ -86,4 +86,14 @@ fn inspect_dumps_every_stage_and_the_accumulator_when_segmentation_fails() {
     assert!(err.contains("group 0") && err.contains("stripes"), "{err}");
     assert!(bad.join("hough.png").is_file() && bad.join("in_focus.png").is_file());
     assert!(!bad.join("samples.csv").exists());
+    // The failing run over the good one's folder: what it could not redo is named as an
+    // earlier run's, and kept.
+    let out = inspect(&ok, &["--params", params.to_str().unwrap(), "--force"]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(
+        err.contains("samples.csv") && err.contains("not from this run"),
+        "{err}"
+    );
+    assert!(ok.join("samples.csv").is_file());
 }
