@@ -18,6 +18,9 @@ const ENVELOPE_SMOOTH_BLOCKS: usize = 1;
 /// Fewest envelope blocks for an envelope r (10 blocks = 50 ms): over a handful of smoothed
 /// block peaks the correlation means nothing, so shorter clips get none.
 const MIN_ENVELOPE_BLOCKS: usize = 10;
+/// A reference whose whole-block envelope spreads by less than this share of its peak is
+/// steady (a tone): its envelope r would only correlate ripple, so it gets none.
+const STEADY_ENVELOPE_SPREAD: f32 = 0.01;
 /// SNR reported when the residual is exactly zero (keeps the score finite for JSON).
 const MAX_SNR_DB: f64 = 300.0;
 
@@ -28,7 +31,8 @@ pub struct Scores {
     /// inverted; the lag maximises the signed r, so a polarity error shows).
     pub r: f64,
     /// Pearson r of the peak envelopes at the best lag (see [`peak_envelope`]); `None` when
-    /// the overlap is shorter than 10 envelope blocks (50 ms).
+    /// the overlap is shorter than 10 envelope blocks (50 ms) or the reference's envelope is
+    /// steady (a tone: within 1 % of its peak).
     pub envelope_r: Option<f64>,
     /// SNR (dB) of the recovered signal after best gain and lag:
     /// 10·log10(Σref² / Σ(ref − g·rec)²) with the least-squares g. For rec = ref + noise this
@@ -41,14 +45,14 @@ pub struct Scores {
 }
 
 impl Scores {
-    /// The envelope r with `decimals` decimals, or "n/a (< 50 ms)" (the shortest clip that
-    /// gets one) when the clip was too short to measure it.
+    /// The envelope r with `decimals` decimals, or "n/a (< 50 ms or steady)" when the clip was
+    /// too short (50 ms is the shortest that gets one) or its reference too steady to measure it.
     #[must_use]
     pub fn envelope_r_text(&self, decimals: usize) -> String {
         self.envelope_r.map_or_else(
             || {
                 let ms = MIN_ENVELOPE_BLOCKS as f64 * ENVELOPE_WINDOW_S * 1000.0;
-                format!("n/a (< {ms:.0} ms)")
+                format!("n/a (< {ms:.0} ms or steady)")
             },
             |e| format!("{e:.decimals$}"),
         )
@@ -126,6 +130,23 @@ pub fn peak_envelope(samples: &[f32], window: usize) -> Vec<f32> {
             mean
         })
         .collect()
+}
+
+/// Whether an envelope is steady: its whole blocks (the last one is left out when `partial`,
+/// the length of a short last block, is not 0) lie within [`STEADY_ENVELOPE_SPREAD`] of their
+/// peak. A silent one is steady too.
+fn is_steady(envelope: &[f32], partial: usize) -> bool {
+    let whole = if partial == 0 {
+        envelope
+    } else {
+        &envelope[..envelope.len().saturating_sub(1)]
+    };
+    // The smoothing averages the edge blocks with the short one: leave those out as well.
+    let inner = whole.get(1..whole.len().saturating_sub(1)).unwrap_or(&[]);
+    let (lo, hi) = inner.iter().fold((f32::INFINITY, 0.0_f32), |(lo, hi), &v| {
+        (lo.min(v), hi.max(v))
+    });
+    hi <= 0.0 || hi - lo < STEADY_ENVELOPE_SPREAD * hi
 }
 
 /// Overlap of reference indices for a lag: `i ∈ [lo, hi)` with `i + lag` inside `recovered`.
@@ -262,7 +283,8 @@ pub fn evaluate(
         peak_envelope(rec_part, window),
         peak_envelope(ref_part, window),
     );
-    let envelope_r = (env_rec.len() >= MIN_ENVELOPE_BLOCKS).then(|| pearson(&env_rec, &env_ref));
+    let envelope_r = (env_rec.len() >= MIN_ENVELOPE_BLOCKS && !is_steady(&env_ref, len % window))
+        .then(|| pearson(&env_rec, &env_ref));
     Some(Scores {
         r,
         envelope_r,
@@ -405,11 +427,26 @@ mod tests {
         let short = tone(30);
         let s = evaluate(&short, &short, 0, 44_100).unwrap();
         assert!(s.r > 0.999 && s.envelope_r.is_none(), "{s:?}");
-        assert_eq!(s.envelope_r_text(3), "n/a (< 50 ms)");
+        assert_eq!(s.envelope_r_text(3), "n/a (< 50 ms or steady)");
         let long = tone(60);
         let s = evaluate(&long, &long, 0, 44_100).unwrap();
         assert!(s.envelope_r.is_some_and(|e| e > 0.999), "{s:?}");
         assert_eq!(s.envelope_r_text(2), "1.00");
+    }
+
+    #[test]
+    fn a_steady_tone_gets_no_envelope_r_and_a_fading_one_does() {
+        let tone = |fade: f32| -> Vec<f32> {
+            (0..48_000)
+                .map(|i| (i as f32 * 0.0916).sin() * (1.0 - fade * i as f32 / 48_000.0))
+                .collect()
+        };
+        let steady = tone(0.0);
+        let s = evaluate(&steady, &steady, 0, 48_000).unwrap();
+        assert!(s.r > 0.999 && s.envelope_r.is_none(), "{s:?}");
+        let fading = tone(0.5);
+        let s = evaluate(&fading, &fading, 0, 48_000).unwrap();
+        assert!(s.envelope_r.is_some_and(|e| e > 0.999), "{s:?}");
     }
 
     #[test]
