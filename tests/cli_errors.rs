@@ -217,3 +217,27 @@ fn eval_scores_stereo_per_channel_and_refuses_nan_samples() {
     let err = stderr(&out);
     assert!(err.contains("NaN") && err.contains("nan.wav"), "{err}");
 }
+
+#[test]
+fn a_land_flow_past_the_frame_is_named_not_silently_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let group = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo/g00000");
+    let mut args: Vec<String> = vec!["flow".into()];
+    args.extend((0..7).map(|k| s(&group.join(format!("f{k:03}.png"))).to_string()));
+    let out = dir.path().join("x.flo");
+    args.extend([
+        "--out".into(),
+        s(&out).into(),
+        "--land-flow-px".into(),
+        "1e30".into(),
+    ]);
+    let run = groovescope(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(!run.status.success());
+    let err = stderr(&run);
+    assert!(
+        err.contains("land_flow_px: 1.0e30 px per frame") && err.contains("320 px wide"),
+        "{err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(!out.exists());
+}

@@ -225,6 +225,43 @@ pub fn compute_derivatives(
         )));
     }
     let base_flow_px = if params.prewarp { land_flow_px } else { 0.0 };
+    // The widest pre-warp of a window must leave columns whose filters read real samples:
+    // without any the derivatives are all zero and the flow silently nothing.
+    let (shifts, radius): (Vec<RowShift>, usize) = match params.mode {
+        DerivativeMode::Simoncelli => (
+            (0..SIMONCELLI_WINDOW_FRAMES)
+                .map(|k| RowShift::new((k as f64 - HALF_WINDOW as f64) * base_flow_px, first.width))
+                .collect(),
+            RADIUS,
+        ),
+        DerivativeMode::TwoFrame => (vec![RowShift::new(base_flow_px, first.width)], 1),
+    };
+    let margin = prewarp_margin(&shifts, radius);
+    if 2 * margin >= first.width && 2 * radius < first.width {
+        // Short figures for absurd values (1e30 px), whole pixels otherwise.
+        let px = |v: f64| {
+            if v.abs() < 1e6 {
+                format!("{v}")
+            } else {
+                format!("{v:.1e}")
+            }
+        };
+        let half_window = match params.mode {
+            DerivativeMode::Simoncelli => HALF_WINDOW as f64,
+            DerivativeMode::TwoFrame => 1.0,
+        };
+        return Err(StageError::InvalidParam {
+            name: "land_flow_px".to_string(),
+            problem: format!(
+                "{} px per frame pre-warps the {:?} window by up to {} px: nothing of a {} px \
+                 wide frame is left to compare",
+                px(land_flow_px),
+                params.mode,
+                px((land_flow_px * half_window).abs().ceil()),
+                first.width
+            ),
+        });
+    }
     Ok(match params.mode {
         DerivativeMode::Simoncelli => (HALF_WINDOW..frames.len() - HALF_WINDOW)
             .map(|c| {

@@ -204,6 +204,18 @@ fn bad_input_is_rejected() {
         ));
     }
     assert!(compute_derivatives(&[], 0.0, &simoncelli(false)).is_err());
+    // ±3 frames × 30 px pre-warps a 7-frame window past both sides of a 160 px frame: refused
+    // naming the land flow, where it used to give all-zero derivatives.
+    let wide = vec![Image::zeros(160, 6); 7];
+    match compute_derivatives(&wide, -30.0, &simoncelli(true)) {
+        Err(StageError::InvalidParam { name, problem }) => {
+            assert_eq!(name, "land_flow_px");
+            assert!(problem.contains("160 px wide"), "{problem}");
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(compute_derivatives(&wide, -30.0, &simoncelli(false)).is_ok());
+    assert!(compute_derivatives(&wide, -20.0, &simoncelli(true)).is_ok());
 }
 
 proptest! {
@@ -227,7 +239,16 @@ proptest! {
             prewarp,
             ..DerivativeParams::default()
         };
-        let sets = compute_derivatives(&frames, land, &p).unwrap();
+        let sets = match compute_derivatives(&frames, land, &p) {
+            // A pre-warp wider than the frame is refused, naming the land flow.
+            Err(StageError::InvalidParam { name, .. }) if prewarp && name == "land_flow_px" => {
+                let half_window = if two { 1.0 } else { 3.0 };
+                // The shift, the cubic's reach and the filter radius.
+                prop_assert!(land.abs() * half_window + 5.0 >= w as f64 / 2.0);
+                return Ok(());
+            }
+            r => r.unwrap(),
+        };
         prop_assert_eq!(sets.len(), if two { n - 1 } else { n - 6 });
         for d in &sets {
             for im in [&d.ix, &d.iy, &d.it, &d.image] {
