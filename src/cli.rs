@@ -6,7 +6,7 @@ use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::io::wav::{Audio, WavBits, read_wav};
+use crate::io::wav::{Audio, WavBits, read_finite_wav};
 use crate::job::Job;
 use crate::pipeline::PipelineParams;
 use crate::pipeline::{Method, PathChoice};
@@ -501,17 +501,7 @@ fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64) -> 
     if !(max_lag_ms.is_finite() && max_lag_ms >= 0.0) {
         bail!("--max-lag-ms must be a non-negative number, got {max_lag_ms}");
     }
-    let read = |path: &Path| -> Result<Audio> {
-        let audio = read_wav(path)?;
-        if audio.channels.iter().flatten().any(|v| !v.is_finite()) {
-            bail!(
-                "the sound holds NaN or infinite samples: {}",
-                path.display()
-            );
-        }
-        Ok(audio)
-    };
-    let (rec, refa) = (read(recovered)?, read(reference)?);
+    let (rec, refa) = (read_finite_wav(recovered)?, read_finite_wav(reference)?);
     // Channel by channel: a stereo pair mixed to mono can cancel (left = −right scores 0).
     let (n_rec, n_ref) = (rec.channels.len(), refa.channels.len());
     let channels: Vec<(Vec<f32>, Vec<f32>)> = if n_rec == n_ref {

@@ -267,6 +267,31 @@ fn the_still_command_writes_sound_and_a_report() {
     assert_eq!(json["left_wall"], "the upper wall (time runs rightward)");
     let r0 = json["scores"][0]["r"].as_f64().unwrap();
     assert!(r0 > 0.9, "{r0}");
+    // A reference of a few samples cannot be scored: the sound is still written, with a
+    // warning naming the reference.
+    let short = dir.path().join("short.wav");
+    let spec = hound::WavSpec {
+        channels: 1,
+        sample_rate: 44_100,
+        bits_per_sample: 16,
+        sample_format: hound::SampleFormat::Int,
+    };
+    let mut w = hound::WavWriter::create(&short, spec).unwrap();
+    for v in [100_i16, -100, 50] {
+        w.write_sample(v).unwrap();
+    }
+    w.finalize().unwrap();
+    let short_wav = dir.path().join("short-ref.wav");
+    let mut short_args = still_args(s(&image), s(&short_wav), &radius);
+    short_args.extend(["--axis", "horizontal", "--reference", s(&short)]);
+    let out = groovescope(&short_args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("too few samples overlap") && err.contains("short.wav"),
+        "{err}"
+    );
+    assert!(short_wav.is_file());
     // Without --force the outputs are not replaced.
     let again = groovescope(&args);
     assert!(!again.status.success());
@@ -322,6 +347,28 @@ fn bad_stills_get_one_clear_line() {
     );
     let err = still_error(&image, &radius, &["--groove", "0"]);
     assert!(err.contains("counts from 1"), "{err}");
+    // References that cannot be scored against are named, not read as silence or upsampled.
+    let wav = |name: &str, rate: u32, samples: &[f32]| {
+        let path = dir.path().join(name);
+        let spec = hound::WavSpec {
+            channels: 1,
+            sample_rate: rate,
+            bits_per_sample: 32,
+            sample_format: hound::SampleFormat::Float,
+        };
+        let mut w = hound::WavWriter::create(&path, spec).unwrap();
+        for &v in samples {
+            w.write_sample(v).unwrap();
+        }
+        w.finalize().unwrap();
+        path
+    };
+    let nan = wav("nan.wav", 44_100, &[0.1, f32::NAN, 0.2]);
+    let err = still_error(&image, &radius, &["--reference", s(&nan)]);
+    assert!(err.contains("NaN") && err.contains("nan.wav"), "{err}");
+    let slow = wav("slow.wav", 500, &[0.1; 500]);
+    let err = still_error(&image, &radius, &["--reference", s(&slow)]);
+    assert!(err.contains("500 Hz") && err.contains("slow.wav"), "{err}");
     let err = still_error(&image, "0", &[]);
     assert!(err.contains("radius_mm"), "{err}");
     // 33⅓ rpm at 0.01 mm over 1 µm pixels: 34.9 samples a second, refused (otherwise the

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use crate::io::wav::{Audio, read_wav};
+use crate::io::wav::{Audio, read_reference_wav};
 use crate::io::{LoadError, Scan, ScanMeta};
 use crate::pipeline::audio_signal::{GroupSignal, SignalPack, StitchedSignal, read_from, resample};
 use crate::pipeline::eval::{Scores, evaluate};
@@ -376,9 +376,6 @@ const REFERENCE_TAIL_SECS: f64 = 10.0;
 /// Most samples a reference is resampled to for scoring (23 min at 48 kHz): a reference that
 /// needs more, because the clip starts that far into it, is not scored.
 const MAX_RESAMPLED_REFERENCE: f64 = (1u64 << 26) as f64;
-/// Lowest reference rate scored against (Hz): nothing slower records a groove's sound, and
-/// resampling from it to the clip's rate costs in proportion to the ratio.
-const MIN_REFERENCE_RATE_HZ: u32 = 1000;
 
 /// Reference sound aligned to the stretch a reconstruction covers, at the recovered rate.
 ///
@@ -395,17 +392,7 @@ pub fn aligned_reference(
     groove_speed_mm_s: f64,
     path: &std::path::Path,
 ) -> Result<Vec<f32>, LoadError> {
-    let reference = read_wav(path)?;
-    if reference.sample_rate_hz < MIN_REFERENCE_RATE_HZ {
-        return Err(LoadError::Sound {
-            problem: format!(
-                "its rate, {} Hz, is below the {MIN_REFERENCE_RATE_HZ} Hz a recording of the \
-                 groove's sound needs",
-                reference.sample_rate_hz
-            ),
-            path: path.to_path_buf(),
-        });
-    }
+    let reference = read_reference_wav(path)?;
     let mono = reference.mono();
     let rate = f64::from(reference.sample_rate_hz);
     let start_secs = stitched.start_um / (groove_speed_mm_s * 1000.0);

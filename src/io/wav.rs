@@ -110,6 +110,46 @@ pub fn read_wav(path: &Path) -> Result<Audio, LoadError> {
     read_wav_from(std::io::BufReader::new(file), path)
 }
 
+/// Lowest reference rate scored against (Hz): nothing slower records a groove's sound, and
+/// resampling from it to the clip's rate costs in proportion to the ratio.
+pub const MIN_REFERENCE_RATE_HZ: u32 = 1000;
+
+/// [`read_wav`] for a sound whose samples are used as numbers (a generator's sound, a
+/// sound to score): NaN or infinite samples are refused rather than read as silence.
+///
+/// # Errors
+/// As [`read_wav`], and [`LoadError::Sound`] naming the file when a sample is not finite.
+pub fn read_finite_wav(path: &Path) -> Result<Audio, LoadError> {
+    let audio = read_wav(path)?;
+    if audio.channels.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(LoadError::Sound {
+            problem: "the sound holds NaN or infinite samples".into(),
+            path: path.to_path_buf(),
+        });
+    }
+    Ok(audio)
+}
+
+/// [`read_finite_wav`] for a reference to score against: its rate must also be at least
+/// [`MIN_REFERENCE_RATE_HZ`].
+///
+/// # Errors
+/// As [`read_finite_wav`], and [`LoadError::Sound`] naming the file for a lower rate.
+pub fn read_reference_wav(path: &Path) -> Result<Audio, LoadError> {
+    let audio = read_finite_wav(path)?;
+    if audio.sample_rate_hz < MIN_REFERENCE_RATE_HZ {
+        return Err(LoadError::Sound {
+            problem: format!(
+                "its rate, {} Hz, is below the {MIN_REFERENCE_RATE_HZ} Hz a recording of the \
+                 groove's sound needs",
+                audio.sample_rate_hz
+            ),
+            path: path.to_path_buf(),
+        });
+    }
+    Ok(audio)
+}
+
 /// Reads WAV data from `source` (see [`read_wav`]); `path` names it in errors. The sample
 /// count in the header is checked against [`MAX_WAV_SAMPLES`] before samples are read.
 ///

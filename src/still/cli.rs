@@ -287,6 +287,14 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
     let a = &run.analysis;
     let groove = &a.grooves.grooves[a.chosen];
     crate::cli::print_warnings(&run.warnings);
+    if let (Some(path), Some(all)) = (&args.reference, &scores)
+        && all.iter().any(Option::is_none)
+    {
+        eprintln!(
+            "warning: too few samples overlap the sound to score against the reference: {}",
+            path.display()
+        );
+    }
     if !args.quiet {
         let details = format!(
             "{}, groove {} of {} found, {:.1} s",

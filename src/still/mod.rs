@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use crate::io::LoadError;
 use crate::io::still::StillReader;
-use crate::io::wav::{Audio, read_wav};
+use crate::io::wav::{Audio, read_reference_wav};
 use crate::pipeline::audio_signal::resample;
 use crate::pipeline::eval::{Scores, evaluate};
 use crate::pipeline::finish::channels_to_output;
@@ -304,7 +304,7 @@ pub fn decode_groove(
 /// # Errors
 /// [`LoadError`] when the reference cannot be read or resampled.
 pub fn score_still(audio: &Audio, reference: &Path) -> Result<Vec<Option<Scores>>, LoadError> {
-    let refa = read_wav(reference)?;
+    let refa = read_reference_wav(reference)?;
     let rate = audio.sample_rate_hz;
     let to_rate = |c: &[f32]| -> Result<Vec<f32>, LoadError> {
         if refa.sample_rate_hz == rate {
