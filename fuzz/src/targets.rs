@@ -494,9 +494,12 @@ pub fn zarr_store(data: &[u8]) {
     let Ok((written, damaged)) = write_zarr(&mut u, &store) else {
         return;
     };
-    let Ok(scan) = Scan::open(&store) else {
-        assert!(damaged, "an intact store does not open");
-        return;
+    let scan = match Scan::open(&store) {
+        Ok(scan) => scan,
+        Err(e) => {
+            assert!(damaged, "an intact store does not open: {e}");
+            return;
+        }
     };
     for (group, frames) in scan.groups.iter().zip(&written) {
         match load_group(group) {
@@ -517,7 +520,9 @@ pub fn zarr_store(data: &[u8]) {
 fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<RawFrame>>, bool)> {
     let groups = u.int_in_range(1usize..=3)?;
     let frames = u.int_in_range(7usize..=9)?;
-    let (w, h) = (u.int_in_range(1usize..=24)?, u.int_in_range(1usize..=24)?);
+    // Wide enough for the scan.toml below, whose groups must overlap: 2 µm group steps
+    // within the 8 px (3.1 µm) left of 24 px between the stitcher's margins.
+    let (w, h) = (u.int_in_range(24usize..=32)?, u.int_in_range(1usize..=24)?);
     let sample_type = *u.choose(&[SampleType::U8, SampleType::U16, SampleType::F32])?;
     let mut writer = ZarrWriter::create(dir, frames, w, h, sample_type, 1).map_err(fail)?;
     let mut written = Vec::new();
@@ -548,7 +553,7 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
     }
     let scan_toml = "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\ncut = \"lateral\"\n\
         [camera]\npixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n\
-        [motion]\nframe_step_um = 0.78\ngroup_step_um = 8.0\n";
+        [motion]\nframe_step_um = 0.78\ngroup_step_um = 2.0\n";
     writer.finish(scan_toml).map_err(fail)?;
     // The chunk file of group `g`, as the reader names it.
     let chunk = |g: usize| {
