@@ -128,6 +128,29 @@ fn a_group_of_another_frame_size_is_named_or_with_keep_going_a_gap_that_quiet_st
 }
 
 #[test]
+fn a_group_cut_short_is_named_when_run_and_leaves_the_rest_of_the_scan_usable() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    for k in 4..7 {
+        std::fs::remove_file(demo.join(format!("g00003/f{k:03}.png"))).unwrap();
+    }
+    // The scan still opens: group 3 keeps its place and fails only when it is loaded.
+    let out = dir.path().join("o.wav");
+    refused(&demo, &out, &[], &["4 frames", "at least 7", "g00003"]);
+    let out = dir.path().join("gap.wav");
+    let o = reconstruct(&demo, &out, &["--keep-going", "--groups", "5"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("warning: group 3") && err.contains("4 frames"),
+        "{err}"
+    );
+    let inspected = dir.path().join("inspect");
+    let o = groovescope(&["inspect", s(&demo), "--group", "4", "--out", s(&inspected)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
 fn force_never_turns_an_input_into_an_output() {
     let dir = tempfile::tempdir().unwrap();
     let demo = demo_copy(dir.path());

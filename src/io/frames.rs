@@ -128,7 +128,8 @@ pub fn decode_frame(bytes: &[u8], path: &Path) -> Result<Image, LoadError> {
 /// Loads every frame of a group in parallel and checks they share one size.
 ///
 /// # Errors
-/// The first unreadable frame, or the first frame whose size differs from the group's first.
+/// The first unreadable frame, the first frame whose size differs from the group's first, or
+/// too few frames.
 pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
     load_group_frames(group, 0..group.frame_count())
 }
@@ -141,7 +142,8 @@ pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
 /// the file, which catches truncation.
 ///
 /// # Errors
-/// As [`load_group`].
+/// As [`load_group`], and [`LoadError::TooFewFrames`] for a group of fewer than
+/// [`super::scan::MIN_FRAMES_PER_GROUP`] frames.
 pub fn load_group_frames(
     group: &GroupEntry,
     range: std::ops::Range<usize>,
@@ -150,6 +152,13 @@ pub fn load_group_frames(
         return super::zarr::load_group_frames(z, range);
     }
     let n = group.frames.len();
+    if n < super::scan::MIN_FRAMES_PER_GROUP {
+        return Err(LoadError::TooFewFrames {
+            found: n,
+            needed: super::scan::MIN_FRAMES_PER_GROUP,
+            path: group.dir.clone(),
+        });
+    }
     let paths = group
         .frames
         .get(range.start.min(n)..range.end.min(n))

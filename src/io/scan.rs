@@ -139,7 +139,9 @@ impl Scan {
     ///
     /// # Errors
     /// [`LoadError`] when the folder is not a scan, the metadata is invalid, there are no
-    /// groups, or a group holds fewer than [`MIN_FRAMES_PER_GROUP`] frames.
+    /// groups, or no group holds [`MIN_FRAMES_PER_GROUP`] frames. A group with fewer (a
+    /// transfer cut short) keeps its place, so the groups after it stay where they lie on the
+    /// groove; loading it fails (see [`super::load_group_frames`]), a gap under `--keep-going`.
     pub fn open(dir: &Path) -> Result<Self, LoadError> {
         if dir.join("zarr.json").is_file() {
             return super::zarr::open_scan(dir);
@@ -171,13 +173,6 @@ impl Scan {
                 MAX_FRAMES_PER_GROUP,
                 "frames",
             )?;
-            if frames.len() < MIN_FRAMES_PER_GROUP {
-                return Err(LoadError::TooFewFrames {
-                    found: frames.len(),
-                    needed: MIN_FRAMES_PER_GROUP,
-                    path,
-                });
-            }
             groups.push(GroupEntry {
                 index: groups.len(),
                 dir: path,
@@ -185,10 +180,21 @@ impl Scan {
                 zarr: None,
             });
         }
-        let Some(first) = groups.first().and_then(|g| g.frames.first()) else {
-            return Err(LoadError::NotAScan {
-                problem: "the scan holds no group folders with frames".into(),
-                path: dir.to_path_buf(),
+        let Some(first) = groups
+            .iter()
+            .find(|g| g.frames.len() >= MIN_FRAMES_PER_GROUP)
+            .and_then(|g| g.frames.first())
+        else {
+            return Err(match groups.iter().find(|g| !g.frames.is_empty()) {
+                Some(short) => LoadError::TooFewFrames {
+                    found: short.frames.len(),
+                    needed: MIN_FRAMES_PER_GROUP,
+                    path: short.dir.clone(),
+                },
+                None => LoadError::NotAScan {
+                    problem: "the scan holds no group folders with frames".into(),
+                    path: dir.to_path_buf(),
+                },
             });
         };
         let frame_size = frame_dimensions(first)?;
