@@ -9,6 +9,7 @@ pub mod alloc;
 pub mod app;
 pub mod cli;
 pub mod engine;
+pub mod eval_cli;
 pub mod image;
 pub mod inspect;
 pub mod io;
