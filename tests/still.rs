@@ -381,6 +381,32 @@ fn bad_stills_get_one_clear_line() {
         "{err}"
     );
 
+    // A still whose last two thirds are worn flat: the grooves are found in the first third,
+    // and a sound that would be two thirds bridging is refused; with the share set to 1 it is
+    // written, with the warning.
+    let mut worn = groovescope::io::load_frame(&image).unwrap();
+    let level = worn.data.iter().sum::<f32>() / worn.data.len() as f32;
+    let width = worn.width;
+    worn.data[400 * width..].fill(level);
+    let worn_png = dir.path().join("worn.png");
+    groovescope::io::save_grey_png(&worn, &worn_png, false, false).unwrap();
+    let err = still_error(&worn_png, &radius, &[]);
+    assert!(
+        err.contains("could not be followed")
+            && err.contains("of 1200 lines")
+            && err.contains("still.max_bridged_share = 0.5")
+            && err.contains("worn.png"),
+        "{err}"
+    );
+    let lenient = dir.path().join("lenient.toml");
+    std::fs::write(&lenient, "[still]\nmax_bridged_share = 1.0\n").unwrap();
+    let wav = dir.path().join("worn.wav");
+    let mut args = still_args(s(&worn_png), s(&wav), &radius);
+    args.extend(["--params", s(&lenient)]);
+    let out = groovescope(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("were bridged"), "{}", stderr(&out));
+
     let flat = dir.path().join("flat.png");
     groovescope::io::save_grey_png(&Image::filled(300, 200, 0.4), &flat, false, false).unwrap();
     let err = still_error(&flat, "100", &[]);

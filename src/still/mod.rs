@@ -273,6 +273,15 @@ pub fn decode_groove(
             .filter(|g| g.channel == c)
             .map(|g| g.lines)
             .sum();
+        if lost as f64 > sp.max_bridged_share * borders.lines as f64 {
+            return Err(wrap(StillError::NotFollowed {
+                number: found.grooves.grooves[chosen].number,
+                channel: c,
+                lost,
+                lines: borders.lines,
+                share: sp.max_bridged_share,
+            }));
+        }
         if lost as f64 > GAP_WARNING_SHARE * borders.lines as f64 {
             warnings.push(format!(
                 "{} of {} lines of channel {c} had no usable border and were bridged",

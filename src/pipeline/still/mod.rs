@@ -97,6 +97,9 @@ pub struct StillParams {
     /// Wall angle from the record plane (stereo: a wall moving `a` along its normal moves its
     /// land border by `a / sin` of it); default 45.
     pub wall_angle_deg: f64,
+    /// Largest share of a groove's lines that may have no usable border (bridged) before the
+    /// groove is refused as not followed (1 = never refused); default 0.5.
+    pub max_bridged_share: f64,
     /// The border model.
     pub border: BorderParams,
 }
@@ -115,6 +118,7 @@ impl Default for StillParams {
             outlier_sigmas: 5.0,
             path_window_um: 20_000.0,
             wall_angle_deg: 45.0,
+            max_bridged_share: 0.5,
             border: BorderParams::default(),
         }
     }
@@ -144,6 +148,7 @@ impl StillParams {
         check_range("still.outlier_sigmas", self.outlier_sigmas, 1.0, 1e3)?;
         check_range("still.path_window_um", self.path_window_um, 1.0, 1e9)?;
         check_range("still.wall_angle_deg", self.wall_angle_deg, 10.0, 80.0)?;
+        check_range("still.max_bridged_share", self.max_bridged_share, 0.0, 1.0)?;
         if self.min_track_blocks == 0 {
             return Err(StageError::InvalidParam {
                 name: "still.min_track_blocks".into(),
@@ -260,6 +265,25 @@ pub enum StillError {
         found: usize,
         /// `left` or `top`.
         side: &'static str,
+    },
+    /// The chosen groove's borders were lost on most of its lines: what came out would be
+    /// mostly bridging (an image of no grooves, or settings that do not fit it).
+    #[error(
+        "groove {number} could not be followed: {lost} of {lines} lines of channel {channel} had \
+         no usable border, more than still.max_bridged_share = {share} of them (does the image \
+         show grooves, and do --um-per-px and --axis fit it?)"
+    )]
+    NotFollowed {
+        /// The groove's `--groove` number.
+        number: usize,
+        /// The channel.
+        channel: usize,
+        /// Its lines without a usable border.
+        lost: usize,
+        /// Its lines.
+        lines: usize,
+        /// The share allowed.
+        share: f64,
     },
     /// The structure of the image runs the other way.
     #[error(
