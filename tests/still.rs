@@ -392,14 +392,29 @@ fn bad_stills_get_one_clear_line() {
     groovescope::io::save_grey_png(&worn, &worn_png, false, false).unwrap();
     let err = still_error(&worn_png, &radius, &[]);
     assert!(
-        err.contains("could not be followed")
-            && err.contains("of 1200 lines")
-            && err.contains("still.max_bridged_share = 0.5")
+        err.contains("could not be followed: it was found in only")
+            && err.contains("still.max_lost_share = 0.5 of it is lost")
             && err.contains("worn.png"),
         "{err}"
     );
+    // Pure noise: the grooves the detector makes of it are each found in under half the
+    // image (37-48 % in five noise images), and refused.
+    let noise = dir.path().join("noise.png");
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    let pixels = Image::from_fn(2000, 300, |_, _| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    });
+    groovescope::io::save_grey_png(&pixels, &noise, false, false).unwrap();
+    let err = still_error(&noise, "100", &["--axis", "horizontal"]);
+    assert!(
+        err.contains("could not be followed") && err.contains("noise.png"),
+        "{err}"
+    );
     let lenient = dir.path().join("lenient.toml");
-    std::fs::write(&lenient, "[still]\nmax_bridged_share = 1.0\n").unwrap();
+    std::fs::write(&lenient, "[still]\nmax_lost_share = 1.0\n").unwrap();
     let wav = dir.path().join("worn.wav");
     let mut args = still_args(s(&worn_png), s(&wav), &radius);
     args.extend(["--params", s(&lenient)]);

@@ -209,8 +209,8 @@ knob_docs! {
         => "groove length over which the slow path (skew, curvature, drift) is fitted as a quadratic and taken out, µm",
     "still.wall_angle_deg"
         => "wall angle from the record plane (stereo: border motion × sin of it = channel)",
-    "still.max_bridged_share"
-        => "largest share of a groove's lines that may be bridged for want of a border before it is refused (1 = never)",
+    "still.max_lost_share"
+        => "largest share of a groove that may be lost (blocks it was not found in, lines without a usable border) before it is refused (1 = never)",
     "still.border.fit_half_window_px"
         => "half-width of the profile stretch the edge-spread fit reads, px",
     "still.border.min_width_px"

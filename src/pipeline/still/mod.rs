@@ -97,9 +97,10 @@ pub struct StillParams {
     /// Wall angle from the record plane (stereo: a wall moving `a` along its normal moves its
     /// land border by `a / sin` of it); default 45.
     pub wall_angle_deg: f64,
-    /// Largest share of a groove's lines that may have no usable border (bridged) before the
-    /// groove is refused as not followed (1 = never refused); default 0.5.
-    pub max_bridged_share: f64,
+    /// Largest share of a groove that may be lost before it is refused as not followed: the
+    /// detection blocks it was not found in, or the lines without a usable border (bridged);
+    /// 1 never refuses; default 0.5.
+    pub max_lost_share: f64,
     /// The border model.
     pub border: BorderParams,
 }
@@ -118,7 +119,7 @@ impl Default for StillParams {
             outlier_sigmas: 5.0,
             path_window_um: 20_000.0,
             wall_angle_deg: 45.0,
-            max_bridged_share: 0.5,
+            max_lost_share: 0.5,
             border: BorderParams::default(),
         }
     }
@@ -148,7 +149,7 @@ impl StillParams {
         check_range("still.outlier_sigmas", self.outlier_sigmas, 1.0, 1e3)?;
         check_range("still.path_window_um", self.path_window_um, 1.0, 1e9)?;
         check_range("still.wall_angle_deg", self.wall_angle_deg, 10.0, 80.0)?;
-        check_range("still.max_bridged_share", self.max_bridged_share, 0.0, 1.0)?;
+        check_range("still.max_lost_share", self.max_lost_share, 0.0, 1.0)?;
         if self.min_track_blocks == 0 {
             return Err(StageError::InvalidParam {
                 name: "still.min_track_blocks".into(),
@@ -266,22 +267,18 @@ pub enum StillError {
         /// `left` or `top`.
         side: &'static str,
     },
-    /// The chosen groove's borders were lost on most of its lines: what came out would be
-    /// mostly bridging (an image of no grooves, or settings that do not fit it).
+    /// Most of the chosen groove was lost: what came out would be mostly bridging (an image of
+    /// no grooves, a worn-flat stretch, or settings that do not fit the image).
     #[error(
-        "groove {number} could not be followed: {lost} of {lines} lines of channel {channel} had \
-         no usable border, more than still.max_bridged_share = {share} of them (does the image \
-         show grooves, and do --um-per-px and --axis fit it?)"
+        "groove {number} could not be followed: {lost}; more than still.max_lost_share = \
+         {share} of it is lost (does the image show grooves, and do --um-per-px and --axis fit it?)"
     )]
     NotFollowed {
         /// The groove's `--groove` number.
         number: usize,
-        /// The channel.
-        channel: usize,
-        /// Its lines without a usable border.
-        lost: usize,
-        /// Its lines.
-        lines: usize,
+        /// What was lost: "it was found in only 12 of the image's 62 blocks", "860 of 1200
+        /// lines of channel 0 had no usable border".
+        lost: String,
         /// The share allowed.
         share: f64,
     },
