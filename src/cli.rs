@@ -304,10 +304,14 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
     let cfg = match config {
         Some(p) => {
             let text = crate::io::limits::read_toml_text(p, "scene settings")?;
-            toml::from_str::<SceneConfig>(&text).map_err(|e| {
+            let cfg = toml::from_str::<SceneConfig>(&text).map_err(|e| {
                 let e = crate::toml_error::located(&text, &e);
                 anyhow::anyhow!("invalid scene settings: {e}: {}", p.display())
-            })?
+            })?;
+            // A value out of range names the file it came from, as a type error does.
+            cfg.validate()
+                .map_err(|e| anyhow::anyhow!("{e}: {}", p.display()))?;
+            cfg
         }
         None => SceneConfig::default(),
     };

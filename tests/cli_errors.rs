@@ -241,3 +241,27 @@ fn a_land_flow_past_the_frame_is_named_not_silently_zero() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(!out.exists());
 }
+
+#[test]
+fn a_scene_setting_out_of_range_names_its_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("tiny.toml");
+    std::fs::write(&config, "width_px = 0\n").unwrap();
+    let out = dir.path().join("scene");
+    let run = groovescope(&[
+        "synth-scene",
+        "cube",
+        "--out",
+        s(&out),
+        "--config",
+        s(&config),
+    ]);
+    assert!(!run.status.success());
+    let err = stderr(&run);
+    assert!(
+        err.contains("scene.width_px") && err.contains("got 0") && err.contains("tiny.toml"),
+        "{err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(!out.exists());
+}
