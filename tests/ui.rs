@@ -71,6 +71,28 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
         "{msg}"
     );
     assert_eq!(wb(&h).scan().unwrap().dir, good);
+    // A group cut short in the middle: the scan opens, that group says why it cannot run,
+    // and the others still do.
+    let short = tmp.path().join("short");
+    write_scan(&short, 3);
+    for t in 4..7 {
+        std::fs::remove_file(short.join(format!("group_001/f{t:02}.png"))).unwrap();
+    }
+    wb_mut(&mut h).open_scan(&short).unwrap();
+    settle(&mut h);
+    assert_eq!(wb(&h).scan().unwrap().dir, short);
+    h.get_by_label("next >").click();
+    settle(&mut h);
+    assert_eq!(wb(&h).group(), 1);
+    let msg = last_message(&h);
+    assert!(
+        msg.contains("4 frames") && msg.contains("group_001"),
+        "{msg}"
+    );
+    h.get_by_label("next >").click();
+    settle(&mut h);
+    assert_eq!(wb(&h).group(), 2);
+    assert!(wb(&h).frames().is_some(), "frames of group 2 are loaded");
     // An invalid preset.
     let preset = tmp.path().join("bad.toml");
     std::fs::write(&preset, "[flow]\nlambda = \"soft\"\n").unwrap();
