@@ -567,6 +567,7 @@ pub fn run(command: Command) -> Result<()> {
             | Command::Synth(_)
             | Command::SynthScene { .. }
             | Command::ImportVideo(_)
+            | Command::Still(_)
     );
     if stoppable {
         crate::job::catch_interrupts().map_err(|e| anyhow::anyhow!("cannot catch Ctrl-C: {e}"))?;

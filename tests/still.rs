@@ -476,3 +476,29 @@ fn synth_still_refuses_a_folder_that_is_not_empty() {
         "mine"
     );
 }
+
+#[test]
+fn an_interrupt_stops_a_still_file_decode() {
+    // Only decode_still_file reads the flag in this test binary (the other tests run the
+    // command in their own processes or call the stages directly).
+    let dir = tempfile::tempdir().unwrap();
+    let (_, image, radius) = small_still(dir.path(), Axis::Vertical, Cut::Lateral, "png");
+    let setup = StillSetup {
+        axis: Axis::Vertical,
+        um_per_px: 1.0,
+        rpm: 100.0 / 3.0,
+        radius_mm: radius,
+        cut: Cut::Lateral,
+        reverse: false,
+    };
+    let params = PipelineParams::default();
+    let flag = groovescope::job::interrupted();
+    flag.store(true, std::sync::atomic::Ordering::Relaxed);
+    let stopped = groovescope::still::decode_still_file(&image, &setup, None, &params);
+    flag.store(false, std::sync::atomic::Ordering::Relaxed);
+    assert!(
+        matches!(stopped, Err(groovescope::still::StillRunError::Cancelled)),
+        "{stopped:?}"
+    );
+    assert!(groovescope::still::decode_still_file(&image, &setup, None, &params).is_ok());
+}

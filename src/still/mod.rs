@@ -155,9 +155,13 @@ pub fn finish_sound(
 /// Decodes groove `groove` (1-based; `None`: the most complete near the centre) of the still
 /// at `path`, reading the file twice in bands of rows.
 ///
+/// Stops at the next band of rows once [`crate::job::interrupted`] is raised (Ctrl-C, when the
+/// command line catches it).
+///
 /// # Errors
 /// [`StillRunError`] naming the file: unreadable or oversized images, bad settings, no groove,
-/// a groove out of range, an axis that contradicts the image.
+/// a groove out of range, an axis that contradicts the image; [`StillRunError::Cancelled`]
+/// when interrupted.
 pub fn decode_still_file(
     path: &Path,
     setup: &StillSetup,
@@ -166,7 +170,8 @@ pub fn decode_still_file(
 ) -> Result<StillRun, StillRunError> {
     let started = Instant::now();
     let mut open = || StillReader::open(path);
-    let mut go_on = |_: StillPhase, _: f64| true;
+    let interrupted = crate::job::interrupted();
+    let mut go_on = |_: StillPhase, _: f64| !interrupted.load(std::sync::atomic::Ordering::Relaxed);
     let found = find_grooves(&mut open, setup, &params.still, &mut go_on)?;
     let chosen = choose_groove(&found.grooves, groove).map_err(|problem| StillRunError::Still {
         problem,
