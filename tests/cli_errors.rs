@@ -199,19 +199,8 @@ fn eval_scores_stereo_per_channel_and_refuses_nan_samples() {
     );
     let mut bad = sine;
     bad[100] = f32::NAN;
-    // Written raw: groovescope's own writer never writes a NaN.
     let nan = dir.path().join("nan.wav");
-    let spec = hound::WavSpec {
-        channels: 1,
-        sample_rate: 44_100,
-        bits_per_sample: 32,
-        sample_format: hound::SampleFormat::Float,
-    };
-    let mut w = hound::WavWriter::create(&nan, spec).unwrap();
-    for v in bad {
-        w.write_sample(v).unwrap();
-    }
-    w.finalize().unwrap();
+    common::write_raw_wav(&nan, 44_100, &bad);
     let out = groovescope(&["eval", s(&nan), s(&pair)]);
     assert!(!out.status.success());
     let err = stderr(&out);

@@ -270,17 +270,7 @@ fn the_still_command_writes_sound_and_a_report() {
     // A reference of a few samples cannot be scored: the sound is still written, with a
     // warning naming the reference.
     let short = dir.path().join("short.wav");
-    let spec = hound::WavSpec {
-        channels: 1,
-        sample_rate: 44_100,
-        bits_per_sample: 16,
-        sample_format: hound::SampleFormat::Int,
-    };
-    let mut w = hound::WavWriter::create(&short, spec).unwrap();
-    for v in [100_i16, -100, 50] {
-        w.write_sample(v).unwrap();
-    }
-    w.finalize().unwrap();
+    common::write_raw_wav(&short, 44_100, &[0.01, -0.01, 0.005]);
     let short_wav = dir.path().join("short-ref.wav");
     let mut short_args = still_args(s(&image), s(&short_wav), &radius);
     short_args.extend(["--axis", "horizontal", "--reference", s(&short)]);
@@ -350,17 +340,7 @@ fn bad_stills_get_one_clear_line() {
     // References that cannot be scored against are named, not read as silence or upsampled.
     let wav = |name: &str, rate: u32, samples: &[f32]| {
         let path = dir.path().join(name);
-        let spec = hound::WavSpec {
-            channels: 1,
-            sample_rate: rate,
-            bits_per_sample: 32,
-            sample_format: hound::SampleFormat::Float,
-        };
-        let mut w = hound::WavWriter::create(&path, spec).unwrap();
-        for &v in samples {
-            w.write_sample(v).unwrap();
-        }
-        w.finalize().unwrap();
+        common::write_raw_wav(&path, rate, samples);
         path
     };
     let nan = wav("nan.wav", 44_100, &[0.1, f32::NAN, 0.2]);

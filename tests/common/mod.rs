@@ -97,6 +97,22 @@ pub fn demo_copy(dir: &Path) -> PathBuf {
     out
 }
 
+/// Writes `samples` as a mono 32-bit float WAV at `rate` Hz, as they are: NaN and infinity
+/// too, which groovescope's own writer never writes.
+pub fn write_raw_wav(path: &Path, rate: u32, samples: &[f32]) {
+    let spec = hound::WavSpec {
+        channels: 1,
+        sample_rate: rate,
+        bits_per_sample: 32,
+        sample_format: hound::SampleFormat::Float,
+    };
+    let mut w = hound::WavWriter::create(path, spec).unwrap();
+    for &v in samples {
+        w.write_sample(v).unwrap();
+    }
+    w.finalize().unwrap();
+}
+
 /// xorshift64*: a fixed, seedable stream for mutation and monkey tests.
 pub struct Rng(pub u64);
 
