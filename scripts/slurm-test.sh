@@ -24,16 +24,26 @@ conf="$work/slurm.conf"
 munge_pid=""
 
 shutdown() {
+    local status=$?
     set +e
-    if [ -f "$conf" ]; then SLURM_CONF="$conf" scontrol shutdown >/dev/null 2>&1; fi
+    # The daemons' pids before asking them to stop: slurmctld removes its pid file as it begins
+    # to shut down, so waiting on the file could stop waiting on a daemon still running.
+    local pids=() pidfile pid
     for pidfile in "$work/slurmctld.pid" "$work/slurmd.pid"; do
+        [ -f "$pidfile" ] && pids+=("$(cat "$pidfile")")
+    done
+    if [ -f "$conf" ]; then SLURM_CONF="$conf" scontrol shutdown >/dev/null 2>&1; fi
+    for pid in "${pids[@]}"; do
         for _ in $(seq 50); do
-            [ -f "$pidfile" ] && kill -0 "$(cat "$pidfile")" 2>/dev/null || break
+            kill -0 "$pid" 2>/dev/null || break
             sleep 0.1
         done
-        [ -f "$pidfile" ] && kill "$(cat "$pidfile")" 2>/dev/null
+        kill "$pid" 2>/dev/null
     done
     if [ -n "$munge_pid" ]; then kill "$munge_pid" 2>/dev/null; fi
+    # Only now, with the daemons gone (a later run reuses their ports); a failed run keeps its
+    # logs.
+    if [ "$status" = 0 ]; then rm -rf "$work"; else echo "slurm-test: logs kept in $work" >&2; fi
 }
 trap shutdown EXIT
 
@@ -135,4 +145,3 @@ one=$(echo "$t1 - $t0" | bc)
 slurm=$(echo "$t3 - $t2" | bc)
 echo "slurm-test: passed: $groups groups, $SHARDS shards on 2 CPUs; merged WAV byte-identical to the one-process WAV ($(wc -c <"$work/side.wav") bytes)"
 printf 'slurm-test: wall time: one process %.1f s, Slurm array + merge (submit to merged WAV) %.1f s\n' "$one" "$slurm"
-rm -rf "$work"
