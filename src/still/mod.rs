@@ -293,7 +293,11 @@ pub fn decode_groove(
             .sum();
         if lost as f64 > sp.max_lost_share * borders.lines as f64 {
             return Err(wrap(StillError::NotFollowed {
-                number: found.grooves.grooves[chosen].number,
+                number: found
+                    .grooves
+                    .grooves
+                    .get(chosen)
+                    .map_or(chosen + 1, |t| t.number),
                 lost: format!(
                     "{lost} of {} lines of channel {c} had no usable border",
                     borders.lines
