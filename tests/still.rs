@@ -350,7 +350,7 @@ fn bad_stills_get_one_clear_line() {
     let err = still_error(&image, &radius, &["--reference", s(&slow)]);
     assert!(err.contains("500 Hz") && err.contains("slow.wav"), "{err}");
     let err = still_error(&image, "0", &[]);
-    assert!(err.contains("radius_mm"), "{err}");
+    assert!(err.contains("invalid --radius-mm: 0 is not in"), "{err}");
     // 33⅓ rpm at 0.01 mm over 1 µm pixels: 34.9 samples a second, refused (otherwise the
     // 1,200-px still would become 34 s of interpolated sound).
     let err = still_error(&image, "0.01", &[]);

@@ -257,9 +257,17 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
         cut,
         reverse: args.reverse,
     };
-    setup
-        .validate()
-        .map_err(|e| anyhow::anyhow!("{e}: {}", args.image.display()))?;
+    setup.validate().map_err(|e| match e {
+        // The settings came from flags: name them as typed.
+        crate::pipeline::StageError::InvalidParam { name, problem } => {
+            let flags = name
+                .replace("um_per_px", "--um-per-px")
+                .replace("radius_mm", "--radius-mm")
+                .replace("rpm", "--rpm");
+            anyhow::anyhow!("invalid {flags}: {problem}: {}", args.image.display())
+        }
+        e => anyhow::anyhow!("{e}: {}", args.image.display()),
+    })?;
     if args.groove == Some(0) {
         bail!(
             "--groove counts from 1 (the image's left or top groove): {}",
