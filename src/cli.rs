@@ -234,7 +234,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         _ => SynthConfig::default(),
     };
     let mut cfg = match &args.config {
-        Some(p) => overlay_toml(&base, p, "synth", "synth settings")?,
+        Some(p) => overlay_toml(&base, p, "synth", "synth settings", SynthConfig::validate)?,
         None => base,
     };
     if let Some(n) = args.max_groups {
@@ -302,17 +302,13 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
         _ => SceneKind::Sphere,
     };
     let cfg = match config {
-        Some(p) => {
-            let text = crate::io::limits::read_toml_text(p, "scene settings")?;
-            let cfg = toml::from_str::<SceneConfig>(&text).map_err(|e| {
-                let e = crate::toml_error::located(&text, &e);
-                anyhow::anyhow!("invalid scene settings: {e}: {}", p.display())
-            })?;
-            // A value out of range names the file it came from, as a type error does.
-            cfg.validate()
-                .map_err(|e| anyhow::anyhow!("{e}: {}", p.display()))?;
-            cfg
-        }
+        Some(p) => overlay_toml(
+            &SceneConfig::default(),
+            p,
+            "scene",
+            "scene settings",
+            SceneConfig::validate,
+        )?,
         None => SceneConfig::default(),
     };
     let meta = render_scene(kind, &cfg, out, Job::reporting(&|_, _| {}))?;
@@ -359,12 +355,19 @@ pub fn load_params(path: Option<&Path>) -> Result<PipelineParams> {
     Ok(params)
 }
 
-/// `base` with the keys of the TOML file `path` (optionally under a `[table]`) laid over it.
+/// `base` with the keys of the TOML file `path` (optionally under a `[table]`) laid over it,
+/// then checked by `validate`.
 ///
 /// # Errors
-/// When the file cannot be read or a key or value is invalid: one line naming the key (and
-/// its line, where the file's syntax is at fault) and the file.
-pub(crate) fn overlay_toml<T>(base: &T, path: &Path, table: &str, what: &str) -> Result<T>
+/// When the file cannot be read, a key or value is invalid, or `validate` refuses the result:
+/// one line naming the key (and its line, where the file's syntax is at fault) and the file.
+pub(crate) fn overlay_toml<T, E: std::fmt::Display>(
+    base: &T,
+    path: &Path,
+    table: &str,
+    what: &str,
+    validate: impl FnOnce(&T) -> std::result::Result<(), E>,
+) -> Result<T>
 where
     T: serde::Serialize + serde::de::DeserializeOwned,
 {
@@ -382,7 +385,7 @@ where
         merged.extend(keys.clone());
         toml::Value::Table(merged).try_into::<T>()
     };
-    over(&user).map_err(|e| {
+    let merged = over(&user).map_err(|e| {
         // The merged table has no positions: name the first of the user's keys that fails
         // on its own.
         let key = user.iter().find_map(|(k, v)| {
@@ -393,7 +396,10 @@ where
             Some(k) => fail(format!("{k}: {}", e.message())),
             None => fail(e.message().to_string()),
         }
-    })
+    })?;
+    // A value out of range names the file it came from, as a type error does.
+    validate(&merged).map_err(|e| anyhow::anyhow!("{e}: {}", path.display()))?;
+    Ok(merged)
 }
 
 /// Checks a built-in sound's `--duration`: positive, and no longer than the longest

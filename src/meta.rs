@@ -201,9 +201,9 @@ impl ScanMeta {
                 ));
             }
         }
-        // The land moves f·U/Z = U / pitch px a frame: past the frame's width, consecutive
-        // frames share nothing and neither flow nor the borders can be followed.
-        let land_shift_px = self.motion.frame_step_um / self.camera.pixel_pitch_um;
+        // Past the frame's width, consecutive frames share nothing and neither flow nor the
+        // borders can be followed.
+        let land_shift_px = self.geometry().land_flow_px().abs();
         if land_shift_px >= width as f64 {
             return Err(format!(
                 "motion.frame_step_um = {} µm moves the land {land_shift_px:.4e} px between frames, not less than the frame's {width} px width (at {} µm a pixel), so consecutive frames would share nothing",

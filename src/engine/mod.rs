@@ -298,17 +298,15 @@ pub fn finish_reconstruction(
         stage_secs,
         ..
     } = clip;
-    let empty = match params.method {
-        Method::Flow => signals.is_empty(),
-        Method::Edges => borders.is_empty(),
-        Method::Fused => signals.is_empty() || borders.is_empty(),
+    // The decoder the method needs that has nothing (fused needs both; flow's is named first).
+    let (flow, edges) = ("the flow method", "the edge method");
+    let silent = match params.method {
+        Method::Flow => signals.is_empty().then_some(flow),
+        Method::Edges => borders.is_empty().then_some(edges),
+        Method::Fused if signals.is_empty() => Some(flow),
+        Method::Fused => borders.is_empty().then_some(edges),
     };
-    if empty {
-        let decoder = if matches!(params.method, Method::Edges) || !signals.is_empty() {
-            "the edge method"
-        } else {
-            "the flow method"
-        };
+    if let Some(decoder) = silent {
         return Err(EngineError::NoSound {
             path: scan_dir.to_path_buf(),
             decoder,

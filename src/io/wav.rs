@@ -114,8 +114,8 @@ pub fn read_wav(path: &Path) -> Result<Audio, LoadError> {
 /// resampling from it to the clip's rate costs in proportion to the ratio.
 pub const MIN_REFERENCE_RATE_HZ: u32 = 1000;
 
-/// [`read_wav`] for a sound whose samples are used as numbers (a generator's sound, a
-/// sound to score): NaN or infinite samples are refused rather than read as silence.
+/// [`read_wav`] for a sound to score: NaN or infinite samples are refused rather than
+/// counted as silence.
 ///
 /// # Errors
 /// As [`read_wav`], and [`LoadError::Sound`] naming the file when a sample is not finite.

@@ -18,7 +18,7 @@ const ENVELOPE_SMOOTH_BLOCKS: usize = 1;
 /// Fewest envelope blocks for an envelope r (10 blocks = 50 ms): over a handful of smoothed
 /// block peaks the correlation means nothing, so shorter clips get none.
 const MIN_ENVELOPE_BLOCKS: usize = 10;
-/// A reference whose whole-block envelope spreads by less than this share of its peak is
+/// A reference whose whole blocks' peaks spread by less than this share of the highest is
 /// steady (a tone): its envelope r would only correlate ripple, so it gets none.
 const STEADY_ENVELOPE_SPREAD: f32 = 0.01;
 /// SNR reported when the residual is exactly zero (keeps the score finite for JSON).
@@ -132,18 +132,12 @@ pub fn peak_envelope(samples: &[f32], window: usize) -> Vec<f32> {
         .collect()
 }
 
-/// Whether an envelope is steady: its whole blocks (the last one is left out when `partial`,
-/// the length of a short last block, is not 0) lie within [`STEADY_ENVELOPE_SPREAD`] of their
-/// peak. A silent one is steady too.
-fn is_steady(envelope: &[f32], partial: usize) -> bool {
-    let whole = if partial == 0 {
-        envelope
-    } else {
-        &envelope[..envelope.len().saturating_sub(1)]
-    };
-    // The smoothing averages the edge blocks with the short one: leave those out as well.
-    let inner = whole.get(1..whole.len().saturating_sub(1)).unwrap_or(&[]);
-    let (lo, hi) = inner.iter().fold((f32::INFINITY, 0.0_f32), |(lo, hi), &v| {
+/// Whether `samples` are steady: the peaks of their whole blocks of `window` samples lie
+/// within [`STEADY_ENVELOPE_SPREAD`] of the highest (a silent stretch is steady too).
+fn is_steady(samples: &[f32], window: usize) -> bool {
+    let whole = samples.len() - samples.len() % window.max(1);
+    let peaks = block_peaks(&samples[..whole], window);
+    let (lo, hi) = peaks.iter().fold((f32::INFINITY, 0.0_f32), |(lo, hi), &v| {
         (lo.min(v), hi.max(v))
     });
     hi <= 0.0 || hi - lo < STEADY_ENVELOPE_SPREAD * hi
@@ -283,7 +277,7 @@ pub fn evaluate(
         peak_envelope(rec_part, window),
         peak_envelope(ref_part, window),
     );
-    let envelope_r = (env_rec.len() >= MIN_ENVELOPE_BLOCKS && !is_steady(&env_ref, len % window))
+    let envelope_r = (env_rec.len() >= MIN_ENVELOPE_BLOCKS && !is_steady(ref_part, window))
         .then(|| pearson(&env_rec, &env_ref));
     Some(Scores {
         r,

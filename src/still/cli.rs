@@ -55,7 +55,9 @@ pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
         StillConfig::default()
     };
     let mut cfg = match &args.config {
-        Some(p) => crate::cli::overlay_toml(&base, p, "still", "still settings")?,
+        Some(p) => {
+            crate::cli::overlay_toml(&base, p, "still", "still settings", StillConfig::validate)?
+        }
         None => base,
     };
     match args.axis.as_deref() {

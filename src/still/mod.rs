@@ -253,18 +253,22 @@ pub fn decode_groove(
         path: found.path.clone(),
     };
     let sp = &params.still;
+    let track = found.grooves.grooves.get(chosen);
+    let number = track.map_or(chosen + 1, |t| t.number);
     // A groove found in under half the image is refused before its ribbon is read (pure
     // noise gives grooves found in 37-48 % of the blocks, a scanned groove 97-100 %).
-    if let Some(track) = found.grooves.grooves.get(chosen) {
-        let blocks = track.blocks.len();
-        let seen = track.blocks.iter().filter(|b| b.is_some()).count();
-        if (blocks - seen) as f64 > sp.max_lost_share * blocks as f64 {
-            return Err(wrap(StillError::NotFollowed {
-                number: track.number,
-                lost: format!("it was found in only {seen} of the image's {blocks} blocks"),
-                share: sp.max_lost_share,
-            }));
-        }
+    if let Some(track) = track
+        && 1.0 - track.coverage > sp.max_lost_share
+    {
+        return Err(wrap(StillError::NotFollowed {
+            number,
+            lost: format!(
+                "it was found in only {:.0} % of the image's {} blocks",
+                100.0 * track.coverage,
+                track.blocks.len()
+            ),
+            share: sp.max_lost_share,
+        }));
     }
     let (width, height) = found.image_px;
     let mut read_secs = found.read_secs;
@@ -293,11 +297,7 @@ pub fn decode_groove(
             .sum();
         if lost as f64 > sp.max_lost_share * borders.lines as f64 {
             return Err(wrap(StillError::NotFollowed {
-                number: found
-                    .grooves
-                    .grooves
-                    .get(chosen)
-                    .map_or(chosen + 1, |t| t.number),
+                number,
                 lost: format!(
                     "{lost} of {} lines of channel {c} had no usable border",
                     borders.lines

@@ -145,8 +145,14 @@ fn io_err(problem: String, path: &Path) -> SynthError {
     })
 }
 
-/// Creates `dir` or accepts it when empty; anything else is an error and nothing is touched.
-pub(crate) fn prepare_out_dir(dir: &Path) -> Result<(), SynthError> {
+/// Writes a new output folder through `fill`: `dir` is created, or accepted when it is an
+/// empty folder (anything else is an error and nothing is touched). When `fill` fails (a
+/// cancel, a full disk), the folder is left as it was found (a new one removed, an empty one
+/// emptied): everything in it was this run's, and a half-written scan is no use to anyone.
+pub(crate) fn fill_out_dir<T>(
+    dir: &Path,
+    fill: impl FnOnce() -> Result<T, SynthError>,
+) -> Result<T, SynthError> {
     if dir.exists() && !dir.is_dir() {
         return Err(io_err(
             "the output is a file; give a folder that is new or empty".into(),
@@ -158,27 +164,26 @@ pub(crate) fn prepare_out_dir(dir: &Path) -> Result<(), SynthError> {
             path: dir.to_path_buf(),
         });
     }
-    if dir.exists() {
-        Ok(())
-    } else {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| io_err(format!("cannot create output folder: {e}"), dir))
-    }
-}
-
-/// Empties an output folder that [`prepare_out_dir`] found new (`created`: removes it) or empty.
-pub(crate) fn clear_out_dir(dir: &Path, created: bool) {
+    let created = !dir.exists();
     if created {
-        let _ = std::fs::remove_dir_all(dir);
-    } else if let Ok(entries) = std::fs::read_dir(dir) {
-        for path in entries.flatten().map(|e| e.path()) {
-            let _ = if path.is_dir() {
-                std::fs::remove_dir_all(&path)
-            } else {
-                std::fs::remove_file(&path)
-            };
+        std::fs::create_dir_all(dir)
+            .map_err(|e| io_err(format!("cannot create output folder: {e}"), dir))?;
+    }
+    let filled = fill();
+    if filled.is_err() {
+        if created {
+            let _ = std::fs::remove_dir_all(dir);
+        } else if let Ok(entries) = std::fs::read_dir(dir) {
+            for path in entries.flatten().map(|e| e.path()) {
+                let _ = if path.is_dir() {
+                    std::fs::remove_dir_all(&path)
+                } else {
+                    std::fs::remove_file(&path)
+                };
+            }
         }
     }
+    filled
 }
 
 /// Zero-padded width for `count` indices (at least `min` digits).
@@ -334,15 +339,9 @@ pub fn write_scan(
         key: "synth".into(),
         problem: format!("cannot be written as TOML: {e}"),
     })?;
-    let created = !out_dir.exists();
-    prepare_out_dir(out_dir)?;
-    let written = write_scan_files(groove, out_dir, &meta_text, job);
-    if written.is_err() {
-        // The folder was new or empty: everything in it is this run's, and a scan cut short
-        // (cancelled, a full disk) is no use to anyone.
-        clear_out_dir(out_dir, created);
-    }
-    let groups = written?;
+    let groups = fill_out_dir(out_dir, || {
+        write_scan_files(groove, out_dir, &meta_text, job)
+    })?;
     let reference = groove.reference();
     Ok(SynthSummary {
         out_dir: out_dir.to_path_buf(),

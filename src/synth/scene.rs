@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use super::config::Table;
 use super::noise::{Rng, hash_seq, marble};
-use super::{SynthError, prepare_out_dir};
+use super::{SynthError, fill_out_dir};
 use crate::image::Image;
 use crate::io::frames::save_grey_png;
 use crate::io::{Geometry, LoadError, write_atomic, write_atomic_with};
@@ -492,32 +492,23 @@ pub fn render_scene(
         key: "scene".into(),
         problem: format!("cannot be written as TOML: {e}"),
     })?;
-    let created = !out_dir.exists();
-    prepare_out_dir(out_dir)?;
     let fw = super::digits(cfg.frames, 3);
-    let written = (0..cfg.frames)
-        .into_par_iter()
-        .try_for_each(|k| -> Result<(), SynthError> {
-            if job.is_cancelled() {
-                return Err(SynthError::Cancelled);
-            }
-            let (img, depth) = render_scene_frame(kind, cfg, k)?;
-            save_grey_png(&img, &out_dir.join(format!("f{k:0fw$}.png")), true, false)?;
-            save_true_depth(&depth, &out_dir.join(format!("depth_{k:0fw$}.f32")))?;
-            job.report(k + 1, cfg.frames);
-            Ok(())
-        })
-        .and_then(|()| {
-            Ok(write_atomic(
-                &out_dir.join("scene.toml"),
-                text.as_bytes(),
-                false,
-            )?)
-        });
-    if written.is_err() {
-        super::clear_out_dir(out_dir, created);
-    }
-    written.map(|()| meta)
+    fill_out_dir(out_dir, || {
+        (0..cfg.frames)
+            .into_par_iter()
+            .try_for_each(|k| -> Result<(), SynthError> {
+                if job.is_cancelled() {
+                    return Err(SynthError::Cancelled);
+                }
+                let (img, depth) = render_scene_frame(kind, cfg, k)?;
+                save_grey_png(&img, &out_dir.join(format!("f{k:0fw$}.png")), true, false)?;
+                save_true_depth(&depth, &out_dir.join(format!("depth_{k:0fw$}.f32")))?;
+                job.report(k + 1, cfg.frames);
+                Ok(())
+            })?;
+        write_atomic(&out_dir.join("scene.toml"), text.as_bytes(), false)?;
+        Ok(meta)
+    })
 }
 
 #[cfg(test)]

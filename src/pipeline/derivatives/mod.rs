@@ -227,14 +227,14 @@ pub fn compute_derivatives(
     let base_flow_px = if params.prewarp { land_flow_px } else { 0.0 };
     // The widest pre-warp of a window must leave columns whose filters read real samples:
     // without any the derivatives are all zero and the flow silently nothing.
-    let (shifts, radius): (Vec<RowShift>, usize) = match params.mode {
+    // The window's shifts, its filter radius, and how many frames its farthest frame is moved.
+    let (shifts, radius, reach_frames) = match params.mode {
         DerivativeMode::Simoncelli => (
-            (0..SIMONCELLI_WINDOW_FRAMES)
-                .map(|k| RowShift::new((k as f64 - HALF_WINDOW as f64) * base_flow_px, first.width))
-                .collect(),
+            window_shifts(base_flow_px, first.width),
             RADIUS,
+            HALF_WINDOW as f64,
         ),
-        DerivativeMode::TwoFrame => (vec![RowShift::new(base_flow_px, first.width)], 1),
+        DerivativeMode::TwoFrame => (vec![RowShift::new(base_flow_px, first.width)], 1, 1.0),
     };
     let margin = prewarp_margin(&shifts, radius);
     if 2 * margin >= first.width && 2 * radius < first.width {
@@ -246,10 +246,6 @@ pub fn compute_derivatives(
                 format!("{v:.1e}")
             }
         };
-        let half_window = match params.mode {
-            DerivativeMode::Simoncelli => HALF_WINDOW as f64,
-            DerivativeMode::TwoFrame => 1.0,
-        };
         return Err(StageError::InvalidParam {
             name: "land_flow_px".to_string(),
             problem: format!(
@@ -257,7 +253,7 @@ pub fn compute_derivatives(
                  wide frame is left to compare",
                 px(land_flow_px),
                 params.mode,
-                px((land_flow_px * half_window).abs().ceil()),
+                px((land_flow_px * reach_frames).abs().ceil()),
                 first.width
             ),
         });

@@ -202,6 +202,14 @@ pub(super) fn simoncelli_band(
     }
 }
 
+/// The pre-warp of each frame of a 7-frame window: frame `k` moved back by its `k − 3` frames
+/// of land motion at `base_flow_px` a frame.
+pub(super) fn window_shifts(base_flow_px: f64, width: usize) -> Vec<RowShift> {
+    (0..SIMONCELLI_WINDOW_FRAMES)
+        .map(|k| RowShift::new((k as f64 - HALF_WINDOW as f64) * base_flow_px, width))
+        .collect()
+}
+
 /// One Simoncelli derivative set from a 7-frame window centred on group frame `centre`, the
 /// bands compiled for `isa`.
 pub(super) fn simoncelli_window(
@@ -213,10 +221,7 @@ pub(super) fn simoncelli_window(
     let (width, height) = (window[0].width, window[0].height);
     let p7 = fold_preblur(&P5);
     let d7 = fold_preblur(&D5);
-    let shifts: Vec<RowShift> = (0..window.len())
-        .map(|k| RowShift::new((k as f64 - HALF_WINDOW as f64) * base_flow_px, width))
-        .collect();
-
+    let shifts = window_shifts(base_flow_px, width);
     let margin = prewarp_margin(&shifts, RADIUS);
     let n = width * height;
     let (mut ix, mut iy, mut it, mut image) =

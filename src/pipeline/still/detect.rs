@@ -372,10 +372,9 @@ fn absorb_pieces(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64) {
     };
     loop {
         let mut join = None;
-        'search: for (b, piece) in tracks.iter().enumerate() {
-            let own = found(piece);
-            for (a, track) in tracks.iter().enumerate() {
-                let host = found(track);
+        let seen: Vec<_> = tracks.iter().map(|t| found(t)).collect();
+        'search: for (b, (piece, own)) in tracks.iter().zip(&seen).enumerate() {
+            for (a, (track, host)) in tracks.iter().zip(&seen).enumerate() {
                 if a == b || host.len() <= own.len() {
                     continue;
                 }
@@ -384,9 +383,9 @@ fn absorb_pieces(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64) {
                     .zip(track)
                     .filter(|(p, t)| p.is_some() && t.is_some())
                     .count();
-                let near = own.iter().all(|(block, g)| {
-                    (centre(g) - centre(&interpolate(&host, *block))).abs() < tol
-                });
+                let near = own
+                    .iter()
+                    .all(|(block, g)| (centre(g) - centre(&interpolate(host, *block))).abs() < tol);
                 if shared <= MAX_SHARED_BLOCKS && near {
                     join = Some((a, b));
                     break 'search;

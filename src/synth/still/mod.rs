@@ -34,7 +34,7 @@ use crate::io::Cut;
 use crate::io::still::save_grey_image;
 use crate::io::wav::{Audio, WavBits, write_wav};
 use crate::pipeline::still::Axis;
-use crate::synth::{BUILTIN_RATE_HZ, SynthError, prepare_out_dir};
+use crate::synth::{BUILTIN_RATE_HZ, SynthError, fill_out_dir};
 
 /// One groove's ground truth in the sidecar.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -192,49 +192,50 @@ pub struct StillSummary {
 }
 
 /// Renders `scene` and writes the folder `out_dir` (created, or empty): the image, one WAV per
-/// groove and `truth.toml` last.
+/// groove and `truth.toml` last. A write that fails leaves the folder as it found it.
 ///
 /// # Errors
 /// [`SynthError::OutputExists`] for a folder that is not empty, [`SynthError::Load`] for a
 /// failed write (naming the file), [`SynthError::Config`] when the sidecar cannot be written.
 pub fn write_still(scene: &StillScene, out_dir: &Path) -> Result<StillSummary, SynthError> {
     let c = &scene.cfg;
-    prepare_out_dir(out_dir)?;
-    let rendered = render_still(scene);
-    let ext = if c.format == "tiff" { "tif" } else { "png" };
-    let name = format!("still.{ext}");
-    let image_path = out_dir.join(&name);
-    save_grey_image(&rendered.image, &image_path, c.bit_depth == 16, false)?;
-    let truth = still_truth(scene, &rendered, &name);
-    for (k, g) in scene.grooves.iter().enumerate() {
-        let rate = match &g.left {
-            Motion::Sound { rate_hz, .. } => *rate_hz as u32,
-            Motion::Tone { .. } => BUILTIN_RATE_HZ,
+    fill_out_dir(out_dir, || {
+        let rendered = render_still(scene);
+        let ext = if c.format == "tiff" { "tif" } else { "png" };
+        let name = format!("still.{ext}");
+        let image_path = out_dir.join(&name);
+        save_grey_image(&rendered.image, &image_path, c.bit_depth == 16, false)?;
+        let truth = still_truth(scene, &rendered, &name);
+        for (k, g) in scene.grooves.iter().enumerate() {
+            let rate = match &g.left {
+                Motion::Sound { rate_hz, .. } => *rate_hz as u32,
+                Motion::Tone { .. } => BUILTIN_RATE_HZ,
+            };
+            let audio = groove_reference(scene, k, rate);
+            write_wav(
+                &out_dir.join(format!("groove{}.wav", k + 1)),
+                &audio,
+                WavBits::Float32,
+                false,
+            )?;
+        }
+        let sidecar = StillSidecar {
+            truth: truth.clone(),
+            still: c.clone(),
         };
-        let audio = groove_reference(scene, k, rate);
-        write_wav(
-            &out_dir.join(format!("groove{}.wav", k + 1)),
-            &audio,
-            WavBits::Float32,
+        let text = toml::to_string_pretty(&sidecar).map_err(|e| SynthError::Config {
+            key: "still".into(),
+            problem: format!("cannot be written as TOML: {e}"),
+        })?;
+        let header = "# A generated still (groovescope synth-still) and its ground truth.\n";
+        crate::io::write_atomic(
+            &out_dir.join("truth.toml"),
+            format!("{header}{text}").as_bytes(),
             false,
         )?;
-    }
-    let sidecar = StillSidecar {
-        truth: truth.clone(),
-        still: c.clone(),
-    };
-    let text = toml::to_string_pretty(&sidecar).map_err(|e| SynthError::Config {
-        key: "still".into(),
-        problem: format!("cannot be written as TOML: {e}"),
-    })?;
-    let header = "# A generated still (groovescope synth-still) and its ground truth.\n";
-    crate::io::write_atomic(
-        &out_dir.join("truth.toml"),
-        format!("{header}{text}").as_bytes(),
-        false,
-    )?;
-    Ok(StillSummary {
-        image: image_path,
-        truth,
+        Ok(StillSummary {
+            image: image_path,
+            truth,
+        })
     })
 }
