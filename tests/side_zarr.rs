@@ -92,7 +92,7 @@ fn pack_refuses_groups_of_different_frame_counts_naming_the_group() {
     textured_scan(&folder, 3, "8");
     std::fs::copy(
         folder.join("g00000/f000.png"),
-        folder.join("g00001/f999.png"),
+        folder.join("g00001/f007.png"),
     )
     .unwrap();
     let store = tmp.path().join("scan.zarr");

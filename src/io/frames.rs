@@ -134,6 +134,27 @@ pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
     load_group_frames(group, 0..group.frame_count())
 }
 
+/// Refuses a group folder of a scan folder, or a frame of it, that the scan's numbering
+/// skips (see docs/FORMAT.md).
+///
+/// # Errors
+/// [`LoadError::Missing`] naming the first.
+pub fn check_present(group: &GroupEntry) -> Result<(), LoadError> {
+    if group.frames.is_empty() && !group.dir.exists() {
+        return Err(LoadError::Missing {
+            what: "group folder",
+            path: group.dir.clone(),
+        });
+    }
+    match group.frames.iter().find(|p| !p.exists()) {
+        Some(gone) => Err(LoadError::Missing {
+            what: "frame",
+            path: gone.clone(),
+        }),
+        None => Ok(()),
+    }
+}
+
 /// Loads the frames `range` of a group (clamped to the group) in parallel and checks they
 /// share one size. The other frames are not decoded, but they are read and checked, so an
 /// unreadable frame or one of another size anywhere in the group is still reported: every
@@ -142,7 +163,8 @@ pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
 /// the file, which catches truncation.
 ///
 /// # Errors
-/// As [`load_group`], and [`LoadError::TooFewFrames`] for a group of fewer than
+/// As [`load_group`], [`LoadError::Missing`] for a group folder or frame the scan's
+/// numbering skips, and [`LoadError::TooFewFrames`] for a group of fewer than
 /// [`super::scan::MIN_FRAMES_PER_GROUP`] frames.
 pub fn load_group_frames(
     group: &GroupEntry,
@@ -151,6 +173,7 @@ pub fn load_group_frames(
     if let Some(z) = &group.zarr {
         return super::zarr::load_group_frames(z, range);
     }
+    check_present(group)?;
     let n = group.frames.len();
     if n < super::scan::MIN_FRAMES_PER_GROUP {
         return Err(LoadError::TooFewFrames {

@@ -5,6 +5,7 @@ pub mod flo;
 pub mod frames;
 pub mod limits;
 pub mod lock;
+mod numbering;
 pub mod scan;
 pub mod still;
 #[cfg(feature = "video")]
@@ -35,6 +36,15 @@ pub enum LoadError {
         /// What is wrong.
         problem: String,
         /// The metadata file.
+        path: PathBuf,
+    },
+    /// A group folder or a frame whose number the scan's numbering skips (see
+    /// docs/FORMAT.md): it keeps its place, so what follows stays where it lies.
+    #[error("{what} is missing (the numbering skips it): {}", path.display())]
+    Missing {
+        /// "group folder" or "frame".
+        what: &'static str,
+        /// Where it would be.
         path: PathBuf,
     },
     /// A group holds too few frames.

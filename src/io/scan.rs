@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use super::LoadError;
 use super::frames::frame_dimensions;
 use super::limits::{MAX_FRAMES_PER_GROUP, MAX_GROUPS, read_toml_text};
+use super::numbering::in_numbered_order;
 
 /// Fewest frames a group may hold: the derivative stage needs 7.
 pub const MIN_FRAMES_PER_GROUP: usize = 7;
@@ -103,6 +104,13 @@ fn is_frame_file(p: &Path) -> bool {
         .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "tif" | "tiff"))
 }
 
+/// A name starting with a dot: another program's file (macOS's `._f000.png` resource forks,
+/// `.Trashes`, thumbnail caches), never a group or a frame.
+fn hidden(p: &Path) -> bool {
+    p.file_name()
+        .is_some_and(|n| n.to_string_lossy().starts_with('.'))
+}
+
 /// The entries of `dir` that pass `keep`, sorted by name; more than `limit` of them is refused.
 fn sorted_entries(
     dir: &Path,
@@ -166,13 +174,25 @@ impl Scan {
         }
         let meta = ScanMeta::load(&meta_path)?;
         let mut groups = Vec::new();
-        for path in sorted_entries(dir, Path::is_dir, MAX_GROUPS, "group folders")? {
-            let frames = sorted_entries(
-                &path,
-                |p| p.is_file() && is_frame_file(p),
-                MAX_FRAMES_PER_GROUP,
-                "frames",
-            )?;
+        let folders = sorted_entries(
+            dir,
+            |p| p.is_dir() && !hidden(p),
+            MAX_GROUPS,
+            "group folders",
+        )?;
+        for path in in_numbered_order(dir, folders, MAX_GROUPS, "group folders")? {
+            let frames = if path.exists() {
+                let files = sorted_entries(
+                    &path,
+                    |p| p.is_file() && is_frame_file(p) && !hidden(p),
+                    MAX_FRAMES_PER_GROUP,
+                    "frames",
+                )?;
+                in_numbered_order(&path, files, MAX_FRAMES_PER_GROUP, "frames")?
+            } else {
+                // A number the scan skips: no folder, so loading it fails naming it.
+                Vec::new()
+            };
             groups.push(GroupEntry {
                 index: groups.len(),
                 dir: path,
@@ -211,6 +231,18 @@ impl Scan {
             reference,
             frame_size,
         })
+    }
+
+    /// The groups in `range` whose folders the scan's numbering skips (see docs/FORMAT.md):
+    /// they keep their places, and loading one fails with [`LoadError::Missing`].
+    #[must_use]
+    pub fn missing_groups(&self, range: std::ops::Range<usize>) -> Vec<&GroupEntry> {
+        self.groups
+            .get(range.start.min(self.groups.len())..range.end.min(self.groups.len()))
+            .unwrap_or_default()
+            .iter()
+            .filter(|g| g.zarr.is_none() && g.frames.is_empty() && !g.dir.exists())
+            .collect()
     }
 
     /// Start of group `group` along the groove, in µm from the first group.

@@ -28,6 +28,7 @@ pub struct PackSummary {
 }
 
 fn raw_group(scan_group: &crate::io::GroupEntry) -> Result<Vec<RawFrame>, LoadError> {
+    crate::io::frames::check_present(scan_group)?;
     scan_group
         .frames
         .par_iter()

@@ -1,6 +1,7 @@
 //! The `reconstruct` subcommand (a whole run or one shard, journaled and resumable), with `plan` and `merge` beside it.
 
 use std::io::Write;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -300,6 +301,38 @@ pub fn run_reconstruct_command(args: &ReconstructArgs) -> Result<()> {
     }
 }
 
+/// Refuses a run over groups whose folders the scan's numbering skips, before any work (a
+/// run of hours would stop there), unless `keep_going`: then it warns once that they become
+/// gaps. `quiet` does not hide the warning: silence in the sound must not pass unseen.
+///
+/// # Errors
+/// Missing groups in `range` without `keep_going`, named with the scan.
+pub fn check_missing_groups(scan: &Scan, range: Range<usize>, keep_going: bool) -> Result<()> {
+    let missing = scan.missing_groups(range.clone());
+    let Some(first) = missing.first() else {
+        return Ok(());
+    };
+    const NAMED: usize = 3;
+    let mut names: Vec<String> = missing.iter().take(NAMED).map(|g| g.name()).collect();
+    if missing.len() > NAMED {
+        names.push(format!("and {} more", missing.len() - NAMED));
+    }
+    let what = format!(
+        "the scan's numbering skips {} group folder{} among groups {}..{} ({}; the first would be {})",
+        missing.len(),
+        if missing.len() == 1 { "" } else { "s" },
+        range.start,
+        range.end,
+        names.join(", "),
+        first.dir.display()
+    );
+    if !keep_going {
+        bail!("{what}: run with --keep-going to read each as a gap of silence, in its place");
+    }
+    eprintln!("warning: {what}: each becomes a gap of silence, in its place");
+    Ok(())
+}
+
 /// Runs `reconstruct` over a range of groups (all by default), journaled beside the output.
 ///
 /// # Errors
@@ -335,6 +368,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
             scan.dir.display()
         );
     }
+    check_missing_groups(&scan, first..end, args.keep_going)?;
     let journal = journal_path(&args.out);
     let run = RangeRun {
         scan: &scan,
@@ -494,6 +528,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
     check_hough(&params, &scan, Some(plan_path))?;
     let (shard, id) = plan.shard(index, &scan, plan_path)?;
     let range = shard.first_group..shard.end_group;
+    check_missing_groups(&scan, range.clone(), plan.keep_going)?;
     let identity = RunIdentity::new(&scan, &params, plan.keep_going, range.clone(), Some(id));
     std::fs::create_dir_all(&args.out).map_err(|e| {
         anyhow::anyhow!("cannot create the part folder: {e}: {}", args.out.display())

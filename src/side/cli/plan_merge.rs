@@ -164,6 +164,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
     let mut params = load_params(args.params.as_deref())?;
     params.path = path_choice(&args.path, params.path);
     let scan = Scan::open(&args.scan)?;
+    super::check_missing_groups(&scan, 0..scan.groups.len(), args.keep_going)?;
     let probe = probe_secs_per_group(&scan, &params, args.keep_going, args.probe_groups)?;
     let plan = Plan::new(&scan, &params, args.keep_going, args.shards, probe)?;
     write_json_atomic(&args.out, &plan, args.force)?;

@@ -1,0 +1,196 @@
+//! Numbered names as positions: group folders and frames numbered `g00000, g00001, …` are
+//! put in number order, and a number the sequence skips keeps its place.
+//!
+//! Name order alone would splice silently: a missing `g00003` would pull every later group one
+//! step back along the groove (the sound loses a stretch and nothing says so), and unpadded
+//! names sort `g10` before `g2`. So when every name is one prefix followed by a number (and one
+//! extension), the numbers say where each entry lies, and a skipped number gets the path it
+//! would have had. That path does not exist, so reading it fails naming it: a missing group
+//! becomes a gap under `--keep-going`, a missing frame fails its group.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use super::LoadError;
+
+/// A name split around the number that ends its stem: `g00012` → prefix `g`, 12, 5 digits;
+/// `f007.png` → prefix `f`, 7, 3 digits, extension `.png`.
+#[derive(Debug, PartialEq)]
+struct Numbered<'a> {
+    prefix: &'a str,
+    number: u64,
+    digits: usize,
+    extension: &'a str,
+}
+
+/// Most digits read as a number (`u64` holds every 18-digit number).
+const MAX_DIGITS: usize = 18;
+
+fn numbered(path: &Path) -> Option<Numbered<'_>> {
+    let name = path.file_name()?.to_str()?;
+    let (stem, extension) = match path.extension().and_then(|e| e.to_str()) {
+        Some(ext) => (
+            &name[..name.len() - ext.len() - 1],
+            &name[name.len() - ext.len() - 1..],
+        ),
+        None => (name, ""),
+    };
+    let prefix = stem.trim_end_matches(|c: char| c.is_ascii_digit());
+    let digits = stem.len() - prefix.len();
+    if digits == 0 || digits > MAX_DIGITS {
+        return None;
+    }
+    Some(Numbered {
+        prefix,
+        number: stem[prefix.len()..].parse().ok()?,
+        digits,
+        extension,
+    })
+}
+
+/// `paths` (entries of `dir`, sorted by name) in the order they lie in: by number when every
+/// name is one prefix, a number and one extension, with the path a skipped number would have
+/// had in its place; otherwise unchanged (name order). `what` names the entries in errors.
+///
+/// # Errors
+/// [`LoadError::NotAScan`] when two names carry one number (`g1` and `g01`), or the numbers
+/// span more than `limit` entries.
+pub(super) fn in_numbered_order(
+    dir: &Path,
+    paths: Vec<PathBuf>,
+    limit: usize,
+    what: &str,
+) -> Result<Vec<PathBuf>, LoadError> {
+    let refuse = |problem: String| LoadError::NotAScan {
+        problem,
+        path: dir.to_path_buf(),
+    };
+    let Some(names) = paths
+        .iter()
+        .map(|p| numbered(p))
+        .collect::<Option<Vec<_>>>()
+    else {
+        return Ok(paths);
+    };
+    let Some(first) = names.first() else {
+        return Ok(paths);
+    };
+    if names
+        .iter()
+        .any(|n| n.prefix != first.prefix || n.extension != first.extension)
+    {
+        return Ok(paths);
+    }
+    let mut by_number = BTreeMap::new();
+    for (n, path) in names.iter().zip(&paths) {
+        if let Some(other) = by_number.insert(n.number, path) {
+            return Err(refuse(format!(
+                "{what} {} and {} carry the same number, {}, so their order is unknown",
+                file_name(other),
+                file_name(path),
+                n.number
+            )));
+        }
+    }
+    let (Some((&low, _)), Some((&high, _))) =
+        (by_number.first_key_value(), by_number.last_key_value())
+    else {
+        return Ok(paths);
+    };
+    // At most MAX_GROUPS (2^20) entries are listed, so a span past `limit` is refused before
+    // anything is allocated for it.
+    let span = high - low;
+    if span >= limit as u64 {
+        return Err(refuse(format!(
+            "the {what} are numbered {low} to {high}, more places than the limit of {limit}"
+        )));
+    }
+    // Skipped numbers are written as their neighbours are: padded to one width when all are.
+    let width = names
+        .iter()
+        .all(|n| n.digits == first.digits)
+        .then_some(first.digits);
+    Ok((low..=high)
+        .map(|number| match by_number.get(&number) {
+            Some(path) => (*path).clone(),
+            None => {
+                let digits = match width {
+                    Some(w) => format!("{number:0w$}"),
+                    None => number.to_string(),
+                };
+                dir.join(format!("{}{digits}{}", first.prefix, first.extension))
+            }
+        })
+        .collect())
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn order(names: &[&str]) -> Result<Vec<String>, LoadError> {
+        let dir = Path::new("/scan");
+        let mut paths: Vec<PathBuf> = names.iter().map(|n| dir.join(n)).collect();
+        paths.sort();
+        in_numbered_order(dir, paths, 100, "group folders")
+            .map(|v| v.iter().map(|p| file_name(p)).collect())
+    }
+
+    #[test]
+    fn a_skipped_number_keeps_its_place_with_the_name_it_would_have() {
+        assert_eq!(
+            order(&["g00000", "g00001", "g00004"]).unwrap(),
+            ["g00000", "g00001", "g00002", "g00003", "g00004"]
+        );
+        assert_eq!(
+            order(&["f007.png", "f009.png", "f008.png"]).unwrap(),
+            ["f007.png", "f008.png", "f009.png"]
+        );
+        assert_eq!(
+            order(&["f1.tif", "f3.tif"]).unwrap(),
+            ["f1.tif", "f2.tif", "f3.tif"]
+        );
+    }
+
+    #[test]
+    fn unpadded_numbers_go_in_number_order_not_name_order() {
+        assert_eq!(
+            order(&["g1", "g10", "g2", "g3", "g4", "g5", "g6", "g7", "g8", "g9"]).unwrap(),
+            ["g1", "g2", "g3", "g4", "g5", "g6", "g7", "g8", "g9", "g10"]
+        );
+    }
+
+    #[test]
+    fn names_of_no_common_numbering_keep_name_order() {
+        for names in [
+            &["g00000", "g00002", "notes"][..],
+            &["a1", "b3"],
+            &["f000.png", "f002.tif"],
+            &["take", "retake"],
+        ] {
+            let mut sorted: Vec<String> = names.iter().map(ToString::to_string).collect();
+            sorted.sort();
+            assert_eq!(order(names).unwrap(), sorted, "{names:?}");
+        }
+    }
+
+    #[test]
+    fn one_number_twice_and_a_span_past_the_limit_are_refused() {
+        let msg = order(&["g1", "g01"]).unwrap_err().to_string();
+        assert!(msg.contains("g01 and g1 carry the same number, 1"), "{msg}");
+        assert!(msg.contains("/scan"), "{msg}");
+        let msg = order(&["g0", "g100"]).unwrap_err().to_string();
+        assert!(msg.contains("numbered 0 to 100"), "{msg}");
+        assert_eq!(order(&["g0", "g99"]).unwrap().len(), 100);
+        // Past what u64 holds: not a number, so name order.
+        let long = "g".to_string() + &"9".repeat(19);
+        assert_eq!(order(&[&long, "g1"]).unwrap(), ["g1", long.as_str()]);
+    }
+}

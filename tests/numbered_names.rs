@@ -1,0 +1,111 @@
+//! Numbered group folders and frames are positions: unpadded names run in number order, a
+//! skipped group keeps its place (refused before any work, a gap under `--keep-going`), a
+//! skipped frame fails its group, and other programs' dot files are passed over.
+#![allow(clippy::unwrap_used)] // tests may panic
+
+mod common;
+
+use std::path::Path;
+
+use common::{demo_copy, groovescope, reconstruct, stderr};
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The demo's sound, reconstructed from an untouched copy.
+fn untouched(dir: &Path) -> Vec<u8> {
+    let out = dir.join("untouched.wav");
+    let o = reconstruct(
+        Path::new(&format!("{}/assets/demo", env!("CARGO_MANIFEST_DIR"))),
+        &out,
+        &[],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::read(out).unwrap()
+}
+
+#[test]
+fn unpadded_names_and_dot_files_give_the_untouched_scans_sound() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    // g00000 → g0 … g00012 → g12: name order would run g10, g11, g12 before g2, and the
+    // demo's sound would come out spliced (r 0.35 against its reference, measured).
+    for g in 0..13 {
+        let from = demo.join(format!("g{g:05}"));
+        std::fs::rename(&from, demo.join(format!("g{g}"))).unwrap();
+    }
+    // What a Mac leaves on an exFAT drive, and a thumbnail cache: neither a frame nor a group.
+    std::fs::write(demo.join("g2/._f000.png"), b"\0\x05\x16\x07 resource fork").unwrap();
+    std::fs::create_dir(demo.join(".thumbnails")).unwrap();
+    let out = dir.path().join("renamed.wav");
+    let o = reconstruct(&demo, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::read(&out).unwrap() == untouched(dir.path()));
+}
+
+#[test]
+fn a_skipped_group_keeps_its_place_refused_before_work_or_a_gap_with_keep_going() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    std::fs::remove_dir_all(demo.join("g00003")).unwrap();
+    let out = dir.path().join("o.wav");
+    let o = reconstruct(&demo, &out, &[]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("numbering skips 1 group folder among groups 0..13 (g00003")
+            && err.contains("--keep-going"),
+        "{err}"
+    );
+    assert!(!out.exists() && !dir.path().join("o.wav.journal").exists());
+    let plan = dir.path().join("plan.json");
+    let o = groovescope(&["plan", s(&demo), "--shards", "2", "--out", s(&plan)]);
+    assert!(!o.status.success() && stderr(&o).contains("g00003"));
+    assert!(!plan.exists());
+    let store = dir.path().join("demo.zarr");
+    let o = groovescope(&["pack", s(&demo), "--out", s(&store)]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("group folder is missing"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!store.exists());
+
+    let o = reconstruct(&demo, &out, &["--keep-going"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("group 3: group folder is missing (the numbering skips it)")
+            && err.contains("g00003"),
+        "{err}"
+    );
+    // The groups after it stay where they lie: the sound keeps the untouched length, and
+    // (groups overlap) differs from it only around group 3.
+    let (got, want) = (std::fs::read(&out).unwrap(), untouched(dir.path()));
+    assert_eq!(got.len(), want.len());
+    assert_ne!(got, want);
+    let inspected = dir.path().join("inspect");
+    let o = groovescope(&["inspect", s(&demo), "--group", "3", "--out", s(&inspected)]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("group folder is missing"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn a_skipped_frame_fails_its_group_naming_the_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    std::fs::remove_file(demo.join("g00005/f003.png")).unwrap();
+    let out = dir.path().join("o.wav");
+    let o = reconstruct(&demo, &out, &["--keep-going"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("group 5: frame is missing (the numbering skips it)")
+            && err.contains("g00005/f003.png"),
+        "{err}"
+    );
+}
