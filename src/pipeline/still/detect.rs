@@ -29,11 +29,19 @@ const GAP_CLUSTER_SHARE: f64 = 0.2;
 const LONE_BOTTOM_SHARE: f64 = 0.5;
 /// Most blocks a piece of a groove may share with the track it joins (see `absorb_pieces`).
 const MAX_SHARED_BLOCKS: usize = 2;
+/// Share of a piece's blocks that must lie near a longer track for it to join (see
+/// `absorb_pieces`): the first block of a piece is often a wrong pairing.
+const NEAR_SHARE: f64 = 0.75;
 /// Linking tolerance as a share of the groove spacing (or of the width for a lone groove).
 const LINK_SHARE: f64 = 0.3;
 /// A groove in a block whose width is off the image's median by more than this share is a
 /// wrong pairing (a stereo groove's width swings by twice its walls' swing, so this is wide).
 const WIDTH_TOLERANCE: f64 = 0.6;
+/// A track whose median width is off the image's median by more than this share is a run of
+/// wrong pairings, not a groove: a groove's width holds to a few per cent along it (the
+/// generator's stills, the demo, stereo), while a track that pairs a wall with a dust speck
+/// or a wall's own edges runs at about half the width.
+const TRACK_WIDTH_TOLERANCE: f64 = 0.3;
 /// Along-to-across gradient energy above which the axis contradicts the image.
 const AXIS_RATIO: f64 = 1.2;
 /// Grooves within this share of the best coverage count as complete when choosing one.
@@ -356,13 +364,19 @@ fn merge_fragments(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64, max_gap: u
     }
 }
 
-/// Joins a shorter track to a longer one it runs along (within `tol` of where the longer one
-/// runs, interpolated) while sharing at most [`MAX_SHARED_BLOCKS`] blocks with it: a piece of
-/// the same groove that [`merge_fragments`] does not join, either cut off on both sides by a
-/// stretch longer than the gap allowance (text burnt in across it) or overlapping the longer
-/// track's end by more than one block (a groove near the image edge found twice in a few
-/// blocks). Left alone it counts as a groove of its own, lying on top of the real one.
-fn absorb_pieces(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64) {
+/// Joins a shorter track to a longer one it runs along while sharing at most
+/// [`MAX_SHARED_BLOCKS`] blocks with it: a piece of the same groove that [`merge_fragments`]
+/// does not join, either cut off on both sides by a stretch longer than the gap allowance
+/// (text burnt in across it), overlapping the longer track's end by more than one block (a
+/// groove near the image edge found twice in a few blocks), or starting where dust had led
+/// the longer track astray for a few blocks. Left alone it counts as a groove of its own,
+/// lying on top of the real one.
+///
+/// The piece runs along the longer track when at least [`NEAR_SHARE`] of its blocks lie
+/// within `tol` of where the longer one runs: interpolated between its blocks, and past its
+/// ends along the image's common `drift` (px a block) from its median drift-free position,
+/// since a groove runs on across the image and its last blocks may be the strayed ones.
+fn absorb_pieces(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64, drift: f64) {
     let centre = |g: &[f64; 4]| 0.5 * (g[0] + g[3]);
     let found = |t: &[Option<[f64; 4]>]| -> Vec<(f64, [f64; 4])> {
         t.iter()
@@ -370,9 +384,22 @@ fn absorb_pieces(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64) {
             .filter_map(|(b, g)| g.map(|g| (b as f64, g)))
             .collect()
     };
+    // Where a track runs at a block, from its found blocks (in block order).
+    let runs_at = |host: &[(f64, [f64; 4])], level: f64, block: f64| -> f64 {
+        match (host.first(), host.last()) {
+            (Some(first), Some(last)) if (first.0..=last.0).contains(&block) => {
+                centre(&interpolate(host, block))
+            }
+            _ => level + drift * block,
+        }
+    };
     loop {
         let mut join = None;
         let seen: Vec<_> = tracks.iter().map(|t| found(t)).collect();
+        let levels: Vec<f64> = seen
+            .iter()
+            .map(|s| median(s.iter().map(|(b, g)| centre(g) - drift * b).collect()).unwrap_or(0.0))
+            .collect();
         'search: for (b, (piece, own)) in tracks.iter().zip(&seen).enumerate() {
             for (a, (track, host)) in tracks.iter().zip(&seen).enumerate() {
                 if a == b || host.len() <= own.len() {
@@ -385,8 +412,9 @@ fn absorb_pieces(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64) {
                     .count();
                 let near = own
                     .iter()
-                    .all(|(block, g)| (centre(g) - centre(&interpolate(host, *block))).abs() < tol);
-                if shared <= MAX_SHARED_BLOCKS && near {
+                    .filter(|(block, g)| (centre(g) - runs_at(host, levels[a], *block)).abs() < tol)
+                    .count();
+                if shared <= MAX_SHARED_BLOCKS && near as f64 >= NEAR_SHARE * own.len() as f64 {
                     join = Some((a, b));
                     break 'search;
                 }
@@ -540,8 +568,15 @@ pub fn detect_grooves(
     let tol = spacing.map_or(0.5 * width, |s| LINK_SHARE * s).max(2.0);
     let mut tracks: Vec<Vec<Option<[f64; 4]>>> = link(&per_block, tol, params.max_gap_blocks);
     merge_fragments(&mut tracks, tol, params.max_gap_blocks);
-    absorb_pieces(&mut tracks, tol);
-    tracks.retain(|t| t.iter().flatten().count() >= params.min_track_blocks);
+    let drift = median(tracks.iter().filter_map(|t| slope(t)).collect()).unwrap_or(0.0);
+    absorb_pieces(&mut tracks, tol, drift);
+    tracks.retain(|t| {
+        let track_width = median(t.iter().flatten().map(|g| g[3] - g[0]).collect());
+        t.iter().flatten().count() >= params.min_track_blocks
+            && track_width.is_some_and(|w| {
+                (w / width.max(f64::MIN_POSITIVE) - 1.0).abs() <= TRACK_WIDTH_TOLERANCE
+            })
+    });
     if tracks.is_empty() {
         let (lines_name, cross_name) = match profiles.axis {
             Axis::Vertical => ("rows", "columns"),
@@ -563,6 +598,7 @@ pub fn detect_grooves(
             ),
         });
     }
+    // Again over the grooves as they stand (pieces joined, short tracks dropped).
     let drift = median(tracks.iter().filter_map(|t| slope(t)).collect()).unwrap_or(0.0);
     let mid_block = 0.5 * (profiles.blocks as f64 - 1.0);
     let mut grooves: Vec<GrooveTrack> = tracks
@@ -679,11 +715,39 @@ mod tests {
             // Past the host's end, sharing its last two blocks: the same groove.
             track(49.5, &[26, 27, 28, 29], 30),
         ];
-        absorb_pieces(&mut tracks, 6.0);
+        absorb_pieces(&mut tracks, 6.0, 0.0);
         assert_eq!(tracks.len(), 3, "{tracks:?}");
         let joined = tracks[0].iter().flatten().count();
         assert_eq!(joined, host.len() + 3 + 2);
         assert!(tracks[0][14].is_some_and(|g| (g[0] - 48.5).abs() < 1e-9));
         assert!(tracks[0][29].is_some_and(|g| (g[0] - 47.5).abs() < 1e-9));
+    }
+
+    #[test]
+    fn a_piece_past_a_strayed_end_joins_along_the_drift_despite_a_wrong_first_block() {
+        // A groove drifting 1 px a block whose track strayed 9 px for its last three blocks
+        // (dust), and the rest of the groove found as a piece that starts with a wrong
+        // pairing 12 px off. Held at the track's end the piece would lie 10–40 px off.
+        let drift = 1.0;
+        let on_groove = |b: usize| 50.0 + drift * b as f64;
+        let mut host = vec![None; 40];
+        for (b, slot) in host.iter_mut().enumerate().take(13) {
+            let c = on_groove(b) - if b >= 10 { 9.0 } else { 0.0 };
+            *slot = Some([c - 2.0, c - 1.0, c + 1.0, c + 2.0]);
+        }
+        let mut piece = vec![None; 40];
+        for (b, slot) in piece.iter_mut().enumerate().skip(12).take(12) {
+            let c = on_groove(b) + if b == 12 { 12.0 } else { 0.0 };
+            *slot = Some([c - 2.0, c - 1.0, c + 1.0, c + 2.0]);
+        }
+        let neighbour = track(90.0, &(14..22).collect::<Vec<_>>(), 40);
+        let mut tracks = vec![host.clone(), piece.clone(), neighbour];
+        absorb_pieces(&mut tracks, 6.0, drift);
+        assert_eq!(tracks.len(), 2, "{tracks:?}");
+        assert_eq!(tracks[0].iter().flatten().count(), 24);
+        // Without the drift the piece stays a groove of its own.
+        let mut tracks = vec![host, piece];
+        absorb_pieces(&mut tracks, 6.0, 0.0);
+        assert_eq!(tracks.len(), 2);
     }
 }
