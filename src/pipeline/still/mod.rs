@@ -9,8 +9,8 @@
 //!    along and across the grooves (to catch an axis that contradicts the image).
 //! 2. [`detect_grooves`] finds the dark walls in every block profile against local dark and
 //!    bright levels (uneven light), pairs walls into grooves at their narrow bottom, links the
-//!    grooves from block to block into tracks (drift, close neighbours, gaps under text) and
-//!    numbers them from the image's left (top).
+//!    grooves from block to block into tracks (`link.rs`: drift, close neighbours, gaps under
+//!    text, pieces dust split off) and numbers them from the image's left (top).
 //! 3. [`RibbonBuilder`] (second pass) keeps only a band around the chosen groove's predicted path.
 //! 4. [`track_borders`] fits every border of the groove on every line
 //!    ([`crate::pipeline::edges::border`]).
@@ -23,6 +23,7 @@
 pub mod clean;
 pub mod decode;
 pub mod detect;
+mod link;
 pub mod measure;
 pub mod profile;
 pub mod ribbon;
