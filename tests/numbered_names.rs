@@ -1,6 +1,7 @@
 //! Numbered group folders and frames are positions: unpadded names run in number order, a
 //! skipped group keeps its place (refused before any work, a gap under `--keep-going`), a
-//! skipped frame fails its group, and other programs' dot files are passed over.
+//! skipped frame fails its group, and other programs' dot files and folders of no frames
+//! outside the numbering are passed over.
 #![allow(clippy::unwrap_used)] // tests may panic
 
 mod common;
@@ -46,7 +47,7 @@ fn untouched(dir: &Path) -> Vec<u8> {
 }
 
 #[test]
-fn unpadded_names_and_dot_files_give_the_untouched_scans_sound() {
+fn unpadded_names_dot_files_and_stray_folders_give_the_untouched_scans_sound() {
     let dir = tempfile::tempdir().unwrap();
     let demo = demo_copy(dir.path());
     // g00000 → g0 … g00012 → g12: name order would run g10, g11, g12 before g2, and the
@@ -58,6 +59,11 @@ fn unpadded_names_and_dot_files_give_the_untouched_scans_sound() {
     // What a Mac leaves on an exFAT drive, and a thumbnail cache: neither a frame nor a group.
     std::fs::write(demo.join("g2/._f000.png"), b"\0\x05\x16\x07 resource fork").unwrap();
     std::fs::create_dir(demo.join(".thumbnails")).unwrap();
+    // Folders of no frames outside the numbering: before g0 by name, one would have taken
+    // group 0's place and moved every group one step along the groove.
+    std::fs::create_dir(demo.join("calibration")).unwrap();
+    std::fs::create_dir(demo.join("notes")).unwrap();
+    std::fs::write(demo.join("notes/transfer.txt"), "stylus-free transfer").unwrap();
     let out = dir.path().join("renamed.wav");
     let o = reconstruct(&demo, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -81,6 +87,26 @@ fn a_skipped_group_keeps_its_place_refused_before_work_or_a_gap_with_keep_going(
     let o = groovescope(&["plan", s(&demo), "--shards", "2", "--out", s(&plan)]);
     assert!(!o.status.success() && stderr(&o).contains("g00003"));
     assert!(!plan.exists());
+    let o = groovescope(&[
+        "plan",
+        s(&demo),
+        "--shards",
+        "2",
+        "--out",
+        s(&plan),
+        "--keep-going",
+        "--probe-groups",
+        "4",
+    ]);
+    warned(
+        &o,
+        &["numbering skips 1 group folder", "each becomes a gap"],
+    );
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("over the 3 that gave sound (1 failed)"),
+        "{said}"
+    );
     let store = dir.path().join("demo.zarr");
     let o = groovescope(&["pack", s(&demo), "--out", s(&store)]);
     assert!(

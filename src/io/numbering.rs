@@ -48,6 +48,29 @@ fn numbered(path: &Path) -> Option<Numbered<'_>> {
     })
 }
 
+/// The entries of `paths` that are not part of a numbered scan: when every entry that
+/// `holds_frames` shares one numbering (one prefix and one extension before and after the
+/// number), the entries holding no frames whose names do not fit it (`notes/`,
+/// `calibration/`); otherwise none. Such a folder is no group: in name order it would take a
+/// place on the groove, shift every group after it, and fail the run there.
+pub(super) fn strays(paths: &[PathBuf], holds_frames: impl Fn(usize) -> bool) -> Vec<usize> {
+    let names: Vec<Option<Numbered<'_>>> = paths.iter().map(|p| numbered(p)).collect();
+    let mut with_frames = (0..paths.len()).filter(|&i| holds_frames(i));
+    let Some(Some(first)) = with_frames.next().map(|i| &names[i]) else {
+        return Vec::new();
+    };
+    let fits = |n: &Option<Numbered<'_>>| {
+        n.as_ref()
+            .is_some_and(|n| n.prefix == first.prefix && n.extension == first.extension)
+    };
+    if !with_frames.all(|i| fits(&names[i])) {
+        return Vec::new();
+    }
+    (0..paths.len())
+        .filter(|&i| !holds_frames(i) && !fits(&names[i]))
+        .collect()
+}
+
 /// `paths` (entries of `dir`, sorted by name) in the order they lie in: by number when every
 /// name is one prefix, a number and one extension, with the path a skipped number would have
 /// had in its place; otherwise unchanged (name order). `what` names the entries in errors.
@@ -179,6 +202,21 @@ mod tests {
             sorted.sort();
             assert_eq!(order(names).unwrap(), sorted, "{names:?}");
         }
+    }
+
+    #[test]
+    fn frameless_folders_outside_the_numbering_are_strays() {
+        let paths: Vec<PathBuf> = ["calibration", "g00000", "g00001", "g00003", "notes"]
+            .iter()
+            .map(PathBuf::from)
+            .collect();
+        // g00003 holds no frames but fits: a group cut short, not a stray.
+        let frames = [false, true, true, false, false];
+        assert_eq!(strays(&paths, |i| frames[i]), [0, 4]);
+        // A folder of frames outside the numbering: no numbering, so no strays.
+        let frames = [true, true, true, false, false];
+        assert!(strays(&paths, |i| frames[i]).is_empty());
+        assert!(strays(&paths, |_| false).is_empty());
     }
 
     #[test]

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use super::LoadError;
 use super::frames::frame_dimensions;
 use super::limits::{MAX_FRAMES_PER_GROUP, MAX_GROUPS, read_toml_text};
-use super::numbering::in_numbered_order;
+use super::numbering::{in_numbered_order, strays};
 
 /// Fewest frames a group may hold: the derivative stage needs 7.
 pub const MIN_FRAMES_PER_GROUP: usize = 7;
@@ -173,26 +173,31 @@ impl Scan {
             });
         }
         let meta = ScanMeta::load(&meta_path)?;
-        let mut groups = Vec::new();
-        let folders = sorted_entries(
+        let mut folders = sorted_entries(
             dir,
             |p| p.is_dir() && !hidden(p),
             MAX_GROUPS,
             "group folders",
         )?;
+        let mut frames_of = std::collections::HashMap::new();
+        for path in &folders {
+            let files = sorted_entries(
+                path,
+                |p| p.is_file() && is_frame_file(p) && !hidden(p),
+                MAX_FRAMES_PER_GROUP,
+                "frames",
+            )?;
+            let files = in_numbered_order(path, files, MAX_FRAMES_PER_GROUP, "frames")?;
+            frames_of.insert(path.clone(), files);
+        }
+        let holds_frames = |i: usize| frames_of.get(&folders[i]).is_some_and(|f| !f.is_empty());
+        for stray in strays(&folders, holds_frames).into_iter().rev() {
+            folders.remove(stray);
+        }
+        let mut groups = Vec::new();
         for path in in_numbered_order(dir, folders, MAX_GROUPS, "group folders")? {
-            let frames = if path.exists() {
-                let files = sorted_entries(
-                    &path,
-                    |p| p.is_file() && is_frame_file(p) && !hidden(p),
-                    MAX_FRAMES_PER_GROUP,
-                    "frames",
-                )?;
-                in_numbered_order(&path, files, MAX_FRAMES_PER_GROUP, "frames")?
-            } else {
-                // A number the scan skips: no folder, so loading it fails naming it.
-                Vec::new()
-            };
+            // A number the scan skips has no folder and no frames: loading it fails naming it.
+            let frames = frames_of.remove(&path).unwrap_or_default();
             groups.push(GroupEntry {
                 index: groups.len(),
                 dir: path,
