@@ -574,6 +574,7 @@ pub fn run(command: Command) -> Result<()> {
             | Command::SynthScene { .. }
             | Command::ImportVideo(_)
             | Command::Still(_)
+            | Command::Accuracy { .. }
     );
     if stoppable {
         crate::job::catch_interrupts().map_err(|e| anyhow::anyhow!("cannot catch Ctrl-C: {e}"))?;

@@ -112,3 +112,41 @@ fn accuracy_refuses_to_overwrite_a_report() {
     );
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "mine");
 }
+
+#[test]
+fn ctrl_c_stops_the_suite_without_a_report_and_removes_its_work_folder() {
+    use std::io::{BufRead, BufReader, Read};
+    use std::process::{Command, Stdio};
+    let dir = tempfile::tempdir().unwrap();
+    // The suite renders its scans (150 MB for --quick) in a temporary folder under TMPDIR.
+    let tmp = dir.path().join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let out = dir.path().join("report.md");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+        .args(["accuracy", "--quick", "--out", out.to_str().unwrap()])
+        .env("TMPDIR", &tmp)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut err = BufReader::new(child.stderr.take().unwrap());
+    // The first finished case: the handler is in place and scans lie in the work folder.
+    let mut first = String::new();
+    err.read_line(&mut first).unwrap();
+    assert!(first.contains("tone"), "{first}");
+    assert!(std::fs::read_dir(&tmp).unwrap().next().is_some());
+    let pid = child.id().to_string();
+    let sent = Command::new("kill").args(["-INT", &pid]).status().unwrap();
+    assert!(sent.success());
+    let mut rest = String::new();
+    err.read_to_string(&mut rest).unwrap();
+    let status = child.wait().unwrap();
+    // An exit of its own (status 1), not death by the signal.
+    assert_eq!(status.code(), Some(1), "{rest}");
+    assert!(rest.contains("cancelled"), "{rest}");
+    assert!(!out.exists());
+    assert_eq!(
+        std::fs::read_dir(&tmp).unwrap().count(),
+        0,
+        "work folder left"
+    );
+}

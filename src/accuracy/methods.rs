@@ -2,7 +2,6 @@
 //! engine as `reconstruct --method` runs it, and scored against the scan's reference.
 
 use std::path::Path;
-use std::sync::atomic::AtomicBool;
 
 use super::{AccuracyError, case_err};
 use crate::engine::{ReconstructOptions, Reconstruction, reconstruct};
@@ -47,7 +46,7 @@ fn run(
         groups: None,
         keep_going: true,
     };
-    let rec = reconstruct(scan, &opts, &mut |_| {}, &AtomicBool::new(false))
+    let rec = reconstruct(scan, &opts, &mut |_| {}, crate::job::interrupted())
         .map_err(|e| case_err(case, format!("{}: {e}", method.name())))?;
     let scores = rec
         .scores

@@ -15,7 +15,6 @@ pub use suite::run_suite;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use crate::engine::{ReconstructOptions, reconstruct};
@@ -159,7 +158,7 @@ pub fn render(
     cfg: &SynthConfig,
     dir: &Path,
 ) -> Result<(), AccuracyError> {
-    render_scan(sound, cfg, dir, Job::unwatched())
+    render_scan(sound, cfg, dir, Job::reporting(&|_, _| {}))
         .map(|_| ())
         .map_err(|e| case_err(case, e))
 }
@@ -206,7 +205,7 @@ pub fn score_scan(
         keep_going: true,
     };
     let t = Instant::now();
-    let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false))
+    let rec = reconstruct(&scan, &opts, &mut |_| {}, crate::job::interrupted())
         .map_err(|e| case_err(case, e))?;
     let secs = t.elapsed().as_secs_f64();
     let scores = rec
