@@ -10,7 +10,7 @@ mod still_ab;
 #[path = "ui_parts/still_mode.rs"]
 mod still_mode;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -47,6 +47,18 @@ fn opens_the_demo_scan_and_steps_through_groups() {
     );
 }
 
+/// Leaves group 1 of `scan` 4 frames.
+fn cut_short(scan: &Path) {
+    for t in 4..7 {
+        std::fs::remove_file(scan.join(format!("group_001/f{t:02}.png"))).unwrap();
+    }
+}
+
+/// Removes group 1's folder from `scan`.
+fn skip_group(scan: &Path) {
+    std::fs::remove_dir_all(scan.join("group_001")).unwrap();
+}
+
 #[test]
 fn bad_input_gives_a_message_and_keeps_the_scan() {
     let good = lateral_scan();
@@ -71,28 +83,30 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
         "{msg}"
     );
     assert_eq!(wb(&h).scan().unwrap().dir, good);
-    // A group cut short in the middle: the scan opens, that group says why it cannot run,
-    // and the others still do.
-    let short = tmp.path().join("short");
-    write_scan(&short, 3);
-    for t in 4..7 {
-        std::fs::remove_file(short.join(format!("group_001/f{t:02}.png"))).unwrap();
+    // A group in the middle that cannot run, cut short or skipped by the numbering: the scan
+    // opens, the group keeps its place and says why, and the others still run.
+    let damages = [
+        ("short", cut_short as fn(&Path), "4 frames"),
+        ("holey", skip_group, "group folder is missing"),
+    ];
+    for (name, damage, says) in damages {
+        let scan = tmp.path().join(name);
+        write_scan(&scan, 3);
+        damage(&scan);
+        wb_mut(&mut h).open_scan(&scan).unwrap();
+        settle(&mut h);
+        assert_eq!(wb(&h).scan().unwrap().dir, scan);
+        assert_eq!(wb(&h).scan().unwrap().groups.len(), 3);
+        h.get_by_label("next >").click();
+        settle(&mut h);
+        assert_eq!(wb(&h).group(), 1);
+        let msg = last_message(&h);
+        assert!(msg.contains(says) && msg.contains("group_001"), "{msg}");
+        h.get_by_label("next >").click();
+        settle(&mut h);
+        assert_eq!(wb(&h).group(), 2);
+        assert!(wb(&h).frames().is_some(), "frames of group 2 are loaded");
     }
-    wb_mut(&mut h).open_scan(&short).unwrap();
-    settle(&mut h);
-    assert_eq!(wb(&h).scan().unwrap().dir, short);
-    h.get_by_label("next >").click();
-    settle(&mut h);
-    assert_eq!(wb(&h).group(), 1);
-    let msg = last_message(&h);
-    assert!(
-        msg.contains("4 frames") && msg.contains("group_001"),
-        "{msg}"
-    );
-    h.get_by_label("next >").click();
-    settle(&mut h);
-    assert_eq!(wb(&h).group(), 2);
-    assert!(wb(&h).frames().is_some(), "frames of group 2 are loaded");
     // An invalid preset.
     let preset = tmp.path().join("bad.toml");
     std::fs::write(&preset, "[flow]\nlambda = \"soft\"\n").unwrap();
