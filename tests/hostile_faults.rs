@@ -1,4 +1,4 @@
-//! Faults while running and concurrent writers: frames that vanish after the scan opened, an output folder removed mid-run, a full disk, two runs on one output (issue 19).
+//! Faults while running and concurrent writers: frames that vanish after the scan opened, an output folder removed mid-run, a full disk (for the WAV and for the journal), two runs on one output (issue 19).
 
 #![allow(clippy::unwrap_used)] // tests may panic
 
@@ -87,16 +87,23 @@ fn an_output_folder_removed_mid_run_ends_with_one_line_and_leaves_nothing() {
     assert_eq!(names(dir.path()), vec!["demo".to_string()]);
 }
 
-/// A 256 KiB tmpfs mounted on a fresh folder, unmounted on drop.
+/// A tmpfs of `size` (`256k`) mounted on a fresh folder, unmounted on drop.
 struct SmallDisk {
     dir: tempfile::TempDir,
 }
 
 impl SmallDisk {
-    fn mount() -> Option<Self> {
+    fn mount(size: &str) -> Option<Self> {
         let dir = tempfile::tempdir().ok()?;
         let ok = Command::new("mount")
-            .args(["-t", "tmpfs", "-o", "size=256k", "tmpfs", s(dir.path())])
+            .args([
+                "-t",
+                "tmpfs",
+                "-o",
+                &format!("size={size}"),
+                "tmpfs",
+                s(dir.path()),
+            ])
             .stderr(Stdio::null())
             .status()
             .is_ok_and(|st| st.success());
@@ -112,7 +119,7 @@ impl Drop for SmallDisk {
 
 #[test]
 fn a_full_disk_is_one_clear_error_leaves_no_partial_file_and_keeps_the_old_one() {
-    let Some(disk) = SmallDisk::mount() else {
+    let Some(disk) = SmallDisk::mount("256k") else {
         eprintln!("skipped: cannot mount a tmpfs here (needs root)");
         return;
     };
@@ -146,6 +153,42 @@ fn a_full_disk_is_one_clear_error_leaves_no_partial_file_and_keeps_the_old_one()
         "{msg}"
     );
     assert_eq!(names(disk.dir.path()), vec!["clip.wav".to_string()]);
+}
+
+#[test]
+fn a_disk_filled_by_the_journal_stops_the_run_with_its_groups_kept_for_resume() {
+    // 16 KiB holds the journal of about two of the demo's 13 groups.
+    let Some(disk) = SmallDisk::mount("16k") else {
+        eprintln!("skipped: cannot mount a tmpfs here (needs root)");
+        return;
+    };
+    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
+    let o = common::reconstruct(&demo, &disk.dir.path().join("side.wav"), &[]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("cannot write the journal")
+            && err.contains("No space left")
+            && err.contains("finished groups are kept in")
+            && err.contains("--resume"),
+        "{err}"
+    );
+    assert_eq!(names(disk.dir.path()), ["side.wav.journal"]);
+    // Room made (the journal moved to a roomier disk), --resume ends with the bytes of a
+    // run that never stopped.
+    let roomy = tempfile::tempdir().unwrap();
+    std::fs::copy(
+        disk.dir.path().join("side.wav.journal"),
+        roomy.path().join("side.wav.journal"),
+    )
+    .unwrap();
+    let out = roomy.path().join("side.wav");
+    let o = common::reconstruct(&demo, &out, &["--resume"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let whole = roomy.path().join("whole.wav");
+    assert!(common::reconstruct(&demo, &whole, &[]).status.success());
+    assert!(std::fs::read(&out).unwrap() == std::fs::read(&whole).unwrap());
 }
 
 #[test]
