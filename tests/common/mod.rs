@@ -74,6 +74,16 @@ pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// Asserts that `o` failed with one line of stderr holding every `wanted`; returns the line.
+#[allow(dead_code)] // not every test binary uses it
+pub fn failed_with(o: &Output, wanted: &[&str]) -> String {
+    let err = stderr(o);
+    assert!(!o.status.success(), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(wanted.iter().all(|w| err.contains(w)), "{err}");
+    err
+}
+
 /// A copy of the bundled demo scan (13 dual-focus groups of 7 frames, with `reference.wav`)
 /// in `dir/demo`, for tests that damage or lock it.
 pub fn demo_copy(dir: &Path) -> PathBuf {
