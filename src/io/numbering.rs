@@ -4,9 +4,11 @@
 //! Name order alone would splice silently: a missing `g00003` would pull every later group one
 //! step back along the groove (the sound loses a stretch and nothing says so), and unpadded
 //! names sort `g10` before `g2`. So when every name is one prefix followed by a number (and one
-//! extension), the numbers say where each entry lies, and a skipped number gets the path it
+//! extension), the numbers set the order, and when they are dense (most numbers from the first
+//! to the last present) they say where each entry lies: a skipped number gets the path it
 //! would have had. That path does not exist, so reading it fails naming it: a missing group
-//! becomes a gap under `--keep-going`, a missing frame fails its group.
+//! becomes a gap under `--keep-going`, a missing frame fails its group. Sparse numbers
+//! (timestamps) set the order only.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -22,6 +24,10 @@ struct Numbered<'a> {
     digits: usize,
     extension: &'a str,
 }
+
+/// Numbers are positions, and a skipped one keeps its place, when at least this share of
+/// those from the first to the last is present.
+const MIN_PRESENT_SHARE: f64 = 2.0 / 3.0;
 
 /// Most digits read as a number (`u64` holds every 18-digit number).
 const MAX_DIGITS: usize = 18;
@@ -72,8 +78,10 @@ pub(super) fn strays(paths: &[PathBuf], holds_frames: impl Fn(usize) -> bool) ->
 }
 
 /// `paths` (entries of `dir`, sorted by name) in the order they lie in: by number when every
-/// name is one prefix, a number and one extension, with the path a skipped number would have
-/// had in its place; otherwise unchanged (name order). `what` names the entries in errors.
+/// name is one prefix, a number and one extension, and when the numbers are dense (at least
+/// [`MIN_PRESENT_SHARE`] of those from the first to the last present) with the path a skipped
+/// number would have had in its place; otherwise unchanged (name order). `what` names the
+/// entries in errors.
 ///
 /// # Errors
 /// [`LoadError::NotAScan`] when two names carry one number (`g1` and `g01`), or the numbers
@@ -120,9 +128,12 @@ pub(super) fn in_numbered_order(
     else {
         return Ok(paths);
     };
-    // At most MAX_GROUPS (2^20) entries are listed, so a span past `limit` is refused before
-    // anything is allocated for it.
     let span = high - low;
+    // Sparse numbers are not positions (timestamps, or every other group of a scan taken
+    // at twice the step): they set the order only.
+    if (by_number.len() as f64) < MIN_PRESENT_SHARE * (span as f64 + 1.0) {
+        return Ok(by_number.into_values().cloned().collect());
+    }
     if span >= limit as u64 {
         return Err(refuse(format!(
             "the {what} are numbered {low} to {high}, more places than the limit of {limit}"
@@ -169,7 +180,7 @@ mod tests {
     #[test]
     fn a_skipped_number_keeps_its_place_with_the_name_it_would_have() {
         assert_eq!(
-            order(&["g00000", "g00001", "g00004"]).unwrap(),
+            order(&["g00000", "g00001", "g00002", "g00004"]).unwrap(),
             ["g00000", "g00001", "g00002", "g00003", "g00004"]
         );
         assert_eq!(
@@ -177,9 +188,24 @@ mod tests {
             ["f007.png", "f008.png", "f009.png"]
         );
         assert_eq!(
-            order(&["f1.tif", "f3.tif"]).unwrap(),
-            ["f1.tif", "f2.tif", "f3.tif"]
+            order(&["f1.tif", "f3.tif", "f4.tif"]).unwrap(),
+            ["f1.tif", "f2.tif", "f3.tif", "f4.tif"]
         );
+    }
+
+    #[test]
+    fn sparse_numbers_only_set_the_order() {
+        // Timestamps, and every other group of a scan taken at twice the step.
+        assert_eq!(
+            order(&["t1701234567", "t1701234590", "t1701234602"]).unwrap(),
+            ["t1701234567", "t1701234590", "t1701234602"]
+        );
+        assert_eq!(
+            order(&["g0", "g10", "g12", "g2", "g4", "g6", "g8"]).unwrap(),
+            ["g0", "g2", "g4", "g6", "g8", "g10", "g12"]
+        );
+        // Far apart, so past the limit only if they were positions.
+        assert_eq!(order(&["g0", "g100"]).unwrap(), ["g0", "g100"]);
     }
 
     #[test]
@@ -224,9 +250,14 @@ mod tests {
         let msg = order(&["g1", "g01"]).unwrap_err().to_string();
         assert!(msg.contains("g01 and g1 carry the same number, 1"), "{msg}");
         assert!(msg.contains("/scan"), "{msg}");
-        let msg = order(&["g0", "g100"]).unwrap_err().to_string();
+        let dense: Vec<String> = (0..=100)
+            .filter(|k| k % 10 != 5)
+            .map(|k| format!("g{k}"))
+            .collect();
+        let dense: Vec<&str> = dense.iter().map(String::as_str).collect();
+        let msg = order(&dense).unwrap_err().to_string();
         assert!(msg.contains("numbered 0 to 100"), "{msg}");
-        assert_eq!(order(&["g0", "g99"]).unwrap().len(), 100);
+        assert_eq!(order(&dense[..dense.len() - 1]).unwrap().len(), 100);
         // Past what u64 holds: not a number, so name order.
         let long = "g".to_string() + &"9".repeat(19);
         assert_eq!(order(&[&long, "g1"]).unwrap(), ["g1", long.as_str()]);
