@@ -68,6 +68,20 @@ pub(super) fn link(
     tracks.into_iter().map(|t| t.blocks).collect()
 }
 
+/// Puts `piece`'s grooves into `track`'s empty blocks; in a block both hold, the groove whose
+/// width is nearer `width` stays.
+fn join_into(track: &mut [Option<[f64; 4]>], piece: Vec<Option<[f64; 4]>>, width: f64) {
+    for (slot, g) in track.iter_mut().zip(piece) {
+        match (slot.as_ref(), g) {
+            (None, Some(g)) => *slot = Some(g),
+            (Some(s), Some(g)) if ((g[3] - g[0]) - width).abs() < ((s[3] - s[0]) - width).abs() => {
+                *slot = Some(g);
+            }
+            _ => {}
+        }
+    }
+}
+
 /// Joins tracks that are pieces of one groove: one ends (at most one block after the other
 /// starts) within the gap allowance before the other starts, near where it starts. Where both
 /// hold a block, the groove nearer the joined track's median width is kept.
@@ -110,16 +124,7 @@ pub(super) fn merge_fragments(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64,
             .flatten()
             .map(|g| g[3] - g[0])
             .collect();
-        let w = median(widths).unwrap_or(0.0);
-        for (slot, g) in tracks[a].iter_mut().zip(piece) {
-            match (slot.as_ref(), g) {
-                (None, Some(g)) => *slot = Some(g),
-                (Some(s), Some(g)) if ((g[3] - g[0]) - w).abs() < ((s[3] - s[0]) - w).abs() => {
-                    *slot = Some(g);
-                }
-                _ => {}
-            }
-        }
+        join_into(&mut tracks[a], piece, median(widths).unwrap_or(0.0));
     }
 }
 
@@ -183,17 +188,7 @@ pub(super) fn absorb_pieces(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64, d
         let piece = tracks.remove(b);
         let a = if b < a { a - 1 } else { a };
         let w = median(tracks[a].iter().flatten().map(|g| g[3] - g[0]).collect()).unwrap_or(0.0);
-        for (slot, g) in tracks[a].iter_mut().zip(piece) {
-            match (slot.as_ref(), g) {
-                (None, Some(g)) => *slot = Some(g),
-                // A block both hold: the groove nearer the host's median width, as in
-                // `merge_fragments`.
-                (Some(s), Some(g)) if ((g[3] - g[0]) - w).abs() < ((s[3] - s[0]) - w).abs() => {
-                    *slot = Some(g);
-                }
-                _ => {}
-            }
-        }
+        join_into(&mut tracks[a], piece, w);
     }
 }
 
