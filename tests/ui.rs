@@ -86,10 +86,15 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
     // A group in the middle that cannot run, cut short or skipped by the numbering: the scan
     // opens, the group keeps its place and says why, and the others still run.
     let damages = [
-        ("short", cut_short as fn(&Path), "4 frames"),
-        ("holey", skip_group, "group folder is missing"),
+        ("short", cut_short as fn(&Path), "4 frames", None),
+        (
+            "holey",
+            skip_group,
+            "group folder is missing",
+            Some("numbering skips 1 group folder among groups 0..3 (group_001"),
+        ),
     ];
-    for (name, damage, says) in damages {
+    for (name, damage, says, on_open) in damages {
         let scan = tmp.path().join(name);
         write_scan(&scan, 3);
         damage(&scan);
@@ -97,6 +102,13 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
         settle(&mut h);
         assert_eq!(wb(&h).scan().unwrap().dir, scan);
         assert_eq!(wb(&h).scan().unwrap().groups.len(), 3);
+        if let Some(warned) = on_open {
+            let said = wb(&h)
+                .messages()
+                .iter()
+                .any(|m| m.error && m.text.contains(warned));
+            assert!(said, "{:?}", wb(&h).messages());
+        }
         h.get_by_label("next >").click();
         settle(&mut h);
         assert_eq!(wb(&h).group(), 1);

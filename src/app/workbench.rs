@@ -411,6 +411,7 @@ impl Workbench {
             }
         ));
         let groups = scan.groups.len();
+        let missing = scan.missing_note(0..groups);
         self.nav = Navigation::opened(scan, frames);
         self.stages = StageState::default();
         self.tuning = tuning;
@@ -429,6 +430,9 @@ impl Workbench {
         match note {
             Ok(m) => self.info(m),
             Err(e) => self.error(e),
+        }
+        if let Some(m) = missing {
+            self.error(format!("{m}: each stays a gap of silence, in its place"));
         }
         if self.settings.reconstruct_on_open {
             self.reconstruct(None);

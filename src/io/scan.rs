@@ -250,6 +250,30 @@ impl Scan {
             .collect()
     }
 
+    /// What [`Self::missing_groups`] finds in `range`, in words (None when nothing is
+    /// missing): "the scan's numbering skips 2 group folders among groups 0..13 (g00003,
+    /// g00007; the first would be /scan/g00003)".
+    #[must_use]
+    pub fn missing_note(&self, range: std::ops::Range<usize>) -> Option<String> {
+        /// Names given before "and N more".
+        const NAMED: usize = 3;
+        let missing = self.missing_groups(range.clone());
+        let first = missing.first()?;
+        let mut names: Vec<String> = missing.iter().take(NAMED).map(|g| g.name()).collect();
+        if missing.len() > NAMED {
+            names.push(format!("and {} more", missing.len() - NAMED));
+        }
+        Some(format!(
+            "the scan's numbering skips {} group folder{} among groups {}..{} ({}; the first would be {})",
+            missing.len(),
+            if missing.len() == 1 { "" } else { "s" },
+            range.start,
+            range.end,
+            names.join(", "),
+            first.dir.display()
+        ))
+    }
+
     /// Start of group `group` along the groove, in µm from the first group.
     #[must_use]
     pub fn group_start_um(&self, group: usize) -> f64 {

@@ -308,24 +308,9 @@ pub fn run_reconstruct_command(args: &ReconstructArgs) -> Result<()> {
 /// # Errors
 /// Missing groups in `range` without `keep_going`, named with the scan.
 pub fn check_missing_groups(scan: &Scan, range: Range<usize>, keep_going: bool) -> Result<()> {
-    let missing = scan.missing_groups(range.clone());
-    let Some(first) = missing.first() else {
+    let Some(what) = scan.missing_note(range) else {
         return Ok(());
     };
-    const NAMED: usize = 3;
-    let mut names: Vec<String> = missing.iter().take(NAMED).map(|g| g.name()).collect();
-    if missing.len() > NAMED {
-        names.push(format!("and {} more", missing.len() - NAMED));
-    }
-    let what = format!(
-        "the scan's numbering skips {} group folder{} among groups {}..{} ({}; the first would be {})",
-        missing.len(),
-        if missing.len() == 1 { "" } else { "s" },
-        range.start,
-        range.end,
-        names.join(", "),
-        first.dir.display()
-    );
     if !keep_going {
         bail!("{what}: run with --keep-going to read each as a gap of silence, in its place");
     }
