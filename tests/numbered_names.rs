@@ -138,6 +138,23 @@ fn a_skipped_group_keeps_its_place_refused_before_work_or_a_gap_with_keep_going(
 }
 
 #[test]
+fn one_frame_in_two_formats_is_refused_naming_both() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    // A conversion that left its source beside it: name order would interleave the sets.
+    std::fs::write(demo.join("g00002/f004.tif"), b"II*\0").unwrap();
+    let o = reconstruct(&demo, &dir.path().join("o.wav"), &["--keep-going"]);
+    common::failed_with(
+        &o,
+        &[
+            "f004.png and f004.tif",
+            "one frame in two formats",
+            "g00002",
+        ],
+    );
+}
+
+#[test]
 fn a_skipped_frame_fails_its_group_naming_the_frame() {
     let dir = tempfile::tempdir().unwrap();
     let (demo, out) = demo_without(dir.path(), "g00005/f003.png");

@@ -111,6 +111,27 @@ fn hidden(p: &Path) -> bool {
         .is_some_and(|n| n.to_string_lossy().starts_with('.'))
 }
 
+/// Refuses a group folder holding one frame twice, in two formats (`f000.png` and `f000.tif`,
+/// a conversion that left its source): taken in name order the two sets would interleave.
+fn refuse_twin_frames(dir: &Path, files: &[PathBuf]) -> Result<(), LoadError> {
+    let mut stems: Vec<(&std::ffi::OsStr, &Path)> = files
+        .iter()
+        .filter_map(|p| Some((p.file_stem()?, p.as_path())))
+        .collect();
+    stems.sort_unstable();
+    match stems.windows(2).find(|w| w[0].0 == w[1].0) {
+        Some(w) => Err(LoadError::NotAScan {
+            problem: format!(
+                "the group holds frames {} and {}, one frame in two formats: keep one set",
+                w[0].1.file_name().unwrap_or_default().to_string_lossy(),
+                w[1].1.file_name().unwrap_or_default().to_string_lossy()
+            ),
+            path: dir.to_path_buf(),
+        }),
+        None => Ok(()),
+    }
+}
+
 /// The entries of `dir` that pass `keep`, sorted by name; more than `limit` of them is refused.
 fn sorted_entries(
     dir: &Path,
@@ -187,6 +208,7 @@ impl Scan {
                 MAX_FRAMES_PER_GROUP,
                 "frames",
             )?;
+            refuse_twin_frames(path, &files)?;
             let files = in_numbered_order(path, files, MAX_FRAMES_PER_GROUP, "frames")?;
             frames_of.insert(path.clone(), files);
         }
