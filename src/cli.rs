@@ -376,9 +376,9 @@ where
     let base: toml::Table = toml::Table::try_from(base).map_err(|e| fail(e.to_string()))?;
     let user: toml::Table =
         toml::from_str(&text).map_err(|e| fail(crate::toml_error::located(&text, &e)))?;
-    let user = match user.get(table) {
-        Some(toml::Value::Table(t)) => t.clone(),
-        _ => user,
+    let (user, under) = match user.get(table) {
+        Some(toml::Value::Table(t)) => (t.clone(), Some(table)),
+        _ => (user, None),
     };
     let over = |keys: &toml::Table| {
         let mut merged = base.clone();
@@ -387,13 +387,17 @@ where
     };
     let merged = over(&user).map_err(|e| {
         // The merged table has no positions: name the first of the user's keys that fails
-        // on its own.
+        // on its own, with its line in the file.
         let key = user.iter().find_map(|(k, v)| {
             let one = toml::Table::from_iter([(k.clone(), v.clone())]);
             over(&one).is_err().then_some(k.as_str())
         });
         match key {
-            Some(k) => fail(format!("{k}: {}", e.message())),
+            Some(k) => fail(format!(
+                "{}: {}",
+                crate::toml_error::key_at(&text, under, k),
+                e.message()
+            )),
             None => fail(e.message().to_string()),
         }
     })?;

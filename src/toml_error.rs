@@ -33,6 +33,26 @@ pub fn located(text: &str, error: &toml::de::Error) -> String {
     }
 }
 
+/// `key` of `text`'s `[table]` (top-level keys with `table` None) named with its line, as
+/// [`located`] names a parse error: `table.key (line N)`; without the line when the key is
+/// not written as `key = …` there (a merged table's keys have no positions of their own).
+#[must_use]
+pub fn key_at(text: &str, table: Option<&str>, key: &str) -> String {
+    let name = table.map_or_else(|| key.to_string(), |t| format!("{t}.{key}"));
+    let mut current: Option<String> = None;
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if let Some(header) = line.strip_prefix('[').and_then(|r| r.strip_suffix(']')) {
+            current = Some(header.trim_matches(['[', ']']).trim().to_string());
+        } else if current.as_deref() == table
+            && line.split_once('=').is_some_and(|(k, _)| k.trim() == key)
+        {
+            return format!("{name} (line {})", i + 1);
+        }
+    }
+    name
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -50,6 +70,21 @@ mod tests {
         }
         let e = toml::from_str::<Doc>(text).unwrap_err();
         located(text, &e)
+    }
+
+    #[test]
+    fn a_key_is_found_under_its_own_table() {
+        let text = "width_px = 1\n[synth]\n# size\nwidth_px = 64\n  height_pxx = 9\n";
+        assert_eq!(
+            key_at(text, Some("synth"), "width_px"),
+            "synth.width_px (line 4)"
+        );
+        assert_eq!(
+            key_at(text, Some("synth"), "height_pxx"),
+            "synth.height_pxx (line 5)"
+        );
+        assert_eq!(key_at(text, None, "width_px"), "width_px (line 1)");
+        assert_eq!(key_at(text, Some("synth"), "seed"), "synth.seed");
     }
 
     #[test]

@@ -254,3 +254,41 @@ fn a_scene_setting_out_of_range_names_its_file() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(!out.exists());
 }
+
+#[test]
+fn a_config_key_of_the_wrong_name_or_type_is_named_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&[&str], &str, &str); 3] = [
+        (
+            &["synth", "--tone", "440"],
+            "[synth]\n# a test\nwidth_px = 64\nheight_pxx = 9\n",
+            "synth.height_pxx (line 4): unknown field `height_pxx`",
+        ),
+        (
+            &["synth", "--tone", "440"],
+            "[synth]\nwidth_px = \"wide\"\n",
+            "synth.width_px (line 2): invalid type: string \"wide\"",
+        ),
+        (
+            &["synth-scene", "cube"],
+            "frames = 30\nkind = \"cube\"\n",
+            "kind (line 2): unknown field `kind`",
+        ),
+    ];
+    for (k, (command, text, wanted)) in cases.into_iter().enumerate() {
+        let config = dir.path().join(format!("c{k}.toml"));
+        std::fs::write(&config, text).unwrap();
+        let out = dir.path().join(format!("out{k}"));
+        let mut args = command.to_vec();
+        args.extend(["--out", s(&out), "--config", s(&config)]);
+        let run = groovescope(&args);
+        let err = stderr(&run);
+        assert!(!run.status.success());
+        assert!(
+            err.contains(wanted) && err.contains(&format!("c{k}.toml")),
+            "{err}"
+        );
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(!out.exists());
+    }
+}
