@@ -59,7 +59,8 @@ pub struct GroupEntry {
     /// The group folder (in a Zarr store: the store joined with the group's name, which
     /// names the group in messages).
     pub dir: PathBuf,
-    /// Frame files sorted by name (empty in a Zarr store).
+    /// Frame files in order: by name, or by number (a skipped one kept as the path it would
+    /// have; see docs/FORMAT.md). Empty in a Zarr store.
     pub frames: Vec<PathBuf>,
     /// Where the frames are in a Zarr store (None for a scan folder).
     pub zarr: Option<super::zarr::ZarrGroup>,
@@ -89,7 +90,8 @@ pub struct Scan {
     pub dir: PathBuf,
     /// Parsed `scan.toml`.
     pub meta: ScanMeta,
-    /// Groups sorted by folder name.
+    /// Groups in groove order: by folder name, or by number with a skipped one in its place
+    /// (see docs/FORMAT.md).
     pub groups: Vec<GroupEntry>,
     /// `reference.wav`, when present.
     pub reference: Option<PathBuf>,
