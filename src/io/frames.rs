@@ -134,24 +134,24 @@ pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
     load_group_frames(group, 0..group.frame_count())
 }
 
-/// Refuses a group folder of a scan folder, or a frame of it, that the scan's numbering
-/// skips (see docs/FORMAT.md).
-///
-/// # Errors
-/// [`LoadError::Missing`] naming the first.
-pub fn check_present(group: &GroupEntry) -> Result<(), LoadError> {
+/// What failed a group of a scan folder: [`LoadError::Missing`] when its folder, or one of
+/// its frames, is one the scan's numbering skips (see docs/FORMAT.md), else `error`. Asked
+/// only once reading failed, so a readable group costs no extra look-up per frame (which a
+/// network file system makes slow).
+#[must_use]
+pub fn missing_or(group: &GroupEntry, error: LoadError) -> LoadError {
     if group.frames.is_empty() && !group.dir.exists() {
-        return Err(LoadError::Missing {
+        return LoadError::Missing {
             what: "group folder",
             path: group.dir.clone(),
-        });
+        };
     }
     match group.frames.iter().find(|p| !p.exists()) {
-        Some(gone) => Err(LoadError::Missing {
+        Some(gone) => LoadError::Missing {
             what: "frame",
             path: gone.clone(),
-        }),
-        None => Ok(()),
+        },
+        None => error,
     }
 }
 
@@ -173,7 +173,14 @@ pub fn load_group_frames(
     if let Some(z) = &group.zarr {
         return super::zarr::load_group_frames(z, range);
     }
-    check_present(group)?;
+    load_folder_frames(group, range).map_err(|e| missing_or(group, e))
+}
+
+/// [`load_group_frames`] of a scan folder's group.
+fn load_folder_frames(
+    group: &GroupEntry,
+    range: std::ops::Range<usize>,
+) -> Result<Vec<Image>, LoadError> {
     let n = group.frames.len();
     if n < super::scan::MIN_FRAMES_PER_GROUP {
         return Err(LoadError::TooFewFrames {

@@ -38,9 +38,10 @@ pub enum LoadError {
         /// The metadata file.
         path: PathBuf,
     },
-    /// A group folder or a frame whose number the scan's numbering skips (see
-    /// docs/FORMAT.md): it keeps its place, so what follows stays where it lies.
-    #[error("{what} is missing (the numbering skips it): {}", path.display())]
+    /// A group folder or a frame that is not on disk: one whose number the scan's numbering
+    /// skips (it keeps its place, so what follows stays where it lies; see docs/FORMAT.md),
+    /// or one removed after the scan was opened.
+    #[error("{what} is missing: {}", path.display())]
     Missing {
         /// "group folder" or "frame".
         what: &'static str,

@@ -28,12 +28,20 @@ pub struct PackSummary {
 }
 
 fn raw_group(scan_group: &crate::io::GroupEntry) -> Result<Vec<RawFrame>, LoadError> {
-    crate::io::frames::check_present(scan_group)?;
+    if scan_group.frames.is_empty() {
+        let none = LoadError::TooFewFrames {
+            found: 0,
+            needed: crate::io::scan::MIN_FRAMES_PER_GROUP,
+            path: scan_group.dir.clone(),
+        };
+        return Err(crate::io::frames::missing_or(scan_group, none));
+    }
     scan_group
         .frames
         .par_iter()
         .map(|p| load_frame_raw(p))
-        .collect()
+        .collect::<Result<_, _>>()
+        .map_err(|e| crate::io::frames::missing_or(scan_group, e))
 }
 
 /// Bytes of the files under `dir`.
