@@ -232,33 +232,9 @@ fn a_land_flow_past_the_frame_is_named_not_silently_zero() {
 }
 
 #[test]
-fn a_scene_setting_out_of_range_names_its_file() {
+fn a_config_key_of_the_wrong_name_type_or_range_is_named_with_its_file() {
     let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("tiny.toml");
-    std::fs::write(&config, "width_px = 0\n").unwrap();
-    let out = dir.path().join("scene");
-    let run = groovescope(&[
-        "synth-scene",
-        "cube",
-        "--out",
-        s(&out),
-        "--config",
-        s(&config),
-    ]);
-    assert!(!run.status.success());
-    let err = stderr(&run);
-    assert!(
-        err.contains("scene.width_px") && err.contains("got 0") && err.contains("tiny.toml"),
-        "{err}"
-    );
-    assert_eq!(err.lines().count(), 1, "{err}");
-    assert!(!out.exists());
-}
-
-#[test]
-fn a_config_key_of_the_wrong_name_or_type_is_named_with_its_line() {
-    let dir = tempfile::tempdir().unwrap();
-    let cases: [(&[&str], &str, &str); 3] = [
+    let cases: [(&[&str], &str, &str); 4] = [
         (
             &["synth", "--tone", "440"],
             "[synth]\n# a test\nwidth_px = 64\nheight_pxx = 9\n",
@@ -273,6 +249,12 @@ fn a_config_key_of_the_wrong_name_or_type_is_named_with_its_line() {
             &["synth-scene", "cube"],
             "frames = 30\nkind = \"cube\"\n",
             "kind (line 2): unknown field `kind`",
+        ),
+        // In range is checked on the merged settings, which have no lines.
+        (
+            &["synth-scene", "cube"],
+            "width_px = 0\n",
+            "scene.width_px: must lie in [8, 8192], got 0",
         ),
     ];
     for (k, (command, text, wanted)) in cases.into_iter().enumerate() {
