@@ -42,7 +42,9 @@ pub fn key_at(text: &str, table: Option<&str>, key: &str) -> String {
     let mut current: Option<String> = None;
     for (i, line) in text.lines().enumerate() {
         let line = line.trim();
-        if let Some(header) = line.strip_prefix('[').and_then(|r| r.strip_suffix(']')) {
+        // A header may carry a comment: `[synth]  # mine`.
+        let bare = line.split_once('#').map_or(line, |(b, _)| b).trim_end();
+        if let Some(header) = bare.strip_prefix('[').and_then(|r| r.strip_suffix(']')) {
             current = Some(header.trim_matches(['[', ']']).trim().to_string());
         } else if current.as_deref() == table
             && line.split_once('=').is_some_and(|(k, _)| k.trim() == key)
@@ -74,7 +76,7 @@ mod tests {
 
     #[test]
     fn a_key_is_found_under_its_own_table() {
-        let text = "width_px = 1\n[synth]\n# size\nwidth_px = 64\n  height_pxx = 9\n";
+        let text = "width_px = 1\n[synth]  # mine\n# size\nwidth_px = 64\n  height_pxx = 9\n";
         assert_eq!(
             key_at(text, Some("synth"), "width_px"),
             "synth.width_px (line 4)"

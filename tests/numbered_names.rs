@@ -129,6 +129,20 @@ fn a_skipped_group_keeps_its_place_refused_before_work_or_a_gap_with_keep_going(
         "{}",
         stderr(&o)
     );
+    // A spiral's radius list counts the skipped group's place too, and says so when short.
+    let toml = std::fs::read_to_string(demo.join("scan.toml")).unwrap();
+    let radii = ["60.0"; 12].join(", ");
+    let spiral = toml.replacen(
+        "radius_mm = 60.0\n",
+        &format!("radius_mm = 60.0\ngroup_radius_mm = [{radii}]\n"),
+        1,
+    );
+    std::fs::write(demo.join("scan.toml"), spiral).unwrap();
+    let o = reconstruct(&demo, &dir.path().join("spiral.wav"), &["--keep-going"]);
+    common::failed_with(
+        &o,
+        &["has 12 entries but the scan has 13 groups, 1 of them a number the group folders skip"],
+    );
 }
 
 #[test]

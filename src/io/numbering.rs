@@ -4,10 +4,10 @@
 //! Name order alone would splice silently: a missing `g00003` would pull every later group one
 //! step back along the groove (the sound loses a stretch and nothing says so), and unpadded
 //! names sort `g10` before `g2`. So when every name is one prefix followed by a number (and one
-//! extension), the numbers set the order, and when they are dense (most numbers from the first
-//! to the last present) they say where each entry lies: a skipped number gets the path it
-//! would have had. That path does not exist, so reading it fails naming it: a missing group
-//! becomes a gap under `--keep-going`, a missing frame fails its group. Sparse numbers
+//! extension), the numbers set the order, and when they lie on a regular step (1, or 2 for every
+//! other group) they say where each entry lies: a skipped number gets the path it would have
+//! had. That path does not exist, so reading it fails naming it: a missing group becomes a gap
+//! under `--keep-going`, a missing frame fails its group. Numbers on no regular step
 //! (timestamps) set the order only.
 
 use std::collections::BTreeMap;
@@ -24,10 +24,6 @@ struct Numbered<'a> {
     digits: usize,
     extension: &'a str,
 }
-
-/// Numbers are positions, and a skipped one keeps its place, when at least this share of
-/// those from the first to the last is present.
-const MIN_PRESENT_SHARE: f64 = 2.0 / 3.0;
 
 /// Most digits read as a number (`u64` holds every 18-digit number).
 const MAX_DIGITS: usize = 18;
@@ -78,10 +74,9 @@ pub(super) fn strays(paths: &[PathBuf], holds_frames: impl Fn(usize) -> bool) ->
 }
 
 /// `paths` (entries of `dir`, sorted by name) in the order they lie in: by number when every
-/// name is one prefix, a number and one extension, and when the numbers are dense (at least
-/// [`MIN_PRESENT_SHARE`] of those from the first to the last present) with the path a skipped
-/// number would have had in its place; otherwise unchanged (name order). `what` names the
-/// entries in errors.
+/// name is one prefix, a number and one extension, and when the numbers lie on a regular step
+/// ([`regular_step`]) with the path a skipped number would have had in its place; otherwise
+/// unchanged (name order). `what` names the entries in errors.
 ///
 /// # Errors
 /// [`LoadError::NotAScan`] when two names carry one number (`g1` and `g01`), or the numbers
@@ -123,39 +118,60 @@ pub(super) fn in_numbered_order(
             )));
         }
     }
-    let (Some((&low, _)), Some((&high, _))) =
-        (by_number.first_key_value(), by_number.last_key_value())
-    else {
+    let numbers: Vec<u64> = by_number.keys().copied().collect();
+    let (Some(&low), Some(&high)) = (numbers.first(), numbers.last()) else {
         return Ok(paths);
     };
-    let span = high - low;
-    // Sparse numbers are not positions (timestamps, or every other group of a scan taken
-    // at twice the step): they set the order only.
-    if (by_number.len() as f64) < MIN_PRESENT_SHARE * (span as f64 + 1.0) {
+    // Numbers not on a regular step are not positions (timestamps): they set the order only.
+    let Some(step) = regular_step(&numbers) else {
         return Ok(by_number.into_values().cloned().collect());
-    }
-    if span >= limit as u64 {
+    };
+    let places = (high - low) / step + 1;
+    if places > limit as u64 {
         return Err(refuse(format!(
-            "the {what} are numbered {low} to {high}, more places than the limit of {limit}"
+            "the {what} are numbered {low} to {high} in steps of {step}, more places than the limit of {limit}"
         )));
     }
-    // Skipped numbers are written as their neighbours are: padded to one width when all are.
-    let width = names
-        .iter()
-        .all(|n| n.digits == first.digits)
-        .then_some(first.digits);
-    Ok((low..=high)
-        .map(|number| match by_number.get(&number) {
-            Some(path) => (*path).clone(),
-            None => {
-                let digits = match width {
-                    Some(w) => format!("{number:0w$}"),
-                    None => number.to_string(),
-                };
-                dir.join(format!("{}{digits}{}", first.prefix, first.extension))
+    // A skipped number is written as its neighbours are, padded as the shortest of them is
+    // (g00003 among g00000…g99999, g100000…).
+    let width = names.iter().map(|n| n.digits).min().unwrap_or(1);
+    Ok((0..places)
+        .map(|k| {
+            let number = low + k * step;
+            match by_number.get(&number) {
+                Some(path) => (*path).clone(),
+                None => dir.join(format!(
+                    "{}{number:0width$}{}",
+                    first.prefix, first.extension
+                )),
             }
         })
         .collect())
+}
+
+/// The step of `numbers` (sorted, distinct) when they lie on one, the gaps between neighbours
+/// that are not one step being skipped numbers:
+/// - 1 when at least half the gaps are 1 (`g0, g1, g3`), and for two numbers, which cannot
+///   show a step of their own (so `g0, g2` is a scan that lost `g1`: refused or a gap, never a
+///   silent splice);
+/// - else the commonest gap when at least two gaps and half of them are that, and every gap is
+///   a whole number of it (2 for every other group of a scan taken at twice the step);
+/// - None otherwise (timestamps): the numbers set the order only.
+fn regular_step(numbers: &[u64]) -> Option<u64> {
+    let gaps: Vec<u64> = numbers.windows(2).map(|w| w[1] - w[0]).collect();
+    let ones = gaps.iter().filter(|&&g| g == 1).count();
+    if 2 * ones >= gaps.len() || gaps.len() == 1 {
+        return Some(1);
+    }
+    let mut counts = BTreeMap::new();
+    for &g in &gaps {
+        *counts.entry(g).or_insert(0usize) += 1;
+    }
+    let (&step, &count) = counts
+        .iter()
+        .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))?;
+    let on_lattice = gaps.iter().all(|g| g % step == 0);
+    (on_lattice && count >= 2 && 2 * count >= gaps.len()).then_some(step)
 }
 
 fn file_name(path: &Path) -> String {
@@ -178,34 +194,68 @@ mod tests {
     }
 
     #[test]
-    fn a_skipped_number_keeps_its_place_with_the_name_it_would_have() {
+    fn numbers_set_the_order_and_a_skipped_one_keeps_its_place() {
+        let cases: [(&str, &[&str], &[&str]); 10] = [
+            (
+                "a skipped group, named as its neighbours",
+                &["g00000", "g00001", "g00002", "g00004"],
+                &["g00000", "g00001", "g00002", "g00003", "g00004"],
+            ),
+            (
+                "frames out of order",
+                &["f007.png", "f009.png", "f008.png"],
+                &["f007.png", "f008.png", "f009.png"],
+            ),
+            (
+                "a skipped frame",
+                &["f1.tif", "f3.tif", "f4.tif"],
+                &["f1.tif", "f2.tif", "f3.tif", "f4.tif"],
+            ),
+            (
+                "timestamps: no regular step, the order only",
+                &["t1701234567", "t1701234590", "t1701234602"],
+                &["t1701234567", "t1701234590", "t1701234602"],
+            ),
+            (
+                "nearly regular timestamps",
+                &["t100", "t201", "t299", "t400"],
+                &["t100", "t201", "t299", "t400"],
+            ),
+            (
+                "every other group of a scan at twice the step, one missing",
+                &["g0", "g10", "g2", "g4", "g8"],
+                &["g0", "g2", "g4", "g6", "g8", "g10"],
+            ),
+            (
+                "every other group",
+                &["g0", "g2", "g4"],
+                &["g0", "g2", "g4"],
+            ),
+            (
+                "two numbers show no step: a scan of three that lost its middle",
+                &["g0", "g2"],
+                &["g0", "g1", "g2"],
+            ),
+            (
+                "padded as the shortest name",
+                &["g99998", "g99999", "g100000", "g100002"],
+                &["g99998", "g99999", "g100000", "g100001", "g100002"],
+            ),
+            (
+                "padded as the shortest name, across the width change",
+                &["g99998", "g100000", "g100001"],
+                &["g99998", "g99999", "g100000", "g100001"],
+            ),
+        ];
+        for (case, names, want) in cases {
+            assert_eq!(order(names).unwrap(), want, "{case}");
+        }
+        // One far folder: every place between is missing.
+        assert_eq!(order(&["g0", "g1", "g2", "g9"]).unwrap().len(), 10);
         assert_eq!(
-            order(&["g00000", "g00001", "g00002", "g00004"]).unwrap(),
-            ["g00000", "g00001", "g00002", "g00003", "g00004"]
+            order(&["g1", "g3", "g4"]).unwrap(),
+            ["g1", "g2", "g3", "g4"]
         );
-        assert_eq!(
-            order(&["f007.png", "f009.png", "f008.png"]).unwrap(),
-            ["f007.png", "f008.png", "f009.png"]
-        );
-        assert_eq!(
-            order(&["f1.tif", "f3.tif", "f4.tif"]).unwrap(),
-            ["f1.tif", "f2.tif", "f3.tif", "f4.tif"]
-        );
-    }
-
-    #[test]
-    fn sparse_numbers_only_set_the_order() {
-        // Timestamps, and every other group of a scan taken at twice the step.
-        assert_eq!(
-            order(&["t1701234567", "t1701234590", "t1701234602"]).unwrap(),
-            ["t1701234567", "t1701234590", "t1701234602"]
-        );
-        assert_eq!(
-            order(&["g0", "g10", "g12", "g2", "g4", "g6", "g8"]).unwrap(),
-            ["g0", "g2", "g4", "g6", "g8", "g10", "g12"]
-        );
-        // Far apart, so past the limit only if they were positions.
-        assert_eq!(order(&["g0", "g100"]).unwrap(), ["g0", "g100"]);
     }
 
     #[test]
@@ -256,7 +306,7 @@ mod tests {
             .collect();
         let dense: Vec<&str> = dense.iter().map(String::as_str).collect();
         let msg = order(&dense).unwrap_err().to_string();
-        assert!(msg.contains("numbered 0 to 100"), "{msg}");
+        assert!(msg.contains("numbered 0 to 100 in steps of 1"), "{msg}");
         assert_eq!(order(&dense[..dense.len() - 1]).unwrap().len(), 100);
         // Past what u64 holds: not a number, so name order.
         let long = "g".to_string() + &"9".repeat(19);

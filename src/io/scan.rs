@@ -215,9 +215,12 @@ impl Scan {
             frames_of.insert(path.clone(), files);
         }
         let holds_frames = |i: usize| frames_of.get(&folders[i]).is_some_and(|f| !f.is_empty());
-        for stray in strays(&folders, holds_frames).into_iter().rev() {
-            folders.remove(stray);
-        }
+        let stray = strays(&folders, holds_frames);
+        let mut k = 0;
+        folders.retain(|_| {
+            k += 1;
+            stray.binary_search(&(k - 1)).is_err()
+        });
         let mut groups = Vec::new();
         for path in in_numbered_order(dir, folders, MAX_GROUPS, "group folders")? {
             // A number the scan skips has no folder and no frames: loading it fails naming it.
@@ -247,9 +250,18 @@ impl Scan {
             });
         };
         let frame_size = frame_dimensions(first)?;
+        // The radius list counts places on the groove, a skipped number's included.
+        let skipped = groups
+            .iter()
+            .filter(|g| g.frames.is_empty() && !g.dir.exists())
+            .count();
         meta.check_against_scan(groups.len(), frame_size)
             .map_err(|problem| LoadError::Metadata {
-                problem,
+                problem: if skipped > 0 && meta.record.group_radius_mm.is_some() {
+                    format!("{problem}, {skipped} of them a number the group folders skip (it keeps its place)")
+                } else {
+                    problem
+                },
                 path: meta_path.clone(),
             })?;
         let reference = Some(dir.join("reference.wav")).filter(|p| p.is_file());

@@ -36,8 +36,9 @@ const WIDTH_TOLERANCE: f64 = 0.6;
 /// A track whose median width is off the image's median by more than this share is a run of
 /// wrong pairings, not a groove: a groove's width holds to a few per cent along it (the
 /// generator's stills, the demo, stereo), while a track that pairs a wall with a dust speck
-/// or a wall's own edges runs at about half the width.
-const TRACK_WIDTH_TOLERANCE: f64 = 0.3;
+/// or a wall's own edges runs at about half the width. Wide of both, so a groove cut wider
+/// than its neighbours is kept.
+const TRACK_WIDTH_TOLERANCE: f64 = 0.4;
 /// Along-to-across gradient energy above which the axis contradicts the image.
 const AXIS_RATIO: f64 = 1.2;
 /// Grooves within this share of the best coverage count as complete when choosing one.

@@ -143,8 +143,9 @@ fn probe_secs_per_group(
         &mut slopes,
         &cancel,
         &mut |o: GroupOutcome| {
-            // A group that failed (a gap under --keep-going) costs next to nothing: counted,
-            // it would make the side look faster than its readable groups run.
+            // A group that failed (a gap under --keep-going) is not counted: most fail when
+            // read, at next to no cost, and counted they would make the side look faster. One
+            // that fails late spreads its time over the others, which errs slow.
             ran += usize::from(o.signal.is_some());
             Ok(())
         },
