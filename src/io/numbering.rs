@@ -256,6 +256,10 @@ mod tests {
             order(&["g1", "g3", "g4"]).unwrap(),
             ["g1", "g2", "g3", "g4"]
         );
+        assert_eq!(
+            order(&["g0", "g1", "g3"]).unwrap(),
+            ["g0", "g1", "g2", "g3"]
+        );
     }
 
     #[test]
