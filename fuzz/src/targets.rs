@@ -157,8 +157,9 @@ pub fn flo_file(data: &[u8]) {
     assert_eq!(flo::encode_flo(&u, &v), data, ".flo does not round-trip");
 }
 
-/// A whole tiny scan folder built from the bytes (metadata, groups of PNG or TIFF frames,
-/// some damaged, an optional `reference.wav`), opened and reconstructed with the defaults.
+/// A whole tiny scan folder built from the bytes (metadata, numbered groups of PNG or TIFF
+/// frames, some damaged, a number skipped now and then, stray folders and dot files, an
+/// optional `reference.wav`), opened and reconstructed with the defaults.
 pub fn scan_folder(data: &[u8]) {
     let mut u = Unstructured::new(data);
     let Ok(dir) = scratch_dir() else {
@@ -251,13 +252,42 @@ fn write_scan(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<()> {
         meta = String::from_utf8_lossy(u.bytes(len)?).into_owned();
     }
     std::fs::write(dir.join("scan.toml"), meta).map_err(fail)?;
+    // Numbered folders as transfers leave them: padded or not, a number now and then skipped.
+    let unpadded = u.ratio(1u8, 4)?;
+    let mut number = u.int_in_range(0usize..=1)?;
     for g in 0..groups {
-        let group_dir = dir.join(format!("g{g:05}"));
+        let name = if unpadded {
+            format!("g{number}")
+        } else {
+            format!("g{number:05}")
+        };
+        number += if u.ratio(1u8, 6)? { 2 } else { 1 };
+        let group_dir = dir.join(name);
         std::fs::create_dir(&group_dir).map_err(fail)?;
         let frames = u.int_in_range(5usize..=9)?;
         for k in 0..frames {
             let (bytes, ext) = frame_bytes(u, width, height, g * 16 + k)?;
-            std::fs::write(group_dir.join(format!("f{k:03}.{ext}")), bytes).map_err(fail)?;
+            std::fs::write(group_dir.join(format!("f{k:03}.{ext}")), &bytes).map_err(fail)?;
+            // A frame left in a second format, and another program's dot file.
+            if u.ratio(1u8, 32)? {
+                let other = if ext == "png" { "tif" } else { "png" };
+                std::fs::write(group_dir.join(format!("f{k:03}.{other}")), &bytes).map_err(fail)?;
+            }
+            if u.ratio(1u8, 32)? {
+                std::fs::write(
+                    group_dir.join(format!("._f{k:03}.{ext}")),
+                    b"\0\x05\x16\x07",
+                )
+                .map_err(fail)?;
+            }
+        }
+    }
+    // A folder that is no group: empty, or holding notes.
+    if u.ratio(1u8, 8)? {
+        let stray = dir.join(u.choose(&["notes", "calibration", ".thumbnails", "g"])?);
+        std::fs::create_dir_all(&stray).map_err(fail)?;
+        if u.arbitrary::<bool>()? {
+            std::fs::write(stray.join("transfer.txt"), b"stylus-free").map_err(fail)?;
         }
     }
     if u.ratio(1u8, 3)? {
