@@ -151,9 +151,9 @@ pub(super) fn in_numbered_order(
 
 /// The step of `numbers` (sorted, distinct) when they lie on one, the gaps between neighbours
 /// that are not one step being skipped numbers:
-/// - 1 when at least half the gaps are 1 (`g0, g1, g3`), and for two numbers, which cannot
-///   show a step of their own (so `g0, g2` is a scan that lost `g1`: refused or a gap, never a
-///   silent splice);
+/// - 1 when at least half the gaps are 1 (`g0, g1, g3`), or 1 is the commonest gap (a scan
+///   that lost most of its groups), and for two numbers, which cannot show a step of their
+///   own (so `g0, g2` is a scan that lost `g1`: refused or a gap, never a silent splice);
 /// - else the commonest gap when at least two gaps and half of them are that, and every gap is
 ///   a whole number of it (2 for every other group of a scan taken at twice the step);
 /// - None otherwise (timestamps): the numbers set the order only.
@@ -170,6 +170,10 @@ fn regular_step(numbers: &[u64]) -> Option<u64> {
     let (&step, &count) = counts
         .iter()
         .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))?;
+    // A scan that lost most of its groups still steps by 1 more often than by anything else.
+    if step == 1 && count >= 2 {
+        return Some(1);
+    }
     let on_lattice = gaps.iter().all(|g| g % step == 0);
     (on_lattice && count >= 2 && 2 * count >= gaps.len()).then_some(step)
 }
@@ -259,6 +263,11 @@ mod tests {
         assert_eq!(
             order(&["g0", "g1", "g3"]).unwrap(),
             ["g0", "g1", "g2", "g3"]
+        );
+        // Most groups lost: gaps 1, 1, 3, 4, 5; still steps of 1, the rest missing.
+        assert_eq!(
+            order(&["g0", "g1", "g2", "g5", "g9", "g14"]).unwrap().len(),
+            15
         );
     }
 

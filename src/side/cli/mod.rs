@@ -312,7 +312,11 @@ pub fn check_missing_groups(scan: &Scan, range: Range<usize>, keep_going: bool) 
         return Ok(());
     };
     if !keep_going {
-        bail!("{what}: run with --keep-going to read each as a gap of silence, in its place");
+        bail!(
+            "{what}: run with --keep-going to read each as a gap of silence, in its place (or, \
+             if the numbers are not places on the groove, such as timestamps, name the folders \
+             in order g00000, g00001, …)"
+        );
     }
     eprintln!("warning: {what}: each becomes a gap of silence, in its place");
     Ok(())
