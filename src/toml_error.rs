@@ -20,17 +20,25 @@ pub fn located(text: &str, error: &toml::de::Error) -> String {
         .split_once('=')
         .map(|(k, _)| k.trim())
         .filter(|k| !k.is_empty() && !k.starts_with('['));
-    let table = text[..line_start].lines().rev().find_map(|l| {
-        let l = l.trim();
-        l.strip_prefix('[')
-            .and_then(|r| r.strip_suffix(']'))
-            .map(|t| t.trim_matches(['[', ']']).trim().to_string())
-    });
-    match (table, key) {
-        (Some(t), Some(k)) => format!("{t}.{k} (line {line_no}): {message}"),
-        (None, Some(k)) => format!("{k} (line {line_no}): {message}"),
-        _ => format!("line {line_no}: {message}"),
+    let table = text[..line_start].lines().rev().find_map(header);
+    match key {
+        Some(k) => format!("{} (line {line_no}): {message}", qualified(table, k)),
+        None => format!("line {line_no}: {message}"),
     }
+}
+
+/// The table a `[table]` or `[[table]]` header line names; a comment may follow it
+/// (`[synth]  # mine`).
+fn header(line: &str) -> Option<&str> {
+    let bare = line.split_once('#').map_or(line, |(b, _)| b).trim();
+    bare.strip_prefix('[')?
+        .strip_suffix(']')
+        .map(|t| t.trim_matches(['[', ']']).trim())
+}
+
+/// `table.key`, or `key` at the top level.
+fn qualified(table: Option<&str>, key: &str) -> String {
+    table.map_or_else(|| key.to_string(), |t| format!("{t}.{key}"))
 }
 
 /// `key` of `text`'s `[table]` (top-level keys with `table` None) named with its line, as
@@ -38,17 +46,12 @@ pub fn located(text: &str, error: &toml::de::Error) -> String {
 /// not written as `key = …` there (a merged table's keys have no positions of their own).
 #[must_use]
 pub fn key_at(text: &str, table: Option<&str>, key: &str) -> String {
-    let name = table.map_or_else(|| key.to_string(), |t| format!("{t}.{key}"));
-    let mut current: Option<String> = None;
+    let name = qualified(table, key);
+    let mut current = None;
     for (i, line) in text.lines().enumerate() {
-        let line = line.trim();
-        // A header may carry a comment: `[synth]  # mine`.
-        let bare = line.split_once('#').map_or(line, |(b, _)| b).trim_end();
-        if let Some(header) = bare.strip_prefix('[').and_then(|r| r.strip_suffix(']')) {
-            current = Some(header.trim_matches(['[', ']']).trim().to_string());
-        } else if current.as_deref() == table
-            && line.split_once('=').is_some_and(|(k, _)| k.trim() == key)
-        {
+        if let Some(t) = header(line) {
+            current = Some(t);
+        } else if current == table && line.split_once('=').is_some_and(|(k, _)| k.trim() == key) {
             return format!("{name} (line {})", i + 1);
         }
     }

@@ -140,7 +140,7 @@ pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
 /// network file system makes slow).
 #[must_use]
 pub fn missing_or(group: &GroupEntry, error: LoadError) -> LoadError {
-    if group.frames.is_empty() && !group.dir.exists() {
+    if group.is_missing() {
         return LoadError::Missing {
             what: "group folder",
             path: group.dir.clone(),

@@ -28,15 +28,17 @@ struct Numbered<'a> {
 /// Most digits read as a number (`u64` holds every 18-digit number).
 const MAX_DIGITS: usize = 18;
 
+impl Numbered<'_> {
+    /// Whether `other` is numbered the same way: one prefix and one extension.
+    fn same_scheme(&self, other: &Numbered<'_>) -> bool {
+        self.prefix == other.prefix && self.extension == other.extension
+    }
+}
+
 fn numbered(path: &Path) -> Option<Numbered<'_>> {
     let name = path.file_name()?.to_str()?;
-    let (stem, extension) = match path.extension().and_then(|e| e.to_str()) {
-        Some(ext) => (
-            &name[..name.len() - ext.len() - 1],
-            &name[name.len() - ext.len() - 1..],
-        ),
-        None => (name, ""),
-    };
+    let stem = path.file_stem()?.to_str()?;
+    let extension = &name[stem.len()..];
     let prefix = stem.trim_end_matches(|c: char| c.is_ascii_digit());
     let digits = stem.len() - prefix.len();
     if digits == 0 || digits > MAX_DIGITS {
@@ -61,10 +63,7 @@ pub(super) fn strays(paths: &[PathBuf], holds_frames: impl Fn(usize) -> bool) ->
     let Some(Some(first)) = with_frames.next().map(|i| &names[i]) else {
         return Vec::new();
     };
-    let fits = |n: &Option<Numbered<'_>>| {
-        n.as_ref()
-            .is_some_and(|n| n.prefix == first.prefix && n.extension == first.extension)
-    };
+    let fits = |n: &Option<Numbered<'_>>| n.as_ref().is_some_and(|n| n.same_scheme(first));
     if !with_frames.all(|i| fits(&names[i])) {
         return Vec::new();
     }
@@ -101,10 +100,7 @@ pub(super) fn in_numbered_order(
     let Some(first) = names.first() else {
         return Ok(paths);
     };
-    if names
-        .iter()
-        .any(|n| n.prefix != first.prefix || n.extension != first.extension)
-    {
+    if !names.iter().all(|n| n.same_scheme(first)) {
         return Ok(paths);
     }
     let mut by_number = BTreeMap::new();

@@ -73,6 +73,13 @@ impl GroupEntry {
         self.zarr.as_ref().map_or(self.frames.len(), |z| z.frames)
     }
 
+    /// True for a group of a scan folder that has no folder: a number the scan's numbering
+    /// skips (it keeps its place; see docs/FORMAT.md), or a folder removed since.
+    #[must_use]
+    pub fn is_missing(&self) -> bool {
+        self.zarr.is_none() && self.frames.is_empty() && !self.dir.exists()
+    }
+
     /// The group's name: its folder's name.
     #[must_use]
     pub fn name(&self) -> String {
@@ -196,7 +203,7 @@ impl Scan {
             });
         }
         let meta = ScanMeta::load(&meta_path)?;
-        let mut folders = sorted_entries(
+        let folders = sorted_entries(
             dir,
             |p| p.is_dir() && !hidden(p),
             MAX_GROUPS,
@@ -216,11 +223,12 @@ impl Scan {
         }
         let holds_frames = |i: usize| frames_of.get(&folders[i]).is_some_and(|f| !f.is_empty());
         let stray = strays(&folders, holds_frames);
-        let mut k = 0;
-        folders.retain(|_| {
-            k += 1;
-            stray.binary_search(&(k - 1)).is_err()
-        });
+        let folders: Vec<PathBuf> = folders
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| stray.binary_search(i).is_err())
+            .map(|(_, path)| path)
+            .collect();
         let mut groups = Vec::new();
         for path in in_numbered_order(dir, folders, MAX_GROUPS, "group folders")? {
             // A number the scan skips has no folder and no frames: loading it fails naming it.
@@ -251,10 +259,7 @@ impl Scan {
         };
         let frame_size = frame_dimensions(first)?;
         // The radius list counts places on the groove, a skipped number's included.
-        let skipped = groups
-            .iter()
-            .filter(|g| g.frames.is_empty() && !g.dir.exists())
-            .count();
+        let skipped = groups.iter().filter(|g| g.is_missing()).count();
         meta.check_against_scan(groups.len(), frame_size)
             .map_err(|problem| LoadError::Metadata {
                 problem: if skipped > 0 && meta.record.group_radius_mm.is_some() {
@@ -282,7 +287,7 @@ impl Scan {
             .get(range.start.min(self.groups.len())..range.end.min(self.groups.len()))
             .unwrap_or_default()
             .iter()
-            .filter(|g| g.zarr.is_none() && g.frames.is_empty() && !g.dir.exists())
+            .filter(|g| g.is_missing())
             .collect()
     }
 

@@ -13,7 +13,7 @@
 //! (greedy, nearest pairs first), tolerating gaps of `max_gap_blocks`; they are numbered by
 //! their position across the image with the common drift taken out.
 
-use super::link::{absorb_pieces, link, merge_fragments, slope};
+use super::link::{absorb_pieces, centre, link, merge_fragments, slope};
 use super::profile::Profiles;
 use super::{Axis, StillError, StillParams, StillSetup, WallTone};
 use crate::pipeline::median;
@@ -337,8 +337,7 @@ pub fn detect_grooves(
             grooves
         })
         .collect();
-    let centres =
-        |gs: &Vec<[f64; 4]>| -> Vec<f64> { gs.iter().map(|g| 0.5 * (g[0] + g[3])).collect() };
+    let centres = |gs: &Vec<[f64; 4]>| -> Vec<f64> { gs.iter().map(centre).collect() };
     let spacing = median(
         per_block
             .iter()
@@ -408,7 +407,7 @@ pub fn detect_grooves(
             let n = found.len() as f64;
             let position_px = found
                 .iter()
-                .map(|(b, g)| 0.5 * (g[0] + g[3]) - drift * (*b as f64 - mid_block))
+                .map(|(b, g)| centre(g) - drift * (*b as f64 - mid_block))
                 .sum::<f64>()
                 / n;
             GrooveTrack {

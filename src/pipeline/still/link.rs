@@ -10,6 +10,11 @@ const MAX_SHARED_BLOCKS: usize = 2;
 /// `absorb_pieces`): the first block of a piece is often a wrong pairing.
 const NEAR_SHARE: f64 = 0.75;
 
+/// The middle of a groove's four borders: halfway between its land borders.
+pub(super) fn centre(g: &[f64; 4]) -> f64 {
+    0.5 * (g[0] + g[3])
+}
+
 /// Builds tracks from the grooves of every block (greedy nearest linking).
 pub(super) fn link(
     per_block: &[Vec<[f64; 4]>],
@@ -22,7 +27,6 @@ pub(super) fn link(
         last_block: usize,
         last_centre: f64,
     }
-    let centre = |g: &[f64; 4]| 0.5 * (g[0] + g[3]);
     let mut tracks: Vec<Building> = Vec::new();
     for (b, grooves) in per_block.iter().enumerate() {
         let mut pairs = Vec::new();
@@ -86,7 +90,6 @@ fn join_into(track: &mut [Option<[f64; 4]>], piece: Vec<Option<[f64; 4]>>, width
 /// starts) within the gap allowance before the other starts, near where it starts. Where both
 /// hold a block, the groove nearer the joined track's median width is kept.
 pub(super) fn merge_fragments(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64, max_gap: usize) {
-    let centre = |g: &[f64; 4]| 0.5 * (g[0] + g[3]);
     let ends = |t: &[Option<[f64; 4]>]| -> Option<((usize, f64), (usize, f64))> {
         let first = t.iter().position(Option::is_some)?;
         let last = t.iter().rposition(Option::is_some)?;
@@ -141,7 +144,6 @@ pub(super) fn merge_fragments(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64,
 /// ends along the image's common `drift` (px a block) from its median drift-free position,
 /// since a groove runs on across the image and its last blocks may be the strayed ones.
 pub(super) fn absorb_pieces(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64, drift: f64) {
-    let centre = |g: &[f64; 4]| 0.5 * (g[0] + g[3]);
     let found = |t: &[Option<[f64; 4]>]| -> Vec<(f64, [f64; 4])> {
         t.iter()
             .enumerate()
@@ -197,7 +199,7 @@ pub(super) fn slope(blocks: &[Option<[f64; 4]>]) -> Option<f64> {
     let pts: Vec<(f64, f64)> = blocks
         .iter()
         .enumerate()
-        .filter_map(|(b, g)| g.map(|g| (b as f64, 0.5 * (g[0] + g[3]))))
+        .filter_map(|(b, g)| g.map(|g| (b as f64, centre(&g))))
         .collect();
     let n = pts.len() as f64;
     if pts.len() < 4 {
