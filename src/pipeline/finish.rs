@@ -6,15 +6,15 @@
 //!
 //! [`finish_method_clip`] finishes by the params' method: the flow signals as they are; the
 //! edges' border tracks stitched over the clip, then combined and differentiated
-//! ([`decode_border_signal`]); or both fused per band ([`fuse`]). The edges and fused sound
-//! runs the DC block zero-phase (forward and backward over the clip, [`DcBlockPhase`]), so the
-//! audio keeps its phase through it; the flow method keeps the causal DC block (its output as
-//! before).
+//! ([`decode_border_signal`]); or both fused per band ([`fuse`]). The edges and fused sound,
+//! and a still's ([`channels_to_output`]), run the DC block and the low-pass zero-phase
+//! (forward and backward over the clip, [`FilterPhase`]), so the waveform keeps its shape
+//! through them; the flow method keeps the causal filters (its output as before).
 
 use serde::Serialize;
 
 use super::audio_signal::{GroupSignals, SignalPack, StitchedSignal, resample, stitch};
-use super::dsp::{DcBlockPhase, apply_dsp_with};
+use super::dsp::{FilterPhase, apply_dsp_with};
 use super::edges::decode_border_signal;
 use super::fusion::{FusionBlock, GroupFusion, fuse};
 use super::{Method, PipelineParams, StageError};
@@ -156,7 +156,7 @@ pub fn finish_method_clip(
         Method::Flow => finish_clip(&signals.flow, spacing_um, params),
         Method::Edges => {
             let (velocity, _) = edge_velocity(&signals.borders, spacing_um, meta, params)?;
-            finish_stitched(velocity, params, DcBlockPhase::ZeroPhase)
+            finish_stitched(velocity, params, FilterPhase::ZeroPhase)
         }
         Method::Fused => {
             let ClipSignals { flow, borders } = signals;
@@ -171,7 +171,7 @@ pub fn finish_method_clip(
                 meta,
                 &params.fusion,
             )?;
-            let mut clip = finish_stitched(fused.signal, params, DcBlockPhase::ZeroPhase)?;
+            let mut clip = finish_stitched(fused.signal, params, FilterPhase::ZeroPhase)?;
             clip.fusion = Some(FusionReport {
                 groups: fused.groups,
                 blocks: fused.blocks,
@@ -194,15 +194,15 @@ pub fn finish_clip<S: GroupSignals + ?Sized>(
     spacing_um: f64,
     params: &PipelineParams,
 ) -> Result<FinishedClip, StageError> {
-    finish_stitched(stitch(signals, spacing_um)?, params, DcBlockPhase::Causal)
+    finish_stitched(stitch(signals, spacing_um)?, params, FilterPhase::Causal)
 }
 
-/// A stitched velocity signal finished: short gaps bridged, resampled, DSP (the DC block run as
-/// `dc_phase` says), normalised.
+/// A stitched velocity signal finished: short gaps bridged, resampled, DSP (the DC block and
+/// low-pass run as `phase` says), normalised.
 fn finish_stitched(
     mut stitched: StitchedSignal,
     params: &PipelineParams,
-    dc_phase: DcBlockPhase,
+    phase: FilterPhase,
 ) -> Result<FinishedClip, StageError> {
     let mut warnings = Vec::new();
     let bridged = bridge_short_gaps(&mut stitched);
@@ -218,12 +218,8 @@ fn finish_stitched(
             gap.start
         ));
     }
-    let (channels, gain_per_mm_s) = channels_to_output_with(
-        &stitched.channels,
-        stitched.native_rate_hz,
-        params,
-        dc_phase,
-    )?;
+    let (channels, gain_per_mm_s) =
+        channels_to_output_with(&stitched.channels, stitched.native_rate_hz, params, phase)?;
     Ok(FinishedClip {
         sample_rate_hz: params.sound.output_rate_hz,
         channels,
@@ -235,8 +231,8 @@ fn finish_stitched(
 }
 
 /// Native-rate channels to output sound: each resampled to `sound.output_rate_hz`, through the
-/// DSP chain, then scaled to output level by `SoundParams::scale_to_output`. Returns the
-/// channels and the gain per mm/s. The still decoder finishes its sound through it too.
+/// DSP chain (zero-phase), then scaled to output level by `SoundParams::scale_to_output`.
+/// Returns the channels and the gain per mm/s. The still decoder finishes its sound here.
 ///
 /// # Errors
 /// [`StageError`] for an unusable rate, filter or scale setting.
@@ -245,21 +241,21 @@ pub fn channels_to_output(
     native_rate_hz: f64,
     params: &PipelineParams,
 ) -> Result<(Vec<Vec<f32>>, f64), StageError> {
-    channels_to_output_with(channels, native_rate_hz, params, DcBlockPhase::Causal)
+    channels_to_output_with(channels, native_rate_hz, params, FilterPhase::ZeroPhase)
 }
 
-/// [`channels_to_output`] with the DC block run as `dc_phase` says.
+/// [`channels_to_output`] with the DC block and low-pass run as `phase` says.
 fn channels_to_output_with(
     channels: &[Vec<f32>],
     native_rate_hz: f64,
     params: &PipelineParams,
-    dc_phase: DcBlockPhase,
+    phase: FilterPhase,
 ) -> Result<(Vec<Vec<f32>>, f64), StageError> {
     let out_rate = params.sound.output_rate_hz;
     let mut out = Vec::with_capacity(channels.len());
     for ch in channels {
         let mut y = resample(ch, native_rate_hz, out_rate)?;
-        apply_dsp_with(&mut y, f64::from(out_rate), &params.dsp, dc_phase)?;
+        apply_dsp_with(&mut y, f64::from(out_rate), &params.dsp, phase)?;
         out.push(y);
     }
     let gain_per_mm_s = params.sound.scale_to_output(&mut out)?;

@@ -243,7 +243,12 @@ impl PipelineParams {
     /// [`StageError::InvalidParam`] naming the first bad key.
     pub fn validate_for_clip(&self) -> Result<(), StageError> {
         self.validate()?;
-        dsp::dsp_chain(f64::from(self.sound.output_rate_hz), &self.dsp).map(|_| ())
+        dsp::dsp_chain(
+            f64::from(self.sound.output_rate_hz),
+            &self.dsp,
+            dsp::FilterPhase::Causal,
+        )
+        .map(|_| ())
     }
 }
 

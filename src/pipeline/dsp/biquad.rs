@@ -136,7 +136,20 @@ pub fn dc_blocker(corner_hz: f64, sample_rate_hz: f64) -> Biquad {
 /// 2nd-order Butterworth low-pass (−3 dB at `cutoff_hz`, pre-warped bilinear transform).
 #[must_use]
 pub fn butterworth_lowpass(cutoff_hz: f64, sample_rate_hz: f64) -> Biquad {
-    let k = (PI * cutoff_hz / sample_rate_hz).tan();
+    butterworth_from_k((PI * cutoff_hz / sample_rate_hz).tan())
+}
+
+/// The 2nd-order Butterworth low-pass that, run forward and then backward, is −3 dB at
+/// `cutoff_hz`. The pair's power response is `1/(1 + (t/k)⁴)²` with `t = tan(π f/fs)`, which is
+/// ½ at the cutoff when `k = tan(π·cutoff/fs) / (√2 − 1)^¼` (a corner about 1.25× the cutoff's).
+#[must_use]
+pub fn zero_phase_lowpass(cutoff_hz: f64, sample_rate_hz: f64) -> Biquad {
+    let t = (PI * cutoff_hz / sample_rate_hz).tan();
+    butterworth_from_k(t / (SQRT_2 - 1.0).powf(0.25))
+}
+
+/// The 2nd-order Butterworth low-pass of bilinear constant `k = tan(π·corner/fs)`.
+fn butterworth_from_k(k: f64) -> Biquad {
     let k2 = k * k;
     let norm = 1.0 / (1.0 + SQRT_2 * k + k2);
     let b0 = k2 * norm;

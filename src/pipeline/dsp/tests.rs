@@ -70,7 +70,7 @@ fn running_the_filter_matches_its_response() {
     let p = only(false, EqCurve::Riaa, false);
     for f in [100.0, 1000.0, 5000.0] {
         let got = measured_gain_db(&p, f, FS);
-        let expected = chain_gain_db(&dsp_chain(FS, &p).unwrap(), f, FS);
+        let expected = chain_gain_db(&dsp_chain(FS, &p, FilterPhase::Causal).unwrap(), f, FS);
         assert!((got - expected).abs() < 0.1, "{f}: {got} vs {expected}");
     }
 }
@@ -87,7 +87,7 @@ fn riaa_follows_the_analog_curve() {
         let a = EqCurve::Riaa.analog_gain_db(f);
         assert!((a - db).abs() < 0.02, "analog {f}: {a} vs {db}");
     }
-    let chain = dsp_chain(FS, &only(false, EqCurve::Riaa, false)).unwrap();
+    let chain = dsp_chain(FS, &only(false, EqCurve::Riaa, false), FilterPhase::Causal).unwrap();
     // Tolerances grow with frequency: the bilinear transform compresses towards Nyquist.
     for &(f, tol) in &[
         (20.0, 0.01),
@@ -108,7 +108,12 @@ fn riaa_follows_the_analog_curve() {
 
 #[test]
 fn turnover500_follows_the_analog_curve() {
-    let chain = dsp_chain(FS, &only(false, EqCurve::Turnover500, false)).unwrap();
+    let chain = dsp_chain(
+        FS,
+        &only(false, EqCurve::Turnover500, false),
+        FilterPhase::Causal,
+    )
+    .unwrap();
     // Analog: +3 dB point relative to the HF asymptote at 500 Hz, no treble roll-off.
     let a500 = EqCurve::Turnover500.analog_gain_db(500.0);
     let a_hf = EqCurve::Turnover500.analog_gain_db(20_000.0);
@@ -177,7 +182,7 @@ fn the_zero_phase_dc_block_kills_dc_without_shifting_the_tone() {
     let mut causal = x.clone();
     apply_dsp(&mut causal, FS, &params).unwrap();
     let mut zero = x.clone();
-    apply_dsp_with(&mut zero, FS, &params, DcBlockPhase::ZeroPhase).unwrap();
+    apply_dsp_with(&mut zero, FS, &params, FilterPhase::ZeroPhase).unwrap();
     assert!(
         (phase_of(&causal) - 0.02).abs() < 2e-3,
         "{}",
@@ -187,6 +192,65 @@ fn the_zero_phase_dc_block_kills_dc_without_shifting_the_tone() {
     let mid = &zero[n / 4..3 * n / 4];
     let mean = mid.iter().map(|&v| f64::from(v)).sum::<f64>() / mid.len() as f64;
     assert!(mean.abs() < 1e-3, "{mean}");
+}
+
+#[test]
+fn the_zero_phase_low_pass_is_minus_3db_at_its_cutoff_and_shifts_no_tone() {
+    // Tones at 1 kHz, the cutoff and twice it, through the low-pass alone (DC block off).
+    // Causal, the 2nd-order Butterworth delays them by different times (its phase at 1 kHz
+    // is −0.48 rad for a 3 kHz corner); forward and backward, none moves, the cutoff is still
+    // at −3 dB, and the octave above it falls to 1/(1 + ((t/k)⁴))² in power, t = tan(π f/fs).
+    let (fc, n) = (3000.0, 44_100);
+    let params = only(true, EqCurve::Flat, false);
+    let tone = |f: f64, phase: FilterPhase| {
+        let w = 2.0 * PI * f / FS;
+        let mut y: Vec<f32> = (0..n).map(|i| (w * i as f64).sin() as f32).collect();
+        apply_dsp_with(&mut y, FS, &params, phase).unwrap();
+        let (mut s, mut c) = (0.0, 0.0);
+        for (i, &v) in y.iter().enumerate().take(3 * n / 4).skip(n / 4) {
+            s += f64::from(v) * (w * i as f64).sin();
+            c += f64::from(v) * (w * i as f64).cos();
+        }
+        let m = (n / 2) as f64 / 2.0;
+        ((s / m).hypot(c / m), c.atan2(s))
+    };
+    let (_, causal_phase) = tone(1000.0, FilterPhase::Causal);
+    assert!((causal_phase + 0.48).abs() < 0.005, "{causal_phase}");
+    let k = (PI * fc / FS).tan() / (SQRT_2 - 1.0).powf(0.25);
+    for f in [1000.0, fc, 2.0 * fc] {
+        let (gain, phase) = tone(f, FilterPhase::ZeroPhase);
+        let expected = 1.0 / (1.0 + ((PI * f / FS).tan() / k).powi(4));
+        assert!(phase.abs() < 1e-3, "{f} Hz: phase {phase}");
+        assert!(
+            (gain - expected).abs() < 2e-3,
+            "{f} Hz: {gain} vs {expected}"
+        );
+    }
+    let (at_fc, _) = tone(fc, FilterPhase::ZeroPhase);
+    assert!((at_fc - HALF_POWER).abs() < 2e-3, "{at_fc}");
+}
+
+#[test]
+fn a_short_clip_keeps_its_ends_through_the_zero_phase_low_pass() {
+    // 11 ms of a 2289 Hz tone (a still's clip), whole, ends included, against the tone at the
+    // pair's gain: with each pass settled on its first sample alone the ends ring (30 dB);
+    // with the odd-reflected padding, 38 dB.
+    let (f, n) = (2289.0, 507);
+    let params = only(true, EqCurve::Flat, false);
+    let x: Vec<f64> = (0..n)
+        .map(|i| (2.0 * PI * f * i as f64 / FS + 0.7).sin())
+        .collect();
+    let mut y: Vec<f32> = x.iter().map(|&v| v as f32).collect();
+    apply_dsp_with(&mut y, FS, &params, FilterPhase::ZeroPhase).unwrap();
+    let k = (PI * 3000.0 / FS).tan() / (SQRT_2 - 1.0).powf(0.25);
+    let gain = 1.0 / (1.0 + ((PI * f / FS).tan() / k).powi(4));
+    let (mut signal, mut error) = (0.0, 0.0);
+    for (&a, &b) in x.iter().zip(&y) {
+        signal += (gain * a).powi(2);
+        error += (f64::from(b) - gain * a).powi(2);
+    }
+    let snr_db = 10.0 * (signal / error).log10();
+    assert!(snr_db > 35.0, "{snr_db:.1} dB");
 }
 
 #[test]
