@@ -1,10 +1,14 @@
 //! The `eval` subcommand: a recovered WAV scored against a reference (r, envelope r, SNR), stereo pairs channel by channel.
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use anyhow::{Result, bail};
 
 use crate::io::wav::read_finite_wav;
+
+/// A recovered channel and the reference channel it is scored against.
+type ChannelPair<'a> = (Cow<'a, [f32]>, Cow<'a, [f32]>);
 
 /// Runs `eval`: prints the scores as text or JSON (an array for a stereo pair).
 ///
@@ -19,14 +23,15 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
     let (rec, refa) = (read_finite_wav(recovered)?, read_finite_wav(reference)?);
     // Channel by channel: a stereo pair mixed to mono can cancel (left = −right scores 0).
     let (n_rec, n_ref) = (rec.channels.len(), refa.channels.len());
-    let channels: Vec<(Vec<f32>, Vec<f32>)> = if n_rec == n_ref {
+    // Borrowed where they pair up as they are: a side's channels are not copied.
+    let channels: Vec<ChannelPair> = if n_rec == n_ref {
         rec.channels
             .iter()
-            .cloned()
-            .zip(refa.channels.iter().cloned())
+            .zip(&refa.channels)
+            .map(|(a, b)| (Cow::Borrowed(a.as_slice()), Cow::Borrowed(b.as_slice())))
             .collect()
     } else if n_rec == 1 || n_ref == 1 {
-        vec![(rec.mono(), refa.mono())]
+        vec![(Cow::Owned(rec.mono()), Cow::Owned(refa.mono()))]
     } else {
         bail!(
             "the recovered sound has {n_rec} channels and the reference {n_ref}: {}",
@@ -37,13 +42,13 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
     let mut all = Vec::with_capacity(channels.len());
     for (rec_ch, ref_ch) in &channels {
         let ref_ch = if refa.sample_rate_hz == rec.sample_rate_hz {
-            ref_ch.clone()
+            Cow::Borrowed(ref_ch.as_ref())
         } else {
-            crate::pipeline::audio_signal::resample(
+            Cow::Owned(crate::pipeline::audio_signal::resample(
                 ref_ch,
                 f64::from(refa.sample_rate_hz),
                 rec.sample_rate_hz,
-            )?
+            )?)
         };
         let Some(scores) =
             crate::pipeline::eval::evaluate(rec_ch, &ref_ch, max_lag, rec.sample_rate_hz)

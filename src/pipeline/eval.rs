@@ -2,12 +2,14 @@
 //!
 //! Lag convention: `reference[i] ≈ g · recovered[i + lag]`, so a positive lag means the
 //! recovered signal is late by `lag` samples. All lags within ±`max_lag` are scored at once:
-//! the cross-correlation comes from an FFT and the per-lag means and energies of the overlapping
-//! parts from prefix sums, so the search costs O(N log N) whatever `max_lag` is.
+//! the cross-correlation comes from FFTs of blocks, and the per-lag means and energies of the
+//! overlapping parts from sums up to the few indices where an overlap can start or end, so the
+//! search costs O(N log max_lag) in time and O(max_lag) in memory beside the two signals (a
+//! whole side scores in the memory of a clip).
 
 use serde::{Deserialize, Serialize};
 
-use super::dsp::cross_correlation;
+use super::dsp::lag_cross_correlation;
 
 /// Fewest overlapping samples for any score.
 const MIN_OVERLAP_SAMPLES: usize = 16;
@@ -156,13 +158,50 @@ fn overlap(n_ref: usize, n_rec: usize, lag: i64) -> (usize, usize) {
     )
 }
 
-/// Σ ref[i]·rec[i + lag] for every lag in −max_lag..=max_lag, by FFT (`max_lag` must be below
-/// both lengths' sum, which the caller's clamp ensures).
-fn lag_correlation(reference: &[f64], recovered: &[f64], max_lag: usize) -> Vec<f64> {
-    let (c, n) = cross_correlation(reference, recovered);
-    (0..=2 * max_lag)
-        .map(|j| c.get((j + n - max_lag % n) % n).copied().unwrap_or(0.0))
-        .collect()
+/// Sums of a signal's first `k` samples and of their squares, for just the `k` asked for.
+struct HeadSums {
+    /// `(k, Σ v, Σ v²)`, sorted by `k`.
+    at: Vec<(usize, f64, f64)>,
+}
+
+impl HeadSums {
+    /// The sums of `value(s[i])` over `i < k` for every `k` in `wanted` (any order, repeats
+    /// allowed, each at most `s.len()`), in one pass, summed in index order.
+    fn new(s: &[f32], value: impl Fn(f32) -> f64, mut wanted: Vec<usize>) -> Self {
+        wanted.sort_unstable();
+        wanted.dedup();
+        let mut at = Vec::with_capacity(wanted.len());
+        let mut next = wanted.into_iter().peekable();
+        let (mut sum, mut sum_sq) = (0.0, 0.0);
+        for k in 0..=s.len() {
+            if next.next_if_eq(&k).is_some() {
+                at.push((k, sum, sum_sq));
+            }
+            if let Some(&v) = s.get(k) {
+                let v = value(v);
+                sum += v;
+                sum_sq += v * v;
+            }
+        }
+        Self { at }
+    }
+
+    /// `(Σ v, Σ v²)` over `lo..hi` (both asked for in [`HeadSums::new`]).
+    fn between(&self, lo: usize, hi: usize) -> Option<(f64, f64)> {
+        let get = |k: usize| {
+            let i = self.at.binary_search_by_key(&k, |e| e.0).ok()?;
+            self.at.get(i).map(|e| (e.1, e.2))
+        };
+        let ((s_lo, q_lo), (s_hi, q_hi)) = (get(lo)?, get(hi)?);
+        Some((s_hi - s_lo, q_hi - q_lo))
+    }
+}
+
+/// One lag's overlap: reference indices `lo..hi`, recovered indices from `ylo`.
+fn lag_overlap(n_ref: usize, n_rec: usize, lag: i64) -> Option<(usize, usize, usize)> {
+    let (lo, hi) = overlap(n_ref, n_rec, lag);
+    let ylo = lo.checked_add_signed(isize::try_from(lag).ok()?)?;
+    Some((lo, hi, ylo))
 }
 
 /// Compares `recovered` with `reference` (same rate), searching lags within ±`max_lag` for the
@@ -187,42 +226,36 @@ pub fn evaluate(
     #[allow(clippy::cast_precision_loss)]
     let mean = |s: &[f32]| s.iter().map(val).sum::<f64>() / s.len() as f64;
     let (m_ref, m_rec) = (mean(reference), mean(recovered));
-    let x: Vec<f64> = reference.iter().map(|v| val(v) - m_ref).collect();
-    let y: Vec<f64> = recovered.iter().map(|v| val(v) - m_rec).collect();
-    let prefix = |s: &[f64], sq: bool| {
-        let mut p = Vec::with_capacity(s.len() + 1);
-        let mut acc = 0.0;
-        p.push(0.0);
-        for &v in s {
-            acc += if sq { v * v } else { v };
-            p.push(acc);
-        }
-        p
-    };
-    let (px, pxx) = (prefix(&x, false), prefix(&x, true));
-    let (py, pyy) = (prefix(&y, false), prefix(&y, true));
-    let xcorr = lag_correlation(&x, &y, max_lag);
+    let x_of = |v: f32| val(&v) - m_ref;
+    let y_of = |v: f32| val(&v) - m_rec;
+    let m = i64::try_from(max_lag).ok()?;
+    let overlaps: Vec<Option<(usize, usize, usize)>> =
+        (-m..=m).map(|lag| lag_overlap(n_ref, n_rec, lag)).collect();
+    // Where the overlaps start and end: a few indices near the signals' ends.
+    let (mut x_ends, mut y_ends) = (Vec::new(), Vec::new());
+    for &(lo, hi, ylo) in overlaps.iter().flatten() {
+        x_ends.extend([lo, hi]);
+        y_ends.extend([ylo, ylo + (hi - lo)]);
+    }
+    let (x_sums, y_sums) = (
+        HeadSums::new(reference, x_of, x_ends),
+        HeadSums::new(recovered, y_of, y_ends),
+    );
+    let xcorr = lag_cross_correlation(reference, recovered, max_lag, x_of, y_of);
 
     let mut best: Option<(f64, i64)> = None;
-    for (j, &sxy) in xcorr.iter().enumerate() {
-        let (Ok(j), Ok(m)) = (i64::try_from(j), i64::try_from(max_lag)) else {
-            return None;
+    for ((lag, &sxy), &lag_overlap) in (-m..=m).zip(&xcorr).zip(&overlaps) {
+        let Some((lo, hi, ylo)) = lag_overlap else {
+            continue;
         };
-        let lag = j - m;
-        let (lo, hi) = overlap(n_ref, n_rec, lag);
         let len = hi - lo;
         if len < min_overlap {
             continue;
         }
-        // Recovered indices lo+lag..hi+lag.
-        let Some(ylo) = lo.checked_add_signed(isize::try_from(lag).ok()?) else {
-            continue;
-        };
-        let yhi = ylo + len;
         #[allow(clippy::cast_precision_loss)]
         let nf = len as f64;
-        let (sx, sxx) = (px[hi] - px[lo], pxx[hi] - pxx[lo]);
-        let (sy, syy) = (py[yhi] - py[ylo], pyy[yhi] - pyy[ylo]);
+        let (sx, sxx) = x_sums.between(lo, hi)?;
+        let (sy, syy) = y_sums.between(ylo, ylo + len)?;
         let cov = sxy - sx * sy / nf;
         let vx = sxx - sx * sx / nf;
         let vy = syy - sy * sy / nf;

@@ -30,7 +30,7 @@ mod tests;
 
 use biquad::*;
 pub use biquad::{Biquad, butterworth_lowpass, dc_blocker, zero_phase_lowpass};
-pub(crate) use spectrum::cross_correlation;
+pub(crate) use spectrum::lag_cross_correlation;
 pub use spectrum::{ComplexFft, fft_in_place, magnitude_spectrum};
 
 /// Playback equalisation curve.
