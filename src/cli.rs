@@ -579,6 +579,9 @@ pub fn run(command: Command) -> Result<()> {
             | Command::ImportVideo(_)
             | Command::Still(_)
             | Command::Accuracy { .. }
+            | Command::Plan(_)
+            | Command::Merge(_)
+            | Command::Inspect { .. }
     );
     if stoppable {
         crate::job::catch_interrupts().map_err(|e| anyhow::anyhow!("cannot catch Ctrl-C: {e}"))?;

@@ -60,7 +60,8 @@ const OUTPUT_NAMES: [&str; 10] = [
 /// Runs group `group` of `scan_dir` and writes PNGs and `samples.csv` into `out_dir`.
 ///
 /// Stages that fail are reported, and the outputs of the stages before them are still written,
-/// so an operator can see where a disc fails.
+/// so an operator can see where a disc fails. Ctrl-C stops it at the next stage, before
+/// anything is written.
 ///
 /// # Errors
 /// When the scan or group cannot be read, or a file cannot be written.
@@ -79,8 +80,6 @@ pub fn run_inspect(
             scan_dir.display()
         );
     };
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("cannot create folder: {}", out_dir.display()))?;
     let frames = load_group(entry)?;
     let input = GroupInput {
         group,
@@ -89,7 +88,16 @@ pub fn run_inspect(
         meta: Arc::new(scan.meta.clone()),
     };
     let mut cache = StageCache::default();
-    let outcome = cache.run_from(Stage::Derivatives, &input, params, &mut |_, _| true);
+    // Ctrl-C stops at the next stage; nothing is written then.
+    let interrupted = crate::job::interrupted();
+    let outcome = cache.run_from(Stage::Derivatives, &input, params, &mut |_, _| {
+        !interrupted.load(std::sync::atomic::Ordering::Relaxed)
+    });
+    if interrupted.load(std::sync::atomic::Ordering::Relaxed) {
+        bail!("inspect: cancelled; nothing written");
+    }
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("cannot create folder: {}", out_dir.display()))?;
     let mut written = Vec::new();
     if let Some(d) = cache.derivatives().and_then(|d| d.get(d.len() / 2)) {
         save(

@@ -134,9 +134,7 @@ fn ctrl_c_stops_the_suite_without_a_report_and_removes_its_work_folder() {
     err.read_line(&mut first).unwrap();
     assert!(first.contains("tone"), "{first}");
     assert!(std::fs::read_dir(&tmp).unwrap().next().is_some());
-    let pid = child.id().to_string();
-    let sent = Command::new("kill").args(["-INT", &pid]).status().unwrap();
-    assert!(sent.success());
+    common::ctrl_c(&child);
     let mut rest = String::new();
     err.read_to_string(&mut rest).unwrap();
     let status = child.wait().unwrap();

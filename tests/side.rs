@@ -411,14 +411,7 @@ fn ctrl_c_stops_at_the_next_group_keeps_the_journal_and_says_so() {
     let args = ["reconstruct", s(scan), "--out", s(&out)];
     let (child, reached) = spawn_until(&args, 5, Stdio::piped());
     assert!(reached);
-    let pid = child.id().to_string();
-    assert!(
-        Command::new("kill")
-            .args(["-INT", &pid])
-            .status()
-            .unwrap()
-            .success()
-    );
+    common::ctrl_c(&child);
     let o = child.wait_with_output().unwrap();
     let err = stderr(&o);
     // An exit of its own (status 1), not death by the signal.
@@ -437,6 +430,53 @@ fn ctrl_c_stops_at_the_next_group_keeps_the_journal_and_says_so() {
     let o = common::reconstruct(scan, &out, &["--resume"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(std::fs::read(&out).unwrap() == *one, "resumed WAV differs");
+}
+
+#[test]
+fn ctrl_c_stops_plan_inspect_and_merge_and_they_write_nothing() {
+    let (_keep, scan, _) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    // plan: Ctrl-C before its probe (13 groups) runs; inspect: before its first stage.
+    let (plan_out, inspect_out) = (tmp.path().join("plan.json"), tmp.path().join("inspect"));
+    let cases: [(&str, &[&str]); 2] = [
+        (
+            "plan",
+            &[
+                "--shards",
+                "2",
+                "--probe-groups",
+                "13",
+                "--out",
+                s(&plan_out),
+            ],
+        ),
+        ("inspect", &["--group", "3", "--out", s(&inspect_out)]),
+    ];
+    for (command, extra) in cases {
+        let pipe = tmp.path().join(format!("{command}.toml"));
+        let mut args = vec![command, s(scan), "--params", s(&pipe)];
+        args.extend_from_slice(extra);
+        let o = common::ctrl_c_while_reading(&args, &pipe, b"");
+        common::failed_with(&o, &[&format!("{command}: cancelled; nothing written")]);
+        assert_eq!(
+            o.status.code(),
+            Some(1),
+            "an exit of its own, not the signal's"
+        );
+    }
+    assert_eq!(
+        common::names(tmp.path()),
+        ["inspect.toml", "plan.toml"],
+        "only the pipes: no plan, no inspect folder"
+    );
+    // merge stops between parts once Ctrl-C has raised its flag.
+    let p = tmp.path().join("whole.json");
+    plan(scan, 1, &p, &[]);
+    let part = tmp.path().join("part-0");
+    run_shard(scan, &p, 0, &part);
+    let raised = std::sync::atomic::AtomicBool::new(true);
+    let err = groovescope::side::merge::merge_parts(&[part], &raised).unwrap_err();
+    assert!(err.to_string().contains("cancelled"), "{err}");
 }
 
 #[test]

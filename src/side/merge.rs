@@ -1,10 +1,11 @@
 //! Merge: the parts of every shard of one plan, checked, then finished exactly as a one-process run.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::part::{read_part, read_part_header};
 use super::{RunIdentity, SideError};
-use crate::engine::{ClipGroups, Reconstruction, finish_reconstruction};
+use crate::engine::{ClipGroups, EngineError, Reconstruction, finish_reconstruction};
 use crate::io::ScanMeta;
 use crate::pipeline::PipelineParams;
 
@@ -137,10 +138,12 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
 /// part read and checked whole in shard order, its groups through [`finish_reconstruction`],
 /// scored against the scan's `reference.wav` when the scan named in the parts is still there.
 ///
+/// Stops between parts once `cancel` is raised.
+///
 /// # Errors
 /// [`SideError`] from the checks (a truncated part, one whose header changed since it was
-/// read), or when no group produced sound.
-pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged, SideError> {
+/// read), when no group produced sound, or [`EngineError::Cancelled`].
+pub fn merge_parts(paths: &[PathBuf], cancel: &AtomicBool) -> Result<Merged, SideError> {
     let parts = read_parts(paths)?;
     let Some(first) = parts.first() else {
         return Err(SideError::refused("no parts given", "."));
@@ -154,6 +157,9 @@ pub fn merge_parts(paths: &[PathBuf]) -> Result<Merged, SideError> {
     let mut clip = ClipGroups::with_capacity(identity.scan_groups);
     let part_paths: Vec<PathBuf> = parts.iter().map(|p| p.path.clone()).collect();
     for checked in parts {
+        if cancel.load(Ordering::Relaxed) {
+            return Err(EngineError::Cancelled.into());
+        }
         let part = read_part(&checked.path)?;
         if part.identity.difference(&checked.identity).is_some() {
             return Err(SideError::refused(

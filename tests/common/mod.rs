@@ -51,6 +51,59 @@ pub fn groovescope(args: &[&str]) -> Output {
         .unwrap()
 }
 
+/// Sends the child a Ctrl-C (SIGINT).
+pub fn ctrl_c(child: &std::process::Child) {
+    let pid = child.id().to_string();
+    let sent = Command::new("kill").args(["-INT", &pid]).status().unwrap();
+    assert!(sent.success(), "kill -INT {pid}");
+}
+
+/// Runs groovescope with `args`, one of which names `fifo` (a named pipe this makes) as an
+/// input file, and presses Ctrl-C while the command waits there: once it has opened the
+/// pipe (so its Ctrl-C handler is in place) and before it has read a byte. Then `content` is
+/// written and the pipe closed, and the command runs on with Ctrl-C pressed.
+pub fn ctrl_c_while_reading(args: &[&str], fifo: &Path, content: &[u8]) -> Output {
+    use std::io::Write as _;
+    use std::process::Stdio;
+    use std::time::{Duration, Instant};
+    assert!(Command::new("mkfifo").arg(fifo).status().unwrap().success());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+        .args(args)
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Opening the write end waits for the command to open the read end.
+    let (tx, rx) = std::sync::mpsc::channel();
+    let path = fifo.to_path_buf();
+    std::thread::Builder::new()
+        .name("pipe writer".into())
+        .spawn(move || {
+            let _ = tx.send(std::fs::OpenOptions::new().write(true).open(path));
+        })
+        .unwrap();
+    let started = Instant::now();
+    let mut writer = loop {
+        if let Ok(opened) = rx.recv_timeout(Duration::from_millis(20)) {
+            break opened.unwrap();
+        }
+        let ended = child.try_wait().unwrap().is_some();
+        if ended || started.elapsed() > Duration::from_secs(120) {
+            // Free the waiting writer, then show what the command said.
+            let _ = std::fs::File::open(fifo);
+            let _ = child.kill();
+            let o = child.wait_with_output().unwrap();
+            panic!("never opened {}: {}", fifo.display(), stderr(&o));
+        }
+    };
+    ctrl_c(&child);
+    writer.write_all(content).unwrap();
+    drop(writer);
+    child.wait_with_output().unwrap()
+}
+
 /// Runs `groovescope reconstruct SCAN --out OUT --quiet` with `extra`.
 pub fn reconstruct(scan: &Path, out: &Path, extra: &[&str]) -> Output {
     let (scan, out) = (scan.to_str().unwrap(), out.to_str().unwrap());

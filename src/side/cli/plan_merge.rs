@@ -1,10 +1,10 @@
 //! The `plan` and `merge` subcommands.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::Ordering;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 
 use super::{lock_outputs, make_report};
 use crate::cli::check_outputs;
@@ -85,7 +85,13 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     check_outputs(&outputs, &[], args.force)?;
     let _locks = lock_outputs(&outputs)?;
     let started = Instant::now();
-    let merged = merge_parts(&args.parts)?;
+    let interrupted = crate::job::interrupted();
+    let merged =
+        merge_parts(&args.parts, interrupted).map_err(|e| cancelled_or(e.into(), "merge"))?;
+    // Ctrl-C while the side was finished.
+    if interrupted.load(Ordering::Relaxed) {
+        bail!("merge: cancelled; nothing written");
+    }
     let mut rec = merged.reconstruction;
     rec.timings.total_secs = started.elapsed().as_secs_f64();
     write_wav(&args.out, &rec.audio, args.bits, args.force)?;
@@ -129,7 +135,6 @@ fn probe_secs_per_group(
         return Ok(None);
     }
     let started = Instant::now();
-    let cancel = AtomicBool::new(false);
     let mut slopes = SlopeHistory::default();
     let mut ran = 0usize;
     run_groups(
@@ -141,7 +146,7 @@ fn probe_secs_per_group(
         },
         0..n,
         &mut slopes,
-        &cancel,
+        crate::job::interrupted(),
         &mut |o: GroupOutcome| {
             // A group that failed (a gap under --keep-going) is not counted: most fail when
             // read, at next to no cost, and counted they would make the side look faster. One
@@ -178,7 +183,8 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
     params.path = path_choice(&args.path, params.path);
     let scan = Scan::open(&args.scan)?;
     super::check_missing_groups(&scan, 0..scan.groups.len(), args.keep_going)?;
-    let probe = probe_secs_per_group(&scan, &params, args.keep_going, args.probe_groups)?;
+    let probe = probe_secs_per_group(&scan, &params, args.keep_going, args.probe_groups)
+        .map_err(|e| cancelled_or(e, "plan"))?;
     let plan = Plan::new(&scan, &params, args.keep_going, args.shards, probe)?;
     write_json_atomic(&args.out, &plan, args.force)?;
     println!(
@@ -213,6 +219,15 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// "`command`: cancelled; nothing written" when Ctrl-C stopped the work behind `e`, else `e`.
+fn cancelled_or(e: anyhow::Error, command: &str) -> anyhow::Error {
+    if crate::job::interrupted().load(Ordering::Relaxed) {
+        anyhow::anyhow!("{command}: cancelled; nothing written")
+    } else {
+        e
+    }
 }
 
 /// `path` as one word for a POSIX shell: bare when it holds only safe characters, else in
