@@ -1,7 +1,7 @@
 //! Numbered group folders and frames are positions: unpadded names run in number order, a
 //! skipped group keeps its place (refused before any work, a gap under `--keep-going`), a
 //! skipped frame fails its group, and other programs' dot files and folders of no frames
-//! outside the numbering are passed over.
+//! outside the numbering are passed over; a Zarr store's group names are read the same way.
 #![allow(clippy::unwrap_used)] // tests may panic
 
 mod common;
@@ -168,4 +168,54 @@ fn a_skipped_frame_fails_its_group_naming_the_frame() {
     let (demo, out) = demo_without(dir.path(), "g00005/f003.png");
     let o = reconstruct(&demo, &out, &["--keep-going"]);
     warned(&o, &["group 5: frame is missing: ", "g00005/f003.png"]);
+}
+
+#[test]
+fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_place() {
+    use groovescope::io::frames::load_frame_raw;
+    use groovescope::io::zarr::{SampleType, ZarrWriter};
+    // The stores `pack` wrote before numbered names were positions: the demo's groups named
+    // g0 … g12 and stored in name order (g10, g11, g12 before g2), and one packed from
+    // folders that had lost g5 (every group after it one place early).
+    let dir = tempfile::tempdir().unwrap();
+    let demo = PathBuf::from(format!("{}/assets/demo", env!("CARGO_MANIFEST_DIR")));
+    let scan = groovescope::io::Scan::open(&demo).unwrap();
+    let scan_toml = std::fs::read_to_string(demo.join("scan.toml")).unwrap();
+    let old_store = |name: &str, lost: Option<usize>| {
+        let mut groups: Vec<usize> = (0..13).filter(|&g| Some(g) != lost).collect();
+        groups.sort_by_key(|g| format!("g{g}"));
+        let store = dir.path().join(name);
+        let raw = |g: usize| -> Vec<_> {
+            let frames = &scan.groups[g].frames;
+            frames.iter().map(|p| load_frame_raw(p).unwrap()).collect()
+        };
+        let first = raw(0);
+        let (w, h) = (first[0].width, first[0].height);
+        let sample_type = SampleType::of(&first[0].samples);
+        let mut writer = ZarrWriter::create(&store, first.len(), w, h, sample_type, 3).unwrap();
+        for g in groups {
+            let source = &scan.groups[g].dir;
+            writer
+                .write_group(&format!("g{g}"), raw(g), source)
+                .unwrap();
+        }
+        writer.finish(&scan_toml).unwrap();
+        store
+    };
+    let in_name_order = old_store("name-order.zarr", None);
+    let out = dir.path().join("from-store.wav");
+    let o = reconstruct(&in_name_order, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        std::fs::read(&out).unwrap() == untouched(dir.path()),
+        "the store's sound differs from the folders'"
+    );
+    let short = old_store("short.zarr", Some(5));
+    let o = reconstruct(&short, &dir.path().join("short.wav"), &[]);
+    common::failed_with(
+        &o,
+        &["numbering skips 1 group folder among groups 0..13 (g5"],
+    );
+    let o = reconstruct(&short, &dir.path().join("short.wav"), &["--keep-going"]);
+    warned(&o, &["group 5: group folder is missing: ", "g5"]);
 }

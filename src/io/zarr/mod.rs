@@ -20,6 +20,8 @@ use zarrs::group::{Group, GroupBuilder};
 
 use super::LoadError;
 use super::frames::{RawFrame, RawSamples, grey_from_raw};
+use super::limits::MAX_GROUPS;
+use super::numbering::in_numbered_order;
 use super::scan::{GroupEntry, MIN_FRAMES_PER_GROUP, Scan, ScanMeta};
 use crate::image::Image;
 
@@ -187,29 +189,36 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
             path: dir.join("frames"),
         });
     }
-    meta.check_against_scan(groups, (width, height))
-        .map_err(|problem| LoadError::Metadata {
-            problem,
-            path: dir.join("zarr.json"),
-        })?;
-    let entries = attrs
-        .groups
-        .iter()
+    // The names are read as a scan folder's are (docs/FORMAT.md): a store packed before
+    // numbered names were positions holds its groups in name order (g10 before g2), and one
+    // packed from folders that had lost a group holds the groups after it one place early.
+    let stored: Vec<PathBuf> = attrs.groups.iter().map(|name| dir.join(name)).collect();
+    let chunk_of: std::collections::HashMap<&PathBuf, usize> =
+        stored.iter().enumerate().map(|(k, p)| (p, k)).collect();
+    let places = in_numbered_order(dir, stored.clone(), MAX_GROUPS, "groups")?;
+    let entries: Vec<GroupEntry> = places
+        .into_iter()
         .enumerate()
-        .map(|(index, name)| GroupEntry {
+        .map(|(index, path)| GroupEntry {
             index,
-            dir: dir.join(name),
-            frames: Vec::new(),
-            zarr: Some(ZarrGroup {
+            // A skipped number has no chunk: loading it fails naming it (`is_missing`).
+            zarr: chunk_of.get(&path).map(|&group| ZarrGroup {
                 store: dir.to_path_buf(),
-                group: index,
+                group,
                 frames,
                 width,
                 height,
                 sample_type: attrs.sample_type,
             }),
+            dir: path,
+            frames: Vec::new(),
         })
         .collect();
+    meta.check_against_scan(entries.len(), (width, height))
+        .map_err(|problem| LoadError::Metadata {
+            problem,
+            path: dir.join("zarr.json"),
+        })?;
     Ok(Scan {
         dir: dir.to_path_buf(),
         meta,
