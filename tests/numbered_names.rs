@@ -181,9 +181,9 @@ fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_pla
     let demo = PathBuf::from(format!("{}/assets/demo", env!("CARGO_MANIFEST_DIR")));
     let scan = groovescope::io::Scan::open(&demo).unwrap();
     let scan_toml = std::fs::read_to_string(demo.join("scan.toml")).unwrap();
-    let old_store = |name: &str, lost: Option<usize>| {
+    let old_store = |name: &str, lost: Option<usize>, names: &dyn Fn(usize) -> String| {
         let mut groups: Vec<usize> = (0..13).filter(|&g| Some(g) != lost).collect();
-        groups.sort_by_key(|g| format!("g{g}"));
+        groups.sort_by_key(|&g| names(g));
         let store = dir.path().join(name);
         let raw = |g: usize| -> Vec<_> {
             let frames = &scan.groups[g].frames;
@@ -195,14 +195,13 @@ fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_pla
         let mut writer = ZarrWriter::create(&store, first.len(), w, h, sample_type, 3).unwrap();
         for g in groups {
             let source = &scan.groups[g].dir;
-            writer
-                .write_group(&format!("g{g}"), raw(g), source)
-                .unwrap();
+            writer.write_group(&names(g), raw(g), source).unwrap();
         }
         writer.finish(&scan_toml).unwrap();
         store
     };
-    let in_name_order = old_store("name-order.zarr", None);
+    let unpadded = |g: usize| format!("g{g}");
+    let in_name_order = old_store("name-order.zarr", None, &unpadded);
     let out = dir.path().join("from-store.wav");
     let o = reconstruct(&in_name_order, &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -210,7 +209,7 @@ fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_pla
         std::fs::read(&out).unwrap() == untouched(dir.path()),
         "the store's sound differs from the folders'"
     );
-    let short = old_store("short.zarr", Some(5));
+    let short = old_store("short.zarr", Some(5), &unpadded);
     let o = reconstruct(&short, &dir.path().join("short.wav"), &[]);
     common::failed_with(
         &o,
@@ -218,4 +217,8 @@ fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_pla
     );
     let o = reconstruct(&short, &dir.path().join("short.wav"), &["--keep-going"]);
     warned(&o, &["group 5: group folder is missing: ", "g5"]);
+    // One name twice (not numbered, so the stored order stands) is refused.
+    let twice = old_store("twice.zarr", None, &|g| format!("take{}", g.min(1)));
+    let o = reconstruct(&twice, &dir.path().join("twice.wav"), &[]);
+    common::failed_with(&o, &["two of its groups carry the same name", "twice.zarr"]);
 }

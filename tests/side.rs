@@ -436,24 +436,26 @@ fn ctrl_c_stops_at_the_next_group_keeps_the_journal_and_says_so() {
 fn ctrl_c_stops_plan_inspect_and_merge_and_they_write_nothing() {
     let (_keep, scan, _) = shared();
     let tmp = tempfile::tempdir().unwrap();
-    // plan: Ctrl-C before its probe (13 groups) runs; inspect: before its first stage.
+    // plan: Ctrl-C before its probe (13 groups) runs, or with no probe; inspect: before its
+    // first stage.
     let (plan_out, inspect_out) = (tmp.path().join("plan.json"), tmp.path().join("inspect"));
-    let cases: [(&str, &[&str]); 2] = [
-        (
-            "plan",
-            &[
-                "--shards",
-                "2",
-                "--probe-groups",
-                "13",
-                "--out",
-                s(&plan_out),
-            ],
-        ),
+    let plan_args = |probe| {
+        [
+            "--shards",
+            "2",
+            "--probe-groups",
+            probe,
+            "--out",
+            s(&plan_out),
+        ]
+    };
+    let cases: [(&str, &[&str]); 3] = [
+        ("plan", &plan_args("13")),
+        ("plan", &plan_args("0")),
         ("inspect", &["--group", "3", "--out", s(&inspect_out)]),
     ];
-    for (command, extra) in cases {
-        let pipe = tmp.path().join(format!("{command}.toml"));
+    for (k, (command, extra)) in cases.into_iter().enumerate() {
+        let pipe = tmp.path().join(format!("{k}.toml"));
         let mut args = vec![command, s(scan), "--params", s(&pipe)];
         args.extend_from_slice(extra);
         let o = common::ctrl_c_while_reading(&args, &pipe, b"");
@@ -466,7 +468,7 @@ fn ctrl_c_stops_plan_inspect_and_merge_and_they_write_nothing() {
     }
     assert_eq!(
         common::names(tmp.path()),
-        ["inspect.toml", "plan.toml"],
+        ["0.toml", "1.toml", "2.toml"],
         "only the pipes: no plan, no inspect folder"
     );
     // merge stops between parts once Ctrl-C has raised its flag.

@@ -120,6 +120,32 @@ fn hidden(p: &Path) -> bool {
         .is_some_and(|n| n.to_string_lossy().starts_with('.'))
 }
 
+/// Checks `meta` against a scan of the places `groups` and frames of `frame_size`. The
+/// radius list counts places on the groove, a skipped number's included, and the message says
+/// so when the scan skips one (a list that counted folders is one short).
+///
+/// # Errors
+/// [`LoadError::Metadata`] naming `meta_path`.
+pub(super) fn check_meta_against(
+    meta: &ScanMeta,
+    groups: &[GroupEntry],
+    frame_size: (usize, usize),
+    meta_path: &Path,
+) -> Result<(), LoadError> {
+    let skipped = groups.iter().filter(|g| g.is_missing()).count();
+    meta.check_against_scan(groups.len(), frame_size)
+        .map_err(|problem| LoadError::Metadata {
+            problem: if skipped > 0 && meta.record.group_radius_mm.is_some() {
+                format!(
+                    "{problem}, {skipped} of them a number the group folders skip (it keeps its place)"
+                )
+            } else {
+                problem
+            },
+            path: meta_path.to_path_buf(),
+        })
+}
+
 /// Refuses a group folder holding one frame twice, in two formats (`f000.png` and `f000.tif`,
 /// a conversion that left its source): taken in name order the two sets would interleave.
 fn refuse_twin_frames(dir: &Path, files: &[PathBuf]) -> Result<(), LoadError> {
@@ -258,17 +284,7 @@ impl Scan {
             });
         };
         let frame_size = frame_dimensions(first)?;
-        // The radius list counts places on the groove, a skipped number's included.
-        let skipped = groups.iter().filter(|g| g.is_missing()).count();
-        meta.check_against_scan(groups.len(), frame_size)
-            .map_err(|problem| LoadError::Metadata {
-                problem: if skipped > 0 && meta.record.group_radius_mm.is_some() {
-                    format!("{problem}, {skipped} of them a number the group folders skip (it keeps its place)")
-                } else {
-                    problem
-                },
-                path: meta_path.clone(),
-            })?;
+        check_meta_against(&meta, &groups, frame_size, &meta_path)?;
         let reference = Some(dir.join("reference.wav")).filter(|p| p.is_file());
         Ok(Self {
             dir: dir.to_path_buf(),

@@ -158,24 +158,36 @@ fn overlap(n_ref: usize, n_rec: usize, lag: i64) -> (usize, usize) {
     )
 }
 
-/// Sums of a signal's first `k` samples and of their squares, for just the `k` asked for.
+/// Sums of a signal's first `k` samples and of their squares, kept for the `k` of a few
+/// stretches only (where the lag search's overlaps start and end).
 struct HeadSums {
-    /// `(k, Σ v, Σ v²)`, sorted by `k`.
-    at: Vec<(usize, f64, f64)>,
+    /// Per stretch: its first `k`, then `(Σ v, Σ v²)` for `k`, `k + 1`, ….
+    stretches: Vec<(usize, Vec<(f64, f64)>)>,
 }
 
 impl HeadSums {
-    /// The sums of `value(s[i])` over `i < k` for every `k` in `wanted` (any order, repeats
-    /// allowed, each at most `s.len()`), in one pass, summed in index order.
-    fn new(s: &[f32], value: impl Fn(f32) -> f64, mut wanted: Vec<usize>) -> Self {
-        wanted.sort_unstable();
-        wanted.dedup();
-        let mut at = Vec::with_capacity(wanted.len());
-        let mut next = wanted.into_iter().peekable();
+    /// The sums of `value(s[i])` over `i < k` for every `k` in `stretches` (cut to
+    /// `0..=s.len()`), in one pass, summed in index order.
+    fn new(
+        s: &[f32],
+        value: impl Fn(f32) -> f64,
+        stretches: &[std::ops::RangeInclusive<usize>],
+    ) -> Self {
+        let spans: Vec<(usize, usize)> = stretches
+            .iter()
+            .map(|r| (*r.start(), (*r.end()).min(s.len())))
+            .filter(|(a, b)| a <= b)
+            .collect();
+        let mut kept: Vec<(usize, Vec<(f64, f64)>)> = spans
+            .iter()
+            .map(|&(a, b)| (a, Vec::with_capacity(b - a + 1)))
+            .collect();
         let (mut sum, mut sum_sq) = (0.0, 0.0);
         for k in 0..=s.len() {
-            if next.next_if_eq(&k).is_some() {
-                at.push((k, sum, sum_sq));
+            for (&(a, b), (_, sums)) in spans.iter().zip(&mut kept) {
+                if (a..=b).contains(&k) {
+                    sums.push((sum, sum_sq));
+                }
             }
             if let Some(&v) = s.get(k) {
                 let v = value(v);
@@ -183,16 +195,17 @@ impl HeadSums {
                 sum_sq += v * v;
             }
         }
-        Self { at }
+        Self { stretches: kept }
     }
 
-    /// `(Σ v, Σ v²)` over `lo..hi` (both asked for in [`HeadSums::new`]).
+    /// `(Σ v, Σ v²)` over `lo..hi` (both inside a stretch of [`HeadSums::new`]).
     fn between(&self, lo: usize, hi: usize) -> Option<(f64, f64)> {
-        let get = |k: usize| {
-            let i = self.at.binary_search_by_key(&k, |e| e.0).ok()?;
-            self.at.get(i).map(|e| (e.1, e.2))
+        let at = |k: usize| {
+            self.stretches
+                .iter()
+                .find_map(|(first, sums)| sums.get(k.checked_sub(*first)?).copied())
         };
-        let ((s_lo, q_lo), (s_hi, q_hi)) = (get(lo)?, get(hi)?);
+        let ((s_lo, q_lo), (s_hi, q_hi)) = (at(lo)?, at(hi)?);
         Some((s_hi - s_lo, q_hi - q_lo))
     }
 }
@@ -229,23 +242,19 @@ pub fn evaluate(
     let x_of = |v: f32| val(&v) - m_ref;
     let y_of = |v: f32| val(&v) - m_rec;
     let m = i64::try_from(max_lag).ok()?;
-    let overlaps: Vec<Option<(usize, usize, usize)>> =
-        (-m..=m).map(|lag| lag_overlap(n_ref, n_rec, lag)).collect();
-    // Where the overlaps start and end: a few indices near the signals' ends.
-    let (mut x_ends, mut y_ends) = (Vec::new(), Vec::new());
-    for &(lo, hi, ylo) in overlaps.iter().flatten() {
-        x_ends.extend([lo, hi]);
-        y_ends.extend([ylo, ylo + (hi - lo)]);
-    }
+    // Where a lag's overlap (reference lo..hi, recovered ylo..ylo + hi − lo) can start and
+    // end: lo = max(−lag, 0), hi = min(n_rec − lag, n_ref), ylo = max(lag, 0) and
+    // ylo + hi − lo = min(n_ref + lag, n_rec), so within max_lag of 0, n_ref or n_rec.
+    let near = |k: usize| k.saturating_sub(max_lag)..=k.saturating_add(max_lag);
     let (x_sums, y_sums) = (
-        HeadSums::new(reference, x_of, x_ends),
-        HeadSums::new(recovered, y_of, y_ends),
+        HeadSums::new(reference, x_of, &[near(0), near(n_rec), n_ref..=n_ref]),
+        HeadSums::new(recovered, y_of, &[near(0), near(n_ref), n_rec..=n_rec]),
     );
     let xcorr = lag_cross_correlation(reference, recovered, max_lag, x_of, y_of);
 
     let mut best: Option<(f64, i64)> = None;
-    for ((lag, &sxy), &lag_overlap) in (-m..=m).zip(&xcorr).zip(&overlaps) {
-        let Some((lo, hi, ylo)) = lag_overlap else {
+    for (lag, &sxy) in (-m..=m).zip(&xcorr) {
+        let Some((lo, hi, ylo)) = lag_overlap(n_ref, n_rec, lag) else {
             continue;
         };
         let len = hi - lo;
@@ -509,29 +518,45 @@ mod tests {
 
     #[test]
     fn fft_search_matches_direct_search() {
-        let x = music(3000);
-        let y: Vec<f32> = x
+        // Equal and unequal lengths either way, the recovered sound late or early, a window
+        // wider than both signals (one FFT of both whole), and signals long enough to be
+        // correlated block by block; the reference is the recovered sound's source.
+        let source = music(50_000);
+        let noisy: Vec<f32> = source
             .iter()
-            .zip(noise(3000, 5))
+            .zip(noise(50_000, 5))
             .map(|(a, b)| 0.7 * a + 0.5 * b)
             .collect();
-        let max_lag = 40usize;
-        let s = evaluate(&y, &x, max_lag, FS).unwrap();
-        // Direct O(n·lag) search with pearson().
-        let mut best = (f64::NEG_INFINITY, 0i64);
-        for lag in -(max_lag as i64)..=max_lag as i64 {
-            let (lo, hi) = overlap(x.len(), y.len(), lag);
-            if hi - lo < 1500 {
-                continue;
+        for (n_ref, n_rec, shift, max_lag) in [
+            (3000, 3000, 0, 40usize),
+            (3000, 1700, 25, 40),
+            (1700, 3000, -30, 40),
+            (400, 2500, 7, 3000),
+            (2500, 400, 900, 3000),
+            (45_000, 41_000, -12, 40),
+        ] {
+            let x = &source[1000..1000 + n_ref];
+            let start = (1000 + shift) as usize;
+            let y = &noisy[start..start + n_rec];
+            let s = evaluate(y, x, max_lag, FS).unwrap();
+            // Direct O(n·lag) search with pearson().
+            let min_overlap = (n_ref.min(n_rec) / 2).max(16);
+            let mut best = (f64::NEG_INFINITY, 0i64);
+            for lag in -(max_lag as i64)..=max_lag as i64 {
+                let (lo, hi) = overlap(x.len(), y.len(), lag);
+                if hi - lo < min_overlap {
+                    continue;
+                }
+                let ylo = (lo as i64 + lag) as usize;
+                let r = pearson(&y[ylo..ylo + hi - lo], &x[lo..hi]);
+                if r > best.0 + 1e-12 {
+                    best = (r, lag);
+                }
             }
-            let ylo = (lo as i64 + lag) as usize;
-            let r = pearson(&y[ylo..ylo + hi - lo], &x[lo..hi]);
-            if r > best.0 + 1e-12 {
-                best = (r, lag);
-            }
+            let case = format!("{n_ref} / {n_rec}, shift {shift}, window {max_lag}");
+            assert_eq!(s.lag_samples, best.1, "{case}");
+            assert!((s.r - best.0).abs() < 1e-9, "{case}: {} vs {}", s.r, best.0);
         }
-        assert_eq!(s.lag_samples, best.1);
-        assert!((s.r - best.0).abs() < 1e-9, "{} vs {}", s.r, best.0);
     }
 
     #[test]

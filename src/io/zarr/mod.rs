@@ -22,7 +22,7 @@ use super::LoadError;
 use super::frames::{RawFrame, RawSamples, grey_from_raw};
 use super::limits::MAX_GROUPS;
 use super::numbering::in_numbered_order;
-use super::scan::{GroupEntry, MIN_FRAMES_PER_GROUP, Scan, ScanMeta};
+use super::scan::{GroupEntry, MIN_FRAMES_PER_GROUP, Scan, ScanMeta, check_meta_against};
 use crate::image::Image;
 
 mod pack;
@@ -195,6 +195,12 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
     let stored: Vec<PathBuf> = attrs.groups.iter().map(|name| dir.join(name)).collect();
     let chunk_of: std::collections::HashMap<&PathBuf, usize> =
         stored.iter().enumerate().map(|(k, p)| (p, k)).collect();
+    if chunk_of.len() != stored.len() {
+        return Err(not_a_store(
+            "two of its groups carry the same name, so which chunk is which is unknown".into(),
+            dir,
+        ));
+    }
     let places = in_numbered_order(dir, stored.clone(), MAX_GROUPS, "groups")?;
     let entries: Vec<GroupEntry> = places
         .into_iter()
@@ -214,11 +220,7 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
             frames: Vec::new(),
         })
         .collect();
-    meta.check_against_scan(entries.len(), (width, height))
-        .map_err(|problem| LoadError::Metadata {
-            problem,
-            path: dir.join("zarr.json"),
-        })?;
+    check_meta_against(&meta, &entries, (width, height), &dir.join("zarr.json"))?;
     Ok(Scan {
         dir: dir.to_path_buf(),
         meta,

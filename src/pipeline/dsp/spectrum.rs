@@ -60,15 +60,69 @@ pub fn fft_in_place(re: &mut [f64], im: &mut [f64]) {
 /// Smallest FFT of [`lag_cross_correlation`]'s blocks (2^15 points: 256 KiB a buffer).
 const MIN_BLOCK_FFT: usize = 1 << 15;
 
+/// Real FFTs of one length `n` and their buffers: `c[m] = Σ_k a[k]·b[(k + m) mod n]`.
+struct Correlator {
+    forward: std::sync::Arc<dyn realfft::RealToComplex<f64>>,
+    inverse: std::sync::Arc<dyn realfft::ComplexToReal<f64>>,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    sa: Vec<Complex<f64>>,
+    sb: Vec<Complex<f64>>,
+    c: Vec<f64>,
+}
+
+impl Correlator {
+    fn new(n: usize) -> Self {
+        let mut planner = RealFftPlanner::<f64>::new();
+        let (forward, inverse) = (planner.plan_fft_forward(n), planner.plan_fft_inverse(n));
+        let (sa, sb) = (forward.make_output_vec(), forward.make_output_vec());
+        let c = inverse.make_output_vec();
+        Self {
+            forward,
+            inverse,
+            a: vec![0.0; n],
+            b: vec![0.0; n],
+            sa,
+            sb,
+            c,
+        }
+    }
+
+    /// The circular cross-correlation of the buffers `a` and `b` as filled, scaled by 1/n.
+    fn correlate(&mut self) -> &[f64] {
+        let n = self.a.len();
+        // The lengths come from the plans, so these cannot fail.
+        let _ = self.forward.process(&mut self.a, &mut self.sa);
+        let _ = self.forward.process(&mut self.b, &mut self.sb);
+        // conj(A)·B, bin by bin; the DC and Nyquist bins of real signals are real.
+        for (x, y) in self.sa.iter_mut().zip(&self.sb) {
+            *x = x.conj() * y;
+        }
+        for end in [0, n / 2] {
+            if let Some(p) = self.sa.get_mut(end) {
+                p.im = 0.0;
+            }
+        }
+        let _ = self.inverse.process(&mut self.sa, &mut self.c);
+        #[allow(clippy::cast_precision_loss)] // n ≤ 2^52
+        let scale = 1.0 / n as f64;
+        for v in &mut self.c {
+            *v *= scale;
+        }
+        &self.c
+    }
+}
+
 /// `c[j] = Σ_i a(i)·b(i + j − max_lag)` for `j` in `0..=2·max_lag`: the cross-correlation of
 /// two real signals over the lags `−max_lag..=max_lag`, where `a(i)` is `value_a(a[i])`,
 /// `b(k)` is `value_b(b[k])`, and a sample outside either signal counts as 0.
 ///
 /// Computed block by block of `a` (overlap-save): a block and the stretch of `b` it reaches,
-/// `max_lag` either side, go through FFTs of one fixed length of at least four times the
-/// lag window, so memory stays O(`max_lag`) however long the signals are. (One FFT of the
-/// whole signals, as this was done before, held six buffers of the next power of two above
-/// both lengths: 1.7 GB to score three minutes of sound.)
+/// `max_lag` either side, go through FFTs of one length of about four times the lag window,
+/// so memory stays O(`max_lag`) however long the signals are. A window about as wide as the
+/// signals takes one FFT of both whole instead, as this was done for every window before
+/// (which held six buffers of the next power of two above both lengths: 1.7 GB to score
+/// three minutes of sound with a window of a few samples).
 pub(crate) fn lag_cross_correlation(
     a: &[f32],
     b: &[f32],
@@ -77,14 +131,28 @@ pub(crate) fn lag_cross_correlation(
     value_b: impl Fn(f32) -> f64,
 ) -> Vec<f64> {
     let lags = 2 * max_lag + 1;
-    let n = (4 * lags).max(MIN_BLOCK_FFT).next_power_of_two();
-    let block = n - 2 * max_lag;
-    let mut planner = RealFftPlanner::<f64>::new();
-    let (forward, inverse) = (planner.plan_fft_forward(n), planner.plan_fft_inverse(n));
-    let (mut ab, mut bb) = (vec![0.0; n], vec![0.0; n]);
-    let (mut sa, mut sb) = (forward.make_output_vec(), forward.make_output_vec());
-    let mut c_block = inverse.make_output_vec();
     let mut c = vec![0.0; lags];
+    let n = (4 * lags).max(MIN_BLOCK_FFT).next_power_of_two();
+    let whole = (a.len() + b.len()).next_power_of_two().max(2);
+    if whole <= n {
+        // Every lag in (−a.len(), b.len()) lies unaliased at index lag mod `whole`.
+        let mut fft = Correlator::new(whole);
+        for (dst, &v) in fft.a.iter_mut().zip(a) {
+            *dst = value_a(v);
+        }
+        for (dst, &v) in fft.b.iter_mut().zip(b) {
+            *dst = value_b(v);
+        }
+        let circular = fft.correlate();
+        for (lag, out) in (-(max_lag as i128)..).zip(&mut c) {
+            if -(a.len() as i128) < lag && lag < b.len() as i128 {
+                *out = circular[lag.rem_euclid(whole as i128) as usize];
+            }
+        }
+        return c;
+    }
+    let block = n - 2 * max_lag;
+    let mut fft = Correlator::new(n);
     for start in (0..a.len()).step_by(block) {
         let len = block.min(a.len() - start);
         // b's stretch: b[start − max_lag .. start + len + max_lag], 0 outside b.
@@ -95,39 +163,20 @@ pub(crate) fn lag_cross_correlation(
         if b_lo >= b_hi {
             continue;
         }
-        for (dst, &v) in ab.iter_mut().zip(&a[start..start + len]) {
+        for (dst, &v) in fft.a.iter_mut().zip(&a[start..start + len]) {
             *dst = value_a(v);
         }
-        ab[len..].fill(0.0);
-        bb.fill(0.0);
-        // bb[k] holds b[start − max_lag + k].
+        fft.a[len..].fill(0.0);
+        fft.b.fill(0.0);
+        // b[k] holds the signal's b[start − max_lag + k].
         let first = b_lo + max_lag - start;
-        for (dst, &v) in bb[first..].iter_mut().zip(&b[b_lo..b_hi]) {
+        for (dst, &v) in fft.b[first..].iter_mut().zip(&b[b_lo..b_hi]) {
             *dst = value_b(v);
         }
-        // The lengths come from the plans, so these cannot fail.
-        let _ = forward.process(&mut ab, &mut sa);
-        let _ = forward.process(&mut bb, &mut sb);
-        // conj(A)·B, bin by bin; the DC and Nyquist bins of real signals are real.
-        for (x, y) in sa.iter_mut().zip(&sb) {
-            *x = x.conj() * y;
-        }
-        for end in [0, n / 2] {
-            if let Some(p) = sa.get_mut(end) {
-                p.im = 0.0;
-            }
-        }
-        let _ = inverse.process(&mut sa, &mut c_block);
-        // c_block[m] = Σ_k ab[k]·bb[k + m] with no wrap for m ≤ 2·max_lag (len + 2·max_lag ≤ n):
-        // lag m − max_lag.
-        for (acc, v) in c.iter_mut().zip(&c_block) {
+        // m ≤ 2·max_lag never wraps (len + 2·max_lag ≤ n): lag m − max_lag.
+        for (acc, v) in c.iter_mut().zip(fft.correlate()) {
             *acc += v;
         }
-    }
-    #[allow(clippy::cast_precision_loss)] // n ≤ 2^52
-    let scale = 1.0 / n as f64;
-    for v in &mut c {
-        *v *= scale;
     }
     c
 }

@@ -347,19 +347,21 @@ fn lag_cross_correlation_matches_direct_sums() {
     let b: Vec<f32> = (0..50_123)
         .map(|i| ((i * 3 + 2) % 7) as f32 - 3.0)
         .collect();
-    let max_lag = 300usize;
-    let c = lag_cross_correlation(&a, &b, max_lag, |v| f64::from(v) + 0.5, f64::from);
-    assert_eq!(c.len(), 2 * max_lag + 1);
-    for (j, &got) in c.iter().enumerate() {
-        let lag = j as i64 - max_lag as i64;
-        let direct: f64 = (0..a.len() as i64)
-            .filter(|&i| i + lag >= 0 && i + lag < b.len() as i64)
-            .map(|i| (f64::from(a[i as usize]) + 0.5) * f64::from(b[(i + lag) as usize]))
-            .sum();
-        assert!(
-            (got - direct).abs() < 1e-6 * direct.abs().max(1.0),
-            "lag {lag}: {got} vs {direct}"
-        );
+    // Then a window wider than both signals (one block).
+    for (a, b, max_lag) in [(&a[..], &b[..], 300usize), (&a[..500], &b[..300], 800)] {
+        let c = lag_cross_correlation(a, b, max_lag, |v| f64::from(v) + 0.5, f64::from);
+        assert_eq!(c.len(), 2 * max_lag + 1);
+        for (j, &got) in c.iter().enumerate() {
+            let lag = j as i64 - max_lag as i64;
+            let direct: f64 = (0..a.len() as i64)
+                .filter(|&i| i + lag >= 0 && i + lag < b.len() as i64)
+                .map(|i| (f64::from(a[i as usize]) + 0.5) * f64::from(b[(i + lag) as usize]))
+                .sum();
+            assert!(
+                (got - direct).abs() < 1e-6 * direct.abs().max(1.0),
+                "lag {lag}: {got} vs {direct}"
+            );
+        }
     }
 }
 

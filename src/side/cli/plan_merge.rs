@@ -186,6 +186,10 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
     let probe = probe_secs_per_group(&scan, &params, args.keep_going, args.probe_groups)
         .map_err(|e| cancelled_or(e, "plan"))?;
     let plan = Plan::new(&scan, &params, args.keep_going, args.shards, probe)?;
+    // Ctrl-C while the scan was opened, or with no probe to notice it.
+    if crate::job::interrupted().load(Ordering::Relaxed) {
+        bail!("plan: cancelled; nothing written");
+    }
     write_json_atomic(&args.out, &plan, args.force)?;
     println!(
         "wrote {} ({} groups in {} shards; each also runs up to {} groups before its range)",
