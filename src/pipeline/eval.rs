@@ -3,9 +3,10 @@
 //! Lag convention: `reference[i] ≈ g · recovered[i + lag]`, so a positive lag means the
 //! recovered signal is late by `lag` samples. All lags within ±`max_lag` are scored at once:
 //! the cross-correlation comes from FFTs of blocks, and the per-lag means and energies of the
-//! overlapping parts from sums up to the few indices where an overlap can start or end, so the
+//! overlapping parts from sums kept only near where an overlap can start or end, so the
 //! search costs O(N log max_lag) in time and O(max_lag) in memory beside the two signals (a
-//! whole side scores in the memory of a clip).
+//! whole side scores in the memory of a clip; a window as wide as the signals costs one FFT
+//! of both).
 
 use serde::{Deserialize, Serialize};
 
