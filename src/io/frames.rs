@@ -141,8 +141,17 @@ pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
 #[must_use]
 pub fn missing_or(group: &GroupEntry, error: LoadError) -> LoadError {
     if group.is_missing() {
+        // In a Zarr store: a name the stored groups skip (a folder lost before packing).
+        let in_store = group
+            .dir
+            .parent()
+            .is_some_and(|store| store.join("zarr.json").is_file());
         return LoadError::Missing {
-            what: "group folder",
+            what: if in_store {
+                "group (the store was packed without it)"
+            } else {
+                "group folder"
+            },
             path: group.dir.clone(),
         };
     }

@@ -43,7 +43,7 @@ pub enum LoadError {
     /// or one removed after the scan was opened.
     #[error("{what} is missing: {}", path.display())]
     Missing {
-        /// "group folder" or "frame".
+        /// "group folder", "frame", or a store's "group (the store was packed without it)".
         what: &'static str,
         /// Where it would be.
         path: PathBuf,

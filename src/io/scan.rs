@@ -320,15 +320,27 @@ impl Scan {
         if missing.len() > NAMED {
             names.push(format!("and {} more", missing.len() - NAMED));
         }
-        Some(format!(
-            "the scan's numbering skips {} group folder{} among groups {}..{} ({}; the first would be {})",
-            missing.len(),
-            if missing.len() == 1 { "" } else { "s" },
-            range.start,
-            range.end,
-            names.join(", "),
-            first.dir.display()
-        ))
+        let (count, s) = (missing.len(), if missing.len() == 1 { "" } else { "s" });
+        let (a, b, names) = (range.start, range.end, names.join(", "));
+        Some(if self.is_store() {
+            format!(
+                "the store's group names skip {count} group{s} among groups {a}..{b} ({names}; \
+                 it was packed from folders that lacked them): {}",
+                self.dir.display()
+            )
+        } else {
+            format!(
+                "the scan's numbering skips {count} group folder{s} among groups {a}..{b} \
+                 ({names}; the first would be {})",
+                first.dir.display()
+            )
+        })
+    }
+
+    /// True for a Zarr store (`pack`), false for a scan folder.
+    #[must_use]
+    pub fn is_store(&self) -> bool {
+        self.dir.join("zarr.json").is_file()
     }
 
     /// Start of group `group` along the groove, in µm from the first group.

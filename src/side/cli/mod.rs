@@ -311,6 +311,9 @@ pub fn check_missing_groups(scan: &Scan, range: Range<usize>, keep_going: bool) 
     let Some(what) = scan.missing_note(range) else {
         return Ok(());
     };
+    if !keep_going && scan.is_store() {
+        bail!("{what}: run with --keep-going to read each as a gap of silence, in its place");
+    }
     if !keep_going {
         bail!(
             "{what}: run with --keep-going to read each as a gap of silence, in its place (or, \
