@@ -32,6 +32,12 @@ fn dual_focus_tone_scan_reconstructs_the_tone() {
     assert!(reader.duration() > 500, "{} samples", reader.duration());
     let rep: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(rep["path"], "dual-focus");
+    // The default method, fused, filters zero-phase; the report says so.
+    assert_eq!(
+        rep["filters"],
+        "DC block 10 Hz (first-order high-pass, forward and backward); low-pass 3000 Hz \
+         (2nd-order Butterworth, forward and backward: −3 dB at 3000 Hz, 24 dB an octave above)"
+    );
     let r = rep["scores"]["r"].as_f64().unwrap();
     let snr = rep["scores"]["snr_db"].as_f64().unwrap();
     eprintln!("dual-focus 700 Hz tone: r = {r:.3}, SNR = {snr:.1} dB");

@@ -293,6 +293,8 @@ fn the_still_command_writes_sound_and_a_report() {
     assert_eq!(r.spec().sample_rate, 44_100);
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(json["groove"], 2);
+    let filters = json["filters"].as_str().unwrap();
+    assert!(filters.contains("low-pass 3000 Hz (2nd-order Butterworth, forward and backward"));
     assert_eq!(json["grooves_found"].as_array().unwrap().len(), 3);
     assert_eq!(json["left_wall"], "the upper wall (time runs rightward)");
     let r0 = json["scores"][0]["r"].as_f64().unwrap();

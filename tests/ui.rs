@@ -685,6 +685,10 @@ fn the_previous_clip_stays_for_ab_and_a_range_around_the_group_reconstructs() {
     assert_eq!((spec.bits_per_sample, spec.sample_rate), (16, 44_100));
     let sidecar = std::fs::read_to_string(wav.with_extension("json")).unwrap();
     assert!(sidecar.contains("\"params_state\""), "{sidecar}");
+    assert!(
+        sidecar.contains("\"filters\": \"DC block 10 Hz"),
+        "{sidecar}"
+    );
     assert!(sidecar.contains("\"modified\": true"), "{sidecar}");
 }
 

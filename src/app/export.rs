@@ -75,6 +75,8 @@ pub struct Sidecar {
     pub preset_file: Option<PathBuf>,
     /// The params the clip was made with, in full (`PipelineParams` TOML).
     pub preset: String,
+    /// The filters the sound went through, in order and in words (phase included).
+    pub filters: String,
     /// Scores against the reference, if any.
     pub scores: Option<Scores>,
     /// Per-group report.
@@ -174,6 +176,10 @@ pub fn export_wav(
         params_state: clip.param_state.clone(),
         preset_file: clip.param_state.preset_file().map(Path::to_path_buf),
         preset,
+        filters: crate::pipeline::dsp::describe_chain(
+            &clip.params.dsp,
+            crate::pipeline::finish::filter_phase(clip.recon.method),
+        ),
         scores: clip.recon.scores,
         group_reports: clip.recon.groups.clone(),
         warnings: clip.recon.warnings.clone(),

@@ -20,6 +20,19 @@ use super::fusion::{FusionBlock, GroupFusion, fuse};
 use super::{Method, PipelineParams, StageError};
 use crate::meta::ScanMeta;
 
+/// How `method`'s sound runs the DC block and the low-pass: the flow method causal (its
+/// output as before), the edges and fused sound zero-phase (see the module docs).
+#[must_use]
+pub fn filter_phase(method: Method) -> FilterPhase {
+    match method {
+        Method::Flow => FilterPhase::Causal,
+        Method::Edges | Method::Fused => FilterPhase::ZeroPhase,
+    }
+}
+
+/// How a still's sound runs them ([`channels_to_output`]).
+pub const STILL_FILTER_PHASE: FilterPhase = FilterPhase::ZeroPhase;
+
 /// Gaps up to this many native samples are bridged by linear interpolation; longer ones stay silent.
 pub const BRIDGE_GAP_SAMPLES: usize = 4;
 
@@ -156,7 +169,7 @@ pub fn finish_method_clip(
         Method::Flow => finish_clip(&signals.flow, spacing_um, params),
         Method::Edges => {
             let (velocity, _) = edge_velocity(&signals.borders, spacing_um, meta, params)?;
-            finish_stitched(velocity, params, FilterPhase::ZeroPhase)
+            finish_stitched(velocity, params, filter_phase(Method::Edges))
         }
         Method::Fused => {
             let ClipSignals { flow, borders } = signals;
@@ -171,7 +184,7 @@ pub fn finish_method_clip(
                 meta,
                 &params.fusion,
             )?;
-            let mut clip = finish_stitched(fused.signal, params, FilterPhase::ZeroPhase)?;
+            let mut clip = finish_stitched(fused.signal, params, filter_phase(Method::Fused))?;
             clip.fusion = Some(FusionReport {
                 groups: fused.groups,
                 blocks: fused.blocks,
@@ -194,7 +207,11 @@ pub fn finish_clip<S: GroupSignals + ?Sized>(
     spacing_um: f64,
     params: &PipelineParams,
 ) -> Result<FinishedClip, StageError> {
-    finish_stitched(stitch(signals, spacing_um)?, params, FilterPhase::Causal)
+    finish_stitched(
+        stitch(signals, spacing_um)?,
+        params,
+        filter_phase(Method::Flow),
+    )
 }
 
 /// A stitched velocity signal finished: short gaps bridged, resampled, DSP (the DC block and
@@ -241,7 +258,7 @@ pub fn channels_to_output(
     native_rate_hz: f64,
     params: &PipelineParams,
 ) -> Result<(Vec<Vec<f32>>, f64), StageError> {
-    channels_to_output_with(channels, native_rate_hz, params, FilterPhase::ZeroPhase)
+    channels_to_output_with(channels, native_rate_hz, params, STILL_FILTER_PHASE)
 }
 
 /// [`channels_to_output`] with the DC block and low-pass run as `phase` says.

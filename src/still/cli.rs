@@ -199,6 +199,8 @@ struct StillReport<'a> {
     image: String,
     output: String,
     params_file: Option<String>,
+    /// The filters the sound went through, in order and in words (phase included).
+    filters: String,
     image_width_px: usize,
     image_height_px: usize,
     axis: &'static str,
@@ -370,6 +372,10 @@ pub fn write_still_report(
         image: what.image.display().to_string(),
         output: what.out.display().to_string(),
         params_file: what.params_file.map(|p| p.display().to_string()),
+        filters: crate::pipeline::dsp::describe_chain(
+            &params.dsp,
+            crate::pipeline::finish::STILL_FILTER_PHASE,
+        ),
         image_width_px: run.image_px.0,
         image_height_px: run.image_px.1,
         axis: match setup.axis {

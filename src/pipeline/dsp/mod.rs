@@ -157,6 +157,44 @@ pub enum FilterPhase {
     ZeroPhase,
 }
 
+/// The chain [`apply_dsp_with`] runs, in words, for the record of a transfer: "DC block
+/// 10 Hz (first-order high-pass, forward and backward); low-pass 3000 Hz (2nd-order
+/// Butterworth, forward and backward: −3 dB at 3000 Hz, 24 dB an octave above)".
+#[must_use]
+pub fn describe_chain(params: &DspParams, phase: FilterPhase) -> String {
+    let (how, slope_db) = match phase {
+        FilterPhase::Causal => ("causal", 12),
+        FilterPhase::ZeroPhase => ("forward and backward", 24),
+    };
+    let mut parts = Vec::new();
+    if params.dc_block {
+        parts.push(format!(
+            "DC block {} Hz (first-order high-pass, {how})",
+            params.dc_block_hz
+        ));
+    }
+    let eq = match params.eq {
+        EqCurve::Flat => None,
+        EqCurve::Riaa => Some("RIAA"),
+        EqCurve::Turnover500 => Some("500 Hz turnover"),
+    };
+    if let Some(eq) = eq {
+        parts.push(format!("playback EQ {eq} (causal)"));
+    }
+    if params.lowpass {
+        let hz = params.lowpass_hz;
+        parts.push(format!(
+            "low-pass {hz} Hz (2nd-order Butterworth, {how}: −3 dB at {hz} Hz, {slope_db} dB an \
+             octave above)"
+        ));
+    }
+    if parts.is_empty() {
+        "none".into()
+    } else {
+        parts.join("; ")
+    }
+}
+
 /// Applies the DC block, EQ and the low-pass (in that order) to one channel in place, all
 /// causal. Non-finite samples are replaced by 0 first (an IIR filter would spread them
 /// forever).

@@ -271,6 +271,23 @@ fn zero_phase_filters_take_clips_of_one_two_and_three_samples() {
 }
 
 #[test]
+fn the_chain_is_described_as_it_runs() {
+    let riaa_causal = describe_chain(&only(true, EqCurve::Riaa, false), FilterPhase::Causal);
+    assert_eq!(
+        riaa_causal,
+        "playback EQ RIAA (causal); low-pass 3000 Hz (2nd-order Butterworth, causal: −3 dB at \
+         3000 Hz, 12 dB an octave above)"
+    );
+    let dc_only = describe_chain(&only(false, EqCurve::Flat, true), FilterPhase::ZeroPhase);
+    assert_eq!(
+        dc_only,
+        "DC block 10 Hz (first-order high-pass, forward and backward)"
+    );
+    let nothing = describe_chain(&only(false, EqCurve::Flat, false), FilterPhase::Causal);
+    assert_eq!(nothing, "none");
+}
+
+#[test]
 fn invalid_params_are_rejected() {
     let mut x = vec![0.0f32; 16];
     let bad = |p: DspParams, fs: f64| {

@@ -77,6 +77,8 @@ pub struct Report<'a> {
     pub method: &'static str,
     /// For `fused`: the crossover and edge weights per group and analysis block.
     pub fusion: Option<&'a crate::pipeline::finish::FusionReport>,
+    /// The filters the sound went through, in order and in words (phase included).
+    pub filters: String,
     /// Output duration.
     pub duration_secs: f64,
     /// Output sample rate.
@@ -120,6 +122,10 @@ pub fn make_report<'a>(
         },
         method: rec.method.name(),
         fusion: rec.fusion.as_ref(),
+        filters: crate::pipeline::dsp::describe_chain(
+            &params.dsp,
+            crate::pipeline::finish::filter_phase(rec.method),
+        ),
         duration_secs: rec.audio.duration_secs(),
         sample_rate_hz: rec.audio.sample_rate_hz,
         native_rate_hz: rec.stitched.native_rate_hz,
