@@ -203,8 +203,8 @@ fn zero_phase_gain(f: f64, fc: f64) -> f64 {
 #[test]
 fn the_zero_phase_low_pass_is_minus_3db_at_its_cutoff_and_shifts_no_tone() {
     // Tones at 1 kHz, the cutoff and twice it, through the low-pass alone (DC block off).
-    // Causal, the 2nd-order Butterworth delays them by different times (its phase at 1 kHz
-    // is −0.48 rad for a 3 kHz corner); forward and backward, none moves, the cutoff is still
+    // Causal, the 2nd-order Butterworth delays them (its phase at 1 kHz is −0.48 rad, 76 µs,
+    // for a 3 kHz corner); forward and backward, none moves, the cutoff is still
     // at −3 dB, and the octave above it falls to 1/(1 + ((t/k)⁴))² in power, t = tan(π f/fs).
     let (fc, n) = (3000.0, 44_100);
     let params = only(true, EqCurve::Flat, false);
