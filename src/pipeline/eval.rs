@@ -285,9 +285,8 @@ pub fn evaluate(
     }
     let (_, lag) = best?;
 
-    // Exact scores on the aligned overlap (direct sums: no prefix-sum rounding).
-    let (lo, hi) = overlap(n_ref, n_rec, lag);
-    let ylo = lo.checked_add_signed(isize::try_from(lag).ok()?)?;
+    // Exact scores on the aligned overlap (direct sums, not differences of running sums).
+    let (lo, hi, ylo) = lag_overlap(n_ref, n_rec, lag)?;
     let len = hi - lo;
     let ref_part = reference.get(lo..hi)?;
     let rec_part = recovered.get(ylo..ylo + len)?;

@@ -169,7 +169,7 @@ pub fn finish_method_clip(
         Method::Flow => finish_clip(&signals.flow, spacing_um, params),
         Method::Edges => {
             let (velocity, _) = edge_velocity(&signals.borders, spacing_um, meta, params)?;
-            finish_stitched(velocity, params, filter_phase(Method::Edges))
+            finish_stitched(velocity, params, filter_phase(params.method))
         }
         Method::Fused => {
             let ClipSignals { flow, borders } = signals;
@@ -184,7 +184,7 @@ pub fn finish_method_clip(
                 meta,
                 &params.fusion,
             )?;
-            let mut clip = finish_stitched(fused.signal, params, filter_phase(Method::Fused))?;
+            let mut clip = finish_stitched(fused.signal, params, filter_phase(params.method))?;
             clip.fusion = Some(FusionReport {
                 groups: fused.groups,
                 blocks: fused.blocks,

@@ -87,6 +87,71 @@ impl DspParams {
     }
 }
 
+/// The filters of [`apply_dsp_with`], each in its place: the DC block first, the EQ's
+/// sections, the low-pass last.
+struct Chain {
+    dc_block: Option<Biquad>,
+    eq: Vec<Biquad>,
+    lowpass: Option<Biquad>,
+}
+
+impl Chain {
+    /// The chain for `params` at `sample_rate_hz`, its low-pass designed for `phase`.
+    fn new(
+        sample_rate_hz: f64,
+        params: &DspParams,
+        phase: FilterPhase,
+    ) -> Result<Self, StageError> {
+        check_range("sample_rate_hz", sample_rate_hz, f64::MIN_POSITIVE, 1e9)?;
+        let nyquist_hz = sample_rate_hz / 2.0;
+        let below_nyquist = |name: &str, hz: f64| -> Result<(), StageError> {
+            if hz.is_finite() && hz > 0.0 && hz < nyquist_hz {
+                Ok(())
+            } else {
+                Err(StageError::InvalidParam {
+                    name: name.to_string(),
+                    problem: format!("{hz} Hz is not in (0, Nyquist = {nyquist_hz} Hz)"),
+                })
+            }
+        };
+        let dc_block = if params.dc_block {
+            below_nyquist("dsp.dc_block_hz", params.dc_block_hz)?;
+            Some(dc_blocker(params.dc_block_hz, sample_rate_hz))
+        } else {
+            None
+        };
+        let mut eq = Vec::new();
+        if params.eq != EqCurve::Flat {
+            let corner = params.eq.highest_corner_hz();
+            if corner >= nyquist_hz {
+                return Err(StageError::InvalidParam {
+                    name: "dsp.eq".to_string(),
+                    problem: format!(
+                        "{:?} needs a sample rate above {} Hz, got {sample_rate_hz} Hz",
+                        params.eq,
+                        2.0 * corner
+                    ),
+                });
+            }
+            eq = params.eq.sections(sample_rate_hz);
+        }
+        let lowpass = if params.lowpass {
+            below_nyquist("dsp.lowpass_hz", params.lowpass_hz)?;
+            Some(match phase {
+                FilterPhase::Causal => butterworth_lowpass(params.lowpass_hz, sample_rate_hz),
+                FilterPhase::ZeroPhase => zero_phase_lowpass(params.lowpass_hz, sample_rate_hz),
+            })
+        } else {
+            None
+        };
+        Ok(Self {
+            dc_block,
+            eq,
+            lowpass,
+        })
+    }
+}
+
 /// The whole filter chain of [`apply_dsp_with`] (DC block, EQ, low-pass) as biquad sections,
 /// each run once forward (zero-phase: the DC block and low-pass also backward).
 ///
@@ -98,48 +163,17 @@ pub fn dsp_chain(
     params: &DspParams,
     phase: FilterPhase,
 ) -> Result<Vec<Biquad>, StageError> {
-    check_range("sample_rate_hz", sample_rate_hz, f64::MIN_POSITIVE, 1e9)?;
-    let nyquist_hz = sample_rate_hz / 2.0;
-    let below_nyquist = |name: &str, hz: f64| -> Result<(), StageError> {
-        if hz.is_finite() && hz > 0.0 && hz < nyquist_hz {
-            Ok(())
-        } else {
-            Err(StageError::InvalidParam {
-                name: name.to_string(),
-                problem: format!("{hz} Hz is not in (0, Nyquist = {nyquist_hz} Hz)"),
-            })
-        }
-    };
-    let mut chain = Vec::new();
-    if params.dc_block {
-        below_nyquist("dsp.dc_block_hz", params.dc_block_hz)?;
-        chain.push(dc_blocker(params.dc_block_hz, sample_rate_hz));
-    }
-    if params.eq != EqCurve::Flat {
-        let corner = params.eq.highest_corner_hz();
-        if corner >= nyquist_hz {
-            return Err(StageError::InvalidParam {
-                name: "dsp.eq".to_string(),
-                problem: format!(
-                    "{:?} needs a sample rate above {} Hz, got {sample_rate_hz} Hz",
-                    params.eq,
-                    2.0 * corner
-                ),
-            });
-        }
-        chain.extend(params.eq.sections(sample_rate_hz));
-    }
-    if params.lowpass {
-        below_nyquist("dsp.lowpass_hz", params.lowpass_hz)?;
-        chain.push(match phase {
-            FilterPhase::Causal => butterworth_lowpass(params.lowpass_hz, sample_rate_hz),
-            FilterPhase::ZeroPhase => zero_phase_lowpass(params.lowpass_hz, sample_rate_hz),
-        });
-    }
-    if chain.is_empty() {
-        chain.push(Biquad::IDENTITY);
-    }
-    Ok(chain)
+    let Chain {
+        dc_block,
+        eq,
+        lowpass,
+    } = Chain::new(sample_rate_hz, params, phase)?;
+    let chain: Vec<Biquad> = dc_block.into_iter().chain(eq).chain(lowpass).collect();
+    Ok(if chain.is_empty() {
+        vec![Biquad::IDENTITY]
+    } else {
+        chain
+    })
 }
 
 /// How [`apply_dsp_with`] runs the DC block and the low-pass (the EQ always runs causal).
@@ -220,7 +254,7 @@ pub fn apply_dsp_with(
     params: &DspParams,
     phase: FilterPhase,
 ) -> Result<(), StageError> {
-    let chain = dsp_chain(sample_rate_hz, params, phase)?;
+    let chain = Chain::new(sample_rate_hz, params, phase)?;
     let zero_phase = phase == FilterPhase::ZeroPhase;
     if samples.is_empty() {
         return Ok(());
@@ -230,30 +264,32 @@ pub fn apply_dsp_with(
             *v = 0.0;
         }
     }
-    for (i, section) in chain.iter().enumerate() {
-        if i == 0 && params.dc_block {
-            // Start the DC block settled on the mean level of its first time constant, not
-            // on the first sample (which carries signal): otherwise the difference decays
-            // through the clip as a slow drift, which dominates the error of a short clip.
-            // (dsp_chain puts the DC block first when it is on.) Zero-phase: the same again
-            // backward, settled on the forward output's end level; both levels Hann-weighted,
-            // whose leak of a tone falls as 1/f³ instead of 1/f (a clip of a few periods
-            // otherwise keeps a DC error of a few % of the tone).
-            let tau = (sample_rate_hz / (2.0 * PI * params.dc_block_hz)).ceil() as usize;
-            let head_level = |x: &[f32]| head_mean(&x[..tau.clamp(1, x.len())], zero_phase);
-            section.run_settled(samples, head_level(samples));
-            if zero_phase {
-                samples.reverse();
-                section.run_settled(samples, head_level(samples));
-                samples.reverse();
-            }
-        } else if zero_phase && params.lowpass && i + 1 == chain.len() {
-            // The low-pass (last in the chain): three periods of its corner carry a pass's
-            // start transient past the clip's end.
+    if let Some(dc_block) = chain.dc_block {
+        // Start the DC block settled on the mean level of its first time constant, not on the
+        // first sample (which carries signal): otherwise the difference decays through the
+        // clip as a slow drift, which dominates the error of a short clip. Zero-phase: the
+        // same again backward, settled on the forward output's end level; both levels
+        // Hann-weighted, whose leak of a tone falls as 1/f³ instead of 1/f (a clip of a few
+        // periods otherwise keeps a DC error of a few % of the tone).
+        let tau = (sample_rate_hz / (2.0 * PI * params.dc_block_hz)).ceil() as usize;
+        let head_level = |x: &[f32]| head_mean(&x[..tau.clamp(1, x.len())], zero_phase);
+        dc_block.run_settled(samples, head_level(samples));
+        if zero_phase {
+            samples.reverse();
+            dc_block.run_settled(samples, head_level(samples));
+            samples.reverse();
+        }
+    }
+    for section in &chain.eq {
+        section.run(samples);
+    }
+    if let Some(lowpass) = chain.lowpass {
+        if zero_phase {
+            // Three periods of its corner carry a pass's start transient past the clip's end.
             let pad = (3.0 * sample_rate_hz / params.lowpass_hz).ceil() as usize;
-            run_forward_backward(section, samples, pad);
+            run_forward_backward(&lowpass, samples, pad);
         } else {
-            section.run(samples);
+            lowpass.run(samples);
         }
     }
     Ok(())
