@@ -564,6 +564,31 @@ fn run_flow(args: &FlowArgs) -> Result<()> {
     Ok(())
 }
 
+/// Ends a command that Ctrl-C stopped (see [`crate::job::catch_interrupts`]) with one line,
+/// "`command`: cancelled; nothing written", to be called before it writes anything.
+///
+/// # Errors
+/// That line, once Ctrl-C was pressed.
+pub(crate) fn stop_if_interrupted(command: &str) -> Result<()> {
+    if crate::job::interrupted().load(std::sync::atomic::Ordering::Relaxed) {
+        bail!("{command}: cancelled; nothing written");
+    }
+    Ok(())
+}
+
+/// `result` of work that Ctrl-C may have stopped: [`stop_if_interrupted`]'s line when it did
+/// (whatever the work returned, a cancellation error included), else `result`.
+///
+/// # Errors
+/// As above, or the work's own error.
+pub(crate) fn unless_interrupted<T, E: Into<anyhow::Error>>(
+    command: &str,
+    result: std::result::Result<T, E>,
+) -> Result<T> {
+    stop_if_interrupted(command)?;
+    result.map_err(Into::into)
+}
+
 /// Runs a parsed command line (`None` means the default action was handled by the caller).
 ///
 /// # Errors

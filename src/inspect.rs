@@ -93,9 +93,7 @@ pub fn run_inspect(
     let outcome = cache.run_from(Stage::Derivatives, &input, params, &mut |_, _| {
         !interrupted.load(std::sync::atomic::Ordering::Relaxed)
     });
-    if interrupted.load(std::sync::atomic::Ordering::Relaxed) {
-        bail!("inspect: cancelled; nothing written");
-    }
+    crate::cli::stop_if_interrupted("inspect")?;
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create folder: {}", out_dir.display()))?;
     let mut written = Vec::new();

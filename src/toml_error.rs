@@ -16,10 +16,7 @@ pub fn located(text: &str, error: &toml::de::Error) -> String {
     let line_no = before.matches('\n').count() + 1;
     let line = text[line_start..].lines().next().unwrap_or("");
     // The key of a `key = value` line, under the last `[table]` header above it.
-    let key = line
-        .split_once('=')
-        .map(|(k, _)| k.trim())
-        .filter(|k| !k.is_empty() && !k.starts_with('['));
+    let key = key_of(line).filter(|k| !k.is_empty() && !k.starts_with('['));
     let table = text[..line_start].lines().rev().find_map(header);
     match key {
         Some(k) => format!("{} (line {line_no}): {message}", qualified(table, k)),
@@ -34,6 +31,11 @@ fn header(line: &str) -> Option<&str> {
     bare.strip_prefix('[')?
         .strip_suffix(']')
         .map(|t| t.trim_matches(['[', ']']).trim())
+}
+
+/// The key of a `key = value` line (before its first `=`, trimmed).
+fn key_of(line: &str) -> Option<&str> {
+    line.split_once('=').map(|(k, _)| k.trim())
 }
 
 /// `table.key`, or `key` at the top level.
@@ -51,7 +53,7 @@ pub fn key_at(text: &str, table: Option<&str>, key: &str) -> String {
     for (i, line) in text.lines().enumerate() {
         if let Some(t) = header(line) {
             current = Some(t);
-        } else if current == table && line.split_once('=').is_some_and(|(k, _)| k.trim() == key) {
+        } else if current == table && key_of(line) == Some(key) {
             return format!("{name} (line {})", i + 1);
         }
     }

@@ -176,10 +176,7 @@ pub fn export_wav(
         params_state: clip.param_state.clone(),
         preset_file: clip.param_state.preset_file().map(Path::to_path_buf),
         preset,
-        filters: crate::pipeline::dsp::describe_chain(
-            &clip.params.dsp,
-            crate::pipeline::finish::filter_phase(clip.recon.method),
-        ),
+        filters: crate::pipeline::finish::describe_filters(&clip.params.dsp, clip.recon.method),
         scores: clip.recon.scores,
         group_reports: clip.recon.groups.clone(),
         warnings: clip.recon.warnings.clone(),

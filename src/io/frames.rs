@@ -140,20 +140,8 @@ pub fn load_group(group: &GroupEntry) -> Result<Vec<Image>, LoadError> {
 /// network file system makes slow).
 #[must_use]
 pub fn missing_or(group: &GroupEntry, error: LoadError) -> LoadError {
-    if group.is_missing() {
-        // In a Zarr store: a name the stored groups skip (a folder lost before packing).
-        let in_store = group
-            .dir
-            .parent()
-            .is_some_and(|store| store.join("zarr.json").is_file());
-        return LoadError::Missing {
-            what: if in_store {
-                "group (the store was packed without it)"
-            } else {
-                "group folder"
-            },
-            path: group.dir.clone(),
-        };
+    if let Some(missing) = group.missing_error() {
+        return missing;
     }
     match group.frames.iter().find(|p| !p.exists()) {
         Some(gone) => LoadError::Missing {
@@ -453,6 +441,7 @@ mod tests {
             dir: dir.to_path_buf(),
             frames: paths.to_vec(),
             zarr: None,
+            missing: None,
         }
     }
 

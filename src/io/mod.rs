@@ -43,7 +43,7 @@ pub enum LoadError {
     /// or one removed after the scan was opened.
     #[error("{what} is missing: {}", path.display())]
     Missing {
-        /// "group folder", "frame", or a store's "group (the store was packed without it)".
+        /// "frame", or [`GroupEntry::missing`]'s words for a group.
         what: &'static str,
         /// Where it would be.
         path: PathBuf,

@@ -64,6 +64,10 @@ pub struct GroupEntry {
     pub frames: Vec<PathBuf>,
     /// Where the frames are in a Zarr store (None for a scan folder).
     pub zarr: Option<super::zarr::ZarrGroup>,
+    /// For a place the scan's numbering skips (it keeps its place; see docs/FORMAT.md): what
+    /// is missing there, in words ("group folder", or a store's "group (the store was packed
+    /// without it)"). Set when the scan is opened.
+    pub missing: Option<&'static str>,
 }
 
 impl GroupEntry {
@@ -73,11 +77,19 @@ impl GroupEntry {
         self.zarr.as_ref().map_or(self.frames.len(), |z| z.frames)
     }
 
-    /// True for a group of a scan folder that has no folder: a number the scan's numbering
-    /// skips (it keeps its place; see docs/FORMAT.md), or a folder removed since.
+    /// True for a place the scan's numbering skips (see [`GroupEntry::missing`]).
     #[must_use]
     pub fn is_missing(&self) -> bool {
-        self.zarr.is_none() && self.frames.is_empty() && !self.dir.exists()
+        self.missing.is_some()
+    }
+
+    /// [`LoadError::Missing`] naming the place, for a place the scan's numbering skips.
+    #[must_use]
+    pub fn missing_error(&self) -> Option<LoadError> {
+        self.missing.map(|what| LoadError::Missing {
+            what,
+            path: self.dir.clone(),
+        })
     }
 
     /// The group's name: its folder's name.
@@ -231,7 +243,7 @@ impl Scan {
         let meta = ScanMeta::load(&meta_path)?;
         let folders = sorted_entries(
             dir,
-            |p| p.is_dir() && !hidden(p),
+            |p| !hidden(p) && p.is_dir(),
             MAX_GROUPS,
             "group folders",
         )?;
@@ -239,7 +251,7 @@ impl Scan {
         for path in &folders {
             let files = sorted_entries(
                 path,
-                |p| p.is_file() && is_frame_file(p) && !hidden(p),
+                |p| !hidden(p) && is_frame_file(p) && p.is_file(),
                 MAX_FRAMES_PER_GROUP,
                 "frames",
             )?;
@@ -258,11 +270,12 @@ impl Scan {
         let mut groups = Vec::new();
         for path in in_numbered_order(dir, folders, MAX_GROUPS, "group folders")? {
             // A number the scan skips has no folder and no frames: loading it fails naming it.
-            let frames = frames_of.remove(&path).unwrap_or_default();
+            let frames = frames_of.remove(&path);
             groups.push(GroupEntry {
                 index: groups.len(),
                 dir: path,
-                frames,
+                missing: frames.is_none().then_some("group folder"),
+                frames: frames.unwrap_or_default(),
                 zarr: None,
             });
         }
@@ -340,7 +353,7 @@ impl Scan {
     /// True for a Zarr store (`pack`), false for a scan folder.
     #[must_use]
     pub fn is_store(&self) -> bool {
-        self.dir.join("zarr.json").is_file()
+        self.groups.iter().any(|g| g.zarr.is_some())
     }
 
     /// Start of group `group` along the groove, in µm from the first group.

@@ -30,6 +30,13 @@ pub fn filter_phase(method: Method) -> FilterPhase {
     }
 }
 
+/// The filters `method`'s sound goes through, in words, for its report
+/// ([`super::dsp::describe_chain`]).
+#[must_use]
+pub fn describe_filters(dsp: &super::dsp::DspParams, method: Method) -> String {
+    super::dsp::describe_chain(dsp, filter_phase(method))
+}
+
 /// How a still's sound runs them ([`channels_to_output`]).
 pub const STILL_FILTER_PHASE: FilterPhase = FilterPhase::ZeroPhase;
 

@@ -207,7 +207,9 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
         .enumerate()
         .map(|(index, path)| GroupEntry {
             index,
-            // A skipped number has no chunk: loading it fails naming it (`is_missing`).
+            // A skipped number has no chunk: loading it fails naming it.
+            missing: (!chunk_of.contains_key(&path))
+                .then_some("group (the store was packed without it)"),
             zarr: chunk_of.get(&path).map(|&group| ZarrGroup {
                 store: dir.to_path_buf(),
                 group,

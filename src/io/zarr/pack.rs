@@ -73,11 +73,15 @@ pub fn pack_scan(
     level: i32,
     job: Job<'_>,
 ) -> Result<PackSummary, LoadError> {
-    if scan.groups.iter().any(|g| g.zarr.is_some()) {
+    if scan.is_store() {
         return Err(LoadError::Io {
             problem: "this scan is a Zarr store already".into(),
             path: scan.dir.clone(),
         });
+    }
+    // A place the numbering skips is refused before any group is packed.
+    if let Some(missing) = scan.groups.iter().find_map(|g| g.missing_error()) {
+        return Err(missing);
     }
     if !dir_is_missing_or_empty(out)? {
         return Err(LoadError::Io {

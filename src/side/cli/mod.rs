@@ -122,10 +122,7 @@ pub fn make_report<'a>(
         },
         method: rec.method.name(),
         fusion: rec.fusion.as_ref(),
-        filters: crate::pipeline::dsp::describe_chain(
-            &params.dsp,
-            crate::pipeline::finish::filter_phase(rec.method),
-        ),
+        filters: crate::pipeline::finish::describe_filters(&params.dsp, rec.method),
         duration_secs: rec.audio.duration_secs(),
         sample_rate_hz: rec.audio.sample_rate_hz,
         native_rate_hz: rec.stitched.native_rate_hz,
@@ -317,14 +314,16 @@ pub fn check_missing_groups(scan: &Scan, range: Range<usize>, keep_going: bool) 
     let Some(what) = scan.missing_note(range) else {
         return Ok(());
     };
-    if !keep_going && scan.is_store() {
-        bail!("{what}: run with --keep-going to read each as a gap of silence, in its place");
-    }
     if !keep_going {
+        // Folders can be renamed; a store's names are what it was packed with.
+        let rename = if scan.is_store() {
+            ""
+        } else {
+            " (or, if the numbers are not places on the groove, such as timestamps, name the \
+             folders in order g00000, g00001, …)"
+        };
         bail!(
-            "{what}: run with --keep-going to read each as a gap of silence, in its place (or, \
-             if the numbers are not places on the groove, such as timestamps, name the folders \
-             in order g00000, g00001, …)"
+            "{what}: run with --keep-going to read each as a gap of silence, in its place{rename}"
         );
     }
     eprintln!("warning: {what}: each becomes a gap of silence, in its place");

@@ -1,17 +1,17 @@
 //! The `plan` and `merge` subcommands.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
 use std::time::Instant;
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 
 use super::{lock_outputs, make_report};
 use crate::cli::check_outputs;
-use crate::cli::{load_params, path_choice};
+use crate::cli::{load_params, path_choice, unless_interrupted};
 use crate::engine::{GroupOutcome, GroupStream, SlopeMode, run_groups};
 use crate::io::wav::{WavBits, write_wav};
 use crate::io::{Scan, ScanMeta, write_json_atomic};
+use crate::job::interrupted;
 use crate::pipeline::PipelineParams;
 use crate::pipeline::slope_reference::SlopeHistory;
 use crate::side::merge::merge_parts;
@@ -85,13 +85,7 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     check_outputs(&outputs, &[], args.force)?;
     let _locks = lock_outputs(&outputs)?;
     let started = Instant::now();
-    let interrupted = crate::job::interrupted();
-    let merged =
-        merge_parts(&args.parts, interrupted).map_err(|e| cancelled_or(e.into(), "merge"))?;
-    // Ctrl-C while the side was finished.
-    if interrupted.load(Ordering::Relaxed) {
-        bail!("merge: cancelled; nothing written");
-    }
+    let merged = unless_interrupted("merge", merge_parts(&args.parts, interrupted()))?;
     let mut rec = merged.reconstruction;
     rec.timings.total_secs = started.elapsed().as_secs_f64();
     write_wav(&args.out, &rec.audio, args.bits, args.force)?;
@@ -146,7 +140,7 @@ fn probe_secs_per_group(
         },
         0..n,
         &mut slopes,
-        crate::job::interrupted(),
+        interrupted(),
         &mut |o: GroupOutcome| {
             // A group that failed (a gap under --keep-going) is not counted: most fail when
             // read, at next to no cost, and counted they would make the side look faster. One
@@ -183,13 +177,12 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
     params.path = path_choice(&args.path, params.path);
     let scan = Scan::open(&args.scan)?;
     super::check_missing_groups(&scan, 0..scan.groups.len(), args.keep_going)?;
-    let probe = probe_secs_per_group(&scan, &params, args.keep_going, args.probe_groups)
-        .map_err(|e| cancelled_or(e, "plan"))?;
+    // Also what stops a plan that Ctrl-C reached while its scan was opened (or with no probe).
+    let probe = unless_interrupted(
+        "plan",
+        probe_secs_per_group(&scan, &params, args.keep_going, args.probe_groups),
+    )?;
     let plan = Plan::new(&scan, &params, args.keep_going, args.shards, probe)?;
-    // Ctrl-C while the scan was opened, or with no probe to notice it.
-    if crate::job::interrupted().load(Ordering::Relaxed) {
-        bail!("plan: cancelled; nothing written");
-    }
     write_json_atomic(&args.out, &plan, args.force)?;
     println!(
         "wrote {} ({} groups in {} shards; each also runs up to {} groups before its range)",
@@ -223,15 +216,6 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// "`command`: cancelled; nothing written" when Ctrl-C stopped the work behind `e`, else `e`.
-fn cancelled_or(e: anyhow::Error, command: &str) -> anyhow::Error {
-    if crate::job::interrupted().load(Ordering::Relaxed) {
-        anyhow::anyhow!("{command}: cancelled; nothing written")
-    } else {
-        e
-    }
 }
 
 /// `path` as one word for a POSIX shell: bare when it holds only safe characters, else in
