@@ -264,13 +264,7 @@ fn a_config_key_of_the_wrong_name_type_or_range_is_named_with_its_file() {
         let mut args = command.to_vec();
         args.extend(["--out", s(&out), "--config", s(&config)]);
         let run = groovescope(&args);
-        let err = stderr(&run);
-        assert!(!run.status.success());
-        assert!(
-            err.contains(wanted) && err.contains(&format!("c{k}.toml")),
-            "{err}"
-        );
-        assert_eq!(err.lines().count(), 1, "{err}");
+        common::failed_with(&run, &[wanted, &format!("c{k}.toml")]);
         assert!(!out.exists());
     }
 }

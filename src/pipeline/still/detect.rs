@@ -13,7 +13,7 @@
 //! (greedy, nearest pairs first), tolerating gaps of `max_gap_blocks`; they are numbered by
 //! their position across the image with the common drift taken out.
 
-use super::link::{absorb_pieces, centre, link, merge_fragments, slope};
+use super::link::{absorb_pieces, centre, common_drift, interpolate, link, merge_fragments, width};
 use super::profile::Profiles;
 use super::{Axis, StillError, StillParams, StillSetup, WallTone};
 use crate::pipeline::median;
@@ -79,26 +79,6 @@ impl GrooveTrack {
             .filter_map(|(b, v)| v.map(|v| (map.block_centres[b], v)))
             .collect();
         interpolate(&found, line)
-    }
-}
-
-/// The four borders at `line` from `found` (line, borders) pairs in line order: linear
-/// between them, held at the ends; NaN when there are none.
-pub(super) fn interpolate(found: &[(f64, [f64; 4])], line: f64) -> [f64; 4] {
-    let Some(&(first_line, first)) = found.first() else {
-        return [f64::NAN; 4];
-    };
-    if line <= first_line {
-        return first;
-    }
-    let i = found.partition_point(|(l, _)| *l <= line);
-    match (found.get(i.wrapping_sub(1)), found.get(i)) {
-        (Some(&(l0, v0)), Some(&(l1, v1))) => {
-            let t = (line - l0) / (l1 - l0).max(1e-9);
-            std::array::from_fn(|k| v0[k] + t * (v1[k] - v0[k]))
-        }
-        (Some(&(_, v)), None) => v,
-        _ => first,
     }
 }
 
@@ -333,7 +313,7 @@ pub fn detect_grooves(
                     }
                 }
             }
-            grooves.retain(|g| g[3] - g[0] <= max_width_px);
+            grooves.retain(|g| width(g) <= max_width_px);
             grooves
         })
         .collect();
@@ -349,28 +329,28 @@ pub fn detect_grooves(
             })
             .collect(),
     );
-    let width = median(per_block.iter().flatten().map(|g| g[3] - g[0]).collect()).unwrap_or(0.0);
+    let image_width = median(per_block.iter().flatten().map(width).collect()).unwrap_or(0.0);
+    // How far a width is off the image's, as a share of it.
+    let off_width = |w: f64| (w / image_width.max(f64::MIN_POSITIVE) - 1.0).abs();
     // Pieces of grooves broken up by text or damage pair into grooves of the wrong width.
     let per_block: Vec<Vec<[f64; 4]>> = per_block
         .into_iter()
         .map(|mut gs| {
-            gs.retain(|g| {
-                ((g[3] - g[0]) / width.max(f64::MIN_POSITIVE) - 1.0).abs() <= WIDTH_TOLERANCE
-            });
+            gs.retain(|g| off_width(width(g)) <= WIDTH_TOLERANCE);
             gs
         })
         .collect();
-    let tol = spacing.map_or(0.5 * width, |s| LINK_SHARE * s).max(2.0);
+    let tol = spacing
+        .map_or(0.5 * image_width, |s| LINK_SHARE * s)
+        .max(2.0);
     let mut tracks: Vec<Vec<Option<[f64; 4]>>> = link(&per_block, tol, params.max_gap_blocks);
     merge_fragments(&mut tracks, tol, params.max_gap_blocks);
-    let drift = median(tracks.iter().filter_map(|t| slope(t)).collect()).unwrap_or(0.0);
+    let drift = common_drift(&tracks);
     absorb_pieces(&mut tracks, tol, drift);
     tracks.retain(|t| {
-        let track_width = median(t.iter().flatten().map(|g| g[3] - g[0]).collect());
+        let track_width = median(t.iter().flatten().map(width).collect());
         t.iter().flatten().count() >= params.min_track_blocks
-            && track_width.is_some_and(|w| {
-                (w / width.max(f64::MIN_POSITIVE) - 1.0).abs() <= TRACK_WIDTH_TOLERANCE
-            })
+            && track_width.is_some_and(|w| off_width(w) <= TRACK_WIDTH_TOLERANCE)
     });
     if tracks.is_empty() {
         let (lines_name, cross_name) = match profiles.axis {
@@ -394,7 +374,7 @@ pub fn detect_grooves(
         });
     }
     // Again over the grooves as they stand (pieces joined, short tracks dropped).
-    let drift = median(tracks.iter().filter_map(|t| slope(t)).collect()).unwrap_or(0.0);
+    let drift = common_drift(&tracks);
     let mid_block = 0.5 * (profiles.blocks as f64 - 1.0);
     let mut grooves: Vec<GrooveTrack> = tracks
         .into_iter()
@@ -414,7 +394,7 @@ pub fn detect_grooves(
                 number: 0,
                 coverage: n / profiles.blocks as f64,
                 position_px,
-                width_px: median(found.iter().map(|(_, g)| g[3] - g[0]).collect()).unwrap_or(0.0),
+                width_px: median(found.iter().map(|(_, g)| width(g)).collect()).unwrap_or(0.0),
                 blocks,
             }
         })

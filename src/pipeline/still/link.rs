@@ -1,7 +1,6 @@
 //! Grooves linked from block to block into tracks: greedy nearest linking, then pieces of one
 //! groove joined (end to start across a gap, or a shorter piece running along a longer track).
 
-use super::detect::interpolate;
 use crate::pipeline::median;
 
 /// Most blocks a piece of a groove may share with the track it joins (see `absorb_pieces`).
@@ -13,6 +12,36 @@ const NEAR_SHARE: f64 = 0.75;
 /// The middle of a groove's four borders: halfway between its land borders.
 pub(super) fn centre(g: &[f64; 4]) -> f64 {
     0.5 * (g[0] + g[3])
+}
+
+/// A groove's width at the land: between its outer borders.
+pub(super) fn width(g: &[f64; 4]) -> f64 {
+    g[3] - g[0]
+}
+
+/// The four borders at `line` from `found` (line, borders) pairs in line order: linear
+/// between them, held at the ends; NaN when there are none.
+pub(super) fn interpolate(found: &[(f64, [f64; 4])], line: f64) -> [f64; 4] {
+    let Some(&(first_line, first)) = found.first() else {
+        return [f64::NAN; 4];
+    };
+    if line <= first_line {
+        return first;
+    }
+    let i = found.partition_point(|(l, _)| *l <= line);
+    match (found.get(i.wrapping_sub(1)), found.get(i)) {
+        (Some(&(l0, v0)), Some(&(l1, v1))) => {
+            let t = (line - l0) / (l1 - l0).max(1e-9);
+            std::array::from_fn(|k| v0[k] + t * (v1[k] - v0[k]))
+        }
+        (Some(&(_, v)), None) => v,
+        _ => first,
+    }
+}
+
+/// The image's common drift (px a block): the median slope of the tracks.
+pub(super) fn common_drift(tracks: &[Vec<Option<[f64; 4]>>]) -> f64 {
+    median(tracks.iter().filter_map(|t| slope(t)).collect()).unwrap_or(0.0)
 }
 
 /// Builds tracks from the grooves of every block (greedy nearest linking).
@@ -72,13 +101,26 @@ pub(super) fn link(
     tracks.into_iter().map(|t| t.blocks).collect()
 }
 
+/// Takes track `b` out of `tracks` to join it to track `a`: `a`'s index after the removal,
+/// and the piece.
+fn take_piece(
+    tracks: &mut Vec<Vec<Option<[f64; 4]>>>,
+    a: usize,
+    b: usize,
+) -> (usize, Vec<Option<[f64; 4]>>) {
+    let piece = tracks.remove(b);
+    (if b < a { a - 1 } else { a }, piece)
+}
+
 /// Puts `piece`'s grooves into `track`'s empty blocks; in a block both hold, the groove whose
-/// width is nearer `width` stays.
-fn join_into(track: &mut [Option<[f64; 4]>], piece: Vec<Option<[f64; 4]>>, width: f64) {
+/// width is nearer `keep_width` stays.
+fn join_into(track: &mut [Option<[f64; 4]>], piece: Vec<Option<[f64; 4]>>, keep_width: f64) {
     for (slot, g) in track.iter_mut().zip(piece) {
         match (slot.as_ref(), g) {
             (None, Some(g)) => *slot = Some(g),
-            (Some(s), Some(g)) if ((g[3] - g[0]) - width).abs() < ((s[3] - s[0]) - width).abs() => {
+            (Some(s), Some(g))
+                if (width(&g) - keep_width).abs() < (width(s) - keep_width).abs() =>
+            {
                 *slot = Some(g);
             }
             _ => {}
@@ -119,13 +161,13 @@ pub(super) fn merge_fragments(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64,
             }
         }
         let Some((a, b)) = join else { return };
-        let piece = tracks.remove(b);
-        let a = if b < a { a - 1 } else { a };
+        let (a, piece) = take_piece(tracks, a, b);
+        // The groove nearer the median width of host and piece together stays.
         let widths: Vec<f64> = tracks[a]
             .iter()
             .chain(&piece)
             .flatten()
-            .map(|g| g[3] - g[0])
+            .map(width)
             .collect();
         join_into(&mut tracks[a], piece, median(widths).unwrap_or(0.0));
     }
@@ -176,20 +218,24 @@ pub(super) fn absorb_pieces(tracks: &mut Vec<Vec<Option<[f64; 4]>>>, tol: f64, d
                     .zip(track)
                     .filter(|(p, t)| p.is_some() && t.is_some())
                     .count();
+                if shared > MAX_SHARED_BLOCKS {
+                    continue;
+                }
                 let near = own
                     .iter()
                     .filter(|(block, g)| (centre(g) - runs_at(host, levels[a], *block)).abs() < tol)
                     .count();
-                if shared <= MAX_SHARED_BLOCKS && near as f64 >= NEAR_SHARE * own.len() as f64 {
+                if near as f64 >= NEAR_SHARE * own.len() as f64 {
                     join = Some((a, b));
                     break 'search;
                 }
             }
         }
         let Some((a, b)) = join else { return };
-        let piece = tracks.remove(b);
-        let a = if b < a { a - 1 } else { a };
-        let w = median(tracks[a].iter().flatten().map(|g| g[3] - g[0]).collect()).unwrap_or(0.0);
+        let (a, piece) = take_piece(tracks, a, b);
+        // The groove nearer the longer host's own median width stays (a piece may begin with
+        // a wrong pairing).
+        let w = median(tracks[a].iter().flatten().map(width).collect()).unwrap_or(0.0);
         join_into(&mut tracks[a], piece, w);
     }
 }
