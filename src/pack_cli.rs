@@ -7,7 +7,7 @@ use anyhow::{Result, bail};
 
 use crate::cli::progress_bar;
 use crate::io::Scan;
-use crate::io::zarr::{DEFAULT_ZSTD_LEVEL, pack_scan};
+use crate::io::zarr::{DEFAULT_ZSTD_LEVEL, PackOptions, pack_scan};
 use crate::job::Job;
 use crate::side::scan_fingerprint;
 
@@ -22,6 +22,13 @@ pub struct PackArgs {
     /// zstd compression level (1 fastest … 22 smallest).
     #[arg(long, default_value_t = DEFAULT_ZSTD_LEVEL)]
     pub zstd_level: i32,
+    /// Go on from an interrupted pack of this output (its partial store beside `--out`) after
+    /// the last group it packed and checked; without one, start.
+    #[arg(long, conflicts_with = "force")]
+    pub resume: bool,
+    /// Remove an interrupted pack of this output and start over.
+    #[arg(long)]
+    pub force: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -39,14 +46,26 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
     let scan = Scan::open(&args.scan)?;
     let started = Instant::now();
     let pb = progress_bar(scan.groups.len(), args.quiet);
+    let options = PackOptions {
+        zstd_level: args.zstd_level,
+        resume: args.resume,
+        force: args.force,
+        keep_partial: true,
+    };
     let summary = pack_scan(
         &scan,
         &args.out,
-        args.zstd_level,
+        options,
         Job::reporting(&|done, _| pb.set_position(done as u64)),
     );
     pb.finish_and_clear();
     let summary = summary?;
+    if summary.resumed > 0 && !args.quiet {
+        println!(
+            "resumed: {} of {} groups were packed and checked before",
+            summary.resumed, summary.groups
+        );
+    }
     let packed = Scan::open(&summary.out)?;
     if scan_fingerprint(&packed) != scan_fingerprint(&scan) {
         bail!(

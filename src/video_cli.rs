@@ -132,9 +132,10 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
             crate::io::zarr::pack_scan(
                 &scan,
                 &args.out,
-                crate::io::zarr::DEFAULT_ZSTD_LEVEL,
+                crate::io::zarr::PackOptions::once(crate::io::zarr::DEFAULT_ZSTD_LEVEL),
                 Job::unwatched(),
             )
+            .map_err(|e| e.error)
         });
         let _ = std::fs::remove_dir_all(&folder);
         packed?;

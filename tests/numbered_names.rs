@@ -173,7 +173,7 @@ fn a_skipped_frame_fails_its_group_naming_the_frame() {
 #[test]
 fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_place() {
     use groovescope::io::frames::load_frame_raw;
-    use groovescope::io::zarr::{SampleType, ZarrWriter};
+    use groovescope::io::zarr::{GroupLayout, SampleType, ZarrWriter};
     // The stores `pack` wrote before numbered names were positions: the demo's groups named
     // g0 … g12 and stored in name order (g10, g11, g12 before g2), and one packed from
     // folders that had lost g5 (every group after it one place early).
@@ -192,7 +192,13 @@ fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_pla
         let first = raw(0);
         let (w, h) = (first[0].width, first[0].height);
         let sample_type = SampleType::of(&first[0].samples);
-        let mut writer = ZarrWriter::create(&store, first.len(), w, h, sample_type, 3).unwrap();
+        let layout = GroupLayout {
+            frames: first.len(),
+            width: w,
+            height: h,
+            sample_type,
+        };
+        let mut writer = ZarrWriter::create(&store, layout, 3).unwrap();
         for g in groups {
             let source = &scan.groups[g].dir;
             writer.write_group(&names(g), raw(g), source).unwrap();

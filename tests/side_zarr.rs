@@ -5,9 +5,12 @@
 mod common;
 
 use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
 
 use common::{groovescope, stderr};
 use groovescope::image::Image;
+use groovescope::io::zarr::{PROGRESS_FILE, partial_path};
 use groovescope::io::{Scan, load_group, save_grey_png};
 use groovescope::job::Job;
 use groovescope::side::scan_fingerprint;
@@ -54,26 +57,7 @@ fn pack_round_trips_every_frame_bit_for_bit_for_8_bit_16_bit_and_colour_frames()
         textured_scan(&folder, 3, kind);
         let o = groovescope(&["pack", s(&folder), "--out", s(&store)]);
         assert!(o.status.success(), "{}", stderr(&o));
-        let (a, b) = (Scan::open(&folder).unwrap(), Scan::open(&store).unwrap());
-        assert!(b.groups.iter().all(|g| g.zarr.is_some()));
-        assert_eq!(a.meta, b.meta);
-        assert_eq!(scan_fingerprint(&a), scan_fingerprint(&b));
-        assert!(b.reference.as_ref().is_some_and(|p| p.starts_with(&store)));
-        for (ga, gb) in a.groups.iter().zip(&b.groups) {
-            let (fa, fb) = (load_group(ga).unwrap(), load_group(gb).unwrap());
-            assert_eq!(fa.len(), 7);
-            for (x, y) in fa.iter().zip(&fb) {
-                assert_eq!((x.width, x.height), (y.width, y.height));
-                assert!(
-                    x.data
-                        .iter()
-                        .zip(&y.data)
-                        .all(|(p, q)| p.to_bits() == q.to_bits()),
-                    "{kind}-bit group {} differs",
-                    ga.index
-                );
-            }
-        }
+        assert_same_scan(&folder, &store);
         // Packing onto a store that exists is refused; the store is untouched.
         let o = groovescope(&["pack", s(&folder), "--out", s(&store)]);
         assert!(
@@ -85,8 +69,148 @@ fn pack_round_trips_every_frame_bit_for_bit_for_8_bit_16_bit_and_colour_frames()
     }
 }
 
+/// `store` holds the scan of `folder`: the same metadata, fingerprint and reference, and
+/// every group's frames bit for bit.
+fn assert_same_scan(folder: &Path, store: &Path) {
+    let (a, b) = (Scan::open(folder).unwrap(), Scan::open(store).unwrap());
+    assert!(b.groups.iter().all(|g| g.zarr.is_some()));
+    assert_eq!(a.meta, b.meta);
+    assert_eq!(scan_fingerprint(&a), scan_fingerprint(&b));
+    assert!(b.reference.as_ref().is_some_and(|p| p.starts_with(store)));
+    for (ga, gb) in a.groups.iter().zip(&b.groups) {
+        let (fa, fb) = (load_group(ga).unwrap(), load_group(gb).unwrap());
+        assert_eq!(fa.len(), 7);
+        for (x, y) in fa.iter().zip(&fb) {
+            assert_eq!((x.width, x.height), (y.width, y.height));
+            assert!(
+                x.data
+                    .iter()
+                    .zip(&y.data)
+                    .all(|(p, q)| p.to_bits() == q.to_bits()),
+                "{}: group {} differs",
+                store.display(),
+                ga.index
+            );
+        }
+    }
+    assert!(!store.join(PROGRESS_FILE).exists(), "the progress record");
+}
+
+/// The groups an interrupted pack's record counts (0 while it has none).
+fn groups_checked(partial: &Path) -> usize {
+    std::fs::read(partial.join(PROGRESS_FILE))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|v| v["groups_checked"].as_u64())
+        .map_or(0, |n| n as usize)
+}
+
+/// Starts `groovescope pack` with `args` and returns once its record counts `at_least`
+/// groups of `partial` (the pack is still running).
+fn pack_until(args: &[&str], partial: &Path, at_least: usize) -> Child {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+        .arg("pack")
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while groups_checked(partial) < at_least {
+        if child.try_wait().unwrap().is_some() || started.elapsed() > Duration::from_secs(120) {
+            let _ = child.kill();
+            let o = child.wait_with_output().unwrap();
+            panic!(
+                "the pack ended or stalled before {at_least} groups: {}",
+                stderr(&o)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    child
+}
+
 #[test]
-fn pack_refuses_groups_of_different_frame_counts_naming_the_group() {
+fn a_stopped_or_killed_pack_resumes_where_it_stopped_to_the_same_store() {
+    let tmp = tempfile::tempdir().unwrap();
+    let folder = tmp.path().join("scan");
+    let groups = 400;
+    textured_scan(&folder, groups, "8");
+    let store = tmp.path().join("side.zarr");
+    let partial = partial_path(&store);
+    let args = [s(&folder), "--out", s(&store), "--quiet"];
+
+    // Ctrl-C: the groups packed so far are kept, and the line says where and how to go on.
+    let child = pack_until(&args, &partial, 2);
+    common::ctrl_c(&child);
+    let o = child.wait_with_output().unwrap();
+    let e = stderr(&o);
+    let kept = groups_checked(&partial);
+    assert!(
+        !o.status.success()
+            && e.contains("stopped")
+            && e.contains(&format!("the {kept} of {groups} groups"))
+            && e.contains(s(&partial))
+            && e.contains("--resume")
+            && e.lines().count() == 1,
+        "{e}"
+    );
+    assert!((2..groups).contains(&kept), "{kept}");
+    assert!(!store.exists());
+
+    // Without --resume or --force the partial store is neither used nor touched.
+    let o = groovescope(&["pack", s(&folder), "--out", s(&store)]);
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains(s(&partial)) && e.contains("--resume"),
+        "{e}"
+    );
+    assert_eq!(groups_checked(&partial), kept);
+    // Nor with another zstd level: the chunks would mix two.
+    let o = groovescope(&[
+        "pack",
+        s(&folder),
+        "--out",
+        s(&store),
+        "--resume",
+        "--zstd-level",
+        "9",
+    ]);
+    let e = stderr(&o);
+    assert!(!o.status.success() && e.contains("--zstd-level 3"), "{e}");
+
+    // Killed outright while resuming: what it counted is whole.
+    let mut args_resume = args.to_vec();
+    args_resume.push("--resume");
+    let mut child = pack_until(&args_resume, &partial, kept + 2);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let killed_at = groups_checked(&partial);
+    assert!(killed_at >= kept + 2, "{killed_at}");
+
+    let mut loud = args_resume.clone();
+    loud.retain(|a| *a != "--quiet");
+    let mut cmd = vec!["pack"];
+    cmd.extend(loud);
+    let o = groovescope(&cmd);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains(&format!("resumed: {killed_at} of {groups} groups")),
+        "{said}"
+    );
+    assert!(!partial.exists(), "the partial store is renamed into place");
+    assert_same_scan(&folder, &store);
+    let left: Vec<_> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert_eq!(left.len(), 2, "only the scan and its store: {left:?}");
+}
+
+#[test]
+fn pack_refuses_groups_of_different_frame_counts_naming_the_group_and_resumes_once_mended() {
     let tmp = tempfile::tempdir().unwrap();
     let folder = tmp.path().join("scan");
     textured_scan(&folder, 3, "8");
@@ -99,16 +223,56 @@ fn pack_refuses_groups_of_different_frame_counts_naming_the_group() {
     let o = groovescope(&["pack", s(&folder), "--out", s(&store)]);
     let e = stderr(&o);
     assert!(
-        !o.status.success() && e.contains("g00001") && e.contains("same number of frames"),
+        !o.status.success()
+            && e.contains("g00001")
+            && e.contains("same number of frames")
+            && e.contains("the 1 of 3 groups")
+            && e.contains("--resume"),
         "{e}"
     );
     assert!(!store.exists(), "a failed pack left its store");
     let leftovers: Vec<_> = std::fs::read_dir(tmp.path()).unwrap().collect();
-    assert_eq!(
-        leftovers.len(),
-        1,
-        "a failed pack left its temporary folder"
+    assert_eq!(leftovers.len(), 2, "the scan and the partial store");
+    let partial = partial_path(&store);
+    assert_eq!(groups_checked(&partial), 1);
+
+    // Once the scan's metadata has changed it is another scan: refused, and nothing written.
+    let toml = std::fs::read_to_string(folder.join("scan.toml")).unwrap();
+    std::fs::write(
+        folder.join("scan.toml"),
+        toml.replace("rpm = 78.0", "rpm = 45.0"),
+    )
+    .unwrap();
+    let o = groovescope(&["pack", s(&folder), "--out", s(&store), "--resume"]);
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains("another scan") && e.contains(s(&partial)),
+        "{e}"
     );
+    // --force starts over on the scan as it is now (and stops at group 1 again) ...
+    let o = groovescope(&["pack", s(&folder), "--out", s(&store), "--force"]);
+    assert!(stderr(&o).contains("the 1 of 3 groups"), "{}", stderr(&o));
+    // ... and mended, it goes on from group 1.
+    std::fs::remove_file(folder.join("g00001/f007.png")).unwrap();
+    let o = groovescope(&["pack", s(&folder), "--out", s(&store), "--resume"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("resumed: 1 of 3 groups"), "{said}");
+    assert_same_scan(&folder, &store);
+    assert_eq!(Scan::open(&store).unwrap().meta.record.rpm, 45.0);
+
+    // A pack that fails on its first group keeps nothing.
+    let other = tmp.path().join("other");
+    textured_scan(&other, 2, "8");
+    std::fs::write(other.join("g00000/f003.png"), b"not a png").unwrap();
+    let out = tmp.path().join("other.zarr");
+    let o = groovescope(&["pack", s(&other), "--out", s(&out)]);
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains("f003.png") && !e.contains("--resume"),
+        "{e}"
+    );
+    assert!(!out.exists() && !partial_path(&out).exists());
 }
 
 #[test]

@@ -15,7 +15,7 @@ use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::frames::{RawFrame, RawSamples, grey_from_raw};
 use groovescope::io::frames::{check_frame_bytes, decode_frame};
 use groovescope::io::still::save_grey_image;
-use groovescope::io::zarr::{SampleType, ZarrGroup, ZarrWriter};
+use groovescope::io::zarr::{GroupLayout, SampleType, ZarrGroup, ZarrWriter};
 use groovescope::io::{Scan, ScanMeta, flo, load_group, wav};
 use groovescope::meta::Cut;
 use groovescope::pipeline::PipelineParams;
@@ -554,7 +554,13 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
     // within the 8 px (3.1 µm) left of 24 px between the stitcher's margins.
     let (w, h) = (u.int_in_range(24usize..=32)?, u.int_in_range(1usize..=24)?);
     let sample_type = *u.choose(&[SampleType::U8, SampleType::U16, SampleType::F32])?;
-    let mut writer = ZarrWriter::create(dir, frames, w, h, sample_type, 1).map_err(fail)?;
+    let layout = GroupLayout {
+        frames,
+        width: w,
+        height: h,
+        sample_type,
+    };
+    let mut writer = ZarrWriter::create(dir, layout, 1).map_err(fail)?;
     let mut written = Vec::new();
     for g in 0..groups {
         let group: Vec<RawFrame> = (0..frames)
@@ -590,10 +596,7 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
         ZarrGroup {
             store: dir.to_path_buf(),
             group: g,
-            frames,
-            width: w,
-            height: h,
-            sample_type,
+            layout,
         }
         .chunk_path()
     };

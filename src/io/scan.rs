@@ -74,7 +74,7 @@ impl GroupEntry {
     /// Frames in the group.
     #[must_use]
     pub fn frame_count(&self) -> usize {
-        self.zarr.as_ref().map_or(self.frames.len(), |z| z.frames)
+        self.zarr.as_ref().map_or(self.frames.len(), |z| z.layout.frames)
     }
 
     /// True for a place the scan's numbering skips (see [`GroupEntry::missing`]).

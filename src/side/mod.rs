@@ -61,29 +61,7 @@ impl SideError {
     }
 }
 
-/// 64-bit FNV-1a of `bytes`, as 16 hex digits: a fingerprint for telling runs apart (not a
-/// defence against forgery).
-#[must_use]
-pub fn fingerprint(bytes: &[u8]) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    format!("{h:016x}")
-}
-
-/// The scan's fingerprint: its metadata (as canonical TOML), and every group's name and frame
-/// count. The folder and the Zarr form of one scan have the same one.
-#[must_use]
-pub fn scan_fingerprint(scan: &Scan) -> String {
-    let mut text = scan.meta.to_toml_string().unwrap_or_default();
-    text.push_str(&format!("\ngroups {}\n", scan.groups.len()));
-    for g in &scan.groups {
-        text.push_str(&format!("{} {}\n", g.name(), g.frame_count()));
-    }
-    fingerprint(text.as_bytes())
-}
+pub use crate::io::fingerprint::{fingerprint, scan_fingerprint};
 
 /// The params' fingerprint (over their canonical TOML).
 #[must_use]

@@ -26,7 +26,7 @@ use super::scan::{GroupEntry, MIN_FRAMES_PER_GROUP, Scan, ScanMeta, check_meta_a
 use crate::image::Image;
 
 mod pack;
-pub use pack::{PackSummary, pack_scan};
+pub use pack::{PROGRESS_FILE, PackError, PackOptions, PackSummary, pack_scan, partial_path};
 
 /// Path of the frames array inside the store.
 pub const FRAMES_ARRAY: &str = "/frames";
@@ -69,6 +69,19 @@ impl SampleType {
     }
 }
 
+/// The frames of every group of a store: how many, their size and how their samples are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GroupLayout {
+    /// Frames per group.
+    pub frames: usize,
+    /// Frame width (px).
+    pub width: usize,
+    /// Frame height (px).
+    pub height: usize,
+    /// How samples are stored.
+    pub sample_type: SampleType,
+}
+
 /// The root group's `groovescope` attribute.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StoreAttributes {
@@ -89,14 +102,8 @@ pub struct ZarrGroup {
     pub store: PathBuf,
     /// The group's chunk index.
     pub group: usize,
-    /// Frames in the group.
-    pub frames: usize,
-    /// Frame width (px).
-    pub width: usize,
-    /// Frame height (px).
-    pub height: usize,
-    /// How samples are stored.
-    pub sample_type: SampleType,
+    /// The store's frames.
+    pub layout: GroupLayout,
 }
 
 impl ZarrGroup {
@@ -213,10 +220,12 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
             zarr: chunk_of.get(&path).map(|&group| ZarrGroup {
                 store: dir.to_path_buf(),
                 group,
-                frames,
-                width,
-                height,
-                sample_type: attrs.sample_type,
+                layout: GroupLayout {
+                    frames,
+                    width,
+                    height,
+                    sample_type: attrs.sample_type,
+                },
             }),
             dir: path,
             frames: Vec::new(),
@@ -246,32 +255,32 @@ pub fn load_group_raw(z: &ZarrGroup) -> Result<Vec<RawFrame>, LoadError> {
     let store = open_store(&z.store)?;
     let array = Array::open(store, FRAMES_ARRAY).map_err(|e| bad(e.to_string()))?;
     let idx = [z.group as u64, 0, 0, 0];
-    let px = z.width * z.height;
+    let px = z.layout.width * z.layout.height;
     let missing = || {
         bad(format!(
             "the chunk of group {} is missing from the store",
             z.group
         ))
     };
-    let frames: Vec<RawSamples> = match z.sample_type {
+    let frames: Vec<RawSamples> = match z.layout.sample_type {
         SampleType::U8 => chunk_frames(&array, &idx, px, RawSamples::U8),
         SampleType::U16 => chunk_frames(&array, &idx, px, RawSamples::U16),
         SampleType::F32 => chunk_frames(&array, &idx, px, RawSamples::F32),
     }
     .map_err(|e| bad(e.to_string()))?
     .ok_or_else(missing)?;
-    if frames.len() != z.frames {
+    if frames.len() != z.layout.frames {
         return Err(bad(format!(
             "the chunk holds {} frames, the array says {}",
             frames.len(),
-            z.frames
+            z.layout.frames
         )));
     }
     Ok(frames
         .into_iter()
         .map(|samples| RawFrame {
-            width: z.width,
-            height: z.height,
+            width: z.layout.width,
+            height: z.layout.height,
             samples,
         })
         .collect())
@@ -316,10 +325,7 @@ pub struct ZarrWriter {
     dir: PathBuf,
     store: Arc<FilesystemStore>,
     array: Array<FilesystemStore>,
-    frames: usize,
-    width: usize,
-    height: usize,
-    sample_type: SampleType,
+    layout: GroupLayout,
     names: Vec<String>,
 }
 
@@ -333,48 +339,62 @@ impl std::fmt::Debug for ZarrWriter {
 }
 
 impl ZarrWriter {
-    /// Starts a store in the empty folder `dir` for groups of `frames` frames of
-    /// `width`×`height` samples of `sample_type`, compressed at zstd `level`.
+    /// Starts a store in the empty folder `dir` for groups of `layout`, compressed at zstd
+    /// `level`.
     ///
     /// # Errors
     /// [`LoadError::Io`] naming `dir` when the store cannot be created.
-    pub fn create(
+    pub fn create(dir: &Path, layout: GroupLayout, level: i32) -> Result<Self, LoadError> {
+        Self::reopen(dir, layout, level, Vec::new())
+    }
+
+    /// Goes on with a store in `dir` whose first `names.len()` chunks were written (and
+    /// checked) by a writer of the same layout and `level`: the array's metadata is written
+    /// again from that layout (the copy on disk may be one group ahead of the chunks, or torn
+    /// by a kill), and the next group written becomes chunk `names.len()`. With no names it
+    /// starts a new store.
+    ///
+    /// # Errors
+    /// [`LoadError::Io`] naming `dir` when the store cannot be created or its metadata written.
+    pub fn reopen(
         dir: &Path,
-        frames: usize,
-        width: usize,
-        height: usize,
-        sample_type: SampleType,
+        layout: GroupLayout,
         level: i32,
+        names: Vec<String>,
     ) -> Result<Self, LoadError> {
         let err =
             |e: &dyn std::fmt::Display| io_err(format!("cannot create the Zarr store: {e}"), dir);
         std::fs::create_dir_all(dir).map_err(|e| err(&e))?;
         let store = open_store(dir)?;
-        let (f, h, w) = (frames as u64, height as u64, width as u64);
-        let fill: zarrs::array::FillValue = match sample_type {
+        let (f, h, w) = (
+            layout.frames as u64,
+            layout.height as u64,
+            layout.width as u64,
+        );
+        let fill: zarrs::array::FillValue = match layout.sample_type {
             SampleType::U8 => 0u8.into(),
             SampleType::U16 => 0u16.into(),
             SampleType::F32 => 0f32.into(),
         };
         let array = ArrayBuilder::new(
-            vec![0, f, h, w],
+            vec![names.len() as u64, f, h, w],
             vec![1, f, h, w],
-            sample_type.data_type(),
+            layout.sample_type.data_type(),
             fill,
         )
         .bytes_to_bytes_codecs(vec![Arc::new(ZstdCodec::new(level, true))])
         .dimension_names(["group", "frame", "y", "x"].into())
         .build(store.clone(), FRAMES_ARRAY)
         .map_err(|e| err(&e))?;
+        if !names.is_empty() {
+            array.store_metadata().map_err(|e| err(&e))?;
+        }
         Ok(Self {
             dir: dir.to_path_buf(),
             store,
             array,
-            frames,
-            width,
-            height,
-            sample_type,
-            names: Vec::new(),
+            layout,
+            names,
         })
     }
 
@@ -389,12 +409,12 @@ impl ZarrWriter {
         source: &Path,
     ) -> Result<(), LoadError> {
         let g = self.names.len() as u64;
-        if frames.len() != self.frames {
+        if frames.len() != self.layout.frames {
             return Err(LoadError::Io {
                 problem: format!(
                     "a Zarr store needs the same number of frames in every group: this one has {}, the first {}",
                     frames.len(),
-                    self.frames
+                    self.layout.frames
                 ),
                 path: source.to_path_buf(),
             });
@@ -403,16 +423,16 @@ impl ZarrWriter {
         let mut u16s = Vec::new();
         let mut f32s = Vec::new();
         for f in frames {
-            if f.width != self.width || f.height != self.height {
+            if f.width != self.layout.width || f.height != self.layout.height {
                 return Err(LoadError::MixedSizes {
                     found_w: f.width,
                     found_h: f.height,
-                    want_w: self.width,
-                    want_h: self.height,
+                    want_w: self.layout.width,
+                    want_h: self.layout.height,
                     path: source.to_path_buf(),
                 });
             }
-            match (f.samples, self.sample_type) {
+            match (f.samples, self.layout.sample_type) {
                 (RawSamples::U8(v), SampleType::U8) => u8s.extend(v),
                 (RawSamples::U16(v), SampleType::U16) => u16s.extend(v),
                 (RawSamples::F32(v), SampleType::F32) => f32s.extend(v),
@@ -438,7 +458,7 @@ impl ZarrWriter {
         // A chunk of zeros is still written: a missing chunk means a lost group, not black frames.
         let opts = CodecOptions::default().with_store_empty_chunks(true);
         let idx = [g, 0, 0, 0];
-        match self.sample_type {
+        match self.layout.sample_type {
             SampleType::U8 => self.array.store_chunk_opt(&idx, u8s, &opts),
             SampleType::U16 => self.array.store_chunk_opt(&idx, u16s, &opts),
             SampleType::F32 => self.array.store_chunk_opt(&idx, f32s, &opts),
@@ -461,7 +481,7 @@ impl ZarrWriter {
             store_format: STORE_FORMAT,
             scan_toml: scan_toml.to_string(),
             groups: self.names,
-            sample_type: self.sample_type,
+            sample_type: self.layout.sample_type,
         };
         let mut map = serde_json::Map::new();
         map.insert(
