@@ -44,6 +44,24 @@ pub struct CameraMeta {
     pub working_distance_mm: f64,
 }
 
+/// What the numbers in group folder and frame names say (docs/FORMAT.md, "Numbered names are
+/// positions").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum NumberedNames {
+    /// Numbers on a regular step are places: a number skipped is a missing group or frame.
+    #[default]
+    Positions,
+    /// The numbers set the order only (timestamps, capture counters that skip).
+    Order,
+}
+
+impl NumberedNames {
+    fn is_positions(&self) -> bool {
+        *self == Self::Positions
+    }
+}
+
 /// The `[motion]` table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -52,6 +70,10 @@ pub struct MotionMeta {
     pub frame_step_um: f64,
     /// Travel between the first frames of consecutive groups.
     pub group_step_um: f64,
+    /// What numbered names say; only written when it is not the default, so the canonical
+    /// TOML (and every fingerprint) of a scan without it is unchanged.
+    #[serde(default, skip_serializing_if = "NumberedNames::is_positions")]
+    pub numbered_names: NumberedNames,
 }
 
 /// Which part of the field of view the cover glass covers.

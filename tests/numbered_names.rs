@@ -146,6 +146,48 @@ fn a_skipped_group_keeps_its_place_refused_before_work_or_a_gap_with_keep_going(
 }
 
 #[test]
+fn timestamp_names_are_an_order_once_scan_toml_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    // Groups named by the second they were taken: one took two seconds, so its successor's
+    // number skips one. As positions that is a lost group; the capture lost none.
+    let start = 1_733_390_401;
+    for g in 0..13 {
+        let stamp = start + g + usize::from(g >= 6);
+        let from = demo.join(format!("g{g:05}"));
+        std::fs::rename(&from, demo.join(format!("cap{stamp}"))).unwrap();
+    }
+    let out = dir.path().join("stamps.wav");
+    let o = reconstruct(&demo, &out, &[]);
+    common::failed_with(
+        &o,
+        &[
+            "skips 1 group folder",
+            "cap1733390407",
+            "numbered_names = \"order\"",
+        ],
+    );
+    let toml = std::fs::read_to_string(demo.join("scan.toml")).unwrap();
+    let said = toml.replace(
+        "group_step_um = 230.88\n",
+        "group_step_um = 230.88\nnumbered_names = \"order\"\n",
+    );
+    assert_ne!(said, toml);
+    std::fs::write(demo.join("scan.toml"), said).unwrap();
+    let o = reconstruct(&demo, &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::read(&out).unwrap() == untouched(dir.path()));
+    // A store packed from it keeps the setting and the order.
+    let store = dir.path().join("stamps.zarr");
+    let o = groovescope(&["pack", s(&demo), "--out", s(&store), "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let from_store = dir.path().join("store.wav");
+    let o = reconstruct(&store, &from_store, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::read(&from_store).unwrap() == std::fs::read(&out).unwrap());
+}
+
+#[test]
 fn one_frame_in_two_formats_is_refused_naming_both() {
     let dir = tempfile::tempdir().unwrap();
     let demo = demo_copy(dir.path());
@@ -173,7 +215,7 @@ fn a_skipped_frame_fails_its_group_naming_the_frame() {
 #[test]
 fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_place() {
     use groovescope::io::frames::load_frame_raw;
-    use groovescope::io::zarr::{GroupLayout, SampleType, ZarrWriter};
+    use groovescope::io::zarr::{ChunkLayout, SampleType, ZarrWriter};
     // The stores `pack` wrote before numbered names were positions: the demo's groups named
     // g0 … g12 and stored in name order (g10, g11, g12 before g2), and one packed from
     // folders that had lost g5 (every group after it one place early).
@@ -192,7 +234,7 @@ fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_pla
         let first = raw(0);
         let (w, h) = (first[0].width, first[0].height);
         let sample_type = SampleType::of(&first[0].samples);
-        let layout = GroupLayout {
+        let layout = ChunkLayout {
             frames: first.len(),
             width: w,
             height: h,

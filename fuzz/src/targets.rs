@@ -15,7 +15,7 @@ use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::frames::{RawFrame, RawSamples, grey_from_raw};
 use groovescope::io::frames::{check_frame_bytes, decode_frame};
 use groovescope::io::still::save_grey_image;
-use groovescope::io::zarr::{GroupLayout, SampleType, ZarrGroup, ZarrWriter};
+use groovescope::io::zarr::{ChunkLayout, SampleType, ZarrGroup, ZarrWriter};
 use groovescope::io::{Scan, ScanMeta, flo, load_group, wav};
 use groovescope::meta::Cut;
 use groovescope::pipeline::PipelineParams;
@@ -554,7 +554,7 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
     // within the 8 px (3.1 µm) left of 24 px between the stitcher's margins.
     let (w, h) = (u.int_in_range(24usize..=32)?, u.int_in_range(1usize..=24)?);
     let sample_type = *u.choose(&[SampleType::U8, SampleType::U16, SampleType::F32])?;
-    let layout = GroupLayout {
+    let layout = ChunkLayout {
         frames,
         width: w,
         height: h,

@@ -8,12 +8,14 @@
 //! other group) they say where each entry lies: a skipped number gets the path it would have
 //! had. That path does not exist, so reading it fails naming it: a missing group becomes a gap
 //! under `--keep-going`, a missing frame fails its group. Numbers on no regular step
-//! (timestamps) set the order only.
+//! (timestamps) set the order only, as all numbers do when `scan.toml` says
+//! `numbered_names = "order"` (timestamps of whole seconds can look like a regular step).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::LoadError;
+use crate::meta::NumberedNames;
 
 /// A name split around the number that ends its stem: `g00012` → prefix `g`, 12, 5 digits;
 /// `f007.png` → prefix `f`, 7, 3 digits, extension `.png`.
@@ -74,8 +76,8 @@ pub(super) fn strays(paths: &[PathBuf], holds_frames: impl Fn(usize) -> bool) ->
 
 /// `paths` (entries of `dir`, sorted by name) in the order they lie in: by number when every
 /// name is one prefix, a number and one extension, and when the numbers lie on a regular step
-/// ([`regular_step`]) with the path a skipped number would have had in its place; otherwise
-/// unchanged (name order). `what` names the entries in errors.
+/// ([`regular_step`]) and `names` says they are positions, with the path a skipped number would
+/// have had in its place; otherwise unchanged (name order). `what` names the entries in errors.
 ///
 /// # Errors
 /// [`LoadError::NotAScan`] when two names carry one number (`g1` and `g01`), or the numbers
@@ -85,6 +87,7 @@ pub(super) fn in_numbered_order(
     paths: Vec<PathBuf>,
     limit: usize,
     what: &str,
+    names_say: NumberedNames,
 ) -> Result<Vec<PathBuf>, LoadError> {
     let refuse = |problem: String| LoadError::NotAScan {
         problem,
@@ -119,7 +122,11 @@ pub(super) fn in_numbered_order(
         return Ok(paths);
     };
     // Numbers not on a regular step are not positions (timestamps): they set the order only.
-    let Some(step) = regular_step(&numbers) else {
+    let step = match names_say {
+        NumberedNames::Positions => regular_step(&numbers),
+        NumberedNames::Order => None,
+    };
+    let Some(step) = step else {
         return Ok(by_number.into_values().cloned().collect());
     };
     let places = (high - low) / step + 1;
@@ -189,8 +196,29 @@ mod tests {
         let dir = Path::new("/scan");
         let mut paths: Vec<PathBuf> = names.iter().map(|n| dir.join(n)).collect();
         paths.sort();
-        in_numbered_order(dir, paths, 100, "group folders")
+        in_numbered_order(dir, paths, 100, "group folders", NumberedNames::Positions)
             .map(|v| v.iter().map(|p| file_name(p)).collect())
+    }
+
+    #[test]
+    fn names_said_to_be_an_order_keep_no_place_for_a_skipped_number() {
+        let dir = Path::new("/scan");
+        let paths: Vec<PathBuf> = ["t100", "t101", "t103", "t99"]
+            .iter()
+            .map(|n| dir.join(n))
+            .collect();
+        let names = |say| {
+            in_numbered_order(dir, paths.clone(), 100, "group folders", say)
+                .unwrap()
+                .iter()
+                .map(|p| file_name(p))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(names(NumberedNames::Order), ["t99", "t100", "t101", "t103"]);
+        assert_eq!(
+            names(NumberedNames::Positions),
+            ["t99", "t100", "t101", "t102", "t103"]
+        );
     }
 
     #[test]

@@ -11,8 +11,8 @@ use super::numbering::{in_numbered_order, strays};
 pub const MIN_FRAMES_PER_GROUP: usize = 7;
 
 pub use crate::meta::{
-    CameraMeta, Cut, DualFocusMeta, FORMAT_VERSION, Geometry, GlassSide, MotionMeta, RecordMeta,
-    ScanMeta,
+    CameraMeta, Cut, DualFocusMeta, FORMAT_VERSION, Geometry, GlassSide, MotionMeta, NumberedNames,
+    RecordMeta, ScanMeta,
 };
 
 /// Reading and writing `scan.toml`.
@@ -74,7 +74,9 @@ impl GroupEntry {
     /// Frames in the group.
     #[must_use]
     pub fn frame_count(&self) -> usize {
-        self.zarr.as_ref().map_or(self.frames.len(), |z| z.layout.frames)
+        self.zarr
+            .as_ref()
+            .map_or(self.frames.len(), |z| z.layout.frames)
     }
 
     /// True for a place the scan's numbering skips (see [`GroupEntry::missing`]).
@@ -256,7 +258,13 @@ impl Scan {
                 "frames",
             )?;
             refuse_twin_frames(path, &files)?;
-            let files = in_numbered_order(path, files, MAX_FRAMES_PER_GROUP, "frames")?;
+            let files = in_numbered_order(
+                path,
+                files,
+                MAX_FRAMES_PER_GROUP,
+                "frames",
+                meta.motion.numbered_names,
+            )?;
             frames_of.insert(path.clone(), files);
         }
         let holds_frames = |i: usize| frames_of.get(&folders[i]).is_some_and(|f| !f.is_empty());
@@ -268,7 +276,8 @@ impl Scan {
             .map(|(_, path)| path)
             .collect();
         let mut groups = Vec::new();
-        for path in in_numbered_order(dir, folders, MAX_GROUPS, "group folders")? {
+        let names_say = meta.motion.numbered_names;
+        for path in in_numbered_order(dir, folders, MAX_GROUPS, "group folders", names_say)? {
             // A number the scan skips has no folder and no frames: loading it fails naming it.
             let frames = frames_of.remove(&path);
             groups.push(GroupEntry {
@@ -449,5 +458,27 @@ mod tests {
         let back = ScanMeta::from_toml_str(&m.to_toml_string().unwrap(), Path::new("s")).unwrap();
         assert_eq!(m, back);
         assert!(back.extra.contains_key("synth"));
+    }
+
+    #[test]
+    fn numbered_names_are_written_only_when_they_are_an_order() {
+        // The default is left out, so the canonical text (and every scan's fingerprint) of a
+        // scan.toml without the key is what it was before the key existed.
+        let m = ScanMeta::from_toml_str(&minimal(), Path::new("s")).unwrap();
+        assert_eq!(m.motion.numbered_names, NumberedNames::Positions);
+        assert!(!m.to_toml_string().unwrap().contains("numbered_names"));
+        let text = minimal().replace("[motion]\n", "[motion]\nnumbered_names = \"order\"\n");
+        let m = ScanMeta::from_toml_str(&text, Path::new("s")).unwrap();
+        assert_eq!(m.motion.numbered_names, NumberedNames::Order);
+        let back = ScanMeta::from_toml_str(&m.to_toml_string().unwrap(), Path::new("s")).unwrap();
+        assert_eq!(m, back);
+        let bad = text.replace("\"order\"", "\"time\"");
+        let msg = ScanMeta::from_toml_str(&bad, Path::new("/x/scan.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("numbered_names") && msg.contains("`order`"),
+            "{msg}"
+        );
     }
 }

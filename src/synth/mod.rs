@@ -58,7 +58,8 @@ pub use sounds::{BUILTIN_RATE_HZ, arpeggio, chord, melody, stereo, sweep, tone};
 use crate::io::LoadError;
 use crate::io::frames::save_grey_png;
 use crate::io::scan::{
-    CameraMeta, DualFocusMeta, FORMAT_VERSION, GlassSide, MotionMeta, RecordMeta, ScanMeta,
+    CameraMeta, DualFocusMeta, FORMAT_VERSION, GlassSide, MotionMeta, NumberedNames, RecordMeta,
+    ScanMeta,
 };
 use crate::io::wav::{Audio, WavBits, write_wav};
 use crate::job::Job;
@@ -271,6 +272,7 @@ pub fn scan_meta(groove: &Groove) -> Result<ScanMeta, SynthError> {
         motion: MotionMeta {
             frame_step_um: cfg.frame_step_um,
             group_step_um: cfg.group_step_um(),
+            numbered_names: NumberedNames::Positions,
         },
         dual_focus,
         extra,

@@ -2,7 +2,8 @@
 
 use super::{DEFAULT_FRAMES_PER_GROUP, VideoError};
 use crate::io::scan::{
-    CameraMeta, Cut, FORMAT_VERSION, MIN_FRAMES_PER_GROUP, MotionMeta, RecordMeta, ScanMeta,
+    CameraMeta, Cut, FORMAT_VERSION, MIN_FRAMES_PER_GROUP, MotionMeta, NumberedNames, RecordMeta,
+    ScanMeta,
 };
 
 /// How a clip's frames are cut into groups.
@@ -152,6 +153,7 @@ impl ClipMeta {
             motion: MotionMeta {
                 frame_step_um: self.frame_step_um,
                 group_step_um,
+                numbered_names: NumberedNames::Positions,
             },
             dual_focus: None,
             extra: toml::Table::new(),

@@ -71,7 +71,7 @@ impl SampleType {
 
 /// The frames of every group of a store: how many, their size and how their samples are stored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct GroupLayout {
+pub struct ChunkLayout {
     /// Frames per group.
     pub frames: usize,
     /// Frame width (px).
@@ -103,7 +103,7 @@ pub struct ZarrGroup {
     /// The group's chunk index.
     pub group: usize,
     /// The store's frames.
-    pub layout: GroupLayout,
+    pub layout: ChunkLayout,
 }
 
 impl ZarrGroup {
@@ -208,7 +208,8 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
             dir,
         ));
     }
-    let places = in_numbered_order(dir, stored.clone(), MAX_GROUPS, "groups")?;
+    let names_say = meta.motion.numbered_names;
+    let places = in_numbered_order(dir, stored.clone(), MAX_GROUPS, "groups", names_say)?;
     let entries: Vec<GroupEntry> = places
         .into_iter()
         .enumerate()
@@ -220,7 +221,7 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
             zarr: chunk_of.get(&path).map(|&group| ZarrGroup {
                 store: dir.to_path_buf(),
                 group,
-                layout: GroupLayout {
+                layout: ChunkLayout {
                     frames,
                     width,
                     height,
@@ -325,7 +326,7 @@ pub struct ZarrWriter {
     dir: PathBuf,
     store: Arc<FilesystemStore>,
     array: Array<FilesystemStore>,
-    layout: GroupLayout,
+    layout: ChunkLayout,
     names: Vec<String>,
 }
 
@@ -344,7 +345,7 @@ impl ZarrWriter {
     ///
     /// # Errors
     /// [`LoadError::Io`] naming `dir` when the store cannot be created.
-    pub fn create(dir: &Path, layout: GroupLayout, level: i32) -> Result<Self, LoadError> {
+    pub fn create(dir: &Path, layout: ChunkLayout, level: i32) -> Result<Self, LoadError> {
         Self::reopen(dir, layout, level, Vec::new())
     }
 
@@ -358,7 +359,7 @@ impl ZarrWriter {
     /// [`LoadError::Io`] naming `dir` when the store cannot be created or its metadata written.
     pub fn reopen(
         dir: &Path,
-        layout: GroupLayout,
+        layout: ChunkLayout,
         level: i32,
         names: Vec<String>,
     ) -> Result<Self, LoadError> {

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::{GroupLayout, SampleType, ZarrGroup, ZarrWriter, load_group_raw};
+use super::{ChunkLayout, SampleType, ZarrGroup, ZarrWriter, load_group_raw};
 use crate::io::atomic::{beside, dir_is_missing_or_empty, write_json_atomic};
 use crate::io::fingerprint::scan_names_fingerprint;
 use crate::io::frames::{RawFrame, load_frame_raw};
@@ -118,7 +118,7 @@ struct Progress {
     zstd_level: i32,
     /// The groups' frames.
     #[serde(flatten)]
-    layout: GroupLayout,
+    layout: ChunkLayout,
     /// Groups whose chunks are written, read back, checked and synced, from the first.
     groups_checked: usize,
     /// Bytes of those groups' frame files.
@@ -359,7 +359,7 @@ fn pack_into(
             progress_format: PROGRESS_FORMAT,
             scan_names_fingerprint: scan_names_fingerprint(scan),
             zstd_level: level,
-            layout: GroupLayout {
+            layout: ChunkLayout {
                 frames: first.len(),
                 width: f0.width,
                 height: f0.height,

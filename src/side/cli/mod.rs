@@ -319,8 +319,8 @@ pub fn check_missing_groups(scan: &Scan, range: Range<usize>, keep_going: bool) 
         let rename = if scan.is_store() {
             ""
         } else {
-            " (or, if the numbers are not places on the groove, such as timestamps, name the \
-             folders in order g00000, g00001, …)"
+            " (or, if the numbers are not places on the groove, such as timestamps, say \
+             numbered_names = \"order\" in the [motion] table of scan.toml)"
         };
         bail!(
             "{what}: run with --keep-going to read each as a gap of silence, in its place{rename}"
