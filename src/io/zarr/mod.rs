@@ -26,7 +26,9 @@ use super::scan::{GroupEntry, MIN_FRAMES_PER_GROUP, Scan, ScanMeta, check_meta_a
 use crate::image::Image;
 
 mod pack;
-pub use pack::{PROGRESS_FILE, PackError, PackOptions, PackSummary, pack_scan, partial_path};
+pub mod partial;
+pub use pack::{PackError, PackSummary, pack_scan};
+pub use partial::{Kept, PROGRESS_FILE, PackOptions, PartialStore, partial_path};
 
 /// Path of the frames array inside the store.
 pub const FRAMES_ARRAY: &str = "/frames";
