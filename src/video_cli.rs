@@ -50,9 +50,17 @@ pub struct ImportVideoArgs {
     #[arg(long, allow_hyphen_values = true)]
     pub group_step_um: Option<f64>,
     /// Write a Zarr store (one zstd chunk per group, see `groovescope pack`) instead of a scan
-    /// folder; also chosen by an --out name ending in `.zarr`.
+    /// folder, group by group as the clip is decoded; also chosen by an --out name ending in
+    /// `.zarr`.
     #[arg(long)]
     pub zarr: bool,
+    /// Go on from an interrupted import into this store (its partial store beside `--out`)
+    /// after the last group it wrote and checked; without one, start.
+    #[arg(long, conflicts_with = "force")]
+    pub resume: bool,
+    /// Remove an interrupted import into this store and start over.
+    #[arg(long)]
+    pub force: bool,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -67,7 +75,8 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
     use indicatif::{ProgressBar, ProgressStyle};
 
     use crate::io::Cut;
-    use crate::io::video::{ClipMeta, GroupLayout, import_video};
+    use crate::io::video::{ClipMeta, GroupLayout, import_video, import_video_to_store};
+    use crate::io::zarr::{DEFAULT_ZSTD_LEVEL, PackOptions};
     use crate::job::Job;
 
     let cut = match args.cut.as_str() {
@@ -106,42 +115,39 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
         pb.set_position(done as u64);
     };
     let zarr = args.zarr || args.out.extension().is_some_and(|e| e == "zarr");
-    // A Zarr store: the clip is imported as a scan folder beside it, packed, then removed.
-    let folder = if zarr {
-        crate::io::atomic::beside(&args.out, "scan", |name| {
-            format!(".{name}.frames-{}", std::process::id())
-        })
-    } else {
-        args.out.clone()
-    };
-    if zarr && !crate::io::atomic::dir_is_missing_or_empty(&args.out)? {
+    if !zarr && (args.resume || args.force) {
         anyhow::bail!(
-            "refusing to write into a folder that is not empty: {}",
+            "--resume and --force are for an import into a Zarr store (--zarr, or --out NAME.zarr); \
+             an import into a folder starts afresh: {}",
             args.out.display()
         );
     }
-    let mut summary = import_video(
-        &args.clip,
-        &folder,
-        &layout,
-        &meta,
-        Job::reporting(&progress),
-    )?;
-    if zarr {
-        let packed = crate::io::Scan::open(&folder).and_then(|scan| {
-            crate::io::zarr::pack_scan(
-                &scan,
-                &args.out,
-                crate::io::zarr::PackOptions::once(crate::io::zarr::DEFAULT_ZSTD_LEVEL),
-                Job::unwatched(),
-            )
-            .map_err(|e| e.error)
-        });
-        let _ = std::fs::remove_dir_all(&folder);
-        packed?;
-        summary.out_dir.clone_from(&args.out);
-    }
+    let summary = if zarr {
+        // Straight into the store, group by group, resumable.
+        let options = PackOptions {
+            zstd_level: DEFAULT_ZSTD_LEVEL,
+            resume: args.resume,
+            force: args.force,
+            keep_partial: true,
+        };
+        let job = Job::reporting(&progress);
+        import_video_to_store(&args.clip, &args.out, &layout, &meta, options, job)?
+    } else {
+        import_video(
+            &args.clip,
+            &args.out,
+            &layout,
+            &meta,
+            Job::reporting(&progress),
+        )?
+    };
     pb.finish_and_clear();
+    if summary.resumed_groups > 0 && !args.quiet {
+        println!(
+            "resumed: {} of {} groups were written and checked before",
+            summary.resumed_groups, summary.groups
+        );
+    }
     if !args.quiet {
         let details = format!(
             "stride {}, {}x{} {}-bit grey, {} frames decoded, {}",

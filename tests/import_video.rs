@@ -121,6 +121,67 @@ fn import_video_errors_are_one_line_naming_the_file() {
     assert!(!out.exists());
 }
 
+/// `store` holds the scan of `folder` frame for frame, and the same metadata.
+#[cfg(feature = "video")]
+fn assert_same_frames(folder: &std::path::Path, store: &std::path::Path) {
+    use groovescope::io::{Scan, load_group};
+    let (a, b) = (Scan::open(folder).unwrap(), Scan::open(store).unwrap());
+    assert_eq!(a.meta, b.meta);
+    assert_eq!(a.groups.len(), b.groups.len());
+    assert!(b.groups.iter().all(|g| g.zarr.is_some()));
+    for (ga, gb) in a.groups.iter().zip(&b.groups) {
+        assert_eq!(ga.name(), gb.name());
+        let (fa, fb) = (load_group(ga).unwrap(), load_group(gb).unwrap());
+        assert_eq!(fa, fb, "group {}", ga.index);
+    }
+}
+
+#[cfg(feature = "video")]
+#[test]
+fn import_video_into_a_store_resumes_and_holds_what_a_folder_import_holds() {
+    use common::groups_checked;
+    use groovescope::io::zarr::partial_path;
+    let dir = tempfile::tempdir().unwrap();
+    let clip = clip(dir.path(), 1200);
+    let grouping = ["--frames-per-group", "8", "--group-stride", "6", "--quiet"];
+    let folder = dir.path().join("scan");
+    let mut args = vec!["import-video", s(&clip), "--out", s(&folder)];
+    args.extend(grouping);
+    args.extend(META);
+    let o = groovescope(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Folders start afresh: --resume has nothing to go on with there.
+    args.push("--resume");
+    let o = groovescope(&args);
+    assert!(stderr(&o).contains("Zarr store"), "{}", stderr(&o));
+
+    // Ctrl-C after a few groups: kept, and the line says where and how to go on.
+    let store = dir.path().join("clip.zarr");
+    let partial = partial_path(&store);
+    let mut args = vec![s(&clip), "--out", s(&store)];
+    args.extend(grouping);
+    args.extend(META);
+    let run = common::StoreRun {
+        command: "import-video",
+        args: &args,
+        partial: &partial,
+    };
+    let kept = run.ctrl_c_keeps(3, &["cancelled", "groups written"]);
+    assert!(!store.exists());
+    // Another grouping is another import: refused, nothing touched.
+    let mut other = args.clone();
+    other[4] = "9";
+    other.push("--resume");
+    let mut cmd = vec!["import-video"];
+    cmd.extend(other);
+    let o = groovescope(&cmd);
+    assert!(stderr(&o).contains("something else"), "{}", stderr(&o));
+    assert_eq!(groups_checked(&partial), kept);
+
+    run.resume_to_the_end(kept, 199);
+    assert_same_frames(&folder, &store);
+}
+
 #[cfg(not(feature = "video"))]
 #[test]
 fn import_video_without_the_feature_says_so() {

@@ -5,10 +5,8 @@
 mod common;
 
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
 
-use common::{groovescope, stderr};
+use common::{StoreRun, groovescope, groups_checked, stderr};
 use groovescope::image::Image;
 use groovescope::io::zarr::{PROGRESS_FILE, partial_path};
 use groovescope::io::{Scan, load_group, save_grey_png};
@@ -96,40 +94,6 @@ fn assert_same_scan(folder: &Path, store: &Path) {
     assert!(!store.join(PROGRESS_FILE).exists(), "the progress record");
 }
 
-/// The groups an interrupted pack's record counts (0 while it has none).
-fn groups_checked(partial: &Path) -> usize {
-    std::fs::read(partial.join(PROGRESS_FILE))
-        .ok()
-        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
-        .and_then(|v| v["groups_checked"].as_u64())
-        .map_or(0, |n| n as usize)
-}
-
-/// Starts `groovescope pack` with `args` and returns once its record counts `at_least`
-/// groups of `partial` (the pack is still running).
-fn pack_until(args: &[&str], partial: &Path, at_least: usize) -> Child {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
-        .arg("pack")
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let started = Instant::now();
-    while groups_checked(partial) < at_least {
-        if child.try_wait().unwrap().is_some() || started.elapsed() > Duration::from_secs(120) {
-            let _ = child.kill();
-            let o = child.wait_with_output().unwrap();
-            panic!(
-                "the pack ended or stalled before {at_least} groups: {}",
-                stderr(&o)
-            );
-        }
-        std::thread::sleep(Duration::from_millis(2));
-    }
-    child
-}
-
 #[test]
 fn a_stopped_or_killed_pack_resumes_where_it_stopped_to_the_same_store() {
     let tmp = tempfile::tempdir().unwrap();
@@ -139,23 +103,16 @@ fn a_stopped_or_killed_pack_resumes_where_it_stopped_to_the_same_store() {
     let store = tmp.path().join("side.zarr");
     let partial = partial_path(&store);
     let args = [s(&folder), "--out", s(&store), "--quiet"];
+    let run = StoreRun {
+        command: "pack",
+        args: &args,
+        partial: &partial,
+    };
 
     // Ctrl-C: the groups packed so far are kept, and the line says where and how to go on.
-    let child = pack_until(&args, &partial, 2);
-    common::ctrl_c(&child);
-    let o = child.wait_with_output().unwrap();
-    let e = stderr(&o);
-    let kept = groups_checked(&partial);
-    assert!(
-        !o.status.success()
-            && e.contains("stopped")
-            && e.contains(&format!("the {kept} of {groups} groups"))
-            && e.contains(s(&partial))
-            && e.contains("--resume")
-            && e.lines().count() == 1,
-        "{e}"
-    );
-    assert!((2..groups).contains(&kept), "{kept}");
+    let of = format!(" of {groups} groups");
+    let kept = run.ctrl_c_keeps(2, &["stopped", &of]);
+    assert!(kept < groups, "{kept}");
     assert!(!store.exists());
 
     // Without --resume or --force the partial store is neither used nor touched.
@@ -182,24 +139,17 @@ fn a_stopped_or_killed_pack_resumes_where_it_stopped_to_the_same_store() {
     // Killed outright while resuming: what it counted is whole.
     let mut args_resume = args.to_vec();
     args_resume.push("--resume");
-    let mut child = pack_until(&args_resume, &partial, kept + 2);
+    let resuming = StoreRun {
+        args: &args_resume,
+        ..run
+    };
+    let mut child = resuming.until(kept + 2);
     child.kill().unwrap();
     child.wait().unwrap();
     let killed_at = groups_checked(&partial);
     assert!(killed_at >= kept + 2, "{killed_at}");
 
-    let mut loud = args_resume.clone();
-    loud.retain(|a| *a != "--quiet");
-    let mut cmd = vec!["pack"];
-    cmd.extend(loud);
-    let o = groovescope(&cmd);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let said = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        said.contains(&format!("resumed: {killed_at} of {groups} groups")),
-        "{said}"
-    );
-    assert!(!partial.exists(), "the partial store is renamed into place");
+    run.resume_to_the_end(killed_at, groups);
     assert_same_scan(&folder, &store);
     let left: Vec<_> = std::fs::read_dir(tmp.path())
         .unwrap()

@@ -396,6 +396,24 @@ fn quantised<T>(img: &Image, full: f32, cast: impl Fn(f32) -> T) -> Vec<T> {
         .collect()
 }
 
+/// The samples [`save_grey_png`] would store for `img` (8- or 16-bit), without the file:
+/// what a Zarr store of the frames holds, so a store written straight from images loads as one
+/// packed from their PNGs would.
+#[cfg(feature = "video")]
+#[must_use]
+pub(crate) fn raw_from_grey(img: &Image, sixteen_bit: bool) -> RawFrame {
+    let samples = if sixteen_bit {
+        RawSamples::U16(quantised(img, 65535.0, |q| q as u16))
+    } else {
+        RawSamples::U8(quantised(img, 255.0, |q| q as u8))
+    };
+    RawFrame {
+        width: img.width,
+        height: img.height,
+        samples,
+    }
+}
+
 /// Saves a grey image (values in `[0, 1]`, clamped, rounded to 8 or 16 bits) in `format`,
 /// atomically.
 ///

@@ -1,4 +1,4 @@
-//! Video import (feature `video`): decodes an AVI/MP4/MKV clip to grey frames and writes them as a scan folder.
+//! Video import (feature `video`): decodes an AVI/MP4/MKV clip to grey frames and writes them as a scan folder (or, `store.rs`, a Zarr store).
 //!
 //! Every frame is decoded in order (FFmpeg through `ffmpeg-next`), converted to grey — 16-bit
 //! when the source format holds more than 8 bits per component, else 8-bit — and streamed into
@@ -25,15 +25,18 @@ use serde::Serialize;
 
 use super::LoadError;
 use super::atomic::{dir_is_missing_or_empty, write_atomic};
+use crate::image::Image;
 use crate::job::Job;
 use grey::{GreyConverter, Splitter, component_depth_bits, estimated_frames};
 
 mod encode;
 mod grey;
 mod layout;
+mod store;
 
 pub use encode::encode_grey_clip;
 pub use layout::{ClipMeta, GroupLayout};
+pub use store::import_video_to_store;
 
 /// Frames per group when the caller does not say (the paper's choice for real records).
 pub const DEFAULT_FRAMES_PER_GROUP: usize = 12;
@@ -115,6 +118,14 @@ pub enum VideoError {
     /// The cancel flag was raised; nothing was left behind.
     #[error("cancelled")]
     Cancelled,
+    /// An import into a store stopped after writing groups, and kept them to go on from.
+    #[error("{error}{kept}")]
+    Kept {
+        /// Why it stopped.
+        error: Box<VideoError>,
+        /// What it kept.
+        kept: crate::io::zarr::Kept,
+    },
 }
 
 /// The `[video_import]` table: where the scan came from.
@@ -150,6 +161,8 @@ pub struct ImportSummary {
     pub codec: String,
     /// Unfinished imports to the same target, left by killed runs, that were removed.
     pub removed_stale: Vec<PathBuf>,
+    /// Groups an interrupted import into a store had written, taken over by `--resume`.
+    pub resumed_groups: usize,
 }
 
 /// Removes the temporary folder unless the import finished.
@@ -268,41 +281,48 @@ fn check_out_dir(out_dir: &Path) -> Result<(), VideoError> {
     }
 }
 
-/// Imports `clip` as a scan in `out_dir` (missing or empty; created).
-///
-/// `job` is told `(decoded, total)` with 0 first and after every decoded frame; `total` is
-/// the number of frames expected to be decoded (0 when the container does not say). Cancelling
-/// `job` stops before the next frame with [`VideoError::Cancelled`]; nothing is left behind
-/// then, nor after any other error.
-///
-/// # Errors
-/// [`VideoError`] naming the clip (missing, not a video, no video stream, unsupported codec,
-/// no frames, too few frames for one group), the output folder, or the file that failed.
-pub fn import_video(
-    clip: &Path,
-    out_dir: &Path,
-    layout: &GroupLayout,
-    meta: &ClipMeta,
-    job: Job<'_>,
-) -> Result<ImportSummary, VideoError> {
-    layout
-        .validate()
-        .map_err(|problem| VideoError::Settings { problem })?;
-    let mut scan_meta = meta.scan_meta(layout)?;
+/// What takes the decoded grey frames: a scan folder's groups ([`grey::Splitter`]) or a
+/// store's ([`store::StoreSink`]).
+trait FrameSink {
+    /// Whether frame `j` (counted from the first frame used) is still needed: a resumed store
+    /// holds its first groups already, and their frames are decoded but not converted.
+    fn wants(&self, _j: usize) -> bool {
+        true
+    }
+
+    /// Takes frame `j`, grey, 16-bit when `sixteen_bit`.
+    fn push(&mut self, j: usize, img: &Image, sixteen_bit: bool) -> Result<(), VideoError>;
+}
+
+/// A clip opened for decoding.
+struct Source {
+    input: ffmpeg::format::context::Input,
+    stream_index: usize,
+    decoder: ffmpeg::decoder::Video,
+    /// The codec's name.
+    codec: String,
+    /// 16-bit output, when the codec parameters say (else the first frame does).
+    sixteen_bit: Option<bool>,
+    /// Frames expected to be decoded (0 when the container does not say).
+    total: usize,
+    /// Groups expected, for the width of the group numbers.
+    est_groups: usize,
+}
+
+/// Opens `clip` for decoding by `layout`.
+fn open_source(clip: &Path, layout: &GroupLayout) -> Result<Source, VideoError> {
     if !clip.is_file() {
         return Err(VideoError::Missing {
             path: clip.to_path_buf(),
         });
     }
-    check_out_dir(out_dir)?;
-
     ffmpeg::init().map_err(|e| VideoError::NotAVideo {
         problem: format!("FFmpeg failed to start: {e}"),
         path: clip.to_path_buf(),
     })?;
     // Our errors name the file; FFmpeg's own log lines would only repeat them on stderr.
     ffmpeg::util::log::set_level(ffmpeg::util::log::Level::Fatal);
-    let mut input = ffmpeg::format::input(clip).map_err(|e| VideoError::NotAVideo {
+    let input = ffmpeg::format::input(clip).map_err(|e| VideoError::NotAVideo {
         problem: e.to_string(),
         path: clip.to_path_buf(),
     })?;
@@ -323,11 +343,11 @@ pub fn import_video(
     if ffmpeg::decoder::find(codec_id).is_none() {
         return Err(unsupported(ffmpeg::Error::DecoderNotFound));
     }
-    let mut decoder = ffmpeg::codec::context::Context::from_parameters(params)
+    let decoder = ffmpeg::codec::context::Context::from_parameters(params)
         .and_then(|c| c.decoder().video())
         .map_err(unsupported)?;
     // The depth is known from the codec parameters for most clips, else from the first frame.
-    let mut sixteen_bit: Option<bool> = (decoder.format() != ffmpeg::format::Pixel::None)
+    let sixteen_bit: Option<bool> = (decoder.format() != ffmpeg::format::Pixel::None)
         .then(|| component_depth_bits(decoder.format()) > 8);
     let mut total = estimated_frames(&stream);
     if let Some(needed) = layout.frames_needed() {
@@ -342,27 +362,55 @@ pub fn import_video(
         .max_groups
         .unwrap_or(0)
         .max(layout.full_groups(total.saturating_sub(layout.first_frame)));
+    Ok(Source {
+        input,
+        stream_index,
+        decoder,
+        codec,
+        sixteen_bit,
+        total,
+        est_groups,
+    })
+}
 
-    let removed_stale = remove_stale_imports(out_dir);
-    let tmp = make_temp_dir(out_dir)?;
-    let mut splitter = Splitter {
-        layout,
-        dir: &tmp.path,
-        sixteen_bit: false,
-        group_digits: crate::synth::digits(est_groups, 5),
-        frame_digits: crate::synth::digits(layout.frames_per_group, 3),
-        taken: 0,
-    };
+/// What decoding gave.
+struct Decoded {
+    /// Frames decoded from the clip (including skipped ones).
+    decoded: usize,
+    /// Frames taken, from the first frame used.
+    taken: usize,
+    /// The frames' size.
+    size: Option<(usize, usize)>,
+    /// Whether they were made 16-bit.
+    sixteen_bit: bool,
+}
+
+/// Decodes `src` in order into `sink`, frames from `layout.first_frame` on, until the clip
+/// ends or `max_groups` groups are full. `job` is told `(decoded, total)` after every frame.
+fn decode_into(
+    src: &mut Source,
+    clip: &Path,
+    layout: &GroupLayout,
+    job: Job<'_>,
+    sink: &mut dyn FrameSink,
+) -> Result<Decoded, VideoError> {
+    let total = src.total;
     let mut converter: Option<GreyConverter> = None;
-    let mut size: Option<(usize, usize)> = None;
-    let mut decoded = 0usize;
+    let mut out = Decoded {
+        decoded: 0,
+        taken: 0,
+        size: None,
+        sixteen_bit: false,
+    };
+    let mut sixteen_bit = src.sixteen_bit;
     let mut frame = VideoFrame::empty();
     job.report(0, total);
 
     // Sends a packet (or, with `None`, the end of stream) and takes every frame the decoder has
     // ready; returns false once enough groups are full.
     let mut feed = |decoder: &mut ffmpeg::decoder::Video,
-                    packet: Option<&ffmpeg::Packet>|
+                    packet: Option<&ffmpeg::Packet>,
+                    out: &mut Decoded|
      -> Result<bool, VideoError> {
         let decode_err = |frame: usize, problem: String| VideoError::Decode {
             frame,
@@ -373,47 +421,52 @@ pub fn import_video(
             Some(p) => decoder.send_packet(p),
             None => decoder.send_eof(),
         };
-        sent.map_err(|e| decode_err(decoded, e.to_string()))?;
+        sent.map_err(|e| decode_err(out.decoded, e.to_string()))?;
         while decoder.receive_frame(&mut frame).is_ok() {
             if job.is_cancelled() {
                 return Err(VideoError::Cancelled);
             }
-            if decoded >= layout.first_frame {
+            if out.decoded >= layout.first_frame {
                 let deep =
                     *sixteen_bit.get_or_insert_with(|| component_depth_bits(frame.format()) > 8);
-                splitter.sixteen_bit = deep;
-                let img = converter
-                    .get_or_insert_with(|| GreyConverter::new(deep))
-                    .convert(&frame)
-                    .map_err(|e| decode_err(decoded, format!("grey conversion failed: {e}")))?;
-                let this = (img.width, img.height);
-                let first = *size.get_or_insert(this);
-                if this != first {
-                    return Err(decode_err(
-                        decoded,
-                        format!(
-                            "frame is {}x{} but the clip's first frame is {}x{}",
-                            this.0, this.1, first.0, first.1
-                        ),
-                    ));
+                out.sixteen_bit = deep;
+                if sink.wants(out.taken) {
+                    let img = converter
+                        .get_or_insert_with(|| GreyConverter::new(deep))
+                        .convert(&frame)
+                        .map_err(|e| {
+                            decode_err(out.decoded, format!("grey conversion failed: {e}"))
+                        })?;
+                    let this = (img.width, img.height);
+                    let first = *out.size.get_or_insert(this);
+                    if this != first {
+                        return Err(decode_err(
+                            out.decoded,
+                            format!(
+                                "frame is {}x{} but the clip's first frame is {}x{}",
+                                this.0, this.1, first.0, first.1
+                            ),
+                        ));
+                    }
+                    sink.push(out.taken, &img, deep)?;
                 }
-                splitter.push(&img)?;
+                out.taken += 1;
             }
-            decoded += 1;
-            job.report(decoded, total.max(decoded));
-            if splitter.done() {
+            out.decoded += 1;
+            job.report(out.decoded, total.max(out.decoded));
+            if layout.frames_needed().is_some_and(|n| out.taken >= n) {
                 return Ok(false);
             }
         }
         Ok(true)
     };
     let mut more = true;
-    for (stream, packet) in input.packets() {
+    for (stream, packet) in src.input.packets() {
         if job.is_cancelled() {
             return Err(VideoError::Cancelled);
         }
-        if stream.index() == stream_index {
-            more = feed(&mut decoder, Some(&packet))?;
+        if stream.index() == src.stream_index {
+            more = feed(&mut src.decoder, Some(&packet), &mut out)?;
             if !more {
                 break;
             }
@@ -421,31 +474,33 @@ pub fn import_video(
     }
     if more {
         // End of stream: the decoder may still hold delayed frames.
-        feed(&mut decoder, None)?;
+        feed(&mut src.decoder, None, &mut out)?;
     }
     // The container's frame count is only an estimate; end the bar at what was decoded.
-    job.report(decoded, decoded);
-
-    if decoded == 0 {
+    job.report(out.decoded, out.decoded);
+    if out.decoded == 0 {
         return Err(VideoError::NoFrames {
             path: clip.to_path_buf(),
         });
     }
-    let groups = splitter.finish()?;
-    if groups == 0 {
-        return Err(VideoError::TooFewFrames {
-            found: splitter.taken,
-            needed: layout.frames_per_group,
-            path: clip.to_path_buf(),
-        });
-    }
+    Ok(out)
+}
+
+/// `scan.toml` of an imported clip: `scan_meta` with a `[video_import]` table naming the clip
+/// and the grouping.
+fn imported_scan_toml(
+    mut scan_meta: super::ScanMeta,
+    clip: &Path,
+    codec: &str,
+    layout: &GroupLayout,
+) -> Result<String, VideoError> {
     let source = clip
         .file_name()
         .map_or_else(|| clip.to_string_lossy(), |n| n.to_string_lossy())
         .into_owned();
     let info = ImportInfo {
         source: &source,
-        codec: &codec,
+        codec,
         first_frame: layout.first_frame,
         frames_per_group: layout.frames_per_group,
         group_stride_frames: layout.stride(),
@@ -456,29 +511,82 @@ pub fn import_video(
     scan_meta
         .extra
         .insert("video_import".into(), toml::Value::Table(info));
-    let meta_text = scan_meta
+    scan_meta
         .to_toml_string()
         .map_err(|e| VideoError::Settings {
             problem: format!("cannot write scan.toml: {e}"),
-        })?;
+        })
+}
+
+/// The scan metadata of an import by `layout` with `meta`, once both are checked.
+fn checked_settings(layout: &GroupLayout, meta: &ClipMeta) -> Result<super::ScanMeta, VideoError> {
+    layout
+        .validate()
+        .map_err(|problem| VideoError::Settings { problem })?;
+    meta.scan_meta(layout)
+}
+
+/// Imports `clip` as a scan in `out_dir` (missing or empty; created).
+///
+/// `job` is told `(decoded, total)` with 0 first and after every decoded frame; `total` is
+/// the number of frames expected to be decoded (0 when the container does not say). Cancelling
+/// `job` stops before the next frame with [`VideoError::Cancelled`]; nothing is left behind
+/// then, nor after any other error.
+///
+/// # Errors
+/// [`VideoError`] naming the clip (missing, not a video, no video stream, unsupported codec,
+/// no frames, too few frames for one group), the output folder, or the file that failed.
+pub fn import_video(
+    clip: &Path,
+    out_dir: &Path,
+    layout: &GroupLayout,
+    meta: &ClipMeta,
+    job: Job<'_>,
+) -> Result<ImportSummary, VideoError> {
+    let scan_meta = checked_settings(layout, meta)?;
+    if !clip.is_file() {
+        return Err(VideoError::Missing {
+            path: clip.to_path_buf(),
+        });
+    }
+    check_out_dir(out_dir)?;
+    let mut src = open_source(clip, layout)?;
+    let removed_stale = remove_stale_imports(out_dir);
+    let tmp = make_temp_dir(out_dir)?;
+    let mut splitter = Splitter {
+        layout,
+        dir: &tmp.path,
+        group_digits: crate::synth::digits(src.est_groups, 5),
+        frame_digits: crate::synth::digits(layout.frames_per_group, 3),
+    };
+    let decoded = decode_into(&mut src, clip, layout, job, &mut splitter)?;
+    let groups = splitter.finish(decoded.taken)?;
+    if groups == 0 {
+        return Err(VideoError::TooFewFrames {
+            found: decoded.taken,
+            needed: layout.frames_per_group,
+            path: clip.to_path_buf(),
+        });
+    }
+    let meta_text = imported_scan_toml(scan_meta, clip, &src.codec, layout)?;
     write_atomic(&tmp.path.join("scan.toml"), meta_text.as_bytes(), false)?;
     if job.is_cancelled() {
         return Err(VideoError::Cancelled);
     }
-    let bit_depth = if splitter.sixteen_bit { 16 } else { 8 };
     finish_into(tmp, out_dir)?;
-    let (width, height) = size.unwrap_or((0, 0));
+    let (width, height) = decoded.size.unwrap_or((0, 0));
     Ok(ImportSummary {
         out_dir: out_dir.to_path_buf(),
         groups,
         frames_per_group: layout.frames_per_group,
         group_stride_frames: layout.stride(),
-        frames_decoded: decoded,
+        frames_decoded: decoded.decoded,
         width,
         height,
-        bit_depth,
-        codec,
+        bit_depth: if decoded.sixteen_bit { 16 } else { 8 },
+        codec: src.codec,
         removed_stale,
+        resumed_groups: 0,
     })
 }
 

@@ -54,7 +54,12 @@ pub fn groovescope(args: &[&str]) -> Output {
 /// Sends the child a Ctrl-C (SIGINT).
 pub fn ctrl_c(child: &std::process::Child) {
     let pid = child.id().to_string();
-    let sent = Command::new("kill").args(["-INT", &pid]).status().unwrap();
+    // By its full path: the workbench harness empties `PATH` for the whole test process.
+    let kill = ["/usr/bin/kill", "/bin/kill"]
+        .into_iter()
+        .find(|p| Path::new(p).exists())
+        .unwrap_or("kill");
+    let sent = Command::new(kill).args(["-INT", &pid]).status().unwrap();
     assert!(sent.success(), "kill -INT {pid}");
 }
 
@@ -102,6 +107,102 @@ pub fn ctrl_c_while_reading(args: &[&str], fifo: &Path, content: &[u8]) -> Outpu
     writer.write_all(content).unwrap();
     drop(writer);
     child.wait_with_output().unwrap()
+}
+
+/// The groups the progress record of the partial store `partial` counts (0 while it has none).
+pub fn groups_checked(partial: &Path) -> usize {
+    std::fs::read(partial.join(groovescope::io::zarr::PROGRESS_FILE))
+        .ok()
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        .and_then(|v| v["groups_checked"].as_u64())
+        .map_or(0, |n| n as usize)
+}
+
+/// A groovescope command that writes a store through a partial store (`pack`,
+/// `import-video` into a store): `command` then `args`, writing `partial`.
+pub struct StoreRun<'a> {
+    /// The subcommand.
+    pub command: &'a str,
+    /// Its arguments.
+    pub args: &'a [&'a str],
+    /// The partial store it writes.
+    pub partial: &'a Path,
+}
+
+impl StoreRun<'_> {
+    /// Starts the command and returns once its progress record counts `at_least` groups (the
+    /// command is still running).
+    pub fn until(&self, at_least: usize) -> std::process::Child {
+        use std::process::Stdio;
+        use std::time::{Duration, Instant};
+        let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+            .arg(self.command)
+            .args(self.args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let started = Instant::now();
+        while groups_checked(self.partial) < at_least {
+            let ended = child.try_wait().unwrap().is_some();
+            if ended || started.elapsed() > Duration::from_secs(120) {
+                let _ = child.kill();
+                let o = child.wait_with_output().unwrap();
+                panic!(
+                    "{} ended or stalled before {at_least} groups: {}",
+                    self.command,
+                    stderr(&o)
+                );
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        child
+    }
+
+    /// Runs it until `at_least` groups are counted, presses Ctrl-C, and checks that it failed
+    /// with one line that holds every `said`, says how many groups it kept and where, and how
+    /// to go on. Returns the groups kept.
+    pub fn ctrl_c_keeps(&self, at_least: usize, said: &[&str]) -> usize {
+        let child = self.until(at_least);
+        ctrl_c(&child);
+        let o = child.wait_with_output().unwrap();
+        let e = stderr(&o);
+        let kept = groups_checked(self.partial);
+        assert!(
+            !o.status.success()
+                && said.iter().all(|w| e.contains(w))
+                && e.contains(&format!("the {kept} "))
+                && e.contains(self.partial.to_str().unwrap())
+                && e.contains("--resume")
+                && e.trim().lines().count() == 1,
+            "{e}"
+        );
+        assert!(kept >= at_least, "{kept}");
+        kept
+    }
+
+    /// Runs it without `--quiet` and with `--resume`, and checks that it finished, said it
+    /// took over `resumed` of `total` groups, and left no partial store.
+    pub fn resume_to_the_end(&self, resumed: usize, total: usize) {
+        let mut all = vec![self.command];
+        all.extend(
+            self.args
+                .iter()
+                .filter(|a| **a != "--quiet" && **a != "--resume"),
+        );
+        all.push("--resume");
+        let o = groovescope(&all);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let said = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            said.contains(&format!("resumed: {resumed} of {total} groups")),
+            "{said}"
+        );
+        assert!(
+            !self.partial.exists(),
+            "the partial store is renamed into place"
+        );
+    }
 }
 
 /// Runs `groovescope reconstruct SCAN --out OUT --quiet` with `extra`.

@@ -7,7 +7,7 @@ use ffmpeg::software::scaling;
 use ffmpeg::util::frame::video::Video as VideoFrame;
 use ffmpeg_next as ffmpeg;
 
-use super::{GroupLayout, VideoError, io_err};
+use super::{FrameSink, GroupLayout, VideoError, io_err};
 use crate::image::Image;
 use crate::io::frames::save_grey_png;
 
@@ -108,11 +108,8 @@ impl GreyConverter {
 pub(super) struct Splitter<'a> {
     pub(super) layout: &'a GroupLayout,
     pub(super) dir: &'a Path,
-    pub(super) sixteen_bit: bool,
     pub(super) group_digits: usize,
     pub(super) frame_digits: usize,
-    /// Frames taken so far, counted from the first frame used.
-    pub(super) taken: usize,
 }
 
 impl Splitter<'_> {
@@ -121,35 +118,10 @@ impl Splitter<'_> {
         self.dir.join(format!("g{g:0gw$}"))
     }
 
-    /// Writes frame `self.taken` into every group holding it.
-    pub(super) fn push(&mut self, img: &Image) -> Result<(), VideoError> {
-        let j = self.taken;
-        for (g, k) in self.layout.placements(j) {
-            let gdir = self.group_dir(g);
-            if k == 0 {
-                std::fs::create_dir(&gdir)
-                    .map_err(|e| io_err(format!("cannot create group folder: {e}"), &gdir))?;
-            }
-            let fw = self.frame_digits;
-            save_grey_png(
-                img,
-                &gdir.join(format!("f{k:0fw$}.png")),
-                self.sixteen_bit,
-                false,
-            )?;
-        }
-        self.taken += 1;
-        Ok(())
-    }
-
-    /// Whether `max_groups` groups are full.
-    pub(super) fn done(&self) -> bool {
-        self.layout.frames_needed().is_some_and(|n| self.taken >= n)
-    }
-
-    /// Removes the folders of trailing groups the clip did not fill; returns the full groups.
-    pub(super) fn finish(&self) -> Result<usize, VideoError> {
-        let full = self.layout.groups_written(self.taken);
+    /// Removes the folders of trailing groups the `taken` frames did not fill; returns the
+    /// full groups.
+    pub(super) fn finish(&self, taken: usize) -> Result<usize, VideoError> {
+        let full = self.layout.groups_written(taken);
         let mut g = full;
         loop {
             let gdir = self.group_dir(g);
@@ -161,6 +133,27 @@ impl Splitter<'_> {
             g += 1;
         }
         Ok(full)
+    }
+}
+
+impl FrameSink for Splitter<'_> {
+    /// Writes frame `j` into every group holding it.
+    fn push(&mut self, j: usize, img: &Image, sixteen_bit: bool) -> Result<(), VideoError> {
+        for (g, k) in self.layout.placements(j) {
+            let gdir = self.group_dir(g);
+            if k == 0 {
+                std::fs::create_dir(&gdir)
+                    .map_err(|e| io_err(format!("cannot create group folder: {e}"), &gdir))?;
+            }
+            let fw = self.frame_digits;
+            save_grey_png(
+                img,
+                &gdir.join(format!("f{k:0fw$}.png")),
+                sixteen_bit,
+                false,
+            )?;
+        }
+        Ok(())
     }
 }
 
