@@ -186,6 +186,17 @@ fn pack_refuses_groups_of_different_frame_counts_naming_the_group_and_resumes_on
     let partial = partial_path(&store);
     assert_eq!(groups_checked(&partial), 1);
 
+    // A group taken over must still hold as many frames as its chunk.
+    let extra = folder.join("g00000/f007.png");
+    std::fs::copy(folder.join("g00000/f000.png"), &extra).unwrap();
+    let o = groovescope(&["pack", s(&folder), "--out", s(&store), "--resume"]);
+    let e = stderr(&o);
+    assert!(
+        !o.status.success() && e.contains("g00000") && e.contains("now holds 8 frames"),
+        "{e}"
+    );
+    std::fs::remove_file(extra).unwrap();
+
     // Once the scan's metadata has changed it is another scan: refused, and nothing written.
     let toml = std::fs::read_to_string(folder.join("scan.toml")).unwrap();
     std::fs::write(

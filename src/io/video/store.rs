@@ -42,6 +42,11 @@ fn import_fingerprint(
     Ok(crate::io::fingerprint::fingerprint(&text))
 }
 
+/// The name of group `g`, its number padded to `digits` as the folder import names it.
+fn group_name(g: usize, digits: usize) -> String {
+    format!("g{g:0digits$}")
+}
+
 /// Takes decoded frames into a [`PartialStore`], a group at a time.
 struct StoreSink<'a> {
     layout: &'a GroupLayout,
@@ -52,13 +57,6 @@ struct StoreSink<'a> {
     group_digits: usize,
     /// The clip (names a group in errors).
     clip: &'a Path,
-}
-
-impl StoreSink<'_> {
-    fn name(&self, g: usize) -> String {
-        let gw = self.group_digits;
-        format!("g{g:0gw$}")
-    }
 }
 
 impl FrameSink for StoreSink<'_> {
@@ -89,11 +87,8 @@ impl FrameSink for StoreSink<'_> {
                     self.clip,
                 ));
             }
-            let name = self.name(g);
-            let gw = self.group_digits;
-            self.store.add_group(&name, frames, self.clip, 0, |held| {
-                (0..held).map(|h| format!("g{h:0gw$}")).collect()
-            })?;
+            let name = group_name(g, self.group_digits);
+            self.store.add_group(&name, frames, self.clip)?;
         }
         Ok(())
     }
@@ -126,12 +121,14 @@ pub fn import_video_to_store(
         })?;
     let fingerprint = import_fingerprint(clip, layout, &meta_toml)?;
     let start_over = "import it again with --force to start over";
-    let mut store = PartialStore::open(out, fingerprint, options, start_over)?;
+    let digits = crate::synth::digits(src.est_groups, 5);
+    let names = |held: usize| (0..held).map(|g| group_name(g, digits)).collect();
+    let mut store = PartialStore::open(out, fingerprint, options, start_over, names)?;
     let mut sink = StoreSink {
         layout,
         store: &mut store,
         open: BTreeMap::new(),
-        group_digits: crate::synth::digits(src.est_groups, 5),
+        group_digits: digits,
         clip,
     };
     let decoded = decode_into(&mut src, clip, layout, job, &mut sink).and_then(|decoded| {
@@ -147,7 +144,11 @@ pub fn import_video_to_store(
         }
         Ok(decoded)
     });
-    let decoded = match decoded {
+    let done = decoded.and_then(|decoded| {
+        let text = imported_scan_toml(scan_meta, clip, &src.codec, layout)?;
+        Ok((decoded, store.finish(&text)?))
+    });
+    let (decoded, done) = match done {
         Ok(d) => d,
         Err(error) => {
             return Err(match store.abandon(None) {
@@ -159,8 +160,6 @@ pub fn import_video_to_store(
             });
         }
     };
-    let text = imported_scan_toml(scan_meta, clip, &src.codec, layout)?;
-    let done = store.finish(&text)?;
     Ok(ImportSummary {
         out_dir: done.out,
         groups: done.groups,

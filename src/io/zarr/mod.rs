@@ -476,6 +476,16 @@ impl ZarrWriter {
     /// # Errors
     /// [`LoadError::Io`] naming the store when a write fails.
     pub fn finish(self, scan_toml: &str) -> Result<PathBuf, LoadError> {
+        self.store_metadata(scan_toml)?;
+        Ok(self.dir)
+    }
+
+    /// Writes the metadata (array shape, root attributes with `scan_toml`) as [`Self::finish`]
+    /// does, keeping the writer (a store finished again after a failure writes it again).
+    ///
+    /// # Errors
+    /// [`LoadError::Io`] naming the store when a write fails.
+    pub fn store_metadata(&self, scan_toml: &str) -> Result<(), LoadError> {
         let err = |e: &dyn std::fmt::Display| {
             io_err(format!("cannot write the Zarr metadata: {e}"), &self.dir)
         };
@@ -483,7 +493,7 @@ impl ZarrWriter {
         let attrs = StoreAttributes {
             store_format: STORE_FORMAT,
             scan_toml: scan_toml.to_string(),
-            groups: self.names,
+            groups: self.names.clone(),
             sample_type: self.layout.sample_type,
         };
         let mut map = serde_json::Map::new();
@@ -496,8 +506,7 @@ impl ZarrWriter {
             .build(self.store.clone(), "/")
             .map_err(|e| err(&e))?
             .store_metadata()
-            .map_err(|e| err(&e))?;
-        Ok(self.dir)
+            .map_err(|e| err(&e))
     }
 
     /// Groups written so far.

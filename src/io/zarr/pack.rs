@@ -107,34 +107,72 @@ pub fn pack_scan(
         "pack {} again with --force to start over",
         scan.dir.display()
     );
-    let mut store = PartialStore::open(out, scan_names_fingerprint(scan), options, &start_over)?;
-    if let Err(error) = pack_into(scan, &mut store, job) {
-        let kept = store.abandon(Some(scan.groups.len()));
-        return Err(PackError { error, kept });
-    }
-    let meta_toml = scan
-        .meta
-        .to_toml_string()
-        .map_err(|e| LoadError::Metadata {
-            problem: e.to_string(),
-            path: scan.dir.join("scan.toml"),
-        })?;
-    let done = store.finish(&meta_toml)?;
+    let names = |k: usize| scan.groups[..k].iter().map(|g| g.name()).collect();
+    let mut store = PartialStore::open(
+        out,
+        scan_names_fingerprint(scan),
+        options,
+        &start_over,
+        names,
+    )?;
+    let done = pack_into(scan, &mut store, job).and_then(|()| {
+        let meta_toml = scan
+            .meta
+            .to_toml_string()
+            .map_err(|e| LoadError::Metadata {
+                problem: e.to_string(),
+                path: scan.dir.join("scan.toml"),
+            })?;
+        store.finish(&meta_toml)
+    });
+    let done = match done {
+        Ok(done) => done,
+        Err(error) => {
+            let kept = store.abandon(Some(scan.groups.len()));
+            return Err(PackError { error, kept });
+        }
+    };
     Ok(PackSummary {
         out: done.out,
         groups: done.groups,
         resumed: done.resumed,
         frames_per_group: done.layout.frames,
         sample_type: done.layout.sample_type,
-        folder_bytes: done.source_bytes,
+        folder_bytes: scan.groups.iter().map(frame_bytes).sum(),
         store_bytes: done.store_bytes,
     })
+}
+
+/// Bytes of a group's frame files.
+fn frame_bytes(entry: &crate::io::GroupEntry) -> u64 {
+    entry
+        .frames
+        .iter()
+        .map(|p| std::fs::metadata(p).map_or(0, |m| m.len()))
+        .sum()
 }
 
 /// Packs the groups of `scan` after the ones `store` holds, then copies the side files in.
 fn pack_into(scan: &Scan, store: &mut PartialStore, job: Job<'_>) -> Result<(), LoadError> {
     let total = scan.groups.len();
     let from = store.groups();
+    // The groups taken over are not read again, but each must still hold as many frames as
+    // the store's chunks do (a group mended since would be packed as it was).
+    if let Some(layout) = store.layout()
+        && let Some(changed) = scan.groups[..from]
+            .iter()
+            .find(|g| g.frame_count() != layout.frames)
+    {
+        return Err(io_err(
+            format!(
+                "this group now holds {} frames, but the interrupted pack stored it with {}; \
+                 start over with --force",
+                changed.frame_count(),
+                layout.frames
+            ),
+            &changed.dir,
+        ));
+    }
     job.report(from, total);
     for (g, entry) in scan.groups.iter().enumerate().skip(from) {
         if job.is_cancelled() {
@@ -144,14 +182,7 @@ fn pack_into(scan: &Scan, store: &mut PartialStore, job: Job<'_>) -> Result<(), 
             ));
         }
         let raw = raw_group(entry)?;
-        let bytes = entry
-            .frames
-            .iter()
-            .map(|p| std::fs::metadata(p).map_or(0, |m| m.len()))
-            .sum::<u64>();
-        store.add_group(&entry.name(), raw, &entry.dir, bytes, |k| {
-            scan.groups[..k].iter().map(|g| g.name()).collect()
-        })?;
+        store.add_group(&entry.name(), raw, &entry.dir)?;
         job.report(g + 1, total);
     }
     for side_file in ["reference.wav", "preset.toml"] {

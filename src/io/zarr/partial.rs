@@ -3,13 +3,14 @@
 //! The store is written as a *partial* store beside the output (`.NAME.partial`). After each
 //! group's chunk is read back, compared and synced, a progress record in it (`progress.json`,
 //! written atomically) counts the group, with a fingerprint of what is being written (the scan
-//! or the clip and its settings) and the store's layout, so every counted group is whole. A
-//! writer that stops (Ctrl-C, bad input, a kill) after one or more groups keeps the partial
-//! store; `resume` checks the record against the fingerprint and the zstd level and goes on
-//! after the last counted group, `force` starts over, and without either the output is
-//! refused. A partial store without a record holds no counted group and is started again. The
-//! finished store loses the record and is renamed into place, so the output is complete or
-//! absent; a lock beside the output keeps a second writer out meanwhile.
+//! or the clip and its settings) and the store's layout. A writer that stops (Ctrl-C, bad
+//! input, a kill) after one or more groups keeps the partial store; `resume` checks the record
+//! against the fingerprint and the zstd level and goes on after the last counted group whose
+//! chunk is still there, `force` starts over, and without either the output is refused. A
+//! partial store without a record holds no counted group and is started again. The finished
+//! store is renamed into place before it loses the record, so the output is complete or absent
+//! and a failure on the way never costs a counted group; a lock beside the output keeps a
+//! second writer out meanwhile.
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -92,8 +93,6 @@ struct Progress {
     layout: ChunkLayout,
     /// Groups whose chunks are written, read back, checked and synced, from the first.
     groups_checked: usize,
-    /// Bytes read from the source for those groups.
-    source_bytes: u64,
 }
 
 /// The partial store of a store written to `out`: `.NAME.partial` beside it.
@@ -146,6 +145,16 @@ fn dir_bytes(dir: &Path) -> u64 {
         .sum()
 }
 
+/// The chunk file of group `g` of the store `store`.
+fn chunk_path(store: &Path, g: usize, layout: ChunkLayout) -> PathBuf {
+    ZarrGroup {
+        store: store.to_path_buf(),
+        group: g,
+        layout,
+    }
+    .chunk_path()
+}
+
 /// What a finished store holds.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FinishedStore {
@@ -157,8 +166,6 @@ pub struct FinishedStore {
     pub resumed: usize,
     /// Its layout.
     pub layout: ChunkLayout,
-    /// Bytes read from the source, over every group.
-    pub source_bytes: u64,
     /// Bytes of the store on disk.
     pub store_bytes: u64,
 }
@@ -174,69 +181,69 @@ pub struct PartialStore {
     progress: Option<Progress>,
     writer: Option<ZarrWriter>,
     resumed: usize,
-    /// Held until the store is finished or abandoned.
+    /// Held until the store is dropped.
     _lock: OutputLock,
 }
 
 impl PartialStore {
     /// Starts writing a store to `out` (a new or empty folder) of what `fingerprint` stands
     /// for, or, with `options.resume` and an interrupted writer's partial store of `out`
-    /// whose record carries the same fingerprint and zstd level, goes on with it.
-    /// `start_over` says in errors how to make a fingerprint that differs start over.
+    /// whose record carries the same fingerprint and zstd level, goes on with it after the
+    /// last counted group whose chunk is still on disk: the store is reopened at once, its
+    /// first groups named by `resumed_names(groups it holds)`. `start_over` says in errors
+    /// how to make a fingerprint that differs start over.
     ///
     /// # Errors
     /// [`LoadError::Io`]: `out` is not new or empty, another writer holds it, a partial store
     /// is there without `resume` or `force`, its record is damaged or belongs to another
-    /// source or level.
+    /// source or level, or the store cannot be reopened.
     pub fn open(
         out: &Path,
         fingerprint: String,
         options: PackOptions,
         start_over: &str,
+        resumed_names: impl FnOnce(usize) -> Vec<String>,
     ) -> Result<Self, LoadError> {
-        if !dir_is_missing_or_empty(out)? {
-            return Err(io_err("the output folder must be new or empty", out));
-        }
         if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
             std::fs::create_dir_all(parent)
                 .map_err(|e| io_err(format!("cannot create the output's folder: {e}"), parent))?;
         }
         let lock = OutputLock::acquire(out)?;
+        // Checked under the lock: a writer that finished meanwhile filled it.
+        if !dir_is_missing_or_empty(out)? {
+            return Err(io_err("the output folder must be new or empty", out));
+        }
         let path = partial_path(out);
         // A partial store without a record holds no checked group: it is started again.
-        let progress = if path.join(PROGRESS_FILE).exists() {
-            let progress = read_progress(&path)?;
-            if options.resume {
-                let refuse = |why: String| io_err(format!("cannot resume: {why}"), &path);
-                if progress.source_fingerprint != fingerprint {
-                    return Err(refuse(format!(
-                        "the interrupted writer was writing something else (or what it wrote \
-                         has changed since); {start_over}"
-                    )));
-                }
-                if progress.zstd_level != options.zstd_level {
-                    return Err(refuse(format!(
-                        "the interrupted writer used --zstd-level {}, not {}; resume with that \
-                         level, or start over with --force",
-                        progress.zstd_level, options.zstd_level
-                    )));
-                }
-                Some(progress)
-            } else if options.force {
-                None
-            } else {
-                return Err(io_err(
-                    format!(
-                        "an interrupted run's partial store of this output is kept here ({} \
-                         groups written): continue it with --resume, or start over with --force",
-                        progress.groups_checked
-                    ),
-                    &path,
-                ));
+        let recorded = path.join(PROGRESS_FILE).exists();
+        let mut progress = None;
+        if recorded && options.resume {
+            let p = read_progress(&path)?;
+            let refuse = |why: String| io_err(format!("cannot resume: {why}"), &path);
+            if p.source_fingerprint != fingerprint {
+                return Err(refuse(format!(
+                    "the interrupted writer was writing something else (or what it wrote has \
+                     changed since); {start_over}"
+                )));
             }
-        } else {
-            None
-        };
+            if p.zstd_level != options.zstd_level {
+                return Err(refuse(format!(
+                    "the interrupted writer used --zstd-level {}, not {}; resume with that \
+                     level, or start over with --force",
+                    p.zstd_level, options.zstd_level
+                )));
+            }
+            progress = Some(p);
+        } else if recorded && !options.force {
+            let counted = read_progress(&path)?.groups_checked;
+            return Err(io_err(
+                format!(
+                    "an interrupted run's partial store of this output is kept here ({counted} \
+                     groups written): continue it with --resume, or start over with --force"
+                ),
+                &path,
+            ));
+        }
         if progress.is_none() && path.exists() {
             std::fs::remove_dir_all(&path).map_err(|e| {
                 io_err(
@@ -245,14 +252,32 @@ impl PartialStore {
                 )
             })?;
         }
+        // A counted chunk that a power cut took from the file system is written again.
+        if let Some(p) = progress.as_mut() {
+            let layout = p.layout;
+            if let Some(lost) =
+                (0..p.groups_checked).find(|&g| !chunk_path(&path, g, layout).is_file())
+            {
+                p.groups_checked = lost;
+            }
+        }
         let resumed = progress.as_ref().map_or(0, |p| p.groups_checked);
+        let writer = match &progress {
+            Some(p) => Some(ZarrWriter::reopen(
+                &path,
+                p.layout,
+                options.zstd_level,
+                resumed_names(resumed),
+            )?),
+            None => None,
+        };
         Ok(Self {
             out: out.to_path_buf(),
             path,
             options,
             fingerprint,
             progress,
-            writer: None,
+            writer,
             resumed,
             _lock: lock,
         })
@@ -276,10 +301,9 @@ impl PartialStore {
         self.progress.as_ref().map(|p| p.layout)
     }
 
-    /// Writes the next group (`frames`, named `name`; `source` names it in errors,
-    /// `source_bytes` is what was read for it), reads its chunk back and compares it, syncs
-    /// it, and counts it in the record. The first group sets the layout; `names` of the
-    /// resumed groups are asked for once, when the store is reopened.
+    /// Writes the next group (`frames`, named `name`; `source` names it in errors), reads its
+    /// chunk back and compares it, syncs it, and counts it in the record. The first group of
+    /// a new store sets its layout.
     ///
     /// # Errors
     /// [`LoadError`] naming the group when its frames do not fit the store, a write fails, or
@@ -289,39 +313,29 @@ impl PartialStore {
         name: &str,
         frames: Vec<RawFrame>,
         source: &Path,
-        source_bytes: u64,
-        resumed_names: impl FnOnce(usize) -> Vec<String>,
     ) -> Result<(), LoadError> {
         if self.writer.is_none() {
-            let progress = match self.progress.take() {
-                Some(p) => p,
-                None => {
-                    let Some(f0) = frames.first() else {
-                        return Err(io_err("a group of no frames", source));
-                    };
-                    Progress {
-                        progress_format: PROGRESS_FORMAT,
-                        source_fingerprint: self.fingerprint.clone(),
-                        zstd_level: self.options.zstd_level,
-                        layout: ChunkLayout {
-                            frames: frames.len(),
-                            width: f0.width,
-                            height: f0.height,
-                            sample_type: super::SampleType::of(&f0.samples),
-                        },
-                        groups_checked: 0,
-                        source_bytes: 0,
-                    }
-                }
+            let Some(f0) = frames.first() else {
+                return Err(io_err("a group of no frames", source));
             };
-            let names = resumed_names(progress.groups_checked);
-            self.writer = Some(ZarrWriter::reopen(
+            let layout = ChunkLayout {
+                frames: frames.len(),
+                width: f0.width,
+                height: f0.height,
+                sample_type: super::SampleType::of(&f0.samples),
+            };
+            self.writer = Some(ZarrWriter::create(
                 &self.path,
-                progress.layout,
+                layout,
                 self.options.zstd_level,
-                names,
             )?);
-            self.progress = Some(progress);
+            self.progress = Some(Progress {
+                progress_format: PROGRESS_FORMAT,
+                source_fingerprint: self.fingerprint.clone(),
+                zstd_level: self.options.zstd_level,
+                layout,
+                groups_checked: 0,
+            });
         }
         let (Some(writer), Some(progress)) = (self.writer.as_mut(), self.progress.as_mut()) else {
             return Err(io_err("the store was not started", &self.path));
@@ -344,9 +358,11 @@ impl PartialStore {
         std::fs::File::open(&chunk)
             .and_then(|f| f.sync_all())
             .map_err(|e| io_err(format!("cannot sync the chunk: {e}"), &chunk))?;
-        progress.groups_checked = g + 1;
-        progress.source_bytes += source_bytes;
-        write_json_atomic(&self.path.join(PROGRESS_FILE), &*progress, true)
+        let mut next = progress.clone();
+        next.groups_checked = g + 1;
+        write_json_atomic(&self.path.join(PROGRESS_FILE), &next, true)?;
+        *progress = next;
+        Ok(())
     }
 
     /// The partial store's folder (side files such as `reference.wav` are copied into it
@@ -356,23 +372,18 @@ impl PartialStore {
         &self.path
     }
 
-    /// Ends the store: its metadata with `scan_toml`, the record removed, renamed into place.
+    /// Ends the store: its metadata with `scan_toml`, renamed into place, then the record
+    /// (and any temporary file a killed record write left) removed. Until the rename the
+    /// partial store keeps its record, so a failure here keeps every counted group.
     ///
     /// # Errors
     /// [`LoadError::Io`] naming the store when no group was written or a write or the rename
     /// fails.
-    pub fn finish(mut self, scan_toml: &str) -> Result<FinishedStore, LoadError> {
-        let (Some(writer), Some(progress)) = (self.writer.take(), self.progress.take()) else {
+    pub fn finish(&mut self, scan_toml: &str) -> Result<FinishedStore, LoadError> {
+        let (Some(writer), Some(progress)) = (self.writer.as_ref(), self.progress.as_ref()) else {
             return Err(io_err("no group was written", &self.path));
         };
-        writer.finish(scan_toml)?;
-        std::fs::remove_file(self.path.join(PROGRESS_FILE)).map_err(|e| {
-            io_err(
-                format!("cannot remove the progress record: {e}"),
-                &self.path,
-            )
-        })?;
-        let store_bytes = dir_bytes(&self.path);
+        writer.store_metadata(scan_toml)?;
         if self.out.exists() {
             std::fs::remove_dir(&self.out).map_err(|e| {
                 io_err(
@@ -383,30 +394,163 @@ impl PartialStore {
         }
         std::fs::rename(&self.path, &self.out)
             .map_err(|e| io_err(format!("cannot move the store into place: {e}"), &self.out))?;
-        Ok(FinishedStore {
+        let _ = std::fs::remove_file(self.out.join(PROGRESS_FILE));
+        let record_tmp = format!(".{PROGRESS_FILE}.");
+        if let Ok(entries) = std::fs::read_dir(&self.out) {
+            for e in entries.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                if name.starts_with(&record_tmp) && name.ends_with(".tmp") {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+        let done = FinishedStore {
             out: self.out.clone(),
             groups: progress.groups_checked,
             resumed: self.resumed,
             layout: progress.layout,
-            source_bytes: progress.source_bytes,
-            store_bytes,
-        })
+            store_bytes: dir_bytes(&self.out),
+        };
+        self.writer = None;
+        self.progress = None;
+        Ok(done)
     }
 
-    /// Ends a writer that failed: keeps the partial store when the options say so and it
-    /// counts a group (what was kept, for the error line), else removes it.
+    /// Ends a writer that failed: keeps the partial store when the options say so and its
+    /// record on disk counts a group (what was kept, for the error line), else removes it.
     #[must_use]
     pub fn abandon(self, total: Option<usize>) -> Option<Kept> {
-        let groups = self.groups();
-        let counted = self.path.join(PROGRESS_FILE).is_file();
-        if self.options.keep_partial && groups > 0 && counted {
+        let counted = read_progress(&self.path).map_or(0, |p| p.groups_checked);
+        if self.options.keep_partial && counted > 0 {
             return Some(Kept {
-                groups,
+                groups: counted,
                 total,
                 partial: self.path.clone(),
             });
         }
         let _ = std::fs::remove_dir_all(&self.path);
         None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::frames::RawSamples;
+    use crate::test_support::path_in_temp_dir;
+
+    /// Group `g`: seven 40 × 2 frames of 8-bit samples of its own.
+    fn group(g: u8) -> Vec<RawFrame> {
+        (0..7)
+            .map(|k| RawFrame {
+                width: 40,
+                height: 2,
+                samples: RawSamples::U8((0..80).map(|i| g ^ k ^ i).collect()),
+            })
+            .collect()
+    }
+
+    fn names(n: usize) -> Vec<String> {
+        (0..n).map(|g| format!("g{g}")).collect()
+    }
+
+    const TOML: &str = "format = 1\n[record]\nrpm = 78.0\nradius_mm = 115.0\n[camera]\n\
+        pixel_pitch_um = 0.39\nworking_distance_mm = 4.0\n[motion]\nframe_step_um = 0.78\n\
+        group_step_um = 1.0\n";
+
+    fn resume() -> PackOptions {
+        PackOptions {
+            resume: true,
+            keep_partial: true,
+            ..PackOptions::once(3)
+        }
+    }
+
+    /// A partial store of `n` counted groups at `out`, left as a kill leaves it.
+    fn killed_after(out: &Path, n: u8) {
+        let mut store = PartialStore::open(out, "f".into(), resume(), "", names).unwrap();
+        for g in 0..n {
+            store.add_group(&format!("g{g}"), group(g), out).unwrap();
+        }
+        // No finish, no abandon: the lock goes with the process.
+        drop(store);
+        assert!(partial_path(out).join(PROGRESS_FILE).is_file());
+    }
+
+    /// `out` is a finished store of groups 0..n.
+    fn assert_finished(out: &Path, n: usize) {
+        let scan = crate::io::Scan::open(out).unwrap();
+        assert_eq!(scan.groups.len(), n);
+        for (g, entry) in scan.groups.iter().enumerate() {
+            let z = entry.zarr.as_ref().unwrap();
+            assert_eq!(load_group_raw(z).unwrap(), group(g as u8));
+        }
+        assert!(!partial_path(out).exists() && !out.join(PROGRESS_FILE).exists());
+    }
+
+    #[test]
+    fn a_store_killed_after_its_last_group_was_counted_finishes_on_resume() {
+        let (_dir, out) = path_in_temp_dir("s.zarr");
+        killed_after(&out, 3);
+        let other = PartialStore::open(&out, "g".into(), resume(), "start over", names);
+        assert!(other.unwrap_err().to_string().contains("something else"));
+        let mut store = PartialStore::open(&out, "f".into(), resume(), "", names).unwrap();
+        assert_eq!((store.resumed(), store.groups()), (3, 3));
+        let done = store.finish(TOML).unwrap();
+        assert_eq!((done.groups, done.resumed), (3, 3));
+        assert_finished(&out, 3);
+    }
+
+    #[test]
+    fn a_counted_chunk_the_disk_lost_is_written_again() {
+        let (_dir, out) = path_in_temp_dir("s.zarr");
+        killed_after(&out, 3);
+        let layout = read_progress(&partial_path(&out)).unwrap().layout;
+        std::fs::remove_file(chunk_path(&partial_path(&out), 1, layout)).unwrap();
+        let mut store = PartialStore::open(&out, "f".into(), resume(), "", names).unwrap();
+        assert_eq!(store.groups(), 1);
+        for g in 1..3 {
+            store.add_group(&format!("g{g}"), group(g), &out).unwrap();
+        }
+        store.finish(TOML).unwrap();
+        assert_finished(&out, 3);
+    }
+
+    #[test]
+    fn a_finish_that_fails_keeps_every_group_and_force_clears_a_damaged_record() {
+        let (_dir, out) = path_in_temp_dir("s.zarr");
+        killed_after(&out, 2);
+        let mut store = PartialStore::open(&out, "f".into(), resume(), "", names).unwrap();
+        // Something put into the output meanwhile: the rename must not replace it.
+        std::fs::create_dir(&out).unwrap();
+        std::fs::write(out.join("notes.txt"), "mine").unwrap();
+        assert!(store.finish(TOML).is_err());
+        let kept = store.abandon(Some(2)).unwrap();
+        assert_eq!(kept.groups, 2);
+        assert_eq!(
+            std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+            "mine"
+        );
+        std::fs::remove_dir_all(&out).unwrap();
+
+        std::fs::write(partial_path(&out).join(PROGRESS_FILE), b"{ torn").unwrap();
+        let msg = PartialStore::open(&out, "f".into(), resume(), "", names)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("cannot be read") && msg.contains("--force"),
+            "{msg}"
+        );
+        let force = PackOptions {
+            force: true,
+            ..PackOptions::once(3)
+        };
+        let mut store = PartialStore::open(&out, "f".into(), force, "", names).unwrap();
+        assert_eq!(store.groups(), 0);
+        for g in 0..2 {
+            store.add_group(&format!("g{g}"), group(g), &out).unwrap();
+        }
+        store.finish(TOML).unwrap();
+        assert_finished(&out, 2);
     }
 }
