@@ -78,6 +78,23 @@ fn no_subcommand_without_a_display_writes_the_demo_wav_and_report_here() {
     let found = json["grooves_found"].as_array().unwrap();
     assert_eq!(found.len(), 3, "{:?}", json["grooves_found"]);
     assert!(json["scores"][0]["r"].as_f64().unwrap() >= MIN_R, "{json}");
+    // A Broadcast WAV: it says what it is, what made it and how.
+    let (description, originator, reference, history) =
+        groovescope::io::bwf::read_bext(&std::fs::read(&wav).unwrap()).unwrap();
+    assert_eq!(originator, "groovescope");
+    assert!(
+        description.contains("disc at 16.667 rpm seen in a still image (groove 2 of still.png"),
+        "{description}"
+    );
+    assert_eq!(reference.len(), 32, "{reference}");
+    assert_eq!(history.len(), 2, "{history:?}");
+    assert!(
+        history[1].starts_with("A=PCM,F=44100,W=24,M=mono,T=groovescope ")
+            && history[1].contains("still decoder; DC block 10 Hz")
+            && history[1].contains("low-pass 3000 Hz")
+            && history[1].contains("-3 dB at 3000 Hz"),
+        "{history:?}"
+    );
 }
 
 #[test]

@@ -272,6 +272,19 @@ fn a_store_reconstructs_to_the_same_wav_and_a_missing_chunk_is_named_or_a_gap() 
         std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
         "WAVs differ"
     );
+    // Both are the same Broadcast WAV: the disc, the decoder and filters, and a reference
+    // made of the scan's and the params' fingerprints, which the two forms share.
+    let (description, _, reference, history) =
+        groovescope::io::bwf::read_bext(&std::fs::read(&a).unwrap()).unwrap();
+    assert!(description.contains("lateral-cut disc at"), "{description}");
+    let params = groovescope::pipeline::PipelineParams::default();
+    let want = scan_fingerprint(&Scan::open(&folder).unwrap())
+        + &groovescope::side::params_fingerprint(&params);
+    assert_eq!(reference, want);
+    assert!(
+        history[1].contains("fused decoder on the dual-focus path; DC block"),
+        "{history:?}"
+    );
 
     let chunk = store.join("frames/c/2/0/0/0");
     std::fs::remove_file(&chunk).unwrap();

@@ -224,6 +224,10 @@ fn reconstructs_exports_a_wav_and_reads_it_back() {
         sidecar.contains("[flow]") && sidecar.contains("lambda"),
         "{sidecar}"
     );
+    let (description, _, _, history) =
+        groovescope::io::bwf::read_bext(&std::fs::read(&wav).unwrap()).unwrap();
+    assert!(description.contains("lateral-cut disc at"), "{description}");
+    assert!(history[1].contains(",W=16,"), "{history:?}");
     // A second export asks before replacing; "no" leaves the file alone.
     let before = std::fs::read(&wav).unwrap();
     wb_mut(&mut h).set_export_bits(WavBits::Float32);

@@ -204,7 +204,8 @@ impl Workbench {
             None
         };
         let rate = self.views.wave.export_rate_hz;
-        match export::export_wav(&clip, path, bits, rate, sel, overwrite) {
+        let scan = self.nav.scan.as_ref();
+        match export::export_wav(&clip, scan, path, bits, rate, sel, overwrite) {
             Ok(()) => {
                 self.info(format!("exported {}", path.display()));
                 Ok(())

@@ -10,7 +10,7 @@ use super::still::{StillDoc, StillTask, setup_for, start_still};
 use super::views::still_ui::{StillAction, still_window};
 use super::workbench::{Workbench, repaint_fn};
 use crate::io::lock::OutputLock;
-use crate::io::wav::{WavBits, write_wav};
+use crate::io::wav::{WavBits, write_transfer_wav};
 use crate::pipeline::still::StillSetup;
 
 impl Workbench {
@@ -260,8 +260,16 @@ impl Workbench {
             scores: None,
             chosen_automatically: false,
         };
-        write_wav(path, &run.audio, WavBits::Int24, overwrite).map_err(|e| e.to_string())?;
         let params = self.tuning.params();
+        let info = crate::still::cli::still_transfer_info(
+            &doc.path,
+            run,
+            &doc.setup,
+            params,
+            WavBits::Int24,
+        );
+        write_transfer_wav(path, &run.audio, WavBits::Int24, overwrite, &info)
+            .map_err(|e| e.to_string())?;
         crate::still::cli::write_still_report(&report, run, &doc.setup, params, &what, overwrite)
             .map_err(|e| e.to_string())
     }

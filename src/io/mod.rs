@@ -1,6 +1,7 @@
 //! Disk input and output: scans (folders or Zarr stores) and frames, WAV files, `.flo` flow fields, atomic writes, video import (feature `video`).
 
 pub mod atomic;
+pub mod bwf;
 pub mod fingerprint;
 pub mod flo;
 pub mod frames;

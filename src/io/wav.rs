@@ -222,6 +222,33 @@ pub fn write_wav(
     bits: WavBits,
     overwrite: bool,
 ) -> Result<(), LoadError> {
+    let data = encode_wav(path, audio, bits)?;
+    write_atomic_with(path, overwrite, |w| std::io::Write::write_all(w, &data))
+}
+
+/// Writes a transfer as a Broadcast Wave File: [`write_wav`]'s WAV with a `bext` chunk of
+/// `info` before its samples (see [`super::bwf`]).
+///
+/// # Errors
+/// As [`write_wav`].
+pub fn write_transfer_wav(
+    path: &Path,
+    audio: &Audio,
+    bits: WavBits,
+    overwrite: bool,
+    info: &super::bwf::BroadcastInfo,
+) -> Result<(), LoadError> {
+    let data = super::bwf::with_bext(encode_wav(path, audio, bits)?, info).map_err(|problem| {
+        LoadError::Sound {
+            problem: format!("cannot write the broadcast chunk: {problem}"),
+            path: path.to_path_buf(),
+        }
+    })?;
+    write_atomic_with(path, overwrite, |w| std::io::Write::write_all(w, &data))
+}
+
+/// `audio` encoded as a WAV file in memory (`path` names it in errors).
+fn encode_wav(path: &Path, audio: &Audio, bits: WavBits) -> Result<Vec<u8>, LoadError> {
     let nch = audio.channels.len();
     if nch == 0 || nch > 2 || audio.channels.iter().any(|c| c.len() != audio.len()) {
         return Err(LoadError::Sound {
@@ -272,8 +299,7 @@ pub fn write_wav(
             path: path.to_path_buf(),
         })?;
     }
-    let data = bytes.into_inner();
-    write_atomic_with(path, overwrite, |w| std::io::Write::write_all(w, &data))
+    Ok(bytes.into_inner())
 }
 
 #[cfg(test)]

@@ -284,7 +284,8 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
         .as_deref()
         .map(|r| super::score_still(&run.audio, r))
         .transpose()?;
-    crate::io::wav::write_wav(&args.out, &run.audio, args.bits, args.force)?;
+    let info = still_transfer_info(&args.image, &run, &setup, &params, args.bits);
+    crate::io::wav::write_transfer_wav(&args.out, &run.audio, args.bits, args.force, &info)?;
     if let Some(path) = &args.report {
         let what = ReportInputs {
             image: &args.image,
@@ -348,6 +349,48 @@ pub struct ReportInputs<'a> {
     pub scores: Option<Vec<Option<crate::pipeline::eval::Scores>>>,
     /// The groove was chosen by the decoder, not asked for.
     pub chosen_automatically: bool,
+}
+
+/// The `bext` chunk of a still's WAV ([`crate::io::bwf`]): the disc and the groove of the
+/// image, the still decoder and its filters in words, and as reference fingerprints of the
+/// image (its name and size, and the groove) and of the params.
+#[must_use]
+pub fn still_transfer_info(
+    image: &Path,
+    run: &super::StillRun,
+    setup: &crate::pipeline::still::StillSetup,
+    params: &crate::pipeline::PipelineParams,
+    bits: crate::io::wav::WavBits,
+) -> crate::io::bwf::BroadcastInfo {
+    let name = image.file_name().map_or_else(
+        || image.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    let groove = run.analysis.chosen + 1;
+    let cut = if setup.cut == Cut::Stereo {
+        "45/45 stereo"
+    } else {
+        "lateral-cut"
+    };
+    let source = format!(
+        "{cut} disc at {} rpm seen in a still image (groove {groove} of {name}; {} um a pixel)",
+        crate::io::bwf::short_number(setup.rpm),
+        crate::io::bwf::short_number(setup.um_per_px)
+    );
+    let process = format!(
+        "still decoder; {}",
+        crate::pipeline::dsp::describe_chain(
+            &params.dsp,
+            crate::pipeline::finish::STILL_FILTER_PHASE
+        )
+    );
+    let size = std::fs::metadata(image).map_or(0, |m| m.len());
+    let reference = format!(
+        "{}{}",
+        crate::io::fingerprint::fingerprint(format!("{name} {size} {groove}").as_bytes()),
+        crate::side::params_fingerprint(params)
+    );
+    crate::io::bwf::BroadcastInfo::optical_transfer(&source, &process, &reference, &run.audio, bits)
 }
 
 /// Writes the JSON report of a decoded still to `path` (atomically; an existing file only

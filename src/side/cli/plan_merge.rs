@@ -9,7 +9,7 @@ use super::{lock_outputs, make_report};
 use crate::cli::check_outputs;
 use crate::cli::{load_params, path_choice, unless_interrupted};
 use crate::engine::{GroupOutcome, GroupStream, SlopeMode, run_groups};
-use crate::io::wav::{WavBits, write_wav};
+use crate::io::wav::{WavBits, write_transfer_wav};
 use crate::io::{Scan, ScanMeta, write_json_atomic};
 use crate::job::interrupted;
 use crate::pipeline::PipelineParams;
@@ -88,9 +88,21 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     let merged = unless_interrupted("merge", merge_parts(&args.parts, interrupted()))?;
     let mut rec = merged.reconstruction;
     rec.timings.total_secs = started.elapsed().as_secs_f64();
-    write_wav(&args.out, &rec.audio, args.bits, args.force)?;
+    let identity = &merged.identity;
+    let first_part = merged
+        .parts
+        .first()
+        .map_or(Path::new("."), PathBuf::as_path);
+    let meta = ScanMeta::from_toml_str(&identity.meta_toml, first_part)?;
+    let info = super::transfer_info(
+        &meta,
+        &identity.params,
+        &rec,
+        &identity.scan_fingerprint,
+        (&rec.audio, args.bits),
+    );
+    write_transfer_wav(&args.out, &rec.audio, args.bits, args.force, &info)?;
     if let Some(report_path) = &args.report {
-        let meta = ScanMeta::from_toml_str(&merged.identity.meta_toml, report_path)?;
         let report = make_report(
             Path::new(&merged.identity.scan),
             &meta,
