@@ -22,16 +22,38 @@ pub struct PackArgs {
     /// zstd compression level (1 fastest … 22 smallest).
     #[arg(long, default_value_t = DEFAULT_ZSTD_LEVEL)]
     pub zstd_level: i32,
-    /// Go on from an interrupted pack of this output (its partial store beside `--out`) after
-    /// the last group it packed and checked; without one, start.
-    #[arg(long, conflicts_with = "force")]
-    pub resume: bool,
-    /// Remove an interrupted pack of this output and start over.
-    #[arg(long)]
-    pub force: bool,
+    /// What to do with an interrupted pack of this output.
+    #[command(flatten)]
+    pub interrupted: ResumeArgs,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// What a store's writer (`pack`, `import-video` into a store) does with the partial store an
+/// interrupted run of the same output left (docs/FORMAT.md, "A store in progress").
+#[derive(Clone, Copy, Debug, clap::Args)]
+pub struct ResumeArgs {
+    /// Go on from an interrupted run writing this store (its partial store beside `--out`)
+    /// after the last group it wrote and checked; without one, start.
+    #[arg(long, conflicts_with = "force")]
+    pub resume: bool,
+    /// Remove an interrupted run's partial store of this output and start over.
+    #[arg(long)]
+    pub force: bool,
+}
+
+impl ResumeArgs {
+    /// The store options: these flags at zstd `level`, keeping what a stopped run wrote.
+    #[must_use]
+    pub fn options(self, zstd_level: i32) -> PackOptions {
+        PackOptions {
+            zstd_level,
+            resume: self.resume,
+            force: self.force,
+            keep_partial: true,
+        }
+    }
 }
 
 /// Runs `pack`: converts, reads every chunk back, then opens the store as a scan and checks
@@ -46,12 +68,7 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
     let scan = Scan::open(&args.scan)?;
     let started = Instant::now();
     let pb = progress_bar(scan.groups.len(), args.quiet);
-    let options = PackOptions {
-        zstd_level: args.zstd_level,
-        resume: args.resume,
-        force: args.force,
-        keep_partial: true,
-    };
+    let options = args.interrupted.options(args.zstd_level);
     let summary = pack_scan(
         &scan,
         &args.out,

@@ -54,13 +54,9 @@ pub struct ImportVideoArgs {
     /// `.zarr`.
     #[arg(long)]
     pub zarr: bool,
-    /// Go on from an interrupted import into this store (its partial store beside `--out`)
-    /// after the last group it wrote and checked; without one, start.
-    #[arg(long, conflicts_with = "force")]
-    pub resume: bool,
-    /// Remove an interrupted import into this store and start over.
-    #[arg(long)]
-    pub force: bool,
+    /// What to do with an interrupted import into this store.
+    #[command(flatten)]
+    pub interrupted: crate::pack_cli::ResumeArgs,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -76,7 +72,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
 
     use crate::io::Cut;
     use crate::io::video::{ClipMeta, GroupLayout, import_video, import_video_to_store};
-    use crate::io::zarr::{DEFAULT_ZSTD_LEVEL, PackOptions};
+    use crate::io::zarr::DEFAULT_ZSTD_LEVEL;
     use crate::job::Job;
 
     let cut = match args.cut.as_str() {
@@ -115,7 +111,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
         pb.set_position(done as u64);
     };
     let zarr = args.zarr || args.out.extension().is_some_and(|e| e == "zarr");
-    if !zarr && (args.resume || args.force) {
+    if !zarr && (args.interrupted.resume || args.interrupted.force) {
         anyhow::bail!(
             "--resume and --force are for an import into a Zarr store (--zarr, or --out NAME.zarr); \
              an import into a folder starts afresh: {}",
@@ -124,12 +120,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
     }
     let summary = if zarr {
         // Straight into the store, group by group, resumable.
-        let options = PackOptions {
-            zstd_level: DEFAULT_ZSTD_LEVEL,
-            resume: args.resume,
-            force: args.force,
-            keep_partial: true,
-        };
+        let options = args.interrupted.options(DEFAULT_ZSTD_LEVEL);
         let job = Job::reporting(&progress);
         import_video_to_store(&args.clip, &args.out, &layout, &meta, options, job)?
     } else {
