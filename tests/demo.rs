@@ -83,7 +83,8 @@ fn no_subcommand_without_a_display_writes_the_demo_wav_and_report_here() {
         groovescope::io::bwf::read_bext(&std::fs::read(&wav).unwrap()).unwrap();
     assert_eq!(originator, "groovescope");
     assert!(
-        description.contains("disc at 16.667 rpm seen in a still image (groove 2 of still.png"),
+        description
+            .contains("disc at 16.667 rpm in groove 2 of a still image at 6 um a pixel: still.png"),
         "{description}"
     );
     assert_eq!(reference.len(), 32, "{reference}");

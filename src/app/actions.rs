@@ -204,8 +204,7 @@ impl Workbench {
             None
         };
         let rate = self.views.wave.export_rate_hz;
-        let scan = self.nav.scan.as_ref();
-        match export::export_wav(&clip, scan, path, bits, rate, sel, overwrite) {
+        match export::export_wav(&clip, path, bits, rate, sel, overwrite) {
             Ok(()) => {
                 self.info(format!("exported {}", path.display()));
                 Ok(())

@@ -114,15 +114,13 @@ pub fn selection_samples(clip: &Clip, selection_secs: Option<(f64, f64)>) -> (us
 
 /// Writes the clip (or the selection) as a Broadcast WAV, at `rate_hz` when given
 /// (resampled), plus its sidecar report, which records the params the clip was made with and
-/// where they came from. `scan`, when it is the clip's, describes the disc in the WAV's `bext`
-/// chunk.
+/// where they came from; the WAV's `bext` chunk names the clip's scan and params.
 ///
 /// # Errors
 /// A message naming the file when it exists and `overwrite` is false, the selection is empty,
 /// or a write fails.
 pub fn export_wav(
     clip: &Clip,
-    scan: Option<&crate::io::Scan>,
     path: &Path,
     bits: WavBits,
     rate_hz: Option<u32>,
@@ -185,27 +183,14 @@ pub fn export_wav(
         warnings: clip.recon.warnings.clone(),
     };
     let json = serde_json::to_string_pretty(&sidecar).map_err(|e| e.to_string())?;
-    let info = match scan.filter(|s| s.dir == clip.scan_dir) {
-        Some(scan) => crate::side::cli::transfer_info(
-            &scan.meta,
-            &clip.params,
-            &clip.recon,
-            &crate::io::fingerprint::scan_fingerprint(scan),
-            (&audio, bits),
-        ),
-        // The scan open now is another: the clip's disc is not known here.
-        None => crate::io::bwf::BroadcastInfo::optical_transfer(
-            "disc read optically from scan images",
-            &format!(
-                "{} decoder; {}",
-                clip.recon.method.name(),
-                crate::pipeline::finish::describe_filters(&clip.params.dsp, clip.recon.method)
-            ),
-            &crate::side::params_fingerprint(&clip.params),
-            &audio,
-            bits,
-        ),
-    };
+    let (meta, fingerprint) = &clip.scan_identity;
+    let info = crate::side::cli::transfer_info(
+        meta,
+        &clip.params,
+        &clip.recon,
+        fingerprint,
+        (&audio, bits),
+    );
     write_transfer_wav(path, &audio, bits, overwrite, &info).map_err(|e| e.to_string())?;
     write_atomic(&sidecar_path(path), json.as_bytes(), overwrite).map_err(|e| e.to_string())
 }

@@ -64,6 +64,8 @@ pub struct Clip {
     pub tracks: Vec<GroupTrack>,
     /// Scan folder.
     pub scan_dir: PathBuf,
+    /// The scan's metadata and fingerprint (the exported WAV's `bext` chunk names them).
+    pub scan_identity: (Arc<crate::io::ScanMeta>, String),
     /// Why the reference is missing, when `scan.reference` exists but could not be read.
     pub reference_problem: Option<String>,
 }
@@ -201,6 +203,10 @@ pub fn make_clip(
         groups,
         tracks,
         scan_dir: scan.dir.clone(),
+        scan_identity: (
+            Arc::new(scan.meta.clone()),
+            crate::io::fingerprint::scan_fingerprint(scan),
+        ),
         reference_problem,
     }
 }

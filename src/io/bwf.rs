@@ -4,9 +4,10 @@
 //! its `data`. groovescope's transfers carry one: the description, `groovescope` as
 //! originator, a reference made of the scan's and the params' fingerprints, and two coding
 //! history lines, the disc and the optical transfer (decoder and filters in words). The
-//! origination date and time are left empty, so one transfer always gives the same bytes (a
-//! merged side matches a one-process run); the report records when it was made. Readers that
-//! do not know the chunk skip it, as RIFF says.
+//! origination date and time are left empty (outside the letter of Tech 3285, which most
+//! readers accept), so one transfer always gives the same bytes: a merged side matches a
+//! one-process run, and a scan's folder its store. Readers that do not know the chunk skip it,
+//! as RIFF says.
 
 use super::wav::{Audio, WavBits};
 use crate::meta::{Cut, ScanMeta};
@@ -84,10 +85,10 @@ impl BroadcastInfo {
         audio: &Audio,
         bits: WavBits,
     ) -> Self {
-        let width = match bits {
-            WavBits::Int16 => "16",
-            WavBits::Int24 => "24",
-            WavBits::Float32 => "32F",
+        let (width, float) = match bits {
+            WavBits::Int16 => ("16", ""),
+            WavBits::Int24 => ("24", ""),
+            WavBits::Float32 => ("32", " (IEEE float samples)"),
         };
         let channels = mode(audio.channels.len());
         Self {
@@ -99,7 +100,7 @@ impl BroadcastInfo {
                     "A=PCM,F={},W={width},M={channels},T={}",
                     audio.sample_rate_hz,
                     free_text(&format!(
-                        "groovescope {} optical transfer: {process}",
+                        "groovescope {} optical transfer{float}: {process}",
                         env!("CARGO_PKG_VERSION")
                     ))
                 ),

@@ -372,8 +372,9 @@ pub fn still_transfer_info(
     } else {
         "lateral-cut"
     };
+    // The image's name last: a long one is what the description's 256 characters cut.
     let source = format!(
-        "{cut} disc at {} rpm seen in a still image (groove {groove} of {name}; {} um a pixel)",
+        "{cut} disc at {} rpm in groove {groove} of a still image at {} um a pixel: {name}",
         crate::io::bwf::short_number(setup.rpm),
         crate::io::bwf::short_number(setup.um_per_px)
     );

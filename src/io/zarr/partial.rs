@@ -416,12 +416,13 @@ impl PartialStore {
         Ok(done)
     }
 
-    /// Ends a writer that failed: keeps the partial store when the options say so and its
-    /// record on disk counts a group (what was kept, for the error line), else removes it.
+    /// Ends a writer that failed: keeps the partial store when its record on disk counts a
+    /// group and the options say to keep it, or it was resumed (an earlier run's groups are
+    /// never removed); what was kept goes into the error line. Otherwise removes it.
     #[must_use]
     pub fn abandon(self, total: Option<usize>) -> Option<Kept> {
         let counted = read_progress(&self.path).map_or(0, |p| p.groups_checked);
-        if self.options.keep_partial && counted > 0 {
+        if (self.options.keep_partial || self.resumed > 0) && counted > 0 {
             return Some(Kept {
                 groups: counted,
                 total,
