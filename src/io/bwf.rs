@@ -145,7 +145,9 @@ impl BroadcastInfo {
     }
 }
 
-/// `wav` (a RIFF WAVE file in memory) with a `bext` chunk of `info` before its `data` chunk.
+/// `wav` (a RIFF WAVE file in memory) with a `bext` chunk of `info` before its `data` chunk,
+/// and the pad byte RIFF asks for after an odd-length `data` chunk that ends the file (hound
+/// writes none: 24-bit mono of an odd sample count).
 ///
 /// # Errors
 /// A sentence when `wav` is not a RIFF WAVE file with a `data` chunk.
@@ -169,13 +171,21 @@ pub fn with_bext(mut wav: Vec<u8>, info: &BroadcastInfo) -> Result<Vec<u8>, Stri
     let len = u32::try_from(payload.len()).map_err(|_| "bext chunk too long".to_string())?;
     chunk.extend(len.to_le_bytes());
     chunk.extend(payload);
+    let data_len = u32::from_le_bytes([
+        wav[data_at + 4],
+        wav[data_at + 5],
+        wav[data_at + 6],
+        wav[data_at + 7],
+    ]) as usize;
+    let pad = usize::from(data_len % 2 == 1 && wav.len() == data_at + 8 + data_len);
     let riff = u32::from_le_bytes([wav[4], wav[5], wav[6], wav[7]]);
-    let grown = u32::try_from(chunk.len())
+    let grown = u32::try_from(chunk.len() + pad)
         .ok()
         .and_then(|n| riff.checked_add(n))
         .ok_or("the WAV is too long for a bext chunk")?;
     wav[4..8].copy_from_slice(&grown.to_le_bytes());
     wav.splice(data_at..data_at, chunk);
+    wav.resize(wav.len() + pad, 0);
     Ok(wav)
 }
 
@@ -256,5 +266,23 @@ mod tests {
         );
         assert_eq!(a.channels, b.channels);
         assert!(with_bext(b"RIFF\0\0\0\0WAVEfmt ".to_vec(), &info).is_err());
+
+        // 24-bit mono of three samples: nine bytes of data, then the pad byte RIFF asks for.
+        let odd = Audio {
+            sample_rate_hz: 44_100,
+            channels: vec![vec![0.5, -0.25, 0.125]],
+        };
+        let plain = dir.path().join("odd.wav");
+        crate::io::wav::write_wav(&plain, &odd, WavBits::Int24, false).unwrap();
+        let bwf = with_bext(std::fs::read(&plain).unwrap(), &info).unwrap();
+        assert_eq!(bwf.len() % 2, 0);
+        let riff = u32::from_le_bytes([bwf[4], bwf[5], bwf[6], bwf[7]]) as usize;
+        assert_eq!(riff + 8, bwf.len());
+        let path = dir.path().join("odd-bwf.wav");
+        std::fs::write(&path, &bwf).unwrap();
+        assert_eq!(
+            crate::io::wav::read_wav(&path).unwrap().channels,
+            crate::io::wav::read_wav(&plain).unwrap().channels
+        );
     }
 }
