@@ -40,6 +40,12 @@ pub fn describe_filters(dsp: &super::dsp::DspParams, method: Method) -> String {
 /// How a still's sound runs them ([`channels_to_output`]).
 pub const STILL_FILTER_PHASE: FilterPhase = FilterPhase::ZeroPhase;
 
+/// The filters a still's sound goes through, in words (as [`describe_filters`] for a scan's).
+#[must_use]
+pub fn describe_still_filters(dsp: &super::dsp::DspParams) -> String {
+    super::dsp::describe_chain(dsp, STILL_FILTER_PHASE)
+}
+
 /// Gaps up to this many native samples are bridged by linear interpolation; longer ones stay silent.
 pub const BRIDGE_GAP_SAMPLES: usize = 4;
 

@@ -65,10 +65,21 @@ pub fn check_range(name: &str, value: f64, lo: f64, hi: f64) -> Result<(), Stage
     if value.is_finite() && value >= lo && value <= hi {
         Ok(())
     } else {
-        Err(StageError::InvalidParam {
+        Err(StageError::invalid(
+            name,
+            format!("{value} is not in [{lo}, {hi}]"),
+        ))
+    }
+}
+
+impl StageError {
+    /// [`StageError::InvalidParam`] naming the parameter `name` (its TOML path).
+    #[must_use]
+    pub fn invalid(name: &str, problem: String) -> Self {
+        Self::InvalidParam {
             name: name.to_string(),
-            problem: format!("{value} is not in [{lo}, {hi}]"),
-        })
+            problem,
+        }
     }
 }
 
@@ -243,12 +254,7 @@ impl PipelineParams {
     /// [`StageError::InvalidParam`] naming the first bad key.
     pub fn validate_for_clip(&self) -> Result<(), StageError> {
         self.validate()?;
-        dsp::dsp_chain(
-            f64::from(self.sound.output_rate_hz),
-            &self.dsp,
-            dsp::FilterPhase::Causal,
-        )
-        .map(|_| ())
+        dsp::check_chain(f64::from(self.sound.output_rate_hz), &self.dsp)
     }
 }
 

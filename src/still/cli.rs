@@ -380,10 +380,7 @@ pub fn still_transfer_info(
     );
     let process = format!(
         "still decoder; {}",
-        crate::pipeline::dsp::describe_chain(
-            &params.dsp,
-            crate::pipeline::finish::STILL_FILTER_PHASE
-        )
+        crate::pipeline::finish::describe_still_filters(&params.dsp)
     );
     let size = std::fs::metadata(image).map_or(0, |m| m.len());
     let reference = format!(
@@ -416,10 +413,7 @@ pub fn write_still_report(
         image: what.image.display().to_string(),
         output: what.out.display().to_string(),
         params_file: what.params_file.map(|p| p.display().to_string()),
-        filters: crate::pipeline::dsp::describe_chain(
-            &params.dsp,
-            crate::pipeline::finish::STILL_FILTER_PHASE,
-        ),
+        filters: crate::pipeline::finish::describe_still_filters(&params.dsp),
         image_width_px: run.image_px.0,
         image_height_px: run.image_px.1,
         axis: match setup.axis {

@@ -68,6 +68,13 @@ impl Biquad {
     /// Like [`Biquad::run`], but the filter starts settled on a constant input `x0` instead of
     /// the first sample (a high-pass then has no start transient from a DC offset of `x0`).
     pub fn run_settled(&self, samples: &mut [f32], x0: f64) {
+        self.settled(x0).run(samples.iter_mut());
+    }
+
+    /// The filter's running state, settled on a constant input `x0`: it can be fed samples in
+    /// any order (backward, or across buffers) without copying them into one.
+    #[must_use]
+    pub fn settled(&self, x0: f64) -> Running<'_> {
         let [b0, b1, b2] = self.b;
         let [a1, a2] = self.a;
         let den = 1.0 + a1 + a2;
@@ -77,13 +84,34 @@ impl Biquad {
             0.0
         };
         let y0 = dc_gain * x0;
-        let mut s2 = b2 * x0 - a2 * y0;
-        let mut s1 = b1 * x0 - a1 * y0 + s2;
-        for v in samples.iter_mut() {
+        let s2 = b2 * x0 - a2 * y0;
+        let s1 = b1 * x0 - a1 * y0 + s2;
+        Running {
+            section: self,
+            s1,
+            s2,
+        }
+    }
+}
+
+/// A [`Biquad`] part way through a signal (see [`Biquad::settled`]).
+#[derive(Debug)]
+pub struct Running<'a> {
+    section: &'a Biquad,
+    s1: f64,
+    s2: f64,
+}
+
+impl Running<'_> {
+    /// Filters `samples` in place, in the order given, carrying the state on.
+    pub fn run<'s>(&mut self, samples: impl Iterator<Item = &'s mut f32>) {
+        let [b0, b1, b2] = self.section.b;
+        let [a1, a2] = self.section.a;
+        for v in samples {
             let x = f64::from(*v);
-            let y = b0 * x + s1;
-            s1 = b1 * x - a1 * y + s2;
-            s2 = b2 * x - a2 * y;
+            let y = b0 * x + self.s1;
+            self.s1 = b1 * x - a1 * y + self.s2;
+            self.s2 = b2 * x - a2 * y;
             #[allow(clippy::cast_possible_truncation)] // audio samples are f32
             {
                 *v = y as f32;

@@ -108,10 +108,10 @@ impl Chain {
             if hz.is_finite() && hz > 0.0 && hz < nyquist_hz {
                 Ok(())
             } else {
-                Err(StageError::InvalidParam {
-                    name: name.to_string(),
-                    problem: format!("{hz} Hz is not in (0, Nyquist = {nyquist_hz} Hz)"),
-                })
+                Err(StageError::invalid(
+                    name,
+                    format!("{hz} Hz is not in (0, Nyquist = {nyquist_hz} Hz)"),
+                ))
             }
         };
         let dc_block = if params.dc_block {
@@ -124,14 +124,14 @@ impl Chain {
         if params.eq != EqCurve::Flat {
             let corner = params.eq.highest_corner_hz();
             if corner >= nyquist_hz {
-                return Err(StageError::InvalidParam {
-                    name: "dsp.eq".to_string(),
-                    problem: format!(
-                        "{:?} needs a sample rate above {} Hz, got {sample_rate_hz} Hz",
-                        params.eq,
-                        2.0 * corner
+                let needs = 2.0 * corner;
+                return Err(StageError::invalid(
+                    "dsp.eq",
+                    format!(
+                        "{:?} needs a sample rate above {needs} Hz, got {sample_rate_hz} Hz",
+                        params.eq
                     ),
-                });
+                ));
             }
             eq = params.eq.sections(sample_rate_hz);
         }
@@ -152,28 +152,34 @@ impl Chain {
     }
 }
 
-/// The whole filter chain of [`apply_dsp_with`] (DC block, EQ, low-pass) as biquad sections,
-/// each run once forward (zero-phase: the DC block and low-pass also backward).
+/// The causal filter chain of [`apply_dsp_with`] (DC block, EQ, low-pass) as biquad sections,
+/// each run once forward. (A zero-phase chain is not a list of sections: its DC block and
+/// low-pass also run backward, and its low-pass is designed for the pair.)
 ///
 /// # Errors
 /// [`StageError::InvalidParam`] for a NaN or non-positive rate or corner, or a corner not
 /// below Nyquist.
-pub fn dsp_chain(
-    sample_rate_hz: f64,
-    params: &DspParams,
-    phase: FilterPhase,
-) -> Result<Vec<Biquad>, StageError> {
+pub fn dsp_chain(sample_rate_hz: f64, params: &DspParams) -> Result<Vec<Biquad>, StageError> {
     let Chain {
         dc_block,
         eq,
         lowpass,
-    } = Chain::new(sample_rate_hz, params, phase)?;
+    } = Chain::new(sample_rate_hz, params, FilterPhase::Causal)?;
     let chain: Vec<Biquad> = dc_block.into_iter().chain(eq).chain(lowpass).collect();
     Ok(if chain.is_empty() {
         vec![Biquad::IDENTITY]
     } else {
         chain
     })
+}
+
+/// Checks that `params` make a filter chain at `sample_rate_hz` (either phase: both check
+/// the same corners).
+///
+/// # Errors
+/// As [`dsp_chain`].
+pub(crate) fn check_chain(sample_rate_hz: f64, params: &DspParams) -> Result<(), StageError> {
+    Chain::new(sample_rate_hz, params, FilterPhase::Causal).map(drop)
 }
 
 /// How [`apply_dsp_with`] runs the DC block and the low-pass (the EQ always runs causal).
@@ -272,12 +278,13 @@ pub fn apply_dsp_with(
         // Hann-weighted, whose leak of a tone falls as 1/f³ instead of 1/f (a clip of a few
         // periods otherwise keeps a DC error of a few % of the tone).
         let tau = (sample_rate_hz / (2.0 * PI * params.dc_block_hz)).ceil() as usize;
-        let head_level = |x: &[f32]| head_mean(&x[..tau.clamp(1, x.len())], zero_phase);
-        dc_block.run_settled(samples, head_level(samples));
+        let tau = tau.clamp(1, samples.len());
+        let level = head_mean(samples[..tau].iter(), zero_phase);
+        dc_block.run_settled(samples, level);
         if zero_phase {
-            samples.reverse();
-            dc_block.run_settled(samples, head_level(samples));
-            samples.reverse();
+            let end = samples.len() - tau;
+            let level = head_mean(samples[end..].iter().rev(), zero_phase);
+            dc_block.settled(level).run(samples.iter_mut().rev());
         }
     }
     for section in &chain.eq {
@@ -299,29 +306,35 @@ pub fn apply_dsp_with(
 /// samples of its odd reflection (`2·x[0] − x[k]`, as scipy's `filtfilt` pads): the extension
 /// carries the signal's level and slope past each end, so neither pass starts with a step
 /// into the clip (settled on the first sample alone, a 2.3 kHz tone of 11 ms through the
-/// 3 kHz low-pass kept 30 dB of SNR; padded, 38 dB).
+/// 3 kHz low-pass kept 30 dB of SNR; padded, 38 dB). Each pass starts settled on the first
+/// sample it meets. Only the two extensions are held beside the clip: the backward pass's
+/// output over the leading one is never used, so it is not run there.
 fn run_forward_backward(section: &Biquad, samples: &mut [f32], pad: usize) {
     let n = samples.len();
     let pad = pad.min(n.saturating_sub(1));
     let (Some(&first), Some(&last)) = (samples.first(), samples.last()) else {
         return;
     };
-    let mut ext = Vec::with_capacity(n + 2 * pad);
-    ext.extend((1..=pad).rev().map(|k| 2.0 * first - samples[k]));
-    ext.extend_from_slice(samples);
-    ext.extend((1..=pad).map(|k| 2.0 * last - samples[n - 1 - k]));
-    section.run(&mut ext);
-    ext.reverse();
-    section.run(&mut ext);
-    ext.reverse();
-    samples.copy_from_slice(&ext[pad..pad + n]);
+    let mut lead: Vec<f32> = (1..=pad).rev().map(|k| 2.0 * first - samples[k]).collect();
+    let mut tail: Vec<f32> = (1..=pad).map(|k| 2.0 * last - samples[n - 1 - k]).collect();
+    let start = lead.first().copied().unwrap_or(first);
+    section.settled(f64::from(start)).run(
+        lead.iter_mut()
+            .chain(samples.iter_mut())
+            .chain(tail.iter_mut()),
+    );
+    let end = tail.last().or(samples.last()).copied().unwrap_or(last);
+    section
+        .settled(f64::from(end))
+        .run(tail.iter_mut().rev().chain(samples.iter_mut().rev()));
 }
 
-/// Mean of `head`, plain or Hann-weighted (the window centred on its samples).
-fn head_mean(head: &[f32], hann: bool) -> f64 {
+/// Mean of `head` (in the order given), plain or Hann-weighted (the window centred on its
+/// samples).
+fn head_mean<'a>(head: impl ExactSizeIterator<Item = &'a f32>, hann: bool) -> f64 {
     let n = head.len() as f64;
     let (mut sum, mut weight) = (0.0, 0.0);
-    for (i, &v) in head.iter().enumerate() {
+    for (i, &v) in head.enumerate() {
         let w = if hann {
             0.5 - 0.5 * (2.0 * PI * (i as f64 + 0.5) / n).cos()
         } else {

@@ -299,13 +299,6 @@ fn not_found(problem: String) -> StageError {
     }
 }
 
-fn invalid(name: &str, problem: String) -> StageError {
-    StageError::InvalidParam {
-        name: name.to_string(),
-        problem,
-    }
-}
-
 impl HoughParams {
     /// Checks every Hough knob.
     ///
@@ -332,7 +325,7 @@ impl HoughParams {
             90.0,
         )?;
         if p.theta_max_deg < p.theta_min_deg {
-            return Err(invalid(
+            return Err(StageError::invalid(
                 "hough.theta_max_deg",
                 format!(
                     "θ range is reversed ({} > {})",
@@ -347,11 +340,14 @@ impl HoughParams {
             90.0,
         )?;
         if p.theta_step_deg <= 0.0 {
-            return Err(invalid("hough.theta_step_deg", "must be positive".into()));
+            return Err(StageError::invalid(
+                "hough.theta_step_deg",
+                "must be positive".into(),
+            ));
         }
         check_range("hough.rho_step_px", f64::from(p.rho_step_px), 1e-2, 1e6)?;
         if p.peak_count != STRIPE_COUNT {
-            return Err(invalid(
+            return Err(StageError::invalid(
                 "hough.peak_count",
                 format!(
                     "the dual-focus geometry shows exactly {STRIPE_COUNT} stripes, got {}",
@@ -379,7 +375,7 @@ impl HoughParams {
             MAX_RHO_WINDOW_PX,
         )?;
         if p.line_smoothing_px > MAX_LINE_SMOOTHING_PX {
-            return Err(invalid(
+            return Err(StageError::invalid(
                 "hough.line_smoothing_px",
                 format!(
                     "{} is not in [0, {MAX_LINE_SMOOTHING_PX}]",

@@ -194,7 +194,7 @@ pub(super) fn votes_and_peaks(
     }
     let cells = accumulator_cells(params, h);
     if cells > MAX_ACCUMULATOR_CELLS {
-        return Err(invalid(
+        return Err(StageError::invalid(
             "hough.theta_step_deg",
             format!(
                 "the accumulator would have {cells} cells (at most {MAX_ACCUMULATOR_CELLS}); use coarser θ or ρ steps"
