@@ -51,7 +51,6 @@ impl ResumeArgs {
             zstd_level,
             resume: self.resume,
             force: self.force,
-            keep_partial: true,
         }
     }
 }

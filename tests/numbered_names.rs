@@ -250,7 +250,7 @@ fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_pla
         let mut writer = ZarrWriter::create(&store, layout, 3).unwrap();
         for g in groups {
             let source = &scan.groups[g].dir;
-            writer.write_group(&names(g), raw(g), source).unwrap();
+            writer.write_group(&names(g), &raw(g), source).unwrap();
         }
         writer.finish(&scan_toml).unwrap();
         store

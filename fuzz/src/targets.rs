@@ -583,7 +583,7 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
             })
             .collect();
         writer
-            .write_group(&format!("g{g:05}"), group.clone(), dir)
+            .write_group(&format!("g{g:05}"), &group, dir)
             .map_err(fail)?;
         written.push(group);
     }

@@ -247,11 +247,11 @@ impl Workbench {
 
     /// The name of the reconstruction path the scan is on with the params in force.
     fn path_name(&self) -> &'static str {
-        if self.nav.uses_dual(self.tuning.params()) {
-            "dual-focus"
-        } else {
-            "depth"
-        }
+        let params = self.tuning.params();
+        self.nav
+            .meta
+            .as_ref()
+            .map_or("depth", |m| params.path_name(m))
     }
 
     /// Opens the dialog `kind`, starting in the scan's folder with a name made from the scan.

@@ -183,12 +183,12 @@ pub fn export_wav(
         warnings: clip.recon.warnings.clone(),
     };
     let json = serde_json::to_string_pretty(&sidecar).map_err(|e| e.to_string())?;
-    let (meta, fingerprint) = &clip.scan_identity;
+    let params_fingerprint = crate::side::params_fingerprint(&clip.params);
     let info = crate::side::cli::transfer_info(
-        meta,
+        &clip.scan_meta,
         &clip.params,
         &clip.recon,
-        fingerprint,
+        (&clip.scan_fingerprint, &params_fingerprint),
         (&audio, bits),
     );
     write_transfer_wav(path, &audio, bits, overwrite, &info).map_err(|e| e.to_string())?;

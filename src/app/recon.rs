@@ -64,8 +64,10 @@ pub struct Clip {
     pub tracks: Vec<GroupTrack>,
     /// Scan folder.
     pub scan_dir: PathBuf,
-    /// The scan's metadata and fingerprint (the exported WAV's `bext` chunk names them).
-    pub scan_identity: (Arc<crate::io::ScanMeta>, String),
+    /// The scan's metadata as the clip was made (the exported WAV's `bext` chunk names it).
+    pub scan_meta: Arc<crate::io::ScanMeta>,
+    /// The scan's fingerprint (the exported WAV's `bext` reference starts with it).
+    pub scan_fingerprint: String,
     /// Why the reference is missing, when `scan.reference` exists but could not be read.
     pub reference_problem: Option<String>,
 }
@@ -203,10 +205,8 @@ pub fn make_clip(
         groups,
         tracks,
         scan_dir: scan.dir.clone(),
-        scan_identity: (
-            Arc::new(scan.meta.clone()),
-            crate::io::fingerprint::scan_fingerprint(scan),
-        ),
+        scan_meta: Arc::new(scan.meta.clone()),
+        scan_fingerprint: crate::io::fingerprint::scan_fingerprint(scan),
         reference_problem,
     }
 }

@@ -27,6 +27,24 @@ fn temp_path(target: &Path) -> PathBuf {
     })
 }
 
+/// Removes the temporary files that writes of `target` killed part way left beside it
+/// ([`temp_path`]'s names), whichever process made them.
+pub fn remove_stale_temps(target: &Path) {
+    let (Some(dir), Some(name)) = (target.parent(), target.file_name()) else {
+        return;
+    };
+    let prefix = format!(".{}.", name.to_string_lossy());
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let entry = e.file_name().to_string_lossy().into_owned();
+        if entry.starts_with(&prefix) && entry.ends_with(".tmp") {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
 /// Moves the finished temporary file to `target`. Without `overwrite` this never replaces a
 /// file that appeared meanwhile (another run writing the same output): the file is linked
 /// in under the new name, which fails when the name exists, and the temporary name removed.

@@ -145,84 +145,112 @@ impl BroadcastInfo {
     }
 }
 
-/// `wav` (a RIFF WAVE file in memory) with a `bext` chunk of `info` before its `data` chunk,
-/// and the pad byte RIFF asks for after an odd-length `data` chunk that ends the file (hound
-/// writes none: 24-bit mono of an odd sample count).
-///
-/// # Errors
-/// A sentence when `wav` is not a RIFF WAVE file with a `data` chunk.
-pub fn with_bext(mut wav: Vec<u8>, info: &BroadcastInfo) -> Result<Vec<u8>, String> {
-    if wav.len() < 12 || &wav[0..4] != b"RIFF" || &wav[8..12] != b"WAVE" {
-        return Err("not a RIFF WAVE file".into());
-    }
+/// The chunks of a RIFF file in memory after its `WAVE` header: where each starts, its id and
+/// its length (a chunk cut short by the file's end is the last one yielded).
+fn chunks(wav: &[u8]) -> impl Iterator<Item = (usize, [u8; 4], usize)> + '_ {
     let mut at = 12;
-    let data_at = loop {
-        let Some(header) = wav.get(at..at + 8) else {
-            return Err("no data chunk".into());
-        };
-        if &header[0..4] == b"data" {
-            break at;
-        }
+    std::iter::from_fn(move || {
+        let header = wav.get(at..at + 8)?;
+        let id = [header[0], header[1], header[2], header[3]];
         let len = u32::from_le_bytes([header[4], header[5], header[6], header[7]]) as usize;
-        at += 8 + len + (len & 1);
-    };
-    let payload = info.payload();
-    let mut chunk = b"bext".to_vec();
-    let len = u32::try_from(payload.len()).map_err(|_| "bext chunk too long".to_string())?;
-    chunk.extend(len.to_le_bytes());
-    chunk.extend(payload);
-    let data_len = u32::from_le_bytes([
-        wav[data_at + 4],
-        wav[data_at + 5],
-        wav[data_at + 6],
-        wav[data_at + 7],
-    ]) as usize;
-    let pad = usize::from(data_len % 2 == 1 && wav.len() == data_at + 8 + data_len);
-    let riff = u32::from_le_bytes([wav[4], wav[5], wav[6], wav[7]]);
-    let grown = u32::try_from(chunk.len() + pad)
-        .ok()
-        .and_then(|n| riff.checked_add(n))
-        .ok_or("the WAV is too long for a bext chunk")?;
-    wav[4..8].copy_from_slice(&grown.to_le_bytes());
-    wav.splice(data_at..data_at, chunk);
-    wav.resize(wav.len() + pad, 0);
-    Ok(wav)
+        let here = at;
+        at = at.saturating_add(8 + len + (len & 1));
+        Some((here, id, len))
+    })
+}
+
+/// How to make a WAV in memory a Broadcast Wave File without moving its samples: `wav[..at]`
+/// (its RIFF size already grown), then `chunk`, then `wav[at..]`, then `pad` zero bytes.
+#[derive(Debug)]
+pub struct BextInsert {
+    /// Where the `bext` chunk goes: the start of the `data` chunk.
+    pub at: usize,
+    /// The whole `bext` chunk, header included.
+    pub chunk: Vec<u8>,
+    /// The pad byte RIFF asks for after an odd-length `data` chunk that ends the file (hound
+    /// writes none: 24-bit mono of an odd sample count), 0 or 1.
+    pub pad: usize,
+}
+
+impl BextInsert {
+    /// Plans a `bext` chunk of `info` before the `data` chunk of `wav` (a RIFF WAVE file in
+    /// memory), growing its RIFF size for the chunk and the pad byte.
+    ///
+    /// # Errors
+    /// A sentence when `wav` is not a RIFF WAVE file with a `data` chunk.
+    pub fn plan(wav: &mut [u8], info: &BroadcastInfo) -> Result<Self, String> {
+        if wav.len() < 12 || &wav[0..4] != b"RIFF" || &wav[8..12] != b"WAVE" {
+            return Err("not a RIFF WAVE file".into());
+        }
+        let (at, _, data_len) = chunks(wav)
+            .find(|(_, id, _)| id == b"data")
+            .ok_or("no data chunk")?;
+        let payload = info.payload();
+        let mut chunk = b"bext".to_vec();
+        let len = u32::try_from(payload.len()).map_err(|_| "bext chunk too long".to_string())?;
+        chunk.extend(len.to_le_bytes());
+        chunk.extend(payload);
+        let pad = usize::from(data_len % 2 == 1 && wav.len() == at + 8 + data_len);
+        let riff = u32::from_le_bytes([wav[4], wav[5], wav[6], wav[7]]);
+        let grown = u32::try_from(chunk.len() + pad)
+            .ok()
+            .and_then(|n| riff.checked_add(n))
+            .ok_or("the WAV is too long for a bext chunk")?;
+        wav[4..8].copy_from_slice(&grown.to_le_bytes());
+        Ok(Self { at, chunk, pad })
+    }
+
+    /// Writes `wav` (as [`Self::plan`] left it) with the chunk to `out`.
+    ///
+    /// # Errors
+    /// What `out` fails with.
+    pub fn write(&self, wav: &[u8], out: &mut impl std::io::Write) -> std::io::Result<()> {
+        out.write_all(&wav[..self.at])?;
+        out.write_all(&self.chunk)?;
+        out.write_all(&wav[self.at..])?;
+        out.write_all(&[0u8; 1][..self.pad])
+    }
 }
 
 /// The `bext` chunk of a WAV in memory, if it has one: its description, originator,
 /// reference and coding history lines.
 #[must_use]
 pub fn read_bext(wav: &[u8]) -> Option<(String, String, String, Vec<String>)> {
-    let mut at = 12;
-    while let Some(header) = wav.get(at..at + 8) {
-        let len = u32::from_le_bytes([header[4], header[5], header[6], header[7]]) as usize;
-        if &header[0..4] == b"bext" {
-            let p = wav.get(at + 8..at + 8 + len)?;
-            let text = |b: &[u8]| {
-                String::from_utf8_lossy(b)
-                    .trim_end_matches('\0')
-                    .to_string()
-            };
-            let history = text(p.get(FIXED_BYTES..)?);
-            return Some((
-                text(p.get(0..256)?),
-                text(p.get(256..288)?),
-                text(p.get(288..320)?),
-                history
-                    .split("\r\n")
-                    .filter(|l| !l.is_empty())
-                    .map(str::to_string)
-                    .collect(),
-            ));
-        }
-        at += 8 + len + (len & 1);
-    }
-    None
+    let (at, _, len) = chunks(wav).find(|(_, id, _)| id == b"bext")?;
+    let p = wav.get(at + 8..at + 8 + len)?;
+    let text = |b: &[u8]| {
+        String::from_utf8_lossy(b)
+            .trim_end_matches('\0')
+            .to_string()
+    };
+    let history = text(p.get(FIXED_BYTES..)?);
+    Some((
+        text(p.get(0..256)?),
+        text(p.get(256..288)?),
+        text(p.get(288..320)?),
+        history
+            .split("\r\n")
+            .filter(|l| !l.is_empty())
+            .map(str::to_string)
+            .collect(),
+    ))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `wav` (a RIFF WAVE file in memory) with a `bext` chunk of `info` before its `data` chunk
+    /// ([`BextInsert`], made one buffer).
+    ///
+    /// # Errors
+    /// As [`BextInsert::plan`].
+    fn with_bext(mut wav: Vec<u8>, info: &BroadcastInfo) -> Result<Vec<u8>, String> {
+        let insert = BextInsert::plan(&mut wav, info)?;
+        let mut out = Vec::with_capacity(wav.len() + insert.chunk.len() + insert.pad);
+        insert.write(&wav, &mut out).map_err(|e| e.to_string())?;
+        Ok(out)
+    }
 
     #[test]
     fn a_bext_chunk_goes_before_the_data_and_the_wav_still_reads() {

@@ -21,6 +21,17 @@ pub use atomic::{write_atomic, write_atomic_with, write_json_atomic};
 pub use frames::{load_frame, load_group, load_group_frames, save_grey_png};
 pub use scan::{Cut, Geometry, GroupEntry, Scan, ScanMeta};
 
+impl LoadError {
+    /// [`LoadError::Io`]: `problem` with the file or folder `path`.
+    #[must_use]
+    pub fn io(problem: impl Into<String>, path: &std::path::Path) -> Self {
+        Self::Io {
+            problem: problem.into(),
+            path: path.to_path_buf(),
+        }
+    }
+}
+
 /// Why a scan, frame or sound file could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum LoadError {

@@ -159,7 +159,8 @@ pub struct ImportSummary {
     pub bit_depth: u8,
     /// The clip's codec name.
     pub codec: String,
-    /// Unfinished imports to the same target, left by killed runs, that were removed.
+    /// Unfinished folder imports to the same target, left by killed runs, that were removed
+    /// (always none for a store: its partial store is resumed or refused instead).
     pub removed_stale: Vec<PathBuf>,
     /// Groups an interrupted import into a store had written, taken over by `--resume`.
     pub resumed_groups: usize,
@@ -387,6 +388,10 @@ struct Decoded {
 
 /// Decodes `src` in order into `sink`, frames from `layout.first_frame` on, until the clip
 /// ends or `max_groups` groups are full. `job` is told `(decoded, total)` after every frame.
+/// A frame that no group holds, or that the sink does not want, is decoded but not converted.
+///
+/// # Errors
+/// A frame that fails to decode or convert, or a clip with no frames or too few for a group.
 fn decode_into(
     src: &mut Source,
     clip: &Path,
@@ -430,7 +435,9 @@ fn decode_into(
                 let deep =
                     *sixteen_bit.get_or_insert_with(|| component_depth_bits(frame.format()) > 8);
                 out.sixteen_bit = deep;
-                if sink.wants(out.taken) {
+                // A frame between groups (a stride above the group size) is not converted.
+                let placed = layout.placements(out.taken).next().is_some();
+                if placed && sink.wants(out.taken) {
                     let img = converter
                         .get_or_insert_with(|| GreyConverter::new(deep))
                         .convert(&frame)
@@ -480,6 +487,13 @@ fn decode_into(
     job.report(out.decoded, out.decoded);
     if out.decoded == 0 {
         return Err(VideoError::NoFrames {
+            path: clip.to_path_buf(),
+        });
+    }
+    if layout.groups_written(out.taken) == 0 {
+        return Err(VideoError::TooFewFrames {
+            found: out.taken,
+            needed: layout.frames_per_group,
             path: clip.to_path_buf(),
         });
     }
@@ -544,13 +558,8 @@ pub fn import_video(
     job: Job<'_>,
 ) -> Result<ImportSummary, VideoError> {
     let scan_meta = checked_settings(layout, meta)?;
-    if !clip.is_file() {
-        return Err(VideoError::Missing {
-            path: clip.to_path_buf(),
-        });
-    }
-    check_out_dir(out_dir)?;
     let mut src = open_source(clip, layout)?;
+    check_out_dir(out_dir)?;
     let removed_stale = remove_stale_imports(out_dir);
     let tmp = make_temp_dir(out_dir)?;
     let mut splitter = Splitter {
@@ -561,13 +570,6 @@ pub fn import_video(
     };
     let decoded = decode_into(&mut src, clip, layout, job, &mut splitter)?;
     let groups = splitter.finish(decoded.taken)?;
-    if groups == 0 {
-        return Err(VideoError::TooFewFrames {
-            found: decoded.taken,
-            needed: layout.frames_per_group,
-            path: clip.to_path_buf(),
-        });
-    }
     let meta_text = imported_scan_toml(scan_meta, clip, &src.codec, layout)?;
     write_atomic(&tmp.path.join("scan.toml"), meta_text.as_bytes(), false)?;
     if job.is_cancelled() {

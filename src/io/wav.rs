@@ -223,7 +223,7 @@ pub fn write_wav(
     overwrite: bool,
 ) -> Result<(), LoadError> {
     let data = encode_wav(path, audio, bits)?;
-    write_atomic_with(path, overwrite, |w| std::io::Write::write_all(w, &data))
+    super::write_atomic(path, &data, overwrite)
 }
 
 /// Writes a transfer as a Broadcast Wave File: [`write_wav`]'s WAV with a `bext` chunk of
@@ -238,13 +238,14 @@ pub fn write_transfer_wav(
     overwrite: bool,
     info: &super::bwf::BroadcastInfo,
 ) -> Result<(), LoadError> {
-    let data = super::bwf::with_bext(encode_wav(path, audio, bits)?, info).map_err(|problem| {
-        LoadError::Sound {
+    let mut data = encode_wav(path, audio, bits)?;
+    // The samples stay where `encode_wav` put them: the chunk is written in front of them.
+    let insert =
+        super::bwf::BextInsert::plan(&mut data, info).map_err(|problem| LoadError::Sound {
             problem: format!("cannot write the broadcast chunk: {problem}"),
             path: path.to_path_buf(),
-        }
-    })?;
-    write_atomic_with(path, overwrite, |w| std::io::Write::write_all(w, &data))
+        })?;
+    write_atomic_with(path, overwrite, |w| insert.write(&data, w))
 }
 
 /// `audio` encoded as a WAV file in memory (`path` names it in errors).

@@ -227,6 +227,16 @@ impl PipelineParams {
         }
     }
 
+    /// The name of the path these params take on a scan of `meta`: "dual-focus" or "depth".
+    #[must_use]
+    pub fn path_name(&self, meta: &ScanMeta) -> &'static str {
+        if self.uses_dual_focus(meta) {
+            "dual-focus"
+        } else {
+            "depth"
+        }
+    }
+
     /// Checks every knob: each stage's table through its params' `validate` (the same checks
     /// the stages make). The clip-only checks are [`PipelineParams::validate_for_clip`]'s, so
     /// that a DSP setting never stops the per-group stages of the workbench.

@@ -187,6 +187,13 @@ pub(crate) fn fill_out_dir<T>(
     filled
 }
 
+/// The folder name of group `g` in a scan whose group numbers are padded to `digits`
+/// (`g00012`): the generator, the video import's folders and its stores name groups alike.
+#[must_use]
+pub(crate) fn group_name(g: usize, digits: usize) -> String {
+    format!("g{g:0digits$}")
+}
+
 /// Zero-padded width for `count` indices (at least `min` digits).
 pub(crate) fn digits(count: usize, min: usize) -> usize {
     count.saturating_sub(1).max(1).to_string().len().max(min)
@@ -302,7 +309,7 @@ fn write_scan_files(
         if job.is_cancelled() {
             return Err(SynthError::Cancelled);
         }
-        let gdir = out_dir.join(format!("g{g:0gw$}"));
+        let gdir = out_dir.join(group_name(g, gw));
         std::fs::create_dir(&gdir)
             .map_err(|e| io_err(format!("cannot create group folder: {e}"), &gdir))?;
         (0..cfg.frames_per_group)

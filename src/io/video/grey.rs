@@ -114,8 +114,8 @@ pub(super) struct Splitter<'a> {
 
 impl Splitter<'_> {
     fn group_dir(&self, g: usize) -> PathBuf {
-        let gw = self.group_digits;
-        self.dir.join(format!("g{g:0gw$}"))
+        self.dir
+            .join(crate::synth::group_name(g, self.group_digits))
     }
 
     /// Removes the folders of trailing groups the `taken` frames did not fill; returns the

@@ -24,27 +24,24 @@ use crate::job::Job;
 const FINGERPRINT_END_BYTES: u64 = 1 << 20;
 
 /// The fingerprint a partial store of this import must carry to be resumed: the clip (its
-/// size and its first and last MiB), the grouping and the metadata given.
+/// size and its first and last MiB), the store's `scan.toml` (the metadata given, the clip's
+/// name and codec and the grouping) and `max_groups`.
 fn import_fingerprint(
     clip: &Path,
     layout: &GroupLayout,
-    meta_toml: &str,
+    scan_toml: &str,
 ) -> Result<String, VideoError> {
     let io = |e: std::io::Error| super::io_err(format!("cannot read the clip: {e}"), clip);
     let mut file = std::fs::File::open(clip).map_err(io)?;
     let size = file.metadata().map_err(io)?.len();
-    let mut text = format!("{size}\n{layout:?}\n{meta_toml}\n").into_bytes();
+    let most = layout.max_groups.map_or("all".into(), |m| m.to_string());
+    let mut text = format!("{size}\nmax_groups {most}\n{scan_toml}\n").into_bytes();
     let head = size.min(FINGERPRINT_END_BYTES);
     (&mut file).take(head).read_to_end(&mut text).map_err(io)?;
     let tail_start = size.saturating_sub(FINGERPRINT_END_BYTES).max(head);
     file.seek(SeekFrom::Start(tail_start)).map_err(io)?;
     file.read_to_end(&mut text).map_err(io)?;
     Ok(crate::io::fingerprint::fingerprint(&text))
-}
-
-/// The name of group `g`, its number padded to `digits` as the folder import names it.
-fn group_name(g: usize, digits: usize) -> String {
-    format!("g{g:0digits$}")
 }
 
 /// Takes decoded frames into a [`PartialStore`], a group at a time.
@@ -66,29 +63,33 @@ impl FrameSink for StoreSink<'_> {
     }
 
     fn push(&mut self, j: usize, img: &Image, sixteen_bit: bool) -> Result<(), VideoError> {
-        let raw = raw_from_grey(img, sixteen_bit);
-        for (g, k) in self.layout.placements(j) {
-            if g < self.store.groups() {
-                continue;
-            }
+        let held = self.store.groups();
+        let places: Vec<(usize, usize)> = self
+            .layout
+            .placements(j)
+            .filter(|&(g, _)| g >= held)
+            .collect();
+        let mut raw = Some(raw_from_grey(img, sixteen_bit));
+        for (i, &(g, k)) in places.iter().enumerate() {
+            // Copied into every group that holds it but the last, which takes it.
+            let frame = if i + 1 == places.len() {
+                raw.take()
+            } else {
+                raw.clone()
+            };
             let frames = self.open.entry(g).or_default();
-            frames.push(raw.clone());
+            frames.extend(frame);
             if k + 1 < self.layout.frames_per_group {
                 continue;
             }
             let frames = self.open.remove(&g).unwrap_or_default();
-            // Groups fill in order, so the full one is the store's next.
-            if g != self.store.groups() || frames.len() != self.layout.frames_per_group {
-                return Err(super::io_err(
-                    format!(
-                        "group {g} filled out of order (the store holds {})",
-                        self.store.groups()
-                    ),
-                    self.clip,
-                ));
-            }
-            let name = group_name(g, self.group_digits);
-            self.store.add_group(&name, frames, self.clip)?;
+            // Groups fill in order (`placements` yields them so), the full one the store's next.
+            debug_assert_eq!(
+                (g, frames.len()),
+                (self.store.groups(), self.layout.frames_per_group)
+            );
+            let name = crate::synth::group_name(g, self.group_digits);
+            self.store.add_group(&name, &frames, self.clip)?;
         }
         Ok(())
     }
@@ -97,8 +98,8 @@ impl FrameSink for StoreSink<'_> {
 /// Imports `clip` as a Zarr store at `out` (missing or empty), writing each group's chunk as
 /// soon as the group is full, in a partial store beside `out` renamed into place at the end
 /// (see [`crate::io::zarr::partial`]). With `options.resume` it goes on with the partial store
-/// an interrupted import of the same clip, grouping and metadata left; with
-/// `options.keep_partial` one that stops after writing a group keeps it for that.
+/// an interrupted import of the same clip, grouping and metadata left; one that stops after
+/// writing a group keeps it for that.
 ///
 /// # Errors
 /// As [`super::import_video`], and [`VideoError::Kept`] wrapping the error when a stopped
@@ -114,15 +115,16 @@ pub fn import_video_to_store(
 ) -> Result<ImportSummary, VideoError> {
     let scan_meta = checked_settings(layout, meta)?;
     let mut src = open_source(clip, layout)?;
-    let meta_toml = scan_meta
-        .to_toml_string()
-        .map_err(|e| VideoError::Settings {
-            problem: format!("cannot write scan.toml: {e}"),
-        })?;
-    let fingerprint = import_fingerprint(clip, layout, &meta_toml)?;
+    // The store's scan.toml, known before decoding: the resume fingerprint covers it.
+    let scan_toml = imported_scan_toml(scan_meta, clip, &src.codec, layout)?;
+    let fingerprint = import_fingerprint(clip, layout, &scan_toml)?;
     let start_over = "import it again with --force to start over";
     let digits = crate::synth::digits(src.est_groups, 5);
-    let names = |held: usize| (0..held).map(|g| group_name(g, digits)).collect();
+    let names = |held: usize| {
+        (0..held)
+            .map(|g| crate::synth::group_name(g, digits))
+            .collect()
+    };
     let mut store = PartialStore::open(out, fingerprint, options, start_over, names)?;
     let mut sink = StoreSink {
         layout,
@@ -131,22 +133,11 @@ pub fn import_video_to_store(
         group_digits: digits,
         clip,
     };
-    let decoded = decode_into(&mut src, clip, layout, job, &mut sink).and_then(|decoded| {
-        if store.groups() == 0 {
-            return Err(VideoError::TooFewFrames {
-                found: decoded.taken,
-                needed: layout.frames_per_group,
-                path: clip.to_path_buf(),
-            });
-        }
+    let done = decode_into(&mut src, clip, layout, job, &mut sink).and_then(|decoded| {
         if job.is_cancelled() {
             return Err(VideoError::Cancelled);
         }
-        Ok(decoded)
-    });
-    let done = decoded.and_then(|decoded| {
-        let text = imported_scan_toml(scan_meta, clip, &src.codec, layout)?;
-        Ok((decoded, store.finish(&text)?))
+        Ok((decoded, store.finish(&scan_toml)?))
     });
     let (decoded, done) = match done {
         Ok(d) => d,

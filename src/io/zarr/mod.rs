@@ -122,13 +122,6 @@ impl ZarrGroup {
     }
 }
 
-fn io_err(problem: String, path: &Path) -> LoadError {
-    LoadError::Io {
-        problem,
-        path: path.to_path_buf(),
-    }
-}
-
 fn not_a_store(problem: String, path: &Path) -> LoadError {
     LoadError::NotAScan {
         problem: format!("not a groovescope Zarr store: {problem}"),
@@ -139,7 +132,7 @@ fn not_a_store(problem: String, path: &Path) -> LoadError {
 fn open_store(dir: &Path) -> Result<Arc<FilesystemStore>, LoadError> {
     FilesystemStore::new(dir)
         .map(Arc::new)
-        .map_err(|e| io_err(format!("cannot open the Zarr store: {e}"), dir))
+        .map_err(|e| LoadError::io(format!("cannot open the Zarr store: {e}"), dir))
 }
 
 /// Opens a store written by [`pack_scan`] or the video import as a [`Scan`].
@@ -250,13 +243,21 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
 /// [`LoadError::BadFrame`] naming the chunk when it is missing or does not decode (its zstd
 /// checksum catches damage).
 pub fn load_group_raw(z: &ZarrGroup) -> Result<Vec<RawFrame>, LoadError> {
+    let store = open_store(&z.store)?;
+    let array = Array::open(store, FRAMES_ARRAY).map_err(|e| LoadError::BadFrame {
+        problem: e.to_string(),
+        path: z.chunk_path(),
+    })?;
+    group_frames(&array, z)
+}
+
+/// Group `z.group`'s chunk of `array` as raw frames (see [`load_group_raw`]).
+fn group_frames(array: &Array<FilesystemStore>, z: &ZarrGroup) -> Result<Vec<RawFrame>, LoadError> {
     let chunk = z.chunk_path();
     let bad = |problem: String| LoadError::BadFrame {
         problem,
         path: chunk.clone(),
     };
-    let store = open_store(&z.store)?;
-    let array = Array::open(store, FRAMES_ARRAY).map_err(|e| bad(e.to_string()))?;
     let idx = [z.group as u64, 0, 0, 0];
     let px = z.layout.width * z.layout.height;
     let missing = || {
@@ -266,9 +267,9 @@ pub fn load_group_raw(z: &ZarrGroup) -> Result<Vec<RawFrame>, LoadError> {
         ))
     };
     let frames: Vec<RawSamples> = match z.layout.sample_type {
-        SampleType::U8 => chunk_frames(&array, &idx, px, RawSamples::U8),
-        SampleType::U16 => chunk_frames(&array, &idx, px, RawSamples::U16),
-        SampleType::F32 => chunk_frames(&array, &idx, px, RawSamples::F32),
+        SampleType::U8 => chunk_frames(array, &idx, px, RawSamples::U8),
+        SampleType::U16 => chunk_frames(array, &idx, px, RawSamples::U16),
+        SampleType::F32 => chunk_frames(array, &idx, px, RawSamples::F32),
     }
     .map_err(|e| bad(e.to_string()))?
     .ok_or_else(missing)?;
@@ -365,8 +366,9 @@ impl ZarrWriter {
         level: i32,
         names: Vec<String>,
     ) -> Result<Self, LoadError> {
-        let err =
-            |e: &dyn std::fmt::Display| io_err(format!("cannot create the Zarr store: {e}"), dir);
+        let err = |e: &dyn std::fmt::Display| {
+            LoadError::io(format!("cannot create the Zarr store: {e}"), dir)
+        };
         std::fs::create_dir_all(dir).map_err(|e| err(&e))?;
         let store = open_store(dir)?;
         let (f, h, w) = (
@@ -408,7 +410,7 @@ impl ZarrWriter {
     pub fn write_group(
         &mut self,
         name: &str,
-        frames: Vec<RawFrame>,
+        frames: &[RawFrame],
         source: &Path,
     ) -> Result<(), LoadError> {
         let g = self.names.len() as u64;
@@ -435,15 +437,15 @@ impl ZarrWriter {
                     path: source.to_path_buf(),
                 });
             }
-            match (f.samples, self.layout.sample_type) {
-                (RawSamples::U8(v), SampleType::U8) => u8s.extend(v),
-                (RawSamples::U16(v), SampleType::U16) => u16s.extend(v),
-                (RawSamples::F32(v), SampleType::F32) => f32s.extend(v),
+            match (&f.samples, self.layout.sample_type) {
+                (RawSamples::U8(v), SampleType::U8) => u8s.extend_from_slice(v),
+                (RawSamples::U16(v), SampleType::U16) => u16s.extend_from_slice(v),
+                (RawSamples::F32(v), SampleType::F32) => f32s.extend_from_slice(v),
                 (other, want) => {
                     return Err(LoadError::Io {
                         problem: format!(
                             "a Zarr store needs one sample type: this group has {:?} frames, the first group {want:?}",
-                            SampleType::of(&other)
+                            SampleType::of(other)
                         ),
                         path: source.to_path_buf(),
                     });
@@ -453,11 +455,11 @@ impl ZarrWriter {
         let mut shape = self.array.shape().to_vec();
         shape[0] = g + 1;
         let err = |e: &dyn std::fmt::Display| {
-            io_err(format!("cannot write the group's chunk: {e}"), source)
+            LoadError::io(format!("cannot write the group's chunk: {e}"), source)
         };
+        // In memory only: the metadata on disk is written by `store_metadata` (and by
+        // `reopen`), and [`Self::read_back`] reads through this array.
         self.array.set_shape(shape).map_err(|e| err(&e))?;
-        // The array's metadata follows every group, so each chunk reads back as it is written.
-        self.array.store_metadata().map_err(|e| err(&e))?;
         // A chunk of zeros is still written: a missing chunk means a lost group, not black frames.
         let opts = CodecOptions::default().with_store_empty_chunks(true);
         let idx = [g, 0, 0, 0];
@@ -487,7 +489,7 @@ impl ZarrWriter {
     /// [`LoadError::Io`] naming the store when a write fails.
     pub fn store_metadata(&self, scan_toml: &str) -> Result<(), LoadError> {
         let err = |e: &dyn std::fmt::Display| {
-            io_err(format!("cannot write the Zarr metadata: {e}"), &self.dir)
+            LoadError::io(format!("cannot write the Zarr metadata: {e}"), &self.dir)
         };
         self.array.store_metadata().map_err(|e| err(&e))?;
         let attrs = StoreAttributes {
@@ -509,9 +511,17 @@ impl ZarrWriter {
             .map_err(|e| err(&e))
     }
 
-    /// Groups written so far.
-    #[must_use]
-    pub fn groups(&self) -> usize {
-        self.names.len()
+    /// Group `g`'s chunk as written, decoded through the writer's own array (no metadata is
+    /// read from disk).
+    ///
+    /// # Errors
+    /// As [`load_group_raw`].
+    pub fn read_back(&self, g: usize) -> Result<Vec<RawFrame>, LoadError> {
+        let z = ZarrGroup {
+            store: self.dir.clone(),
+            group: g,
+            layout: self.layout,
+        };
+        group_frames(&self.array, &z)
     }
 }

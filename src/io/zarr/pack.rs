@@ -63,13 +63,6 @@ fn raw_group(scan_group: &crate::io::GroupEntry) -> Result<Vec<RawFrame>, LoadEr
         .map_err(|e| crate::io::frames::missing_or(scan_group, e))
 }
 
-fn io_err(problem: impl Into<String>, path: &Path) -> LoadError {
-    LoadError::Io {
-        problem: problem.into(),
-        path: path.to_path_buf(),
-    }
-}
-
 /// Converts the scan folder `scan` into a Zarr store at `out` (a new or empty folder): every
 /// group becomes one zstd chunk which is read back and compared sample for sample before the
 /// next, in a partial store beside `out` ([`super::partial`]) renamed into place at the end,
@@ -90,7 +83,7 @@ pub fn pack_scan(
     job: Job<'_>,
 ) -> Result<PackSummary, PackError> {
     if scan.is_store() {
-        return Err(io_err("this scan is a Zarr store already", &scan.dir).into());
+        return Err(LoadError::io("this scan is a Zarr store already", &scan.dir).into());
     }
     // A place the numbering skips is refused before any group is packed.
     if let Some(missing) = scan.groups.iter().find_map(|g| g.missing_error()) {
@@ -163,7 +156,7 @@ fn pack_into(scan: &Scan, store: &mut PartialStore, job: Job<'_>) -> Result<(), 
             .iter()
             .find(|g| g.frame_count() != layout.frames)
     {
-        return Err(io_err(
+        return Err(LoadError::io(
             format!(
                 "this group now holds {} frames, but the interrupted pack stored it with {}; \
                  start over with --force",
@@ -176,20 +169,20 @@ fn pack_into(scan: &Scan, store: &mut PartialStore, job: Job<'_>) -> Result<(), 
     job.report(from, total);
     for (g, entry) in scan.groups.iter().enumerate().skip(from) {
         if job.is_cancelled() {
-            return Err(io_err(
+            return Err(LoadError::io(
                 format!("packing this scan was stopped before group {g}"),
                 &scan.dir,
             ));
         }
         let raw = raw_group(entry)?;
-        store.add_group(&entry.name(), raw, &entry.dir)?;
+        store.add_group(&entry.name(), &raw, &entry.dir)?;
         job.report(g + 1, total);
     }
     for side_file in ["reference.wav", "preset.toml"] {
         let from = scan.dir.join(side_file);
         if from.is_file() {
             std::fs::copy(&from, store.folder().join(side_file)).map_err(|e| {
-                io_err(
+                LoadError::io(
                     format!("cannot copy {side_file} into the store: {e}"),
                     &from,
                 )

@@ -17,9 +17,9 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{ChunkLayout, ZarrGroup, ZarrWriter, load_group_raw};
+use super::{ChunkLayout, ZarrGroup, ZarrWriter};
 use crate::io::LoadError;
-use crate::io::atomic::{beside, dir_is_missing_or_empty, write_json_atomic};
+use crate::io::atomic::{beside, dir_is_missing_or_empty, remove_stale_temps, write_json_atomic};
 use crate::io::frames::RawFrame;
 use crate::io::lock::OutputLock;
 
@@ -37,22 +37,6 @@ pub struct PackOptions {
     pub resume: bool,
     /// Remove an interrupted writer's partial store and start over.
     pub force: bool,
-    /// Keep the partial store of a writer that stops after writing a group (false where its
-    /// source goes away with the failure).
-    pub keep_partial: bool,
-}
-
-impl PackOptions {
-    /// A store at `zstd_level` that keeps nothing when its writer stops.
-    #[must_use]
-    pub fn once(zstd_level: i32) -> Self {
-        Self {
-            zstd_level,
-            resume: false,
-            force: false,
-            keep_partial: false,
-        }
-    }
 }
 
 /// What a stopped writer kept to go on from.
@@ -101,18 +85,11 @@ pub fn partial_path(out: &Path) -> PathBuf {
     beside(out, "scan.zarr", |name| format!(".{name}.partial"))
 }
 
-fn io_err(problem: impl Into<String>, path: &Path) -> LoadError {
-    LoadError::Io {
-        problem: problem.into(),
-        path: path.to_path_buf(),
-    }
-}
-
 /// Reads the progress record of the partial store `partial`.
 fn read_progress(partial: &Path) -> Result<Progress, LoadError> {
     let file = partial.join(PROGRESS_FILE);
     let damaged = |why: String| {
-        io_err(
+        LoadError::io(
             format!(
                 "the interrupted writer's progress record cannot be read ({why}); start over \
                  with --force"
@@ -145,6 +122,19 @@ fn dir_bytes(dir: &Path) -> u64 {
         .sum()
 }
 
+/// The layout of a new store whose first group is `frames` (`source` names it in errors).
+fn first_layout(frames: &[RawFrame], source: &Path) -> Result<ChunkLayout, LoadError> {
+    let Some(f0) = frames.first() else {
+        return Err(LoadError::io("a group of no frames", source));
+    };
+    Ok(ChunkLayout {
+        frames: frames.len(),
+        width: f0.width,
+        height: f0.height,
+        sample_type: super::SampleType::of(&f0.samples),
+    })
+}
+
 /// The chunk file of group `g` of the store `store`.
 fn chunk_path(store: &Path, g: usize, layout: ChunkLayout) -> PathBuf {
     ZarrGroup {
@@ -170,6 +160,14 @@ pub struct FinishedStore {
     pub store_bytes: u64,
 }
 
+/// A partial store's writer and the record of what it holds, together from the first group
+/// (or the resumed record) on.
+#[derive(Debug)]
+struct Started {
+    writer: ZarrWriter,
+    progress: Progress,
+}
+
 /// A store being written group by group into its partial store (see the module docs).
 #[derive(Debug)]
 pub struct PartialStore {
@@ -177,9 +175,8 @@ pub struct PartialStore {
     path: PathBuf,
     options: PackOptions,
     fingerprint: String,
-    /// The record, once the first group's layout (or the resumed record) is known.
-    progress: Option<Progress>,
-    writer: Option<ZarrWriter>,
+    /// None until the first group's layout (or the resumed record) is known.
+    started: Option<Started>,
     resumed: usize,
     /// Held until the store is dropped.
     _lock: OutputLock,
@@ -205,13 +202,14 @@ impl PartialStore {
         resumed_names: impl FnOnce(usize) -> Vec<String>,
     ) -> Result<Self, LoadError> {
         if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
-            std::fs::create_dir_all(parent)
-                .map_err(|e| io_err(format!("cannot create the output's folder: {e}"), parent))?;
+            std::fs::create_dir_all(parent).map_err(|e| {
+                LoadError::io(format!("cannot create the output's folder: {e}"), parent)
+            })?;
         }
         let lock = OutputLock::acquire(out)?;
         // Checked under the lock: a writer that finished meanwhile filled it.
         if !dir_is_missing_or_empty(out)? {
-            return Err(io_err("the output folder must be new or empty", out));
+            return Err(LoadError::io("the output folder must be new or empty", out));
         }
         let path = partial_path(out);
         // A partial store without a record holds no checked group: it is started again.
@@ -219,7 +217,7 @@ impl PartialStore {
         let mut progress = None;
         if recorded && options.resume {
             let p = read_progress(&path)?;
-            let refuse = |why: String| io_err(format!("cannot resume: {why}"), &path);
+            let refuse = |why: String| LoadError::io(format!("cannot resume: {why}"), &path);
             if p.source_fingerprint != fingerprint {
                 return Err(refuse(format!(
                     "the interrupted writer was writing something else (or what it wrote has \
@@ -236,7 +234,7 @@ impl PartialStore {
             progress = Some(p);
         } else if recorded && !options.force {
             let counted = read_progress(&path)?.groups_checked;
-            return Err(io_err(
+            return Err(LoadError::io(
                 format!(
                     "an interrupted run's partial store of this output is kept here ({counted} \
                      groups written): continue it with --resume, or start over with --force"
@@ -246,7 +244,7 @@ impl PartialStore {
         }
         if progress.is_none() && path.exists() {
             std::fs::remove_dir_all(&path).map_err(|e| {
-                io_err(
+                LoadError::io(
                     format!("cannot remove the interrupted run's store: {e}"),
                     &path,
                 )
@@ -262,13 +260,16 @@ impl PartialStore {
             }
         }
         let resumed = progress.as_ref().map_or(0, |p| p.groups_checked);
-        let writer = match &progress {
-            Some(p) => Some(ZarrWriter::reopen(
-                &path,
-                p.layout,
-                options.zstd_level,
-                resumed_names(resumed),
-            )?),
+        let started = match progress {
+            Some(progress) => Some(Started {
+                writer: ZarrWriter::reopen(
+                    &path,
+                    progress.layout,
+                    options.zstd_level,
+                    resumed_names(resumed),
+                )?,
+                progress,
+            }),
             None => None,
         };
         Ok(Self {
@@ -276,8 +277,7 @@ impl PartialStore {
             path,
             options,
             fingerprint,
-            progress,
-            writer,
+            started,
             resumed,
             _lock: lock,
         })
@@ -292,13 +292,15 @@ impl PartialStore {
     /// Groups written and checked so far, the resumed ones included.
     #[must_use]
     pub fn groups(&self) -> usize {
-        self.progress.as_ref().map_or(0, |p| p.groups_checked)
+        self.started
+            .as_ref()
+            .map_or(0, |s| s.progress.groups_checked)
     }
 
     /// The layout of the groups, once known (from the resumed record or the first group).
     #[must_use]
     pub fn layout(&self) -> Option<ChunkLayout> {
-        self.progress.as_ref().map(|p| p.layout)
+        self.started.as_ref().map(|s| s.progress.layout)
     }
 
     /// Writes the next group (`frames`, named `name`; `source` names it in errors), reads its
@@ -311,57 +313,42 @@ impl PartialStore {
     pub fn add_group(
         &mut self,
         name: &str,
-        frames: Vec<RawFrame>,
+        frames: &[RawFrame],
         source: &Path,
     ) -> Result<(), LoadError> {
-        if self.writer.is_none() {
-            let Some(f0) = frames.first() else {
-                return Err(io_err("a group of no frames", source));
-            };
-            let layout = ChunkLayout {
-                frames: frames.len(),
-                width: f0.width,
-                height: f0.height,
-                sample_type: super::SampleType::of(&f0.samples),
-            };
-            self.writer = Some(ZarrWriter::create(
-                &self.path,
-                layout,
-                self.options.zstd_level,
-            )?);
-            self.progress = Some(Progress {
-                progress_format: PROGRESS_FORMAT,
-                source_fingerprint: self.fingerprint.clone(),
-                zstd_level: self.options.zstd_level,
-                layout,
-                groups_checked: 0,
-            });
-        }
-        let (Some(writer), Some(progress)) = (self.writer.as_mut(), self.progress.as_mut()) else {
-            return Err(io_err("the store was not started", &self.path));
+        let started = match &mut self.started {
+            Some(started) => started,
+            None => {
+                let layout = first_layout(frames, source)?;
+                let writer = ZarrWriter::create(&self.path, layout, self.options.zstd_level)?;
+                let progress = Progress {
+                    progress_format: PROGRESS_FORMAT,
+                    source_fingerprint: self.fingerprint.clone(),
+                    zstd_level: self.options.zstd_level,
+                    layout,
+                    groups_checked: 0,
+                };
+                self.started.insert(Started { writer, progress })
+            }
         };
-        let g = progress.groups_checked;
-        writer.write_group(name, frames.clone(), source)?;
-        let stored = ZarrGroup {
-            store: self.path.clone(),
-            group: g,
-            layout: progress.layout,
-        };
-        let chunk = stored.chunk_path();
-        if load_group_raw(&stored)? != frames {
-            return Err(io_err(
+        let g = started.progress.groups_checked;
+        started.writer.write_group(name, frames, source)?;
+        if started.writer.read_back(g)? != frames {
+            let chunk = chunk_path(&self.path, g, started.progress.layout);
+            return Err(LoadError::io(
                 "the chunk read back differs from the frames written",
                 &chunk,
             ));
         }
         // On disk before the record counts it, so a counted chunk survives a crash.
+        let chunk = chunk_path(&self.path, g, started.progress.layout);
         std::fs::File::open(&chunk)
             .and_then(|f| f.sync_all())
-            .map_err(|e| io_err(format!("cannot sync the chunk: {e}"), &chunk))?;
-        let mut next = progress.clone();
+            .map_err(|e| LoadError::io(format!("cannot sync the chunk: {e}"), &chunk))?;
+        let mut next = started.progress.clone();
         next.groups_checked = g + 1;
         write_json_atomic(&self.path.join(PROGRESS_FILE), &next, true)?;
-        *progress = next;
+        started.progress = next;
         Ok(())
     }
 
@@ -380,30 +367,24 @@ impl PartialStore {
     /// [`LoadError::Io`] naming the store when no group was written or a write or the rename
     /// fails.
     pub fn finish(&mut self, scan_toml: &str) -> Result<FinishedStore, LoadError> {
-        let (Some(writer), Some(progress)) = (self.writer.as_ref(), self.progress.as_ref()) else {
-            return Err(io_err("no group was written", &self.path));
+        let Some(Started { writer, progress }) = &self.started else {
+            return Err(LoadError::io("no group was written", &self.path));
         };
         writer.store_metadata(scan_toml)?;
         if self.out.exists() {
             std::fs::remove_dir(&self.out).map_err(|e| {
-                io_err(
+                LoadError::io(
                     format!("cannot replace the empty output folder: {e}"),
                     &self.out,
                 )
             })?;
         }
-        std::fs::rename(&self.path, &self.out)
-            .map_err(|e| io_err(format!("cannot move the store into place: {e}"), &self.out))?;
-        let _ = std::fs::remove_file(self.out.join(PROGRESS_FILE));
-        let record_tmp = format!(".{PROGRESS_FILE}.");
-        if let Ok(entries) = std::fs::read_dir(&self.out) {
-            for e in entries.flatten() {
-                let name = e.file_name().to_string_lossy().into_owned();
-                if name.starts_with(&record_tmp) && name.ends_with(".tmp") {
-                    let _ = std::fs::remove_file(e.path());
-                }
-            }
-        }
+        std::fs::rename(&self.path, &self.out).map_err(|e| {
+            LoadError::io(format!("cannot move the store into place: {e}"), &self.out)
+        })?;
+        let record = self.out.join(PROGRESS_FILE);
+        let _ = std::fs::remove_file(&record);
+        remove_stale_temps(&record);
         let done = FinishedStore {
             out: self.out.clone(),
             groups: progress.groups_checked,
@@ -411,18 +392,16 @@ impl PartialStore {
             layout: progress.layout,
             store_bytes: dir_bytes(&self.out),
         };
-        self.writer = None;
-        self.progress = None;
+        self.started = None;
         Ok(done)
     }
 
-    /// Ends a writer that failed: keeps the partial store when its record on disk counts a
-    /// group and the options say to keep it, or it was resumed (an earlier run's groups are
-    /// never removed); what was kept goes into the error line. Otherwise removes it.
+    /// Ends a writer that failed: keeps the partial store when its record counts a group
+    /// (what was kept goes into the error line), else removes it.
     #[must_use]
     pub fn abandon(self, total: Option<usize>) -> Option<Kept> {
-        let counted = read_progress(&self.path).map_or(0, |p| p.groups_checked);
-        if (self.options.keep_partial || self.resumed > 0) && counted > 0 {
+        let counted = self.groups();
+        if counted > 0 {
             return Some(Kept {
                 groups: counted,
                 total,
@@ -438,6 +417,7 @@ impl PartialStore {
 mod tests {
     use super::*;
     use crate::io::frames::RawSamples;
+    use crate::io::zarr::load_group_raw;
     use crate::test_support::path_in_temp_dir;
 
     /// Group `g`: seven 40 × 2 frames of 8-bit samples of its own.
@@ -461,9 +441,9 @@ mod tests {
 
     fn resume() -> PackOptions {
         PackOptions {
+            zstd_level: 3,
             resume: true,
-            keep_partial: true,
-            ..PackOptions::once(3)
+            force: false,
         }
     }
 
@@ -471,7 +451,7 @@ mod tests {
     fn killed_after(out: &Path, n: u8) {
         let mut store = PartialStore::open(out, "f".into(), resume(), "", names).unwrap();
         for g in 0..n {
-            store.add_group(&format!("g{g}"), group(g), out).unwrap();
+            store.add_group(&format!("g{g}"), &group(g), out).unwrap();
         }
         // No finish, no abandon: the lock goes with the process.
         drop(store);
@@ -511,7 +491,7 @@ mod tests {
         let mut store = PartialStore::open(&out, "f".into(), resume(), "", names).unwrap();
         assert_eq!(store.groups(), 1);
         for g in 1..3 {
-            store.add_group(&format!("g{g}"), group(g), &out).unwrap();
+            store.add_group(&format!("g{g}"), &group(g), &out).unwrap();
         }
         store.finish(TOML).unwrap();
         assert_finished(&out, 3);
@@ -543,13 +523,14 @@ mod tests {
             "{msg}"
         );
         let force = PackOptions {
+            zstd_level: 3,
+            resume: false,
             force: true,
-            ..PackOptions::once(3)
         };
         let mut store = PartialStore::open(&out, "f".into(), force, "", names).unwrap();
         assert_eq!(store.groups(), 0);
         for g in 0..2 {
-            store.add_group(&format!("g{g}"), group(g), &out).unwrap();
+            store.add_group(&format!("g{g}"), &group(g), &out).unwrap();
         }
         store.finish(TOML).unwrap();
         assert_finished(&out, 2);

@@ -14,7 +14,6 @@ use crate::engine::{
     ClipGroups, GroupOutcome, Reconstruction, StageTimings, finish_reconstruction,
 };
 use crate::io::bwf::{BroadcastInfo, disc_words};
-use crate::io::fingerprint::scan_fingerprint;
 use crate::io::wav::write_transfer_wav;
 use crate::io::{Scan, ScanMeta, write_json_atomic};
 use crate::pipeline::PipelineParams;
@@ -101,33 +100,25 @@ pub struct Report<'a> {
     pub warnings: &'a [String],
 }
 
-/// The reconstruction path `params` take on a scan of `meta`, by name.
-fn path_name(params: &PipelineParams, meta: &ScanMeta) -> &'static str {
-    if params.uses_dual_focus(meta) {
-        "dual-focus"
-    } else {
-        "depth"
-    }
-}
-
 /// The `bext` chunk of a transfer's WAV ([`crate::io::bwf`]): the disc, the decoder, path and
-/// filters in words, and the scan's and the params' fingerprints as its reference (the same
-/// for a scan's folder and store, and for a merged side and a one-process run).
+/// filters in words, and `(scan, params)` fingerprints as its reference (the same for a
+/// scan's folder and store, and for a merged side and a one-process run; a run's
+/// [`RunIdentity`] holds both).
 #[must_use]
 pub fn transfer_info(
     meta: &ScanMeta,
     params: &PipelineParams,
     rec: &Reconstruction,
-    scan_fingerprint: &str,
+    (scan_fingerprint, params_fingerprint): (&str, &str),
     (audio, bits): (&crate::io::wav::Audio, crate::io::wav::WavBits),
 ) -> BroadcastInfo {
     let process = format!(
         "{} decoder on the {} path; {}",
         rec.method.name(),
-        path_name(params, meta),
+        params.path_name(meta),
         crate::pipeline::finish::describe_filters(&params.dsp, rec.method)
     );
-    let reference = format!("{scan_fingerprint}{}", params_fingerprint(params));
+    let reference = format!("{scan_fingerprint}{params_fingerprint}");
     BroadcastInfo::optical_transfer(&disc_words(meta), &process, &reference, audio, bits)
 }
 
@@ -147,7 +138,7 @@ pub fn make_report<'a>(
         output: out.display().to_string(),
         params_file: params_file.map(|p| p.display().to_string()),
         params,
-        path: path_name(params, meta),
+        path: params.path_name(meta),
         method: rec.method.name(),
         fusion: rec.fusion.as_ref(),
         filters: crate::pipeline::finish::describe_filters(&params.dsp, rec.method),
@@ -425,8 +416,15 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
             &scan.dir,
         )?;
         rec.timings.total_secs = started.elapsed().as_secs_f64();
-        let fp = scan_fingerprint(&scan);
-        let info = transfer_info(&scan.meta, &params, &rec, &fp, (&rec.audio, args.bits));
+        let id = &run.identity;
+        let fingerprints = (id.scan_fingerprint.as_str(), id.params_fingerprint.as_str());
+        let info = transfer_info(
+            &scan.meta,
+            &params,
+            &rec,
+            fingerprints,
+            (&rec.audio, args.bits),
+        );
         write_transfer_wav(&args.out, &rec.audio, args.bits, args.force, &info)?;
         if let Some(report_path) = &args.report {
             let mut report = make_report(

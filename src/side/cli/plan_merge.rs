@@ -98,7 +98,7 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         &meta,
         &identity.params,
         &rec,
-        &identity.scan_fingerprint,
+        (&identity.scan_fingerprint, &identity.params_fingerprint),
         (&rec.audio, args.bits),
     );
     write_transfer_wav(&args.out, &rec.audio, args.bits, args.force, &info)?;
