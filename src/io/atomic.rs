@@ -28,7 +28,7 @@ fn temp_path(target: &Path) -> PathBuf {
 }
 
 /// Removes the temporary files that writes of `target` killed part way left beside it
-/// ([`temp_path`]'s names), whichever process made them.
+/// (the names `write_atomic_with` gives them: `.NAME.PID.N.tmp`), whichever process made them.
 pub fn remove_stale_temps(target: &Path) {
     let (Some(dir), Some(name)) = (target.parent(), target.file_name()) else {
         return;
