@@ -78,9 +78,13 @@ fn no_subcommand_without_a_display_writes_the_demo_wav_and_report_here() {
     let found = json["grooves_found"].as_array().unwrap();
     assert_eq!(found.len(), 3, "{:?}", json["grooves_found"]);
     assert!(json["scores"][0]["r"].as_f64().unwrap() >= MIN_R, "{json}");
-    // A Broadcast WAV: it says what it is, what made it and how.
+    // A Broadcast WAV: the plain PCM format chunk (tag 1, mono, 24 bits), then a `bext`
+    // chunk that says what it is, what made it and how.
+    let bytes = std::fs::read(&wav).unwrap();
+    assert_eq!(&bytes[12..24], b"fmt \x10\0\0\0\x01\0\x01\0");
+    assert_eq!(&bytes[34..40], b"\x18\0bext");
     let (description, originator, reference, history) =
-        groovescope::io::bwf::read_bext(&std::fs::read(&wav).unwrap()).unwrap();
+        groovescope::io::bwf::read_bext(&bytes).unwrap();
     assert_eq!(originator, "groovescope");
     assert!(
         description

@@ -159,14 +159,65 @@ fn chunks(wav: &[u8]) -> impl Iterator<Item = (usize, [u8; 4], usize)> + '_ {
     })
 }
 
-/// How to make a WAV in memory a Broadcast Wave File without moving its samples: `wav[..at]`
-/// (its RIFF size already grown), then `chunk`, then `wav[at..]`, then `pad` zero bytes.
+/// The `WAVE_FORMAT_EXTENSIBLE` sub-format of integer PCM (KSDATAFORMAT_SUBTYPE_PCM).
+const PCM_SUBFORMAT: [u8; 16] = [
+    0x01, 0x00, 0x00, 0x00, 0x00, 0x00, 0x10, 0x00, 0x80, 0x00, 0x00, 0xaa, 0x00, 0x38, 0x9b, 0x71,
+];
+
+/// A little-endian `u16` of `bytes` at `at`.
+fn le_u16(bytes: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes([bytes[at], bytes[at + 1]])
+}
+
+/// The body of a `WAVE_FORMAT_PCM` format chunk (16 bytes: tag 1, then channels, rate, byte
+/// rate, block align and bits) for a `WAVE_FORMAT_EXTENSIBLE` body `fmt` that holds plain
+/// integer PCM (at most two channels, every bit of each sample valid); `None` for any other.
+///
+/// hound writes the extensible form for 24-bit samples. Tech 3285 describes PCM as tag 1,
+/// and readers that know only that tag (Python's `wave` before 3.12, for one) refuse the
+/// extensible form: a transfer carries the plain one where it means the same.
+fn plain_pcm(fmt: &[u8]) -> Option<Vec<u8>> {
+    let extensible = fmt.len() >= 40 && le_u16(fmt, 0) == 0xfffe;
+    if !extensible
+        || le_u16(fmt, 2) > 2
+        || le_u16(fmt, 18) != le_u16(fmt, 14)
+        || fmt[24..40] != PCM_SUBFORMAT
+    {
+        return None;
+    }
+    let mut plain = vec![0x01, 0x00];
+    plain.extend_from_slice(&fmt[2..16]);
+    Some(plain)
+}
+
+/// A RIFF chunk: `id`, the length of `body`, `body`, and the pad byte of an odd length.
+fn chunk(id: &[u8; 4], body: &[u8]) -> Result<Vec<u8>, String> {
+    let len = u32::try_from(body.len()).map_err(|_| format!("{} chunk too long", ascii_id(id)))?;
+    let mut out = Vec::with_capacity(body.len() + 9);
+    out.extend_from_slice(id);
+    out.extend(len.to_le_bytes());
+    out.extend_from_slice(body);
+    if body.len() % 2 == 1 {
+        out.push(0);
+    }
+    Ok(out)
+}
+
+/// A chunk id as text, for messages.
+fn ascii_id(id: &[u8; 4]) -> String {
+    String::from_utf8_lossy(id).trim_end().to_string()
+}
+
+/// How to make a WAV in memory a Broadcast Wave File without moving its samples: `head` (the
+/// RIFF header, the chunks before `data` with the format chunk in its plain PCM form where
+/// [`plain_pcm`] gives one, then the `bext` chunk), then `wav[data_at..]` (the `data` chunk),
+/// then `pad` zero bytes.
 #[derive(Debug)]
 pub struct BextInsert {
-    /// Where the `bext` chunk goes: the start of the `data` chunk.
-    pub at: usize,
-    /// The whole `bext` chunk, header included.
-    pub chunk: Vec<u8>,
+    /// Everything before the `data` chunk, its RIFF size counting the whole file.
+    pub head: Vec<u8>,
+    /// Where the `data` chunk starts in the WAV.
+    pub data_at: usize,
     /// The pad byte RIFF asks for after an odd-length `data` chunk that ends the file (hound
     /// writes none: 24-bit mono of an odd sample count), 0 or 1.
     pub pad: usize,
@@ -174,40 +225,54 @@ pub struct BextInsert {
 
 impl BextInsert {
     /// Plans a `bext` chunk of `info` before the `data` chunk of `wav` (a RIFF WAVE file in
-    /// memory), growing its RIFF size for the chunk and the pad byte.
+    /// memory).
     ///
     /// # Errors
-    /// A sentence when `wav` is not a RIFF WAVE file with a `data` chunk.
-    pub fn plan(wav: &mut [u8], info: &BroadcastInfo) -> Result<Self, String> {
+    /// A sentence when `wav` is not a RIFF WAVE file with a format and a `data` chunk.
+    pub fn plan(wav: &[u8], info: &BroadcastInfo) -> Result<Self, String> {
         if wav.len() < 12 || &wav[0..4] != b"RIFF" || &wav[8..12] != b"WAVE" {
             return Err("not a RIFF WAVE file".into());
         }
-        let (at, _, data_len) = chunks(wav)
-            .find(|(_, id, _)| id == b"data")
-            .ok_or("no data chunk")?;
-        let payload = info.payload();
-        let mut chunk = b"bext".to_vec();
-        let len = u32::try_from(payload.len()).map_err(|_| "bext chunk too long".to_string())?;
-        chunk.extend(len.to_le_bytes());
-        chunk.extend(payload);
-        let pad = usize::from(data_len % 2 == 1 && wav.len() == at + 8 + data_len);
-        let riff = u32::from_le_bytes([wav[4], wav[5], wav[6], wav[7]]);
-        let grown = u32::try_from(chunk.len() + pad)
-            .ok()
-            .and_then(|n| riff.checked_add(n))
-            .ok_or("the WAV is too long for a bext chunk")?;
-        wav[4..8].copy_from_slice(&grown.to_le_bytes());
-        Ok(Self { at, chunk, pad })
+        let mut head = b"RIFF\0\0\0\0WAVE".to_vec();
+        let mut data = None;
+        let mut format = false;
+        for (at, id, len) in chunks(wav) {
+            if &id == b"data" {
+                data = Some((at, len));
+                break;
+            }
+            let body = wav
+                .get(at + 8..at + 8 + len)
+                .ok_or_else(|| format!("the {} chunk is cut short", ascii_id(&id)))?;
+            if &id == b"fmt " {
+                format = true;
+                head.extend(chunk(
+                    &id,
+                    &plain_pcm(body).unwrap_or_else(|| body.to_vec()),
+                )?);
+            } else {
+                head.extend(chunk(&id, body)?);
+            }
+        }
+        let (data_at, data_len) = data.ok_or("no data chunk")?;
+        if !format {
+            return Err("no format chunk".into());
+        }
+        head.extend(chunk(b"bext", &info.payload())?);
+        let pad = usize::from(data_len % 2 == 1 && wav.len() == data_at + 8 + data_len);
+        let riff = u32::try_from(head.len() - 8 + (wav.len() - data_at) + pad)
+            .map_err(|_| "the WAV is too long for a bext chunk".to_string())?;
+        head[4..8].copy_from_slice(&riff.to_le_bytes());
+        Ok(Self { head, data_at, pad })
     }
 
-    /// Writes `wav` (as [`Self::plan`] left it) with the chunk to `out`.
+    /// Writes the Broadcast Wave File of `wav` (the one planned for) to `out`.
     ///
     /// # Errors
     /// What `out` fails with.
     pub fn write(&self, wav: &[u8], out: &mut impl std::io::Write) -> std::io::Result<()> {
-        out.write_all(&wav[..self.at])?;
-        out.write_all(&self.chunk)?;
-        out.write_all(&wav[self.at..])?;
+        out.write_all(&self.head)?;
+        out.write_all(&wav[self.data_at..])?;
         out.write_all(&[0u8; 1][..self.pad])
     }
 }
@@ -245,10 +310,10 @@ mod tests {
     ///
     /// # Errors
     /// As [`BextInsert::plan`].
-    fn with_bext(mut wav: Vec<u8>, info: &BroadcastInfo) -> Result<Vec<u8>, String> {
-        let insert = BextInsert::plan(&mut wav, info)?;
-        let mut out = Vec::with_capacity(wav.len() + insert.chunk.len() + insert.pad);
-        insert.write(&wav, &mut out).map_err(|e| e.to_string())?;
+    fn with_bext(wav: &[u8], info: &BroadcastInfo) -> Result<Vec<u8>, String> {
+        let insert = BextInsert::plan(wav, info)?;
+        let mut out = Vec::with_capacity(wav.len() + insert.head.len() + insert.pad);
+        insert.write(wav, &mut out).map_err(|e| e.to_string())?;
         Ok(out)
     }
 
@@ -268,7 +333,7 @@ mod tests {
             &audio,
             WavBits::Int24,
         );
-        let bwf = with_bext(std::fs::read(&plain).unwrap(), &info).unwrap();
+        let bwf = with_bext(&std::fs::read(&plain).unwrap(), &info).unwrap();
         let (description, originator, reference, history) = read_bext(&bwf).unwrap();
         assert!(description.starts_with("Optical transfer by groovescope of a 45/45"));
         assert_eq!(originator, "groovescope");
@@ -286,6 +351,11 @@ mod tests {
         // The RIFF size counts the new chunk, and the samples read back as they were written.
         let riff = u32::from_le_bytes([bwf[4], bwf[5], bwf[6], bwf[7]]) as usize;
         assert_eq!(riff + 8, bwf.len());
+        // hound's extensible format chunk for 24 bits became the plain PCM one: tag 1, two
+        // channels, 44.1 kHz, 6 bytes a frame, 24 bits.
+        assert_eq!(&bwf[12..20], b"fmt \x10\0\0\0");
+        assert_eq!(&bwf[20..24], [1, 0, 2, 0]);
+        assert_eq!(&bwf[32..36], [6, 0, 24, 0]);
         let path = dir.path().join("bwf.wav");
         std::fs::write(&path, &bwf).unwrap();
         let (a, b) = (
@@ -293,7 +363,19 @@ mod tests {
             crate::io::wav::read_wav(&path).unwrap(),
         );
         assert_eq!(a.channels, b.channels);
-        assert!(with_bext(b"RIFF\0\0\0\0WAVEfmt ".to_vec(), &info).is_err());
+        assert!(with_bext(b"RIFF\0\0\0\0WAVEfmt ", &info).is_err());
+
+        // 32-bit float keeps its extensible chunk (IEEE float, not PCM), and reads back.
+        let float = dir.path().join("float.wav");
+        crate::io::wav::write_wav(&float, &audio, WavBits::Float32, false).unwrap();
+        let bwf = with_bext(&std::fs::read(&float).unwrap(), &info).unwrap();
+        assert_eq!(&bwf[12..22], b"fmt \x28\0\0\0\xfe\xff");
+        let path = dir.path().join("float-bwf.wav");
+        std::fs::write(&path, &bwf).unwrap();
+        assert_eq!(
+            crate::io::wav::read_wav(&path).unwrap().channels,
+            crate::io::wav::read_wav(&float).unwrap().channels
+        );
 
         // 24-bit mono of three samples: nine bytes of data, then the pad byte RIFF asks for.
         let odd = Audio {
@@ -302,7 +384,7 @@ mod tests {
         };
         let plain = dir.path().join("odd.wav");
         crate::io::wav::write_wav(&plain, &odd, WavBits::Int24, false).unwrap();
-        let bwf = with_bext(std::fs::read(&plain).unwrap(), &info).unwrap();
+        let bwf = with_bext(&std::fs::read(&plain).unwrap(), &info).unwrap();
         assert_eq!(bwf.len() % 2, 0);
         let riff = u32::from_le_bytes([bwf[4], bwf[5], bwf[6], bwf[7]]) as usize;
         assert_eq!(riff + 8, bwf.len());

@@ -238,13 +238,12 @@ pub fn write_transfer_wav(
     overwrite: bool,
     info: &super::bwf::BroadcastInfo,
 ) -> Result<(), LoadError> {
-    let mut data = encode_wav(path, audio, bits)?;
-    // The samples stay where `encode_wav` put them: the chunk is written in front of them.
-    let insert =
-        super::bwf::BextInsert::plan(&mut data, info).map_err(|problem| LoadError::Sound {
-            problem: format!("cannot write the broadcast chunk: {problem}"),
-            path: path.to_path_buf(),
-        })?;
+    let data = encode_wav(path, audio, bits)?;
+    // The samples stay where `encode_wav` put them: the header is written in front of them.
+    let insert = super::bwf::BextInsert::plan(&data, info).map_err(|problem| LoadError::Sound {
+        problem: format!("cannot write the broadcast chunk: {problem}"),
+        path: path.to_path_buf(),
+    })?;
     write_atomic_with(path, overwrite, |w| insert.write(&data, w))
 }
 
