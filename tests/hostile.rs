@@ -342,3 +342,73 @@ fn a_flow_iteration_cap_past_the_limit_is_refused_naming_the_key() {
         &["flow.max_iterations", "4294967295", "10000", "slow.toml"],
     );
 }
+
+/// Runs the groovescope binary under a 4 GB address-space limit, so that a run that would
+/// allocate without bound fails at once instead of exhausting the machine.
+fn groovescope_capped(args: &[&str]) -> std::process::Output {
+    std::process::Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -v 4000000; exec \"$0\" \"$@\"")
+        .arg(env!("CARGO_BIN_EXE_groovescope"))
+        .args(args)
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn a_groove_speed_off_by_a_unit_is_refused_naming_the_keys_before_any_group() {
+    // A radius written in metres (0.06) or a speed far too slow asked for hundreds of samples a
+    // pixel: sampling the demo's 13 groups then tried to allocate 391 GB and aborted.
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    let meta = demo.join("scan.toml");
+    let text = std::fs::read_to_string(&meta).unwrap();
+    let out = dir.path().join("x.wav");
+    for (key, from, to) in [
+        (
+            "record.radius_mm = 0.06",
+            "radius_mm = 60.0",
+            "radius_mm = 0.06",
+        ),
+        ("record.rpm = 0.001", "rpm = 16.667", "rpm = 0.001"),
+    ] {
+        assert!(text.contains(from), "{text}");
+        std::fs::write(&meta, text.replacen(from, to, 1)).unwrap();
+        for args in [
+            vec!["reconstruct", s(&demo), "--out", s(&out), "--quiet"],
+            vec!["plan", s(&demo), "--shards", "2", "--out", s(&out)],
+        ] {
+            let o = groovescope_capped(&args);
+            let err = stderr(&o);
+            assert!(!o.status.success(), "{err}");
+            assert_eq!(err.trim().lines().count(), 1, "{err}");
+            for wanted in [key, "samples a pixel", "scan.toml"] {
+                assert!(err.contains(wanted), "{wanted}: {err}");
+            }
+            assert!(!out.exists());
+        }
+    }
+    // The same through the params: named as the params' key.
+    std::fs::write(&meta, &text).unwrap();
+    let params = dir.path().join("fine.toml");
+    std::fs::write(&params, "[sound]\nnative_spacing_um = 0.001\n").unwrap();
+    let o = groovescope_capped(&[
+        "reconstruct",
+        s(&demo),
+        "--out",
+        s(&out),
+        "--params",
+        s(&params),
+        "--quiet",
+    ]);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("sound.native_spacing_um") && err.contains("samples a pixel"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}

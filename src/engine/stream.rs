@@ -122,6 +122,20 @@ pub fn run_groups(
         mode,
     } = *stream;
     let range = range.start.min(scan.groups.len())..range.end.min(scan.groups.len());
+    // Refused before the first group: every group would fail alike, after work.
+    crate::pipeline::sampling::check_sample_density(&scan.meta, &params.sound).map_err(
+        |too_fine| -> EngineError {
+            if too_fine.from_scan {
+                LoadError::Metadata {
+                    problem: too_fine.problem,
+                    path: scan.dir.join("scan.toml"),
+                }
+                .into()
+            } else {
+                StageError::invalid("sound.native_spacing_um", too_fine.problem).into()
+            }
+        },
+    )?;
     let meta = Arc::new(scan.meta.clone());
     // A decoded group: its index, the first frame loaded, the frames, the seconds it took.
     type Loaded = (usize, usize, Result<Vec<Image>, LoadError>, f64);

@@ -232,6 +232,12 @@ impl StageCache {
         after_stage: &mut dyn FnMut(Stage, &StageCache) -> bool,
     ) -> Result<(), StageError> {
         params.validate()?;
+        super::sampling::check_sample_density(&input.meta, &params.sound).map_err(|too_fine| {
+            StageError::BadInput {
+                stage: "sampling",
+                problem: too_fine.problem,
+            }
+        })?;
         let owner = Some((input.group, input.meta.clone()));
         if !same_owner(&self.owner, &owner) {
             self.clear();

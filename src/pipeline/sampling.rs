@@ -30,6 +30,57 @@ pub fn native_spacing_um(meta: &ScanMeta, sound: &SoundParams) -> f64 {
     }
 }
 
+/// Most native samples one pixel of a frame may carry. Finer than the pixels the image holds
+/// nothing more, and every stage's work grows with the samples: a groove speed off by a unit
+/// (a radius in metres) would otherwise ask for millions of samples a group and exhaust the
+/// memory. A slow disc at a high rate stays far below it (8⅓ rpm at 40 mm, 192 kHz and 0.78 µm
+/// pixels: 4.3 a pixel).
+pub const MAX_SAMPLES_PER_PX: f64 = 16.0;
+
+/// Why a scan's native sample grid is too fine for its frames ([`check_sample_density`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TooFine {
+    /// True when the spacing comes from the scan's metadata (groove speed and output rate),
+    /// false when `sound.native_spacing_um` sets it.
+    pub from_scan: bool,
+    /// A sentence naming the keys and the numbers.
+    pub problem: String,
+}
+
+/// Checks that the native sample grid carries at most [`MAX_SAMPLES_PER_PX`] samples a pixel
+/// of `meta`'s frames at the land.
+///
+/// # Errors
+/// [`TooFine`] naming the keys to check.
+pub fn check_sample_density(meta: &ScanMeta, sound: &SoundParams) -> Result<(), TooFine> {
+    let spacing = native_spacing_um(meta, sound);
+    let pitch = meta.camera.pixel_pitch_um;
+    let per_px = pitch / spacing;
+    if per_px.is_finite() && per_px > 0.0 && per_px <= MAX_SAMPLES_PER_PX {
+        return Ok(());
+    }
+    let density = format!(
+        "a native sample every {spacing:.3e} µm along the groove is {per_px:.3e} samples a pixel of {pitch} µm, more than the {MAX_SAMPLES_PER_PX} a pixel can carry"
+    );
+    Err(if sound.native_spacing_um > 0.0 {
+        TooFine {
+            from_scan: false,
+            problem: density,
+        }
+    } else {
+        TooFine {
+            from_scan: true,
+            problem: format!(
+                "record.radius_mm = {} and record.rpm = {} give a groove speed of {:.3e} mm/s, and at {} Hz {density}: check them (a radius in mm, a speed in turns a minute), or set [sound] native_spacing_um",
+                meta.radius_mm(0),
+                meta.record.rpm,
+                meta.groove_speed_mm_s(0),
+                sound.output_rate_hz
+            ),
+        }
+    })
+}
+
 /// Places the scan's global sample grid on the columns of one frame of one group.
 #[must_use]
 pub fn sample_grid(
