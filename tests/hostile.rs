@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use common::{SCAN_TOML, demo_copy, groovescope, stderr, write_scan};
+use common::{SCAN_TOML, demo_copy, failed_with, groovescope, stderr, write_scan};
 use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::limits::{MAX_FRAMES_PER_GROUP, MAX_TOML_BYTES, MAX_WAV_SAMPLES};
 use groovescope::io::{Scan, load_frame, load_group_frames};
@@ -380,13 +380,10 @@ fn a_groove_speed_off_by_a_unit_is_refused_naming_the_keys_before_any_group() {
             vec!["reconstruct", s(&demo), "--out", s(&out), "--quiet"],
             vec!["plan", s(&demo), "--shards", "2", "--out", s(&out)],
         ] {
-            let o = groovescope_capped(&args);
-            let err = stderr(&o);
-            assert!(!o.status.success(), "{err}");
-            assert_eq!(err.trim().lines().count(), 1, "{err}");
-            for wanted in [key, "samples a pixel", "scan.toml"] {
-                assert!(err.contains(wanted), "{wanted}: {err}");
-            }
+            failed_with(
+                &groovescope_capped(&args),
+                &[key, "samples a pixel", "scan.toml"],
+            );
             assert!(!out.exists());
         }
     }
@@ -394,21 +391,17 @@ fn a_groove_speed_off_by_a_unit_is_refused_naming_the_keys_before_any_group() {
     std::fs::write(&meta, &text).unwrap();
     let params = dir.path().join("fine.toml");
     std::fs::write(&params, "[sound]\nnative_spacing_um = 0.001\n").unwrap();
-    let o = groovescope_capped(&[
+    let args = [
         "reconstruct",
         s(&demo),
         "--out",
         s(&out),
         "--params",
         s(&params),
-        "--quiet",
-    ]);
-    let err = stderr(&o);
-    assert!(!o.status.success(), "{err}");
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(
-        err.contains("sound.native_spacing_um") && err.contains("samples a pixel"),
-        "{err}"
+    ];
+    failed_with(
+        &groovescope_capped(&args),
+        &["sound.native_spacing_um", "samples a pixel"],
     );
     assert!(!out.exists());
 }
