@@ -275,6 +275,30 @@ impl ClipGroups {
     }
 }
 
+/// Groove length (µm) of the groups that gave no sound before the first group that did and
+/// after the last, from the report rows (one a group, in group order): consecutive groups lie
+/// `group_step_um` apart, so the clip extended by these keeps its place and length.
+fn silent_ends_um(reports: &[GroupReport], meta: &ScanMeta) -> [f64; 2] {
+    let sounded = |r: &&GroupReport| r.samples > 0;
+    let (Some(first), Some(last)) = (reports.first(), reports.last()) else {
+        return [0.0; 2];
+    };
+    match (
+        reports.iter().find(sounded),
+        reports.iter().rev().find(sounded),
+    ) {
+        (Some(a), Some(b)) => {
+            #[allow(clippy::cast_precision_loss)] // group counts
+            let um = |groups: usize| groups as f64 * meta.motion.group_step_um;
+            [
+                um(a.group.saturating_sub(first.group)),
+                um(last.group.saturating_sub(b.group)),
+            ]
+        }
+        _ => [0.0; 2],
+    }
+}
+
 /// Finishes gathered groups into a reconstruction (`pipeline::finish`) and scores it against
 /// `reference` when given. `scan_dir` names the scan in errors. `total_secs` is left for the
 /// caller to set.
@@ -333,6 +357,7 @@ pub fn finish_reconstruction(
         ClipSignals {
             flow: signals,
             borders,
+            silent_ends_um: silent_ends_um(&reports, meta),
         },
         meta,
         params,

@@ -11,6 +11,8 @@
 //! (forward and backward over the clip, [`FilterPhase`]), so the waveform keeps its shape
 //! through them; the flow method keeps the causal filters (its output as before).
 
+use std::ops::Range;
+
 use serde::Serialize;
 
 use super::audio_signal::{GroupSignals, SignalPack, StitchedSignal, resample, stitch};
@@ -84,6 +86,54 @@ pub struct ClipSignals {
     /// The edge stage's border tracks per group ([`super::edges::Edges::border_signal`]; read
     /// by `edges` and `fused`).
     pub borders: SignalPack,
+    /// Groove length (µm) of the clip's groups that gave no sound before its first group with
+    /// sound and after its last: the clip is extended over them as silence (listed as gaps),
+    /// so the sound keeps its place and length.
+    pub silent_ends_um: [f64; 2],
+}
+
+/// `signal` extended by `ends_um` (µm before its start, after its end; rounded to whole
+/// samples) of silence, each listed as a gap.
+fn extend_with_silence(signal: &mut StitchedSignal, ends_um: [f64; 2]) {
+    let samples = |um: f64| {
+        let k = (um / signal.spacing_um).round();
+        #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // checked finite, ≥ 0
+        if k.is_finite() && k >= 1.0 {
+            k as usize
+        } else {
+            0
+        }
+    };
+    let (lead, trail) = (samples(ends_um[0]), samples(ends_um[1]));
+    if lead == 0 && trail == 0 {
+        return;
+    }
+    let n = signal.channels.first().map_or(0, Vec::len);
+    for ch in &mut signal.channels {
+        let mut padded = vec![0.0; lead];
+        padded.extend_from_slice(ch);
+        padded.resize(lead + n + trail, 0.0);
+        *ch = padded;
+    }
+    #[allow(clippy::cast_precision_loss)] // sample counts ≤ 2^28
+    {
+        signal.start_um -= lead as f64 * signal.spacing_um;
+    }
+    let mut gaps: Vec<Range<usize>> = Vec::with_capacity(signal.gaps.len() + 2);
+    let mut push = |r: Range<usize>| match gaps.last_mut() {
+        Some(last) if last.end >= r.start => last.end = last.end.max(r.end),
+        _ => gaps.push(r),
+    };
+    if lead > 0 {
+        push(0..lead);
+    }
+    for g in &signal.gaps {
+        push(g.start + lead..g.end + lead);
+    }
+    if trail > 0 {
+        push(lead + n..lead + n + trail);
+    }
+    signal.gaps = gaps;
 }
 
 /// Groove speed (mm/s) at each sample of `grid` from the groups' speeds at their middles,
@@ -165,8 +215,9 @@ fn edge_velocity<S: GroupSignals + ?Sized>(
     Ok((velocity, noise))
 }
 
-/// Finishes a clip by `params.method` (see the module docs), then as [`finish_clip`] does:
-/// bridge short gaps, resample, DSP, normalise. `flow` signals give `flow`'s sound exactly as
+/// Finishes a clip by `params.method` (see the module docs), extended over its silent ends
+/// ([`ClipSignals::silent_ends_um`]), then as [`finish_clip`] does: bridge short gaps,
+/// resample, DSP, normalise. `flow` signals with no silent ends give `flow`'s sound exactly as
 /// [`finish_clip`] would.
 ///
 /// # Errors
@@ -178,14 +229,15 @@ pub fn finish_method_clip(
     params: &PipelineParams,
 ) -> Result<FinishedClip, StageError> {
     let spacing_um = super::sampling::native_spacing_um(meta, &params.sound);
-    match params.method {
-        Method::Flow => finish_clip(&signals.flow, spacing_um, params),
-        Method::Edges => {
-            let (velocity, _) = edge_velocity(&signals.borders, spacing_um, meta, params)?;
-            finish_stitched(velocity, params, filter_phase(params.method))
-        }
+    let ends_um = signals.silent_ends_um;
+    let (mut velocity, fusion) = match params.method {
+        Method::Flow => (stitch(&signals.flow, spacing_um)?, None),
+        Method::Edges => (
+            edge_velocity(&signals.borders, spacing_um, meta, params)?.0,
+            None,
+        ),
         Method::Fused => {
-            let ClipSignals { flow, borders } = signals;
+            let ClipSignals { flow, borders, .. } = signals;
             let (velocity, noise) = edge_velocity(&borders, spacing_um, meta, params)?;
             drop(borders);
             let flow_velocity = stitch(&flow, spacing_um)?;
@@ -197,14 +249,17 @@ pub fn finish_method_clip(
                 meta,
                 &params.fusion,
             )?;
-            let mut clip = finish_stitched(fused.signal, params, filter_phase(params.method))?;
-            clip.fusion = Some(FusionReport {
+            let report = FusionReport {
                 groups: fused.groups,
                 blocks: fused.blocks,
-            });
-            Ok(clip)
+            };
+            (fused.signal, Some(report))
         }
-    }
+    };
+    extend_with_silence(&mut velocity, ends_um);
+    let mut clip = finish_stitched(velocity, params, filter_phase(params.method))?;
+    clip.fusion = fusion;
+    Ok(clip)
 }
 
 /// Finishes a clip from its group signals (in group order) on a native grid of `spacing_um`:
