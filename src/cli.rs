@@ -8,6 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::io::wav::{Audio, WavBits};
 use crate::job::Job;
+pub(crate) use crate::output_checks::{check_outputs, check_outside_scan};
 use crate::pipeline::PipelineParams;
 use crate::pipeline::{Method, PathChoice};
 pub use crate::side::cli::{Report, make_report, run_reconstruct};
@@ -417,55 +418,6 @@ pub(crate) fn check_duration(secs: f64) -> Result<()> {
         crate::io::limits::MAX_WAV_SAMPLES as f64 / f64::from(crate::synth::BUILTIN_RATE_HZ);
     if !(secs.is_finite() && secs > 0.0 && secs <= max_secs) {
         bail!("--duration must be above 0 and at most {max_secs:.0} s, got {secs}");
-    }
-    Ok(())
-}
-
-/// Checks the files a command is about to write, before any work: none is a folder, each
-/// one's folder exists, no two are the same file, none is one of the command's `inputs`
-/// (`--force` or not: an input overwritten is lost), and none exists unless `force` says to
-/// replace it.
-///
-/// # Errors
-/// One line naming the path at fault.
-pub(crate) fn check_outputs(paths: &[&Path], inputs: &[&Path], force: bool) -> Result<()> {
-    // Existing files by their canonical path (links and `..` resolved), others as given.
-    let identity = |p: &Path| {
-        std::fs::canonicalize(p)
-            .or_else(|_| std::path::absolute(p))
-            .unwrap_or_else(|_| p.to_path_buf())
-    };
-    let inputs: Vec<PathBuf> = inputs
-        .iter()
-        .filter(|p| p.exists())
-        .map(|p| identity(p))
-        .collect();
-    let mut seen = Vec::with_capacity(paths.len());
-    for &out in paths {
-        if out.is_dir() {
-            bail!("the output is a folder, not a file name: {}", out.display());
-        }
-        let folder = out.parent().filter(|p| !p.as_os_str().is_empty());
-        if let Some(folder) = folder.filter(|f| !f.is_dir()) {
-            bail!("the output's folder does not exist: {}", folder.display());
-        }
-        let id = identity(out);
-        if seen.contains(&id) {
-            bail!("two outputs name the same file: {}", out.display());
-        }
-        if inputs.contains(&id) {
-            bail!(
-                "the output is one of this command's inputs, which it would destroy: {}",
-                out.display()
-            );
-        }
-        seen.push(id);
-        if out.exists() && !force {
-            bail!(
-                "refusing to overwrite an existing file (use --force): {}",
-                out.display()
-            );
-        }
     }
     Ok(())
 }

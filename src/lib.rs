@@ -15,6 +15,7 @@ pub mod inspect;
 pub mod io;
 pub mod job;
 pub mod meta;
+pub(crate) mod output_checks;
 pub mod pack_cli;
 pub mod pipeline;
 #[cfg(feature = "gui")]

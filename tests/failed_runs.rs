@@ -5,7 +5,7 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use common::{demo_copy, groovescope, names, reconstruct, stderr};
 use groovescope::image::Image;
@@ -198,4 +198,84 @@ fn force_never_turns_an_input_into_an_output() {
         std::fs::read(&still).unwrap()
     );
     assert!(!wav.exists());
+}
+
+#[test]
+fn nothing_is_written_among_a_scans_frames_or_over_a_part() {
+    // A frame replaced (`--force`), or a new file in a group read as its eighth frame, broke
+    // the scan: its next run stopped with "frame is missing: g00000/f007.png".
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    let frame = demo.join("g00000/f000.png");
+    let before = std::fs::read(&frame).unwrap();
+    for (out, extra) in [
+        (frame.clone(), &["--force"][..]),
+        (demo.join("g00000/f999.png"), &[][..]),
+    ] {
+        refused(
+            &demo,
+            &out,
+            extra,
+            &["inside a folder of the scan it reads", "g00000"],
+        );
+    }
+    let report = demo.join("g00002/r.json");
+    refused(
+        &demo,
+        &dir.path().join("x.wav"),
+        &["--report", s(&report)],
+        &["g00002"],
+    );
+    assert_eq!(std::fs::read(&frame).unwrap(), before);
+    assert!(!demo.join("g00000/f999.png").exists() && !report.exists());
+    // Beside the groups is the archivist's choice, and the scan still reads after it.
+    let beside = demo.join("transfer.wav");
+    assert!(reconstruct(&demo, &beside, &[]).status.success());
+    assert!(
+        reconstruct(&demo, &dir.path().join("again.wav"), &[])
+            .status
+            .success()
+    );
+    // A store is one thing: nothing goes inside it.
+    let store = dir.path().join("demo.zarr");
+    assert!(
+        groovescope(&["pack", s(&demo), "--out", s(&store)])
+            .status
+            .success()
+    );
+    refused(
+        &store,
+        &store.join("x.wav"),
+        &[],
+        &["inside the Zarr store it reads"],
+    );
+    // merge --force over a part it reads would lose the shard.
+    let plan = dir.path().join("plan.json");
+    assert!(
+        groovescope(&["plan", s(&demo), "--shards", "2", "--out", s(&plan)])
+            .status
+            .success()
+    );
+    let parts: Vec<PathBuf> = (0..2)
+        .map(|k| dir.path().join(format!("part-{k}")))
+        .collect();
+    for (k, part) in parts.iter().enumerate() {
+        let shard = k.to_string();
+        let args = ["--plan", s(&plan), "--shard", shard.as_str()];
+        assert!(reconstruct(&demo, part, &args).status.success());
+    }
+    let part_file = parts[0].join("part.gsp");
+    let kept = std::fs::read(&part_file).unwrap();
+    for given in [&parts[0], &part_file] {
+        let o = groovescope(&[
+            "merge",
+            s(given),
+            s(&parts[1]),
+            "--out",
+            s(&part_file),
+            "--force",
+        ]);
+        common::failed_with(&o, &["one of this command's inputs", "part.gsp"]);
+    }
+    assert_eq!(std::fs::read(&part_file).unwrap(), kept);
 }

@@ -363,6 +363,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         .chain(args.params.as_deref())
         .collect();
     crate::cli::check_outputs(&outputs, &inputs, args.force)?;
+    crate::cli::check_outside_scan(&outputs, &args.scan)?;
     if args.groups == Some(0) {
         bail!("--groups must be at least 1: {}", args.scan.display());
     }

@@ -82,7 +82,13 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
         .chain(args.report.as_deref())
         .collect();
-    check_outputs(&outputs, &[], args.force)?;
+    let part_files: Vec<PathBuf> = args
+        .parts
+        .iter()
+        .map(|p| crate::side::part::part_file(p))
+        .collect();
+    let inputs: Vec<&Path> = part_files.iter().map(PathBuf::as_path).collect();
+    check_outputs(&outputs, &inputs, args.force)?;
     let _locks = lock_outputs(&outputs)?;
     let started = Instant::now();
     let merged = unless_interrupted("merge", merge_parts(&args.parts, interrupted()))?;

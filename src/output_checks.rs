@@ -1,0 +1,89 @@
+//! The checks a command makes of the files it is about to write, before any work: no folder, no input, nothing existing without `--force`, nothing among a scan's data.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, bail};
+
+/// Checks the files a command is about to write, before any work: none is a folder, each
+/// one's folder exists, no two are the same file, none is one of the command's `inputs`
+/// (`--force` or not: an input overwritten is lost), and none exists unless `force` says to
+/// replace it.
+///
+/// # Errors
+/// One line naming the path at fault.
+pub(crate) fn check_outputs(paths: &[&Path], inputs: &[&Path], force: bool) -> Result<()> {
+    // Existing files by their canonical path (links and `..` resolved), others as given.
+    let identity = |p: &Path| {
+        std::fs::canonicalize(p)
+            .or_else(|_| std::path::absolute(p))
+            .unwrap_or_else(|_| p.to_path_buf())
+    };
+    let inputs: Vec<PathBuf> = inputs
+        .iter()
+        .filter(|p| p.exists())
+        .map(|p| identity(p))
+        .collect();
+    let mut seen = Vec::with_capacity(paths.len());
+    for &out in paths {
+        if out.is_dir() {
+            bail!("the output is a folder, not a file name: {}", out.display());
+        }
+        let folder = out.parent().filter(|p| !p.as_os_str().is_empty());
+        if let Some(folder) = folder.filter(|f| !f.is_dir()) {
+            bail!("the output's folder does not exist: {}", folder.display());
+        }
+        let id = identity(out);
+        if seen.contains(&id) {
+            bail!("two outputs name the same file: {}", out.display());
+        }
+        if inputs.contains(&id) {
+            bail!(
+                "the output is one of this command's inputs, which it would destroy: {}",
+                out.display()
+            );
+        }
+        seen.push(id);
+        if out.exists() && !force {
+            bail!(
+                "refusing to overwrite an existing file (use --force): {}",
+                out.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Refuses outputs that would land among a scan's data, `--force` or not: in a folder inside
+/// the scan folder (a group's: a file there is read as a frame, or replaces one), or anywhere
+/// in a Zarr store. Beside the groups, in the scan folder itself, is allowed.
+///
+/// # Errors
+/// One line naming the output and the scan.
+pub(crate) fn check_outside_scan(paths: &[&Path], scan: &Path) -> Result<()> {
+    // A scan that does not open is refused when it is opened.
+    let Ok(scan_id) = std::fs::canonicalize(scan) else {
+        return Ok(());
+    };
+    let store = scan_id.join("zarr.json").is_file();
+    for &out in paths {
+        let folder = out.parent().filter(|p| !p.as_os_str().is_empty());
+        let Ok(folder) = std::fs::canonicalize(folder.unwrap_or(Path::new("."))) else {
+            continue;
+        };
+        if store && folder.starts_with(&scan_id) {
+            bail!(
+                "the output lies inside the Zarr store it reads ({}), which it would alter: {}",
+                scan.display(),
+                out.display()
+            );
+        }
+        if folder != scan_id && folder.starts_with(&scan_id) {
+            bail!(
+                "the output lies inside a folder of the scan it reads ({}), among its frames, which it would alter: {}",
+                scan.display(),
+                out.display()
+            );
+        }
+    }
+    Ok(())
+}
