@@ -12,6 +12,9 @@ use anyhow::{Result, bail};
 /// # Errors
 /// One line naming the path at fault.
 pub(crate) fn check_outputs(paths: &[&Path], inputs: &[&Path], force: bool) -> Result<()> {
+    for &out in paths {
+        check_name_room(out)?;
+    }
     // Existing files by their canonical path (links and `..` resolved), others as given.
     let identity = |p: &Path| {
         std::fs::canonicalize(p)
@@ -49,6 +52,27 @@ pub(crate) fn check_outputs(paths: &[&Path], inputs: &[&Path], force: bool) -> R
                 out.display()
             );
         }
+    }
+    Ok(())
+}
+
+/// Longest file name most file systems take (bytes; Linux's `NAME_MAX`).
+const NAME_MAX_BYTES: usize = 255;
+/// Bytes the names written beside an output add to its own: `.NAME.journal.PID.N.tmp`, the
+/// longest (the journal's temporary file), with room for a 7-digit process id and a counter.
+const HELPER_NAME_BYTES: usize = 32;
+
+/// Refuses an output whose name leaves no room for the temporary, lock and journal files
+/// written beside it: such a run would fail only when it first wrote one, after its work, and
+/// its `--resume` the same way.
+fn check_name_room(out: &Path) -> Result<()> {
+    let len = out.file_name().map_or(0, |n| n.as_encoded_bytes().len());
+    let most = NAME_MAX_BYTES - HELPER_NAME_BYTES;
+    if len > most {
+        bail!(
+            "the output's name is {len} bytes long, more than the {most} that leave room for the temporary, lock and journal files written beside it (names of at most {NAME_MAX_BYTES} bytes): {}",
+            out.display()
+        );
     }
     Ok(())
 }

@@ -55,6 +55,10 @@ fn outputs_are_checked_before_any_group_runs() {
         &["--groups", "0"],
         &["--groups must be at least 1"],
     );
+    // A name the file system takes but its journal's temporary file would not: refused here,
+    // not after every group has run (and again on --resume).
+    let long = work.join(format!("{}.wav", "c".repeat(241)));
+    refused(&scan, &long, &[], &["245 bytes long", "223"]);
     assert!(!report.exists());
     assert_eq!(names(&work), ["a-folder"], "nothing written, no journal");
 }
