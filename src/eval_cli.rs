@@ -80,6 +80,12 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
             text += &format!("SNR          {:.2} dB\n", scores.snr_db);
             text += &format!("lag          {} samples\n", scores.lag_samples);
             text += &format!("samples      {}\n", scores.samples);
+            if let Some(i) = scores.inverted {
+                text += &format!(
+                    "inverted     r {:.4} at lag {} samples: the polarity is likely reversed\n",
+                    i.r, i.lag_samples
+                );
+            }
         }
     }
     // A reader that went away (`| head`) is not an error of the scoring.

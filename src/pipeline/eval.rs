@@ -45,6 +45,21 @@ pub struct Scores {
     pub lag_samples: i64,
     /// Samples compared (the overlap at the best lag).
     pub samples: usize,
+    /// Where the recovered signal correlates more strongly inverted than upright (its most
+    /// negative r beats `r` in size): that r and its lag. Its polarity is likely reversed (a
+    /// still read from a mirrored image, a wiring or sign slip); `r` and the SNR stay the
+    /// upright scores.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inverted: Option<Inverted>,
+}
+
+/// The recovered signal's strongest inverted correlation ([`Scores::inverted`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Inverted {
+    /// Its Pearson r (negative).
+    pub r: f64,
+    /// Its lag, as [`Scores::lag_samples`].
+    pub lag_samples: i64,
 }
 
 impl Scores {
@@ -61,11 +76,18 @@ impl Scores {
         )
     }
 
-    /// The scores on one line: `r = 0.973, envelope r = 0.991, SNR = 12.7 dB`.
+    /// The scores on one line: `r = 0.973, envelope r = 0.991, SNR = 12.7 dB`, and what an
+    /// inverted polarity reads.
     #[must_use]
     pub fn line(&self) -> String {
+        let inverted = self.inverted.map_or_else(String::new, |i| {
+            format!(
+                "; inverted it reads r = {:.3} at lag {}: its polarity is likely reversed",
+                i.r, i.lag_samples
+            )
+        });
         format!(
-            "r = {:.3}, envelope r = {}, SNR = {:.1} dB",
+            "r = {:.3}, envelope r = {}, SNR = {:.1} dB{inverted}",
             self.r,
             self.envelope_r_text(3),
             self.snr_db
@@ -254,6 +276,7 @@ pub fn evaluate(
     let xcorr = lag_cross_correlation(reference, recovered, max_lag, x_of, y_of);
 
     let mut best: Option<(f64, i64)> = None;
+    let mut most_negative: Option<(f64, i64)> = None;
     for (lag, &sxy) in (-m..=m).zip(&xcorr) {
         let Some((lo, hi, ylo)) = lag_overlap(n_ref, n_rec, lag) else {
             continue;
@@ -282,8 +305,16 @@ pub fn evaluate(
         if better {
             best = Some((r, lag));
         }
+        if most_negative.is_none_or(|(nr, nl)| {
+            r < nr - 1e-12 || ((r - nr).abs() <= 1e-12 && lag.abs() < nl.abs())
+        }) {
+            most_negative = Some((r, lag));
+        }
     }
-    let (_, lag) = best?;
+    let (best_r, lag) = best?;
+    let inverted = most_negative
+        .filter(|&(nr, _)| -nr > best_r.max(0.0))
+        .map(|(r, lag_samples)| Inverted { r, lag_samples });
 
     // Exact scores on the aligned overlap (direct sums, not differences of running sums).
     let (lo, hi, ylo) = lag_overlap(n_ref, n_rec, lag)?;
@@ -327,6 +358,7 @@ pub fn evaluate(
         snr_db,
         lag_samples: lag,
         samples: len,
+        inverted,
     })
 }
 
@@ -435,6 +467,18 @@ mod tests {
         // hiding behind a half-period lag on tonal material.
         let s = evaluate(&inv, &x, 30, FS).unwrap();
         assert!(s.r < 0.5, "{s:?}");
+        // ... and is named: inverted, the recovered signal reads r = −1 at lag 0.
+        let inverted = s.inverted.unwrap();
+        assert!(
+            (inverted.r + 1.0).abs() < 1e-6 && inverted.lag_samples == 0,
+            "{s:?}"
+        );
+        assert!(
+            s.line().contains("polarity is likely reversed"),
+            "{}",
+            s.line()
+        );
+        assert_eq!(evaluate(&x, &x, 30, FS).unwrap().inverted, None);
         assert!((pearson(&inv, &x) + 1.0).abs() < 1e-9);
         // The gain-only SNR does not remove a DC offset: it counts as noise.
         assert!(s.snr_db < 20.0, "{s:?}");

@@ -161,6 +161,12 @@ pub fn waveform_ui(
                         s.snr_db,
                         s.lag_samples
                     ));
+                    if let Some(i) = s.inverted {
+                        ui.colored_label(
+                            ui.visuals().warn_fg_color,
+                            format!("inverted it reads r {:.3}: polarity reversed?", i.r),
+                        );
+                    }
                 }
                 None => {
                     ui.weak(c.reference_problem.as_deref().unwrap_or("no reference.wav: no scores"));
