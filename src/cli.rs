@@ -138,9 +138,9 @@ pub struct ReconstructArgs {
     /// Decoder, overriding the params' `method`: flow, edges or fused.
     #[arg(long, value_parser = ["flow", "edges", "fused"])]
     pub method: Option<String>,
-    /// WAV sample format: 16, 24 or 32f.
-    #[arg(long, default_value = "24")]
-    pub bits: WavBits,
+    /// WAV sample format: 16, 24 or 32f (default 24).
+    #[arg(long)]
+    pub bits: Option<WavBits>,
     /// First group to run.
     #[arg(long)]
     pub first_group: Option<usize>,

@@ -282,6 +282,20 @@ fn a_plan_for_another_scan_and_a_shard_out_of_range_are_refused() {
     .unwrap();
     let e = stderr(&run(scan, "0"));
     assert!(e.contains("edited or is damaged"), "{e}");
+    // What a shard does not write is refused, not ignored (the report was never written).
+    std::fs::write(&p, text).unwrap();
+    for extra in [["--report", "r.json"], ["--bits", "16"]] {
+        let mut args = vec!["reconstruct", s(scan), "--plan", s(&p), "--shard", "0"];
+        args.extend(extra);
+        let part = t.join("part");
+        args.extend(["--out", s(&part)]);
+        let e = stderr(&groovescope(&args));
+        assert!(
+            e.contains("do not go with --plan") && e.contains("merge"),
+            "{e}"
+        );
+        assert!(!part.join("part.gsp").exists());
+    }
 }
 
 /// Spawns `args` with `--progress-json` (its stderr to `stderr`) and reads its progress lines

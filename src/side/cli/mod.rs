@@ -418,15 +418,10 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         )?;
         rec.timings.total_secs = started.elapsed().as_secs_f64();
         let id = &run.identity;
+        let bits = args.bits.unwrap_or_default();
         let fingerprints = (id.scan_fingerprint.as_str(), id.params_fingerprint.as_str());
-        let info = transfer_info(
-            &scan.meta,
-            &params,
-            &rec,
-            fingerprints,
-            (&rec.audio, args.bits),
-        );
-        write_transfer_wav(&args.out, &rec.audio, args.bits, args.force, &info)?;
+        let info = transfer_info(&scan.meta, &params, &rec, fingerprints, (&rec.audio, bits));
+        write_transfer_wav(&args.out, &rec.audio, bits, args.force, &info)?;
         if let Some(report_path) = &args.report {
             let mut report = make_report(
                 &scan.dir,
@@ -549,6 +544,11 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
     }
     if args.first_group.is_some() || args.groups.is_some() {
         bail!("--first-group/--groups do not go with --plan: the plan gives the shard's groups");
+    }
+    if args.report.is_some() || args.bits.is_some() {
+        bail!(
+            "--report/--bits do not go with --plan: a shard writes its part, and merge writes the side's WAV and report (give them to merge)"
+        );
     }
     let scan = Scan::open(&args.scan)?;
     check_hough(&params, &scan, Some(plan_path))?;
