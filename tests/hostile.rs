@@ -125,20 +125,28 @@ fn a_frame_step_past_the_frame_width_names_the_key_and_both_numbers() {
 fn an_unreadable_reference_is_a_warning_naming_it_and_the_reconstruction_goes_on() {
     let dir = tempfile::tempdir().unwrap();
     let demo = demo_copy(dir.path());
-    std::fs::write(demo.join("reference.wav"), b"RIFF\x10\0\0\0WAVEjunk").unwrap();
-    let scan = Scan::open(&demo).unwrap();
+    let reference = demo.join("reference.wav");
+    std::fs::write(&reference, b"RIFF\x10\0\0\0WAVEjunk").unwrap();
     let opts = ReconstructOptions {
         groups: Some(0..4),
         ..ReconstructOptions::default()
     };
-    let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false)).unwrap();
-    assert!(rec.scores.is_none());
-    assert!(!rec.audio.is_empty());
-    common::assert_warned(
-        &rec.warnings,
-        &["reference not scored", "reference.wav"],
-        "missing reference",
-    );
+    // Corrupt, then a folder of that name (once skipped without a word).
+    for corrupt in [true, false] {
+        if !corrupt {
+            std::fs::remove_file(&reference).unwrap();
+            std::fs::create_dir(&reference).unwrap();
+        }
+        let scan = Scan::open(&demo).unwrap();
+        let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false)).unwrap();
+        assert!(rec.scores.is_none());
+        assert!(!rec.audio.is_empty());
+        common::assert_warned(
+            &rec.warnings,
+            &["reference not scored", "reference.wav"],
+            "missing reference",
+        );
+    }
 }
 
 #[test]

@@ -127,6 +127,12 @@ fn is_frame_file(p: &Path) -> bool {
         .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "tif" | "tiff"))
 }
 
+/// The scan's `reference.wav` in `dir` when anything of that name is there: a folder or a
+/// dangling link too, so that scoring names what is wrong with it instead of skipping it.
+pub(super) fn reference_in(dir: &Path) -> Option<PathBuf> {
+    Some(dir.join("reference.wav")).filter(|p| p.symlink_metadata().is_ok())
+}
+
 /// A name starting with a dot: another program's file (macOS's `._f000.png` resource forks,
 /// `.Trashes`, thumbnail caches), never a group or a frame.
 fn hidden(p: &Path) -> bool {
@@ -307,7 +313,7 @@ impl Scan {
         };
         let frame_size = frame_dimensions(first)?;
         check_meta_against(&meta, &groups, frame_size, &meta_path)?;
-        let reference = Some(dir.join("reference.wav")).filter(|p| p.is_file());
+        let reference = reference_in(dir);
         Ok(Self {
             dir: dir.to_path_buf(),
             meta,

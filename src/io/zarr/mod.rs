@@ -232,7 +232,7 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
         dir: dir.to_path_buf(),
         meta,
         groups: entries,
-        reference: Some(dir.join("reference.wav")).filter(|p| p.is_file()),
+        reference: super::scan::reference_in(dir),
         frame_size: (width, height),
     })
 }
