@@ -1,6 +1,6 @@
 //! Merge: the parts of every shard of one plan, checked, then finished exactly as a one-process run.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::part::{read_part, read_part_header};
@@ -100,9 +100,13 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
             .iter()
             .any(|p| p.identity.shard.as_ref().is_some_and(|s| s.index == k))
         {
+            let given: Vec<String> = parts.iter().map(|p| p.path.display().to_string()).collect();
             return Err(SideError::refused(
-                format!("shard {k} of {count} is missing from the parts given"),
-                first_path.parent().unwrap_or(Path::new(".")),
+                format!(
+                    "shard {k} of {count} is missing from the parts given ({})",
+                    given.join(", ")
+                ),
+                first_path,
             ));
         }
     }
