@@ -146,11 +146,22 @@ impl ScanMeta {
     /// # Errors
     /// A sentence naming the key and the problem.
     pub fn validate(&self) -> Result<(), String> {
+        // A huge number in full is hundreds of digits: those are shown as 1e308.
+        fn shown(v: f64) -> String {
+            if v.abs() >= 1e9 {
+                format!("{v:e}")
+            } else {
+                v.to_string()
+            }
+        }
         fn positive(name: &str, v: f64) -> Result<(), String> {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(format!("{name} must be a positive number, got {v}"))
+                Err(format!(
+                    "{name} must be a positive number, got {}",
+                    shown(v)
+                ))
             }
         }
         if self.format != FORMAT_VERSION {
@@ -159,17 +170,27 @@ impl ScanMeta {
                 self.format
             ));
         }
-        positive("record.rpm", self.record.rpm)?;
-        positive("record.radius_mm", self.record.radius_mm)?;
-        if let Some(radii) = &self.record.group_radius_mm {
-            for (i, r) in radii.iter().enumerate() {
-                positive(&format!("record.group_radius_mm[{i}]"), *r)?;
+        // Far past any record or microscope, short of the numbers that overflow the geometry.
+        fn at_most(name: &str, v: f64, most: f64) -> Result<(), String> {
+            positive(name, v)?;
+            if v <= most {
+                Ok(())
+            } else {
+                Err(format!("{name} must be at most {most}, got {}", shown(v)))
             }
         }
-        positive("camera.pixel_pitch_um", self.camera.pixel_pitch_um)?;
-        positive(
+        at_most("record.rpm", self.record.rpm, 1000.0)?;
+        at_most("record.radius_mm", self.record.radius_mm, 1000.0)?;
+        if let Some(radii) = &self.record.group_radius_mm {
+            for (i, r) in radii.iter().enumerate() {
+                at_most(&format!("record.group_radius_mm[{i}]"), *r, 1000.0)?;
+            }
+        }
+        at_most("camera.pixel_pitch_um", self.camera.pixel_pitch_um, 1000.0)?;
+        at_most(
             "camera.working_distance_mm",
             self.camera.working_distance_mm,
+            10_000.0,
         )?;
         positive("motion.frame_step_um", self.motion.frame_step_um)?;
         positive("motion.group_step_um", self.motion.group_step_um)?;

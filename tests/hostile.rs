@@ -395,6 +395,19 @@ fn a_groove_speed_off_by_a_unit_is_refused_naming_the_keys_before_any_group() {
             assert!(!out.exists());
         }
     }
+    // Past any record: refused when the scan opens, the number short.
+    std::fs::write(
+        &meta,
+        text.replacen("radius_mm = 60.0", "radius_mm = 1e308", 1),
+    )
+    .unwrap();
+    refused_open(
+        &demo,
+        &[
+            "record.radius_mm must be at most 1000, got 1e308",
+            "scan.toml",
+        ],
+    );
     // The same through the params: named as the params' key.
     std::fs::write(&meta, &text).unwrap();
     let params = dir.path().join("fine.toml");

@@ -59,9 +59,13 @@ pub fn check_sample_density(meta: &ScanMeta, sound: &SoundParams) -> Result<(), 
     if per_px.is_finite() && per_px > 0.0 && per_px <= MAX_SAMPLES_PER_PX {
         return Ok(());
     }
-    let density = format!(
-        "a native sample every {spacing:.3e} µm along the groove is {per_px:.3e} samples a pixel of {pitch} µm, more than the {MAX_SAMPLES_PER_PX} a pixel can carry"
-    );
+    let density = if per_px.is_finite() && per_px > 0.0 {
+        format!(
+            "a native sample every {spacing:.3e} µm along the groove is {per_px:.3e} samples a pixel of {pitch} µm, more than the {MAX_SAMPLES_PER_PX} a pixel can carry"
+        )
+    } else {
+        format!("a native sample spacing of {spacing:.3e} µm is no sampling of the groove")
+    };
     Err(if sound.native_spacing_um > 0.0 {
         TooFine {
             from_scan: false,
