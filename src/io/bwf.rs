@@ -209,8 +209,8 @@ fn ascii_id(id: &[u8; 4]) -> String {
 }
 
 /// How to make a WAV in memory a Broadcast Wave File without moving its samples: `head` (the
-/// RIFF header, the chunks before `data` with the format chunk in its plain PCM form where
-/// [`plain_pcm`] gives one, then the `bext` chunk), then `wav[data_at..]` (the `data` chunk),
+/// RIFF header, the chunks before `data` with the format chunk in its plain PCM form where it
+/// holds integer PCM of at most two channels, then the `bext` chunk), then `wav[data_at..]` (the `data` chunk),
 /// then `pad` zero bytes.
 #[derive(Debug)]
 pub struct BextInsert {
