@@ -152,8 +152,7 @@ fn a_group_cut_short_is_named_when_run_and_leaves_the_rest_of_the_scan_usable() 
 
 #[test]
 fn force_never_turns_an_input_into_an_output() {
-    let dir = tempfile::tempdir().unwrap();
-    let demo = demo_copy(dir.path());
+    let (dir, demo) = common::demo_in_tempdir();
     let reference = demo.join("reference.wav");
     let before = std::fs::read(&reference).unwrap();
     refused(
@@ -208,8 +207,7 @@ fn force_never_turns_an_input_into_an_output() {
 fn nothing_is_written_among_a_scans_frames_or_over_a_part() {
     // A frame replaced (`--force`), or a new file in a group read as its eighth frame, broke
     // the scan: its next run stopped with "frame is missing: g00000/f007.png".
-    let dir = tempfile::tempdir().unwrap();
-    let demo = demo_copy(dir.path());
+    let (dir, demo) = common::demo_in_tempdir();
     let frame = demo.join("g00000/f000.png");
     let before = std::fs::read(&frame).unwrap();
     for (out, extra) in [

@@ -369,8 +369,7 @@ fn groovescope_capped(args: &[&str]) -> std::process::Output {
 fn a_groove_speed_off_by_a_unit_is_refused_naming_the_keys_before_any_group() {
     // A radius written in metres (0.06) or a speed far too slow asked for hundreds of samples a
     // pixel: sampling the demo's 13 groups then tried to allocate 391 GB and aborted.
-    let dir = tempfile::tempdir().unwrap();
-    let demo = demo_copy(dir.path());
+    let (dir, demo) = common::demo_in_tempdir();
     let meta = demo.join("scan.toml");
     let text = std::fs::read_to_string(&meta).unwrap();
     let out = dir.path().join("x.wav");

@@ -238,6 +238,15 @@ pub fn failed_with(o: &Output, wanted: &[&str]) -> String {
     err
 }
 
+/// A temporary folder holding a copy of the demo ([`demo_copy`]); the folder goes when the
+/// first value is dropped.
+#[allow(dead_code)] // not every test binary uses it
+pub fn demo_in_tempdir() -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    (dir, demo)
+}
+
 /// A copy of the bundled demo scan (13 dual-focus groups of 7 frames, with `reference.wav`)
 /// in `dir/demo`, for tests that damage or lock it.
 pub fn demo_copy(dir: &Path) -> PathBuf {
