@@ -141,6 +141,10 @@ fn an_unreadable_reference_is_a_warning_naming_it_and_the_reconstruction_goes_on
         let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false)).unwrap();
         assert!(rec.scores.is_none());
         assert!(!rec.audio.is_empty());
+        // The fused decoder's report names the clip's groups only (group 3's frames reach past
+        // group 4's start, which once listed a group 4 that never ran).
+        let fused: Vec<usize> = rec.fusion.unwrap().groups.iter().map(|g| g.group).collect();
+        assert_eq!(fused, [0, 1, 2, 3]);
         common::assert_warned(
             &rec.warnings,
             &["reference not scored", "reference.wav"],

@@ -379,6 +379,14 @@ pub fn finish_reconstruction(
         ),
         None => None,
     };
+    // Samples past the last group's step lie in its frames' overlap, not in a group of their
+    // own: the fusion report lists the clip's groups only.
+    let clip_groups =
+        reports.first().map_or(0, |r| r.group)..=reports.last().map_or(0, |r| r.group);
+    let fusion = finished.fusion.map(|mut f| {
+        f.groups.retain(|g| clip_groups.contains(&g.group));
+        f
+    });
     Ok(Reconstruction {
         audio,
         stitched,
@@ -388,7 +396,7 @@ pub fn finish_reconstruction(
         scores,
         warnings,
         method: params.method,
-        fusion: finished.fusion,
+        fusion,
     })
 }
 
