@@ -8,7 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::io::wav::{Audio, WavBits};
 use crate::job::Job;
-pub(crate) use crate::output_checks::{check_outputs, check_outside_scan};
+pub(crate) use crate::output_checks::{check_outputs, check_outside_scan, undo_first_on_error};
 use crate::pipeline::PipelineParams;
 use crate::pipeline::{Method, PathChoice};
 pub use crate::side::cli::{Report, make_report, run_reconstruct};

@@ -111,3 +111,23 @@ pub(crate) fn check_outside_scan(paths: &[&Path], scan: &Path) -> Result<()> {
     }
     Ok(())
 }
+
+/// `second`, the result of writing a run's second output (its report) after `first` (its WAV):
+/// on failure `first`, which the run has just written, is removed too, so a failed run leaves
+/// neither; a lone WAV would make the same command refuse without `--force`.
+///
+/// # Errors
+/// `second`'s error, saying the WAV was removed.
+pub(crate) fn undo_first_on_error<T>(first: &Path, second: Result<T>) -> Result<T> {
+    second.map_err(|e| {
+        let removed = std::fs::remove_file(first).is_ok();
+        if removed {
+            anyhow::anyhow!(
+                "{e:#} (the WAV it goes with was removed, so the same command writes both: {})",
+                first.display()
+            )
+        } else {
+            e
+        }
+    })
+}

@@ -295,7 +295,10 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
             scores: scores.clone(),
             chosen_automatically: args.groove.is_none(),
         };
-        write_still_report(path, &run, &setup, &params, &what, args.force)?;
+        crate::cli::undo_first_on_error(
+            &args.out,
+            write_still_report(path, &run, &setup, &params, &what, args.force),
+        )?;
     }
     let a = &run.analysis;
     let groove = &a.grooves.grooves[a.chosen];

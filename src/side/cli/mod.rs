@@ -432,7 +432,10 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
                 &rec,
             );
             report.progress = Some(run_progress.clone());
-            write_json_atomic(report_path, &report, args.force)?;
+            crate::cli::undo_first_on_error(
+                &args.out,
+                write_json_atomic(report_path, &report, args.force).map_err(Into::into),
+            )?;
         }
         result.journal.remove()?;
         finish_message(args, &rec, &run_progress);

@@ -117,7 +117,10 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
             &merged.identity.params,
             &rec,
         );
-        write_json_atomic(report_path, &report, args.force)?;
+        crate::cli::undo_first_on_error(
+            &args.out,
+            write_json_atomic(report_path, &report, args.force).map_err(Into::into),
+        )?;
     }
     crate::cli::print_warnings(&rec.warnings);
     if !args.quiet {
