@@ -222,7 +222,7 @@ fn slow_path(v: &[f64], window: usize) -> (Vec<f64>, Vec<f64>) {
 /// Decodes a groove's border tracks into its sound (see the module docs).
 ///
 /// # Errors
-/// [`StillError::NoGroove`] when no line of a channel could be measured.
+/// [`StillError::NoBorders`] when no line of a channel could be measured.
 pub fn decode_borders(
     tracks: &BorderTracks,
     setup: &StillSetup,
@@ -278,11 +278,10 @@ pub fn decode_borders(
     let mut gaps = Vec::new();
     for (c, v) in channels_cross.iter_mut().enumerate() {
         if !bridge(v, c, &mut gaps) {
-            return Err(StillError::NoGroove {
-                looked: format!(
-                    "the groove was found but none of its {lines} lines gave a usable border{}",
-                    if c == 1 { " for the right wall" } else { "" }
-                ),
+            return Err(StillError::NoBorders {
+                lines,
+                wall: if c == 1 { " for the right wall" } else { "" },
+                min_contrast: params.border.min_contrast,
             });
         }
     }

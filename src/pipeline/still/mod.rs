@@ -256,6 +256,20 @@ pub enum StillError {
         /// Where and what the detector looked for.
         looked: String,
     },
+    /// The groove was found, but no line of one of its channels gave a usable border.
+    #[error(
+        "the groove was found, but none of its {lines} lines gave a usable border{wall} (a dim \
+         image, such as 10 or 12 bits stored in 16, has borders under [still.border] \
+         min_contrast = {min_contrast} of full scale: lower it)"
+    )]
+    NoBorders {
+        /// Lines of the groove.
+        lines: usize,
+        /// "" or " for the right wall".
+        wall: &'static str,
+        /// The border fit's smallest contrast.
+        min_contrast: f64,
+    },
     /// `--groove` asks for a groove that is not there.
     #[error(
         "groove {asked} asked for, but {found} grooves were found (numbered 1–{found} from the image's {side})"
