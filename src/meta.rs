@@ -140,20 +140,21 @@ pub struct ScanMeta {
     pub extra: toml::Table,
 }
 
+/// `v` for a message: a huge number in full is hundreds of digits, so those read `1e308`.
+fn shown(v: f64) -> String {
+    if v.abs() >= 1e9 {
+        format!("{v:e}")
+    } else {
+        v.to_string()
+    }
+}
+
 impl ScanMeta {
     /// Checks every value for sense; returns the first problem found.
     ///
     /// # Errors
     /// A sentence naming the key and the problem.
     pub fn validate(&self) -> Result<(), String> {
-        // A huge number in full is hundreds of digits: those are shown as 1e308.
-        fn shown(v: f64) -> String {
-            if v.abs() >= 1e9 {
-                format!("{v:e}")
-            } else {
-                v.to_string()
-            }
-        }
         fn positive(name: &str, v: f64) -> Result<(), String> {
             if v.is_finite() && v > 0.0 {
                 Ok(())
@@ -200,13 +201,13 @@ impl ScanMeta {
             if !(df.glass_index.is_finite() && df.glass_index >= 1.0) {
                 return Err(format!(
                     "dual_focus.glass_index must be at least 1 (a real glass), got {}",
-                    df.glass_index
+                    shown(df.glass_index)
                 ));
             }
             if !df.glass_edge_row.is_finite() || df.glass_edge_row < 0.0 {
                 return Err(format!(
                     "dual_focus.glass_edge_row must be a row number, got {}",
-                    df.glass_edge_row
+                    shown(df.glass_edge_row)
                 ));
             }
         }
@@ -240,7 +241,7 @@ impl ScanMeta {
             if df.glass_edge_row > last_row {
                 return Err(format!(
                     "dual_focus.glass_edge_row = {} lies outside the frame, whose last row is {last_row} ({height} rows)",
-                    df.glass_edge_row
+                    shown(df.glass_edge_row)
                 ));
             }
         }
@@ -250,7 +251,8 @@ impl ScanMeta {
         if land_shift_px >= width as f64 {
             return Err(format!(
                 "motion.frame_step_um = {} µm moves the land {land_shift_px:.4e} px between frames, not less than the frame's {width} px width (at {} µm a pixel), so consecutive frames would share nothing",
-                self.motion.frame_step_um, self.camera.pixel_pitch_um
+                shown(self.motion.frame_step_um),
+                self.camera.pixel_pitch_um
             ));
         }
         let margin_px = crate::pipeline::sampling::SAMPLE_MARGIN_PX;
@@ -258,7 +260,8 @@ impl ScanMeta {
         if groups > 1 && self.motion.group_step_um > view_um {
             return Err(format!(
                 "motion.group_step_um = {} µm is longer than the {view_um:.2} µm a group's frames are sampled over ({width} px of {} µm less the stitcher's {margin_px} px margin each side), so consecutive groups would not overlap and the sound would have gaps",
-                self.motion.group_step_um, self.camera.pixel_pitch_um
+                shown(self.motion.group_step_um),
+                self.camera.pixel_pitch_um
             ));
         }
         Ok(())

@@ -251,6 +251,15 @@ fn nothing_is_written_among_a_scans_frames_or_over_a_part() {
         &[],
         &["inside the Zarr store it reads"],
     );
+    let o = groovescope(&[
+        "plan",
+        s(&store),
+        "--shards",
+        "2",
+        "--out",
+        s(&store.join("p.json")),
+    ]);
+    common::failed_with(&o, &["inside the Zarr store it reads"]);
     // merge --force over a part it reads would lose the shard.
     let plan = dir.path().join("plan.json");
     assert!(
@@ -266,6 +275,15 @@ fn nothing_is_written_among_a_scans_frames_or_over_a_part() {
         let args = ["--plan", s(&plan), "--shard", shard.as_str()];
         assert!(reconstruct(&demo, part, &args).status.success());
     }
+    let inside = demo.join("g00001/part");
+    let args = ["--plan", s(&plan), "--shard", "0"];
+    refused(
+        &demo,
+        &inside,
+        &args,
+        &["inside a folder of the scan it reads"],
+    );
+    assert!(!inside.exists());
     let part_file = parts[0].join("part.gsp");
     let kept = std::fs::read(&part_file).unwrap();
     for given in [&parts[0], &part_file] {

@@ -390,6 +390,17 @@ fn a_groove_speed_off_by_a_unit_is_refused_naming_the_keys_before_any_group() {
         for args in [
             vec!["reconstruct", s(&demo), "--out", s(&out), "--quiet"],
             vec!["plan", s(&demo), "--shards", "2", "--out", s(&out)],
+            // With no probe group the plan still checks it: its shards would all fail.
+            vec![
+                "plan",
+                s(&demo),
+                "--shards",
+                "2",
+                "--probe-groups",
+                "0",
+                "--out",
+                s(&out),
+            ],
         ] {
             failed_with(
                 &groovescope_capped(&args),

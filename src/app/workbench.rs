@@ -404,10 +404,10 @@ impl Workbench {
             "opened {} ({} groups{})",
             dir.display(),
             scan.groups.len(),
-            if scan.reference.is_some() {
-                ", with reference.wav"
-            } else {
-                ""
+            match scan.reference.as_deref().map(std::path::Path::is_file) {
+                Some(true) => ", with reference.wav",
+                Some(false) => ", with a reference.wav that is no file",
+                None => "",
             }
         ));
         let groups = scan.groups.len();

@@ -20,7 +20,7 @@ use crate::pipeline::walls::WallSide;
 use crate::pipeline::{
     FlowDetail, GroupInput, Method, PipelineParams, Stage, StageCache, StageError,
 };
-pub use stream::{GroupOutcome, GroupStream, SlopeMode, run_groups};
+pub use stream::{GroupOutcome, GroupStream, SlopeMode, check_sample_density, run_groups};
 
 /// What one group adds to the clip's slope history: per wall, its own median |b| from its fits
 /// before the clip check. It depends on that group's frames alone.

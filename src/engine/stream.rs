@@ -98,6 +98,32 @@ fn sized_as_scan(
     }
 }
 
+/// [`crate::pipeline::sampling::check_sample_density`] for `scan` and `params`, naming the
+/// scan's metadata file (`scan.toml`, or a store's `zarr.json`) or the params key.
+///
+/// # Errors
+/// [`EngineError::Load`] or [`EngineError::Stage`] with the sentence.
+pub fn check_sample_density(scan: &Scan, params: &PipelineParams) -> Result<(), EngineError> {
+    crate::pipeline::sampling::check_sample_density(&scan.meta, &params.sound).map_err(
+        |too_fine| -> EngineError {
+            if too_fine.from_scan {
+                let file = if scan.is_store() {
+                    "zarr.json"
+                } else {
+                    "scan.toml"
+                };
+                LoadError::Metadata {
+                    problem: too_fine.problem,
+                    path: scan.dir.join(file),
+                }
+                .into()
+            } else {
+                StageError::invalid("sound.native_spacing_um", too_fine.problem).into()
+            }
+        },
+    )
+}
+
 /// Runs the groups `range` of `stream.scan` in order, one group decoded ahead on a named
 /// loader thread, and hands each outcome to `on_group`. Memory stays at about two groups.
 ///
@@ -123,19 +149,7 @@ pub fn run_groups(
     } = *stream;
     let range = range.start.min(scan.groups.len())..range.end.min(scan.groups.len());
     // Refused before the first group: every group would fail alike, after work.
-    crate::pipeline::sampling::check_sample_density(&scan.meta, &params.sound).map_err(
-        |too_fine| -> EngineError {
-            if too_fine.from_scan {
-                LoadError::Metadata {
-                    problem: too_fine.problem,
-                    path: scan.dir.join("scan.toml"),
-                }
-                .into()
-            } else {
-                StageError::invalid("sound.native_spacing_um", too_fine.problem).into()
-            }
-        },
-    )?;
+    check_sample_density(scan, params)?;
     let meta = Arc::new(scan.meta.clone());
     // A decoded group: its index, the first frame loaded, the frames, the seconds it took.
     type Loaded = (usize, usize, Result<Vec<Image>, LoadError>, f64);

@@ -129,7 +129,7 @@ fn is_frame_file(p: &Path) -> bool {
 
 /// The scan's `reference.wav` in `dir` when anything of that name is there: a folder or a
 /// dangling link too, so that scoring names what is wrong with it instead of skipping it.
-pub(super) fn reference_in(dir: &Path) -> Option<PathBuf> {
+pub(crate) fn reference_in(dir: &Path) -> Option<PathBuf> {
     Some(dir.join("reference.wav")).filter(|p| p.symlink_metadata().is_ok())
 }
 

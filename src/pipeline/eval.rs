@@ -24,6 +24,9 @@ const MIN_ENVELOPE_BLOCKS: usize = 10;
 /// A reference whose whole blocks' peaks spread by less than this share of the highest is
 /// steady (a tone): its envelope r would only correlate ripple, so it gets none.
 const STEADY_ENVELOPE_SPREAD: f32 = 0.01;
+/// How much more strongly (in r) the recovered signal must correlate inverted than upright for
+/// [`Scores::inverted`].
+const INVERTED_MARGIN: f64 = 0.2;
 /// SNR reported when the residual is exactly zero (keeps the score finite for JSON).
 const MAX_SNR_DB: f64 = 300.0;
 
@@ -312,8 +315,10 @@ pub fn evaluate(
         }
     }
     let (best_r, lag) = best?;
+    // A steady tone correlates inverted at half a period about as well as upright at its lag:
+    // only a clear margin says anything about polarity.
     let inverted = most_negative
-        .filter(|&(nr, _)| -nr > best_r.max(0.0))
+        .filter(|&(nr, _)| -nr > best_r.max(0.0) + INVERTED_MARGIN)
         .map(|(r, lag_samples)| Inverted { r, lag_samples });
 
     // Exact scores on the aligned overlap (direct sums, not differences of running sums).
@@ -479,6 +484,18 @@ mod tests {
             s.line()
         );
         assert_eq!(evaluate(&x, &x, 30, FS).unwrap().inverted, None);
+        // A tone at a fractional lag, upright, searched over more than a period: inverted at
+        // half a period it correlates about as well, which says nothing about polarity.
+        for f in [500.0, 2000.0, 5000.0] {
+            let w = 2.0 * PI * f / f64::from(FS);
+            let tone = |shift: f64| -> Vec<f32> {
+                (0..4410)
+                    .map(|i| (w * (i as f64 + shift)).sin() as f32)
+                    .collect()
+            };
+            let s = evaluate(&tone(0.37), &tone(0.0), 220, FS).unwrap();
+            assert_eq!(s.inverted, None, "{f} Hz: {s:?}");
+        }
         assert!((pearson(&inv, &x) + 1.0).abs() < 1e-9);
         // The gain-only SNR does not remove a DC offset: it counts as noise.
         assert!(s.snr_db < 20.0, "{s:?}");

@@ -75,7 +75,12 @@ pub fn check_sample_density(meta: &ScanMeta, sound: &SoundParams) -> Result<(), 
         TooFine {
             from_scan: true,
             problem: format!(
-                "record.radius_mm = {} and record.rpm = {} give a groove speed of {:.3e} mm/s, and at {} Hz {density}: check them (a radius in mm, a speed in turns a minute), or set [sound] native_spacing_um",
+                "{} = {} and record.rpm = {} give a groove speed of {:.3e} mm/s, and at {} Hz {density}: check them (a radius in mm, a speed in turns a minute), or set [sound] native_spacing_um",
+                if meta.record.group_radius_mm.is_some() {
+                    "record.group_radius_mm[0]"
+                } else {
+                    "record.radius_mm"
+                },
                 meta.radius_mm(0),
                 meta.record.rpm,
                 meta.groove_speed_mm_s(0),

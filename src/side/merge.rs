@@ -157,7 +157,7 @@ pub fn merge_parts(paths: &[PathBuf], cancel: &AtomicBool) -> Result<Merged, Sid
     let meta = ScanMeta::from_toml_str(&identity.meta_toml, &first.path)?;
     let params: PipelineParams = identity.params.clone();
     let scan_dir = PathBuf::from(&identity.scan);
-    let reference = Some(scan_dir.join("reference.wav")).filter(|p| p.is_file());
+    let reference = crate::io::scan::reference_in(&scan_dir);
     let mut clip = ClipGroups::with_capacity(identity.scan_groups);
     let part_paths: Vec<PathBuf> = parts.iter().map(|p| p.path.clone()).collect();
     for checked in parts {

@@ -164,7 +164,10 @@ pub fn waveform_ui(
                     if let Some(i) = s.inverted {
                         ui.colored_label(
                             ui.visuals().warn_fg_color,
-                            format!("inverted it reads r {:.3}: polarity reversed?", i.r),
+                            format!(
+                                "inverted it reads r {:.3} at lag {}: its polarity is likely reversed",
+                                i.r, i.lag_samples
+                            ),
                         );
                     }
                 }

@@ -344,8 +344,8 @@ const SETTLE_TIME_CONSTANTS: f64 = 4.0;
 /// Hann-weighted (a tone's leak into them falls as 1/f³ instead of 1/f). Settled on the plain
 /// mean level alone, the block started off by up to `1/(ωτ)` of a tone (0.02 of a 500 Hz tone
 /// for 10 Hz) and carried that through a short clip as an offset: a 500 Hz tone of 8 ms kept
-/// 33 dB of SNR, now 59; over 4 time constants instead of 1, 30 Hz on a 1 s clip keeps 41 dB
-/// instead of 15 (docs/ACCURACY.md).
+/// 33.7 dB of SNR at the worst phase, now 58.7; and the causal block, read over 4 time
+/// constants instead of 1, keeps 41.7 dB instead of 18.5 on a 1 s 30 Hz clip (the tests).
 fn settle_level<'a>(head: impl ExactSizeIterator<Item = &'a f32>, tau: f64) -> f64 {
     let n = head.len() as f64;
     // Σw, Σw·x, Σw·k and Σw·C[k], C[k] = Σ_{j<k} x[j]: then S[k] = C[k] − k·m.

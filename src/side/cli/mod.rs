@@ -362,8 +362,9 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         .into_iter()
         .chain(args.params.as_deref())
         .collect();
-    crate::cli::check_outputs(&outputs, &inputs, args.force)?;
+    // Among the scan's frames is refused whatever --force says, so that is said first.
     crate::cli::check_outside_scan(&outputs, &args.scan)?;
+    crate::cli::check_outputs(&outputs, &inputs, args.force)?;
     if args.groups == Some(0) {
         bail!("--groups must be at least 1: {}", args.scan.display());
     }
@@ -524,6 +525,7 @@ struct ShardReport<'a> {
 }
 
 fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<()> {
+    crate::cli::check_outside_scan(&[args.out.as_path()], &args.scan)?;
     let plan = Plan::load(plan_path)?;
     let params = if args.params.is_none() && args.path == "auto" && args.method.is_none() {
         plan.params.clone()

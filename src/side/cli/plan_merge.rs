@@ -193,11 +193,14 @@ fn probe_secs_per_group(
 /// An unreadable scan or params, a shard count out of range, an existing plan file.
 pub fn run_plan(args: &PlanArgs) -> Result<()> {
     let inputs: Vec<&Path> = args.params.as_deref().into_iter().collect();
+    crate::cli::check_outside_scan(&[args.out.as_path()], &args.scan)?;
     check_outputs(&[args.out.as_path()], &inputs, args.force)?;
     let mut params = load_params(args.params.as_deref())?;
     params.path = path_choice(&args.path, params.path);
     let scan = Scan::open(&args.scan)?;
     super::check_missing_groups(&scan, 0..scan.groups.len(), args.keep_going)?;
+    // Checked here too: with --probe-groups 0 no group runs before the shards would fail.
+    crate::engine::check_sample_density(&scan, &params)?;
     // Also what stops a plan that Ctrl-C reached while its scan was opened (or with no probe).
     let probe = unless_interrupted(
         "plan",
