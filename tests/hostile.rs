@@ -440,3 +440,25 @@ fn a_groove_speed_off_by_a_unit_is_refused_naming_the_keys_before_any_group() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn the_dual_focus_path_on_a_scan_without_a_cover_glass_is_refused_before_any_group() {
+    // It used to run every group, each failing in the stripe stage, then say no group made
+    // sound.
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), 3, 7, 64, 48);
+    let out = dir.path().join("x.wav");
+    let args = [
+        "reconstruct",
+        s(&scan),
+        "--path",
+        "dual-focus",
+        "--out",
+        s(&out),
+    ];
+    failed_with(
+        &groovescope(&args),
+        &["dual-focus needs a [dual_focus] table", "scan"],
+    );
+    assert!(!out.exists() && !dir.path().join("x.wav.journal").exists());
+}

@@ -150,6 +150,16 @@ pub fn run_groups(
     let range = range.start.min(scan.groups.len())..range.end.min(scan.groups.len());
     // Refused before the first group: every group would fail alike, after work.
     check_sample_density(scan, params)?;
+    if params.path == crate::pipeline::PathChoice::DualFocus && scan.meta.dual_focus.is_none() {
+        return Err(StageError::invalid(
+            "path",
+            format!(
+                "dual-focus needs a [dual_focus] table in the scan's metadata, and {} has none",
+                scan.dir.display()
+            ),
+        )
+        .into());
+    }
     let meta = Arc::new(scan.meta.clone());
     // A decoded group: its index, the first frame loaded, the frames, the seconds it took.
     type Loaded = (usize, usize, Result<Vec<Image>, LoadError>, f64);
