@@ -28,7 +28,14 @@ impl std::str::FromStr for WavBits {
         match s {
             "16" => Ok(Self::Int16),
             "24" => Ok(Self::Int24),
-            "32f" | "32" => Ok(Self::Float32),
+            "32f" => Ok(Self::Float32),
+            // Integer or float? groovescope writes no 32-bit integer samples, and a transfer
+            // that is not what was asked for is worse than a refusal.
+            "32" => Err(
+                "\"32\" could mean integer or float samples: use 32f for 32-bit float (16 and 24 \
+                 are integer)"
+                    .into(),
+            ),
             _ => Err(format!(
                 "unknown WAV sample format {s:?} (use 16, 24 or 32f)"
             )),
@@ -327,6 +334,13 @@ mod tests {
             }
         }
         assert!(write_wav(&dir.path().join("0.wav"), &audio, WavBits::Int16, false).is_err());
+    }
+
+    #[test]
+    fn sample_formats_parse_and_an_ambiguous_32_is_refused() {
+        assert_eq!("24".parse::<WavBits>(), Ok(WavBits::Int24));
+        assert_eq!("32f".parse::<WavBits>(), Ok(WavBits::Float32));
+        assert!("32".parse::<WavBits>().unwrap_err().contains("32f"));
     }
 
     #[test]
