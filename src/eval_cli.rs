@@ -31,6 +31,9 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
             .map(|(a, b)| (Cow::Borrowed(a.as_slice()), Cow::Borrowed(b.as_slice())))
             .collect()
     } else if n_rec == 1 || n_ref == 1 {
+        eprintln!(
+            "warning: the recovered sound has {n_rec} channels and the reference {n_ref}: scored as their mono mixes"
+        );
         vec![(Cow::Owned(rec.mono()), Cow::Owned(refa.mono()))]
     } else {
         bail!(

@@ -197,6 +197,16 @@ fn eval_scores_stereo_per_channel_and_refuses_nan_samples() {
         channels.iter().all(|c| c["r"].as_f64().unwrap() > 0.9999),
         "{json}"
     );
+    // Channels that do not pair up are mixed, and it says so.
+    let mono = dir.path().join("mono.wav");
+    common::write_raw_wav(&mono, 44_100, &sine);
+    let out = groovescope(&["eval", s(&pair), s(&mono)]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("2 channels and the reference 1: scored as their mono mixes"),
+        "{}",
+        stderr(&out)
+    );
     let mut bad = sine;
     bad[100] = f32::NAN;
     let nan = dir.path().join("nan.wav");
