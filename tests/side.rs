@@ -220,8 +220,9 @@ fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() 
     run_shard(&other, &po, 1, &d1);
     expect_refusal(&[a0.clone(), d1.clone()], "another scan", &d1);
 
-    // A truncated part: the end record cut off, then a group record cut in half.
-    for cut in [10, 400] {
+    // A part cut short: the end record cut off, then a group record cut in half; and one
+    // with a byte flipped in a group record (once called "truncated").
+    for cut in [10, 400, 0] {
         let torn = t.join(format!("torn{cut}"));
         copy_dir(&a1, &torn);
         let file = torn.join("part.gsp");
@@ -232,7 +233,13 @@ fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() 
             .unwrap()
             .set_len(len - cut)
             .unwrap();
-        expect_refusal(&[a0.clone(), torn.clone()], "truncated part", &file);
+        if cut == 0 {
+            let mut bytes = std::fs::read(&file).unwrap();
+            let at = bytes.len() / 2;
+            bytes[at] ^= 0x40;
+            std::fs::write(&file, bytes).unwrap();
+        }
+        expect_refusal(&[a0.clone(), torn.clone()], "damaged or cut part", &file);
     }
     // The good pair still merges.
     let o = merge(&[a1, a0], &t.join("ok.wav"));

@@ -164,6 +164,17 @@ pub fn read_part(path: &Path) -> Result<Part, SideError> {
         .last()
         .map_or_else(|| "no group".to_string(), |g| format!("group {}", g.group));
     let Some((count, file_crc)) = end else {
+        // Bytes that do not read as records: a damaged byte, or a copy cut inside a record.
+        let unread = bytes.len().saturating_sub(valid);
+        if unread > 0 {
+            return Err(SideError::refused(
+                format!(
+                    "damaged or cut part: its records read up to {last}, and the {unread} bytes after \
+                     that do not (it should hold groups {lo}..{hi}; run its shard again)"
+                ),
+                &file,
+            ));
+        }
         return Err(truncated(format!("no end record after {last}")));
     };
     // With no group records, the end follows the header directly.
