@@ -128,6 +128,28 @@ fn a_group_of_another_frame_size_is_named_or_with_keep_going_a_gap_that_quiet_st
 }
 
 #[test]
+fn an_odd_first_group_is_the_one_named_not_every_other() {
+    // Group 0's size used to be the scan's: all twelve good groups were then refused.
+    let (dir, demo) = common::demo_in_tempdir();
+    for entry in std::fs::read_dir(demo.join("g00000")).unwrap() {
+        let img = Image::from_fn(300, 384, |x, y| ((x * 5 + y) % 13) as f32 / 13.0);
+        save_grey_png(&img, &entry.unwrap().path(), false, true).unwrap();
+    }
+    let out = dir.path().join("o.wav");
+    refused(
+        &demo,
+        &out,
+        &[],
+        &["300x384", "the scan's are 320x384", "g00000"],
+    );
+    let out = dir.path().join("gap.wav");
+    let o = reconstruct(&demo, &out, &["--keep-going"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert_eq!(err.matches("warning: group").count(), 1, "{err}");
+}
+
+#[test]
 fn a_group_cut_short_is_named_when_run_and_leaves_the_rest_of_the_scan_usable() {
     let dir = tempfile::tempdir().unwrap();
     let demo = demo_copy(dir.path());

@@ -127,6 +127,30 @@ fn is_frame_file(p: &Path) -> bool {
         .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "tif" | "tiff"))
 }
 
+/// The scan's frame size: `first`'s (the first group with enough frames), unless the middle
+/// and last such groups agree on another. One odd group 0 (cropped, or from another camera)
+/// would otherwise set the size every other group is then refused for.
+fn majority_frame_size(groups: &[GroupEntry], first: (usize, usize)) -> (usize, usize) {
+    let usable: Vec<&GroupEntry> = groups
+        .iter()
+        .filter(|g| g.frames.len() >= MIN_FRAMES_PER_GROUP)
+        .collect();
+    let size_of = |g: Option<&&GroupEntry>| {
+        g.and_then(|g| g.frames.first())
+            .and_then(|f| frame_dimensions(f).ok())
+    };
+    if usable.len() < 3 {
+        return first;
+    }
+    match (
+        size_of(usable.get(usable.len() / 2)),
+        size_of(usable.last()),
+    ) {
+        (Some(mid), Some(last)) if mid == last && mid != first => mid,
+        _ => first,
+    }
+}
+
 /// The scan's `reference.wav` in `dir` when anything of that name is there: a folder or a
 /// dangling link too, so that scoring names what is wrong with it instead of skipping it.
 pub(crate) fn reference_in(dir: &Path) -> Option<PathBuf> {
@@ -311,7 +335,7 @@ impl Scan {
                 },
             });
         };
-        let frame_size = frame_dimensions(first)?;
+        let frame_size = majority_frame_size(&groups, frame_dimensions(first)?);
         check_meta_against(&meta, &groups, frame_size, &meta_path)?;
         let reference = reference_in(dir);
         Ok(Self {
