@@ -100,53 +100,32 @@ fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
 
 #[test]
 fn a_group_of_another_frame_size_is_named_or_with_keep_going_a_gap_that_quiet_still_shows() {
-    let dir = tempfile::tempdir().unwrap();
-    let demo = demo_copy(dir.path());
-    let group = demo.join("g00003");
-    for entry in std::fs::read_dir(&group).unwrap() {
-        let path = entry.unwrap().path();
-        let img = Image::from_fn(200, 100, |x, y| ((x * 7 + y * 3) % 11) as f32 / 11.0);
-        save_grey_png(&img, &path, false, true).unwrap();
+    // Group 3 of another size, then group 0: group 0's size used to be the scan's, and all
+    // twelve good groups were then refused.
+    for (group, (w, h)) in [(3, (200, 100)), (0, (300, 384))] {
+        let (dir, demo) = common::demo_in_tempdir();
+        let name = format!("g{group:05}");
+        for entry in std::fs::read_dir(demo.join(&name)).unwrap() {
+            let img = Image::from_fn(w, h, |x, y| ((x * 7 + y * 3) % 11) as f32 / 11.0);
+            save_grey_png(&img, &entry.unwrap().path(), false, true).unwrap();
+        }
+        let size = format!("{w}x{h}");
+        let out = dir.path().join("o.wav");
+        refused(&demo, &out, &[], &[&size, "the scan's are 320x384", &name]);
+        // (The refused run kept its finished groups for --resume: this one writes elsewhere.)
+        let out = dir.path().join("gap.wav");
+        let o = reconstruct(&demo, &out, &["--keep-going", "--groups", "5"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let err = stderr(&o);
+        assert!(
+            err.contains(&format!("warning: group {group}:"))
+                && err.contains(&size)
+                && err.contains("silence"),
+            "--quiet keeps the warning: {err}"
+        );
+        assert_eq!(err.matches("warning: group").count(), 1, "{err}");
+        assert!(o.stdout.is_empty());
     }
-    let out = dir.path().join("o.wav");
-    refused(
-        &demo,
-        &out,
-        &[],
-        &["200x100", "the scan's are 320x384", "g00003"],
-    );
-    // (The refused run kept its 3 finished groups for --resume: this one writes elsewhere.)
-    let out = dir.path().join("gap.wav");
-    let o = reconstruct(&demo, &out, &["--keep-going", "--groups", "5"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let err = stderr(&o);
-    assert!(
-        err.contains("warning: group 3") && err.contains("200x100") && err.contains("silence"),
-        "--quiet keeps the warning: {err}"
-    );
-    assert!(o.stdout.is_empty());
-}
-
-#[test]
-fn an_odd_first_group_is_the_one_named_not_every_other() {
-    // Group 0's size used to be the scan's: all twelve good groups were then refused.
-    let (dir, demo) = common::demo_in_tempdir();
-    for entry in std::fs::read_dir(demo.join("g00000")).unwrap() {
-        let img = Image::from_fn(300, 384, |x, y| ((x * 5 + y) % 13) as f32 / 13.0);
-        save_grey_png(&img, &entry.unwrap().path(), false, true).unwrap();
-    }
-    let out = dir.path().join("o.wav");
-    refused(
-        &demo,
-        &out,
-        &[],
-        &["300x384", "the scan's are 320x384", "g00000"],
-    );
-    let out = dir.path().join("gap.wav");
-    let o = reconstruct(&demo, &out, &["--keep-going"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let err = stderr(&o);
-    assert_eq!(err.matches("warning: group").count(), 1, "{err}");
 }
 
 #[test]
