@@ -131,3 +131,17 @@ pub(crate) fn undo_first_on_error<T>(first: &Path, second: Result<T>) -> Result<
         }
     })
 }
+
+/// Refuses an output folder whose parent does not exist, as a file output's is: a mistyped
+/// path is named, not created.
+///
+/// # Errors
+/// One line naming the missing folder.
+pub(crate) fn check_folder_output(out: &Path) -> Result<()> {
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty())
+        && !parent.is_dir()
+    {
+        bail!("the output's folder does not exist: {}", parent.display());
+    }
+    Ok(())
+}

@@ -300,3 +300,22 @@ fn nothing_is_written_among_a_scans_frames_or_over_a_part() {
     }
     assert_eq!(std::fs::read(&part_file).unwrap(), kept);
 }
+
+#[test]
+fn a_folder_output_under_a_missing_folder_is_named_not_created() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
+    let out = dir.path().join("typo/out");
+    let o = s(&out);
+    let runs: [&[&str]; 5] = [
+        &["synth", "--preset", "quick", "--out", o],
+        &["synth-scene", "cube", "--out", o],
+        &["synth-still", "--out", o],
+        &["pack", s(&scan), "--out", o],
+        &["inspect", s(&scan), "--out", o],
+    ];
+    for args in runs {
+        common::failed_with(&groovescope(args), &["folder does not exist", "typo"]);
+    }
+    assert!(names(dir.path()).is_empty(), "nothing created");
+}

@@ -526,6 +526,7 @@ struct ShardReport<'a> {
 
 fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<()> {
     crate::cli::check_outside_scan(&[args.out.as_path()], &args.scan)?;
+    crate::cli::check_folder_output(&args.out)?;
     let plan = Plan::load(plan_path)?;
     let params = if args.params.is_none() && args.path == "auto" && args.method.is_none() {
         plan.params.clone()
