@@ -453,6 +453,22 @@ fn bad_stills_get_one_clear_line() {
     let err = still_error(&dir.path().join("missing.png"), "100", &[]);
     assert!(err.contains("missing.png"), "{err}");
 
+    // A groove too narrow to hold two walls is a setting to mend, not "no groove found".
+    let narrow = dir.path().join("narrow.toml");
+    std::fs::write(&narrow, "[still]\nmax_groove_width_um = 1\n").unwrap();
+    let err = still_error(&flat, "100", &["--params", s(&narrow)]);
+    assert!(
+        err.contains("still.max_groove_width_um") && err.contains("two walls"),
+        "{err}"
+    );
+
+    // A folder, and a scan folder given where a still goes.
+    let err = still_error(dir.path(), "100", &[]);
+    assert!(err.contains("a folder, not a still image"), "{err}");
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
+    let err = still_error(&demo, "100", &[]);
+    assert!(err.contains("groovescope reconstruct"), "{err}");
+
     // A PNG header claiming 5 000 000 × 5 000 000 pixels is refused before any decoding.
     let huge = dir.path().join("huge.png");
     std::fs::write(&huge, png_header(5_000_000, 5_000_000)).unwrap();

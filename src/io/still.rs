@@ -102,6 +102,14 @@ impl StillReader {
     /// [`LoadError::Io`] naming the file when it is missing, not a PNG or TIFF, corrupt,
     /// empty or over the size limits.
     pub fn open(path: &Path) -> Result<Self, LoadError> {
+        if path.is_dir() {
+            let what = if path.join("scan.toml").is_file() || path.join("zarr.json").is_file() {
+                "a scan, not a still image: decode it with `groovescope reconstruct`"
+            } else {
+                "a folder, not a still image (PNG or TIFF)"
+            };
+            return Err(bad(path, what));
+        }
         let file =
             File::open(path).map_err(|e| bad(path, format!("cannot open the still: {e}")))?;
         let mut magic = [0u8; 4];

@@ -16,6 +16,7 @@
 use super::link::{absorb_pieces, centre, common_drift, interpolate, link, merge_fragments, width};
 use super::profile::Profiles;
 use super::{Axis, StillError, StillParams, StillSetup, WallTone};
+use crate::pipeline::StageError;
 use crate::pipeline::median;
 
 /// Dark and bright level quantiles of the local light window.
@@ -269,6 +270,17 @@ pub fn detect_grooves(
     let max_width_px = params.max_groove_width_um * px_per_um;
     let window = (2.0 * max_width_px).ceil() as usize;
     let min_wall_px = (params.min_wall_width_um * px_per_um).max(1.5);
+    if max_width_px < 2.0 * min_wall_px {
+        // A groove holds two walls: a narrower one is looked for in vain.
+        return Err(StageError::InvalidParam {
+            name: "still.max_groove_width_um".into(),
+            problem: format!(
+                "{} µm is {max_width_px:.1} px here, too narrow for two walls of at least                  {min_wall_px:.1} px (still.min_wall_width_um, never under 1.5 px)",
+                params.max_groove_width_um
+            ),
+        }
+        .into());
+    }
     let runs: Vec<Vec<Run>> = (0..profiles.blocks)
         .map(|b| {
             wall_runs(
