@@ -163,31 +163,51 @@ fn chunks(wav: &[u8]) -> impl Iterator<Item = (usize, [u8; 4], usize)> + '_ {
 const PCM_SUBFORMAT: [u8; 16] = [
     0x01, 0x00, 0x00, 0x00, 0x00, 0x00, 0x10, 0x00, 0x80, 0x00, 0x00, 0xaa, 0x00, 0x38, 0x9b, 0x71,
 ];
+/// The sub-format of IEEE float samples (KSDATAFORMAT_SUBTYPE_IEEE_FLOAT).
+const FLOAT_SUBFORMAT: [u8; 16] = [
+    0x03, 0x00, 0x00, 0x00, 0x00, 0x00, 0x10, 0x00, 0x80, 0x00, 0x00, 0xaa, 0x00, 0x38, 0x9b, 0x71,
+];
 
 /// A little-endian `u16` of `bytes` at `at`.
 fn le_u16(bytes: &[u8], at: usize) -> u16 {
     u16::from_le_bytes([bytes[at], bytes[at + 1]])
 }
 
-/// The body of a `WAVE_FORMAT_PCM` format chunk (16 bytes: tag 1, then channels, rate, byte
-/// rate, block align and bits) for a `WAVE_FORMAT_EXTENSIBLE` body `fmt` that holds plain
-/// integer PCM (at most two channels, every bit of each sample valid); `None` for any other.
+/// The plain format chunk body for a `WAVE_FORMAT_EXTENSIBLE` body `fmt` of at most two
+/// channels with every bit of each sample valid, and whether it needs a `fact` chunk; `None`
+/// for any other.
 ///
-/// hound writes the extensible form for 24-bit samples. Tech 3285 describes PCM as tag 1,
-/// and readers that know only that tag (Python's `wave` before 3.12, for one) refuse the
-/// extensible form: a transfer carries the plain one where it means the same.
-fn plain_pcm(fmt: &[u8]) -> Option<Vec<u8>> {
+/// - Integer PCM becomes `WAVE_FORMAT_PCM` (16 bytes: tag 1, then channels, rate, byte rate,
+///   block align and bits). hound writes the extensible form for 24-bit samples; Tech 3285
+///   describes PCM as tag 1, and readers that know only that tag (Python's `wave` before 3.12,
+///   for one) refuse the extensible form.
+/// - IEEE float becomes `WAVE_FORMAT_IEEE_FLOAT` (18 bytes: tag 3, the same fields, a zero
+///   extension size), which RIFF wants followed by a `fact` chunk; SoX warns that the
+///   extensible form's header is "missing extended part of fmt chunk".
+///
+/// A transfer carries the plain form where it means the same.
+fn plain_format(fmt: &[u8]) -> Option<(Vec<u8>, bool)> {
     let extensible = fmt.len() >= 40 && le_u16(fmt, 0) == 0xfffe;
-    if !extensible
-        || le_u16(fmt, 2) > 2
-        || le_u16(fmt, 18) != le_u16(fmt, 14)
-        || fmt[24..40] != PCM_SUBFORMAT
-    {
+    if !extensible || le_u16(fmt, 2) > 2 || le_u16(fmt, 18) != le_u16(fmt, 14) {
         return None;
     }
-    let mut plain = vec![0x01, 0x00];
+    let float = if fmt[24..40] == PCM_SUBFORMAT {
+        false
+    } else if fmt[24..40] == FLOAT_SUBFORMAT {
+        true
+    } else {
+        return None;
+    };
+    let mut plain = if float {
+        vec![0x03, 0x00]
+    } else {
+        vec![0x01, 0x00]
+    };
     plain.extend_from_slice(&fmt[2..16]);
-    Some(plain)
+    if float {
+        plain.extend([0, 0]);
+    }
+    Some((plain, float))
 }
 
 /// A RIFF chunk: `id`, the length of `body`, `body`, and the pad byte of an odd length.
@@ -209,9 +229,10 @@ fn ascii_id(id: &[u8; 4]) -> String {
 }
 
 /// How to make a WAV in memory a Broadcast Wave File without moving its samples: `head` (the
-/// RIFF header, the chunks before `data` with the format chunk in its plain PCM form where it
-/// holds integer PCM of at most two channels, then the `bext` chunk), then `wav[data_at..]` (the `data` chunk),
-/// then `pad` zero bytes.
+/// RIFF header, the chunks before `data` with the format chunk in its plain form where it
+/// holds integer PCM or float of at most two channels and a `fact` chunk where float asks for
+/// one, then the `bext` chunk), then `wav[data_at..]` (the `data` chunk), then `pad` zero
+/// bytes.
 #[derive(Debug)]
 pub struct BextInsert {
     /// Everything before the `data` chunk, its RIFF size counting the whole file.
@@ -235,7 +256,9 @@ impl BextInsert {
         }
         let mut head = b"RIFF\0\0\0\0WAVE".to_vec();
         let mut data = None;
-        let mut format = false;
+        // The block align, and whether a `fact` chunk must be added, once the format is read.
+        let mut format = None;
+        let mut has_fact = false;
         for (at, id, len) in chunks(wav) {
             if &id == b"data" {
                 data = Some((at, len));
@@ -245,18 +268,22 @@ impl BextInsert {
                 .get(at + 8..at + 8 + len)
                 .ok_or_else(|| format!("the {} chunk is cut short", ascii_id(&id)))?;
             if &id == b"fmt " {
-                format = true;
-                head.extend(chunk(
-                    &id,
-                    &plain_pcm(body).unwrap_or_else(|| body.to_vec()),
-                )?);
+                let (body, fact) = plain_format(body).unwrap_or_else(|| (body.to_vec(), false));
+                let align = body.get(12..14).map_or(0, |_| le_u16(&body, 12));
+                format = Some((align, fact));
+                head.extend(chunk(&id, &body)?);
             } else {
+                has_fact |= &id == b"fact";
                 head.extend(chunk(&id, body)?);
             }
         }
         let (data_at, data_len) = data.ok_or("no data chunk")?;
-        if !format {
-            return Err("no format chunk".into());
+        let (align, fact) = format.ok_or("no format chunk")?;
+        if fact && !has_fact {
+            // The sample frames per channel, which RIFF asks of every format but PCM.
+            let frames = u32::try_from(data_len / usize::from(align.max(1)))
+                .map_err(|_| "the WAV is too long for a fact chunk".to_string())?;
+            head.extend(chunk(b"fact", &frames.to_le_bytes())?);
         }
         head.extend(chunk(b"bext", &info.payload())?);
         let pad = usize::from(data_len % 2 == 1 && wav.len() == data_at + 8 + data_len);
@@ -365,11 +392,19 @@ mod tests {
         assert_eq!(a.channels, b.channels);
         assert!(with_bext(b"RIFF\0\0\0\0WAVEfmt ", &info).is_err());
 
-        // 32-bit float keeps its extensible chunk (IEEE float, not PCM), and reads back.
+        // 32-bit float becomes the plain IEEE float chunk (tag 3, 18 bytes) with the `fact`
+        // chunk RIFF asks for beside it (the frame count), and reads back.
         let float = dir.path().join("float.wav");
         crate::io::wav::write_wav(&float, &audio, WavBits::Float32, false).unwrap();
         let bwf = with_bext(&std::fs::read(&float).unwrap(), &info).unwrap();
-        assert_eq!(&bwf[12..22], b"fmt \x28\0\0\0\xfe\xff");
+        assert_eq!(&bwf[12..22], b"fmt \x12\0\0\0\x03\0");
+        assert_eq!(&bwf[32..38], [8, 0, 32, 0, 0, 0]);
+        let frames = u32::try_from(audio.channels[0].len()).unwrap();
+        assert_eq!(&bwf[38..42], b"fact");
+        assert_eq!(
+            &bwf[42..50],
+            [&4u32.to_le_bytes()[..], &frames.to_le_bytes()].concat()
+        );
         let path = dir.path().join("float-bwf.wav");
         std::fs::write(&path, &bwf).unwrap();
         assert_eq!(
