@@ -6,6 +6,7 @@ use std::hint::black_box;
 use criterion::{Criterion, criterion_group, criterion_main};
 use groovescope::pipeline::audio_signal::{GroupSignal, resample, stitch};
 use groovescope::pipeline::dsp::{DspParams, EqCurve, apply_dsp, magnitude_spectrum};
+use groovescope::pipeline::edges::despike::despike;
 use groovescope::pipeline::eval::evaluate;
 
 /// Groove speed at 78 rpm, R = 115 mm (mm/s).
@@ -42,6 +43,19 @@ fn benches(c: &mut Criterion) {
     let native = tone(44_714, 44_714.285);
     c.bench_function("resample 1 s 44714->44100", |b| {
         b.iter(|| resample(black_box(&native), 44_714.285, RATE_HZ));
+    });
+    // A wall's displacement over 1 s (µm: a 1 kHz tone at 50 mm/s), with an outlier in every
+    // 500 samples.
+    let displacement: Vec<f64> = tone(44_100, f64::from(RATE_HZ))
+        .iter()
+        .enumerate()
+        .map(|(j, &v)| 16.0 * f64::from(v) + if j % 500 == 250 { 0.5 } else { 0.0 })
+        .collect();
+    c.bench_function("despike 1 s of a wall's displacement", |b| {
+        b.iter(|| {
+            let mut x = displacement.clone();
+            despike(black_box(&mut x), 5.0)
+        });
     });
     let audio = tone(44_100, f64::from(RATE_HZ));
     let params = DspParams {

@@ -149,6 +149,8 @@ knob_docs! {
         => "longest run of missing samples bridged by interpolation; default 3",
     "edges.weight_window_samples"
         => "samples over which a border's squared standard error is averaged (geometric mean) into its weight when the borders are combined, so the mix of borders stays steady; 0 or 1 = each sample its own; default 32",
+    "edges.despike_sigmas"
+        => "a wall's displacement sample further than this many robust σ from the cubic through its two neighbours on each side, and the largest such within two samples, is an isolated outlier and put back on that cubic (edges::despike); 0 = off; default 5",
     "edges.refine"
         => "refine each border with one smooth curve over the group (edges::refine); default true",
     "edges.hard_width_px"

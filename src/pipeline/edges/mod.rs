@@ -28,6 +28,7 @@
 
 pub mod border;
 pub mod coarse;
+pub mod despike;
 pub mod differentiator;
 pub mod erf;
 pub mod geometry;
@@ -142,6 +143,8 @@ pub struct EdgeParams {
     pub max_bridge_samples: usize,
     #[doc = knob!("edges.weight_window_samples")]
     pub weight_window_samples: usize,
+    #[doc = knob!("edges.despike_sigmas")]
+    pub despike_sigmas: f64,
     #[doc = knob!("edges.refine")]
     pub refine: bool,
     #[doc = knob!("edges.hard_width_px")]
@@ -155,6 +158,9 @@ pub struct EdgeParams {
     #[doc = knob!("edges.spline_frames")]
     pub spline_frames: usize,
 }
+
+/// Default of [`EdgeParams::despike_sigmas`].
+const DEFAULT_DESPIKE: f64 = 5.0;
 
 impl Default for EdgeParams {
     fn default() -> Self {
@@ -171,6 +177,7 @@ impl Default for EdgeParams {
             border_floor_um: 0.02,
             max_bridge_samples: 3,
             weight_window_samples: 32,
+            despike_sigmas: DEFAULT_DESPIKE,
             refine: true,
             hard_width_px: 0.45,
             crossing_sigma_px: 0.05,
@@ -200,6 +207,7 @@ impl EdgeParams {
         check_range("edges.column_sigma_px", self.column_sigma_px, 1e-3, 1e3)?;
         check_range("edges.border_sigma_um", self.border_sigma_um, 1e-4, 1e4)?;
         check_range("edges.border_floor_um", self.border_floor_um, 1e-6, 1e4)?;
+        check_range("edges.despike_sigmas", self.despike_sigmas, 0.0, 1e3)?;
         check_range("edges.hard_width_px", self.hard_width_px, 0.0, 100.0)?;
         check_range(
             "edges.crossing_sigma_px",

@@ -15,6 +15,7 @@
 use std::f64::consts::SQRT_2;
 use std::ops::Range;
 
+use super::despike::despike;
 use super::differentiator::differentiate;
 use super::robust::{CombineParams, Combined, combine_borders, nan_runs};
 use super::{EdgeParams, Edges};
@@ -112,6 +113,8 @@ pub struct DecodedEdges {
     pub velocity: StitchedSignal,
     /// Per output channel: sample ranges without a value.
     pub channel_gaps: Vec<Vec<Range<usize>>>,
+    /// Per wall: the displacement samples put back on the curve as isolated outliers.
+    pub despiked: [Vec<usize>; 2],
 }
 
 /// Combines and differentiates border tracks stitched over a clip (eight channels as
@@ -149,7 +152,7 @@ pub fn decode_border_signal(
             ses[b].push(if seen { f64::from(sv) } else { f64::NAN });
         }
     }
-    let combined = combine_borders(
+    let mut combined = combine_borders(
         &ys,
         &ses,
         &CombineParams {
@@ -160,6 +163,10 @@ pub fn decode_border_signal(
             weight_window: params.weight_window_samples,
         },
     );
+    let despiked = combined
+        .walls_um
+        .each_mut()
+        .map(|w| despike(w, params.despike_sigmas));
     let alpha = params.wall_angle_deg.to_radians();
     let scale = groove_speed_mm_s * alpha.sin() / stitched.spacing_um;
     let velocity: Vec<Vec<f64>> = combined
@@ -194,5 +201,6 @@ pub fn decode_border_signal(
             gaps,
         },
         channel_gaps,
+        despiked,
     })
 }

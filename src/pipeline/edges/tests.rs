@@ -5,7 +5,7 @@ use std::f64::consts::SQRT_2;
 
 use super::predict::first_after;
 use super::*;
-use crate::pipeline::audio_signal::SoundParams;
+use crate::pipeline::audio_signal::{SoundParams, StitchedSignal};
 use crate::synth::{Groove, SynthConfig, scan_meta, stereo, tone};
 
 /// The paper's optics on 640×320 px frames: a 90 µm wide, 35 µm deep groove.
@@ -345,4 +345,48 @@ fn the_interpolants_search_is_the_partition_point() {
             );
         }
     }
+}
+
+#[test]
+fn a_sample_all_four_borders_misplace_is_no_click_in_the_decoded_velocity() {
+    // A 500 Hz tone at 44.1 kHz, 16 µm of displacement, the four borders' constants apart; at
+    // sample 300 every border is 0.4 µm off, which their combination cannot see.
+    let n = 600;
+    let d = |j: usize| 16.0 * (std::f64::consts::TAU * 500.0 / 44_100.0 * j as f64).sin();
+    let mut channels = Vec::new();
+    for c in [-90.0, -20.0, 20.0, 90.0] {
+        #[allow(clippy::cast_possible_truncation)] // the stitched tracks are f32
+        let y = (0..n)
+            .map(|j| (c + d(j) + if j == 300 { 0.4 } else { 0.0 }) as f32)
+            .collect();
+        channels.push(y);
+        channels.push(vec![0.05_f32; n]);
+    }
+    let stitched = StitchedSignal {
+        start_um: 0.0,
+        spacing_um: 21.3,
+        native_rate_hz: 44_100.0,
+        channels,
+        gaps: Vec::new(),
+    };
+    let click = |despike_sigmas: f64| {
+        let params = EdgeParams {
+            despike_sigmas,
+            ..EdgeParams::default()
+        };
+        let decoded = decode_border_signal(&stitched, Cut::Lateral, 1.0, &params).unwrap();
+        let v = &decoded.velocity.channels[0];
+        // The velocity's deviation from its neighbours' mean around the spike, against the
+        // same far from it.
+        let bump = |j: usize| (f64::from(v[j]) - 0.5 * f64::from(v[j - 2] + v[j + 2])).abs();
+        ((298..=302).map(bump).fold(0.0, f64::max), decoded.despiked)
+    };
+    let (kept, none) = click(0.0);
+    let (taken, found) = click(EdgeParams::default().despike_sigmas);
+    assert!(none.iter().all(Vec::is_empty));
+    assert_eq!(found, [vec![300], vec![300]]);
+    assert!(
+        taken < 0.05 * kept,
+        "click {taken} against {kept} without the despike"
+    );
 }
