@@ -27,7 +27,7 @@ pub const BLOCK: usize = 128;
 const MIN_SCALE_UM: f64 = 1e-3;
 
 /// Most spikes a block may hold; more are not isolated outliers.
-const MAX_PER_BLOCK: usize = 4;
+pub const MAX_PER_BLOCK: usize = 4;
 
 /// The cubic prediction's residual at every sample (NaN where a neighbour is missing).
 fn residuals(x: &[f64]) -> Vec<f64> {
