@@ -5,11 +5,13 @@
 mod common;
 
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
 
 use groovescope::accuracy::methods::{MethodScores, score_methods};
 use groovescope::accuracy::{
     render, score_scan, small_lateral, sound_params, speak, two_sample_window_px,
 };
+use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::wav::read_wav;
 use groovescope::pipeline::edges::EdgeParams;
 use groovescope::pipeline::fusion::FusionParams;
@@ -107,6 +109,22 @@ fn edges_and_fused_hold_a_2_khz_tone_above_30_db_on_the_papers_pixels() {
         m.edges.snr_db,
         raw.snr_db
     );
+    // Displacement samples put back on the curve are said in a warning, and only then.
+    let said = |despike_sigmas: f64| {
+        let mut params = no_dc.clone();
+        params.edges.despike_sigmas = despike_sigmas;
+        let opts = ReconstructOptions {
+            params,
+            groups: None,
+            keep_going: true,
+        };
+        let scan = groovescope::io::Scan::open(&scan).unwrap();
+        let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false)).unwrap();
+        rec.warnings.into_iter().find(|w| w.contains("put back"))
+    };
+    let line = said(5.0).expect("this scan has isolated outliers");
+    assert!(line.contains("edges.despike_sigmas = 5"), "{line}");
+    assert_eq!(said(0.0), None);
 }
 
 /// Flakes out of the upper 60% of the right wall over two stretches (2.0–4.5 mm and 8.0–9.5 mm

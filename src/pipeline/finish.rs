@@ -165,15 +165,17 @@ fn groove_speed_along<S: GroupSignals + ?Sized>(groups: &S, grid: &StitchedSigna
 /// The edge method's velocity over the clip: the border tracks stitched, combined,
 /// differentiated, and scaled by the groove speed at each sample. With it, on the same grid,
 /// each channel's displacement noise in velocity units (`σ_d·Vt·sin α/Δ`, mm/s per radian per
-/// sample: the edge noise power at ω is its square times ω²; NaN where unknown).
+/// sample: the edge noise power at ω is its square times ω²; NaN where unknown), and how many
+/// displacement samples were put back on the curve as isolated outliers.
 fn edge_velocity<S: GroupSignals + ?Sized>(
     borders: &S,
     spacing_um: f64,
     meta: &ScanMeta,
     params: &PipelineParams,
-) -> Result<(StitchedSignal, StitchedSignal), StageError> {
+) -> Result<(StitchedSignal, StitchedSignal, usize), StageError> {
     let stitched = stitch(borders, spacing_um)?;
     let decoded = decode_border_signal(&stitched, meta.record.cut, 1.0, &params.edges)?;
+    let despiked = decoded.despiked.iter().map(Vec::len).sum();
     let mut velocity = decoded.velocity;
     let speed = groove_speed_along(borders, &velocity);
     for ch in &mut velocity.channels {
@@ -212,7 +214,7 @@ fn edge_velocity<S: GroupSignals + ?Sized>(
         gaps: Vec::new(),
         ..velocity.clone()
     };
-    Ok((velocity, noise))
+    Ok((velocity, noise, despiked))
 }
 
 /// Finishes a clip by `params.method` (see the module docs), extended over its silent ends
@@ -230,15 +232,18 @@ pub fn finish_method_clip(
 ) -> Result<FinishedClip, StageError> {
     let spacing_um = super::sampling::native_spacing_um(meta, &params.sound);
     let ends_um = signals.silent_ends_um;
+    let mut despiked = 0;
     let (mut velocity, fusion) = match params.method {
         Method::Flow => (stitch(&signals.flow, spacing_um)?, None),
-        Method::Edges => (
-            edge_velocity(&signals.borders, spacing_um, meta, params)?.0,
-            None,
-        ),
+        Method::Edges => {
+            let (velocity, _, n) = edge_velocity(&signals.borders, spacing_um, meta, params)?;
+            despiked = n;
+            (velocity, None)
+        }
         Method::Fused => {
             let ClipSignals { flow, borders, .. } = signals;
-            let (velocity, noise) = edge_velocity(&borders, spacing_um, meta, params)?;
+            let (velocity, noise, n) = edge_velocity(&borders, spacing_um, meta, params)?;
+            despiked = n;
             drop(borders);
             let flow_velocity = stitch(&flow, spacing_um)?;
             drop(flow);
@@ -259,6 +264,13 @@ pub fn finish_method_clip(
     extend_with_silence(&mut velocity, ends_um);
     let mut clip = finish_stitched(velocity, params, filter_phase(params.method))?;
     clip.fusion = fusion;
+    if despiked > 0 {
+        clip.warnings.push(format!(
+            "{despiked} isolated displacement samples put back on the curve through their \
+             neighbours (edges.despike_sigmas = {})",
+            params.edges.despike_sigmas
+        ));
+    }
     Ok(clip)
 }
 
