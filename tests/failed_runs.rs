@@ -86,9 +86,15 @@ fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
     assert_eq!(names(&work), ["a.wav.journal"]);
     // Mended, the same command with --resume goes on from them.
     std::fs::copy(demo.join("g00005/f003.png"), demo.join("g00004/f003.png")).unwrap();
-    let o = reconstruct(&demo, &out, &["--resume"]);
+    let o = groovescope(&["reconstruct", s(&demo), "--out", s(&out), "--resume"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(names(&work), ["a.wav"]);
+    // Its line counts the groups read back apart from those it ran (the time is this run's).
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("13 groups: 4 read back from the journal, 9 run in"),
+        "{said}"
+    );
     // A run that fails on its first group has nothing to go on from: no journal stays.
     std::fs::write(demo.join("g00000/f003.png"), b"not a png").unwrap();
     let first = work.join("b.wav");

@@ -493,12 +493,24 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
     if args.quiet {
         return;
     }
-    let details = format!(
-        "{} groups in {:.1} s, {:.1} groups/s",
-        rec.groups.len(),
-        rec.timings.total_secs,
-        p.groups_per_sec
-    );
+    // After a resume the time and the rate are this run's, so its groups are counted apart.
+    let details = if p.resumed_groups > 0 {
+        format!(
+            "{} groups: {} read back from the journal, {} run in {:.1} s, {:.1} groups/s",
+            rec.groups.len(),
+            p.resumed_groups,
+            p.groups_run,
+            rec.timings.total_secs,
+            p.groups_per_sec
+        )
+    } else {
+        format!(
+            "{} groups in {:.1} s, {:.1} groups/s",
+            rec.groups.len(),
+            rec.timings.total_secs,
+            p.groups_per_sec
+        )
+    };
     let text = crate::cli::wrote_sound(&args.out, &rec.audio, &details);
     let scores = rec.scores.map(|s| format!("vs reference: {}", s.line()));
     for line in std::iter::once(text).chain(scores) {
