@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::io::wav::{Audio, WavBits};
 use crate::job::Job;
 pub(crate) use crate::output_checks::{
-    check_folder_output, check_outputs, check_outside_scan, undo_first_on_error,
+    check_outputs, check_outside_scan, check_parent_exists, undo_first_on_error,
 };
 use crate::pipeline::PipelineParams;
 use crate::pipeline::{Method, PathChoice};
@@ -230,7 +230,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
     use crate::synth::{
         BUILTIN_RATE_HZ, Groove, SynthConfig, arpeggio, render_scan, sweep, tone, write_scan,
     };
-    check_folder_output(&args.out)?;
+    check_parent_exists(&args.out)?;
     let base = match args.preset.as_str() {
         "quick" => SynthConfig::quick_test(),
         "demo" => SynthConfig::demo(),
@@ -300,7 +300,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
 
 fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> {
     use crate::synth::{SceneConfig, SceneKind, render_scene};
-    check_folder_output(out)?;
+    check_parent_exists(out)?;
     let kind = match kind {
         "cube" => SceneKind::Cube,
         "cylinder" => SceneKind::Cylinder,
@@ -595,7 +595,7 @@ pub fn run(command: Command) -> Result<()> {
             path,
             force,
         } => {
-            check_folder_output(&out)?;
+            check_parent_exists(&out)?;
             let mut p = load_params(params.as_deref())?;
             p.path = path_choice(&path, p.path);
             crate::inspect::run_inspect(&scan, group, &out, &p, force)
@@ -608,7 +608,7 @@ pub fn run(command: Command) -> Result<()> {
             quiet,
         } => {
             if let Some(keep) = &keep {
-                check_folder_output(keep)?;
+                check_parent_exists(keep)?;
             }
             let opts = crate::accuracy::AccuracyOptions { quick, keep };
             crate::accuracy::write_report(&out, force, &opts, &mut |line| {

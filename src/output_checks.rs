@@ -31,10 +31,7 @@ pub(crate) fn check_outputs(paths: &[&Path], inputs: &[&Path], force: bool) -> R
         if out.is_dir() {
             bail!("the output is a folder, not a file name: {}", out.display());
         }
-        let folder = out.parent().filter(|p| !p.as_os_str().is_empty());
-        if let Some(folder) = folder.filter(|f| !f.is_dir()) {
-            bail!("the output's folder does not exist: {}", folder.display());
-        }
+        check_parent_exists(out)?;
         let id = identity(out);
         if seen.contains(&id) {
             bail!("two outputs name the same file: {}", out.display());
@@ -132,12 +129,12 @@ pub(crate) fn undo_first_on_error<T>(first: &Path, second: Result<T>) -> Result<
     })
 }
 
-/// Refuses an output folder whose parent does not exist, as a file output's is: a mistyped
+/// Refuses an output (a file, or a folder to be made) whose folder does not exist: a mistyped
 /// path is named, not created.
 ///
 /// # Errors
 /// One line naming the missing folder.
-pub(crate) fn check_folder_output(out: &Path) -> Result<()> {
+pub(crate) fn check_parent_exists(out: &Path) -> Result<()> {
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty())
         && !parent.is_dir()
     {

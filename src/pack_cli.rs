@@ -61,7 +61,7 @@ impl ResumeArgs {
 /// # Errors
 /// An unreadable or irregular scan, an output folder that is not empty, a failed check.
 pub fn run_pack(args: &PackArgs) -> Result<()> {
-    crate::cli::check_folder_output(&args.out)?;
+    crate::cli::check_parent_exists(&args.out)?;
     if !(1..=22).contains(&args.zstd_level) {
         bail!("--zstd-level must be 1 to 22, got {}", args.zstd_level);
     }

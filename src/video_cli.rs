@@ -75,7 +75,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
     use crate::io::zarr::DEFAULT_ZSTD_LEVEL;
     use crate::job::Job;
 
-    crate::cli::check_folder_output(&args.out)?;
+    crate::cli::check_parent_exists(&args.out)?;
     let cut = match args.cut.as_str() {
         "stereo" => Cut::Stereo,
         "vertical" => Cut::Vertical,

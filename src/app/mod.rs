@@ -95,7 +95,7 @@ pub fn demo_scan() -> Option<PathBuf> {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo"),
     ]
     .into_iter()
-    .find(|p| p.join("scan.toml").is_file())
+    .find(|p| crate::io::Scan::is_scan_dir(p))
 }
 
 /// The scan to open when none is given: the last one used, else the demo scan.
@@ -105,7 +105,7 @@ pub fn default_scan(config_dir: Option<&Path>) -> Option<PathBuf> {
     recent
         .scans
         .into_iter()
-        .find(|p| p.join("scan.toml").is_file())
+        .find(|p| crate::io::Scan::is_scan_dir(p))
         .or_else(demo_scan)
 }
 

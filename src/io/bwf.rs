@@ -159,55 +159,52 @@ fn chunks(wav: &[u8]) -> impl Iterator<Item = (usize, [u8; 4], usize)> + '_ {
     })
 }
 
-/// The `WAVE_FORMAT_EXTENSIBLE` sub-format of integer PCM (KSDATAFORMAT_SUBTYPE_PCM).
-const PCM_SUBFORMAT: [u8; 16] = [
-    0x01, 0x00, 0x00, 0x00, 0x00, 0x00, 0x10, 0x00, 0x80, 0x00, 0x00, 0xaa, 0x00, 0x38, 0x9b, 0x71,
+/// The tail of a `WAVE_FORMAT_EXTENSIBLE` sub-format GUID that stands for a plain format: its
+/// first two bytes are then that format's tag (KSDATAFORMAT_SUBTYPE_PCM is tag 1,
+/// KSDATAFORMAT_SUBTYPE_IEEE_FLOAT tag 3).
+const SUBFORMAT_TAIL: [u8; 14] = [
+    0x00, 0x00, 0x00, 0x00, 0x10, 0x00, 0x80, 0x00, 0x00, 0xaa, 0x00, 0x38, 0x9b, 0x71,
 ];
-/// The sub-format of IEEE float samples (KSDATAFORMAT_SUBTYPE_IEEE_FLOAT).
-const FLOAT_SUBFORMAT: [u8; 16] = [
-    0x03, 0x00, 0x00, 0x00, 0x00, 0x00, 0x10, 0x00, 0x80, 0x00, 0x00, 0xaa, 0x00, 0x38, 0x9b, 0x71,
-];
+/// `WAVE_FORMAT_PCM`: the one format tag RIFF asks no `fact` chunk of.
+const TAG_PCM: u16 = 1;
+/// `WAVE_FORMAT_IEEE_FLOAT`.
+const TAG_FLOAT: u16 = 3;
 
 /// A little-endian `u16` of `bytes` at `at`.
 fn le_u16(bytes: &[u8], at: usize) -> u16 {
     u16::from_le_bytes([bytes[at], bytes[at + 1]])
 }
 
-/// The plain format chunk body for a `WAVE_FORMAT_EXTENSIBLE` body `fmt` of at most two
-/// channels with every bit of each sample valid, and whether it needs a `fact` chunk; `None`
-/// for any other.
+/// The plain format chunk body for a `WAVE_FORMAT_EXTENSIBLE` body `fmt` of integer PCM or
+/// IEEE float, at most two channels, every bit of each sample valid; `None` for any other.
 ///
 /// - Integer PCM becomes `WAVE_FORMAT_PCM` (16 bytes: tag 1, then channels, rate, byte rate,
 ///   block align and bits). hound writes the extensible form for 24-bit samples; Tech 3285
 ///   describes PCM as tag 1, and readers that know only that tag (Python's `wave` before 3.12,
 ///   for one) refuse the extensible form.
 /// - IEEE float becomes `WAVE_FORMAT_IEEE_FLOAT` (18 bytes: tag 3, the same fields, a zero
-///   extension size), which RIFF wants followed by a `fact` chunk; SoX warns that the
-///   extensible form's header is "missing extended part of fmt chunk".
+///   extension size); SoX warns that the extensible form's header is "missing extended part of
+///   fmt chunk".
 ///
 /// A transfer carries the plain form where it means the same.
-fn plain_format(fmt: &[u8]) -> Option<(Vec<u8>, bool)> {
+fn plain_format(fmt: &[u8]) -> Option<Vec<u8>> {
     let extensible = fmt.len() >= 40 && le_u16(fmt, 0) == 0xfffe;
-    if !extensible || le_u16(fmt, 2) > 2 || le_u16(fmt, 18) != le_u16(fmt, 14) {
+    if !extensible
+        || le_u16(fmt, 2) > 2
+        || le_u16(fmt, 18) != le_u16(fmt, 14)
+        || fmt[26..40] != SUBFORMAT_TAIL
+    {
         return None;
     }
-    let float = if fmt[24..40] == PCM_SUBFORMAT {
-        false
-    } else if fmt[24..40] == FLOAT_SUBFORMAT {
-        true
-    } else {
-        return None;
-    };
-    let mut plain = if float {
-        vec![0x03, 0x00]
-    } else {
-        vec![0x01, 0x00]
-    };
+    let tag = le_u16(fmt, 24);
+    let mut plain = tag.to_le_bytes().to_vec();
     plain.extend_from_slice(&fmt[2..16]);
-    if float {
-        plain.extend([0, 0]);
+    match tag {
+        TAG_PCM => Some(plain),
+        // WAVEFORMATEX: an extension size, zero.
+        TAG_FLOAT => Some([plain, vec![0, 0]].concat()),
+        _ => None,
     }
-    Some((plain, float))
 }
 
 /// A RIFF chunk: `id`, the length of `body`, `body`, and the pad byte of an odd length.
@@ -230,9 +227,9 @@ fn ascii_id(id: &[u8; 4]) -> String {
 
 /// How to make a WAV in memory a Broadcast Wave File without moving its samples: `head` (the
 /// RIFF header, the chunks before `data` with the format chunk in its plain form where it
-/// holds integer PCM or float of at most two channels and a `fact` chunk where float asks for
-/// one, then the `bext` chunk), then `wav[data_at..]` (the `data` chunk), then `pad` zero
-/// bytes.
+/// holds integer PCM or float of at most two channels, and a `fact` chunk after it where the
+/// format is not plain PCM and the WAV has none, then the `bext` chunk), then
+/// `wav[data_at..]` (the `data` chunk), then `pad` zero bytes.
 #[derive(Debug)]
 pub struct BextInsert {
     /// Everything before the `data` chunk, its RIFF size counting the whole file.
@@ -256,7 +253,7 @@ impl BextInsert {
         }
         let mut head = b"RIFF\0\0\0\0WAVE".to_vec();
         let mut data = None;
-        // The block align, and whether a `fact` chunk must be added, once the format is read.
+        // The format's tag and block align, once read.
         let mut format = None;
         let mut has_fact = false;
         for (at, id, len) in chunks(wav) {
@@ -268,9 +265,11 @@ impl BextInsert {
                 .get(at + 8..at + 8 + len)
                 .ok_or_else(|| format!("the {} chunk is cut short", ascii_id(&id)))?;
             if &id == b"fmt " {
-                let (body, fact) = plain_format(body).unwrap_or_else(|| (body.to_vec(), false));
-                let align = body.get(12..14).map_or(0, |_| le_u16(&body, 12));
-                format = Some((align, fact));
+                let body = plain_format(body).unwrap_or_else(|| body.to_vec());
+                if body.len() < 16 {
+                    return Err("the fmt chunk is cut short".into());
+                }
+                format = Some((le_u16(&body, 0), le_u16(&body, 12)));
                 head.extend(chunk(&id, &body)?);
             } else {
                 has_fact |= &id == b"fact";
@@ -278,8 +277,8 @@ impl BextInsert {
             }
         }
         let (data_at, data_len) = data.ok_or("no data chunk")?;
-        let (align, fact) = format.ok_or("no format chunk")?;
-        if fact && !has_fact {
+        let (tag, align) = format.ok_or("no format chunk")?;
+        if tag != TAG_PCM && !has_fact {
             // The sample frames per channel, which RIFF asks of every format but PCM.
             let frames = u32::try_from(data_len / usize::from(align.max(1)))
                 .map_err(|_| "the WAV is too long for a fact chunk".to_string())?;

@@ -242,6 +242,13 @@ fn sorted_entries(
 }
 
 impl Scan {
+    /// Whether `dir` looks like a scan [`Scan::open`] reads: a folder holding `scan.toml`, or a
+    /// Zarr store (`zarr.json`).
+    #[must_use]
+    pub fn is_scan_dir(dir: &Path) -> bool {
+        dir.join("scan.toml").is_file() || dir.join("zarr.json").is_file()
+    }
+
     /// Opens a scan: a folder (reads `scan.toml` and lists the groups and their frames) or a
     /// Zarr store made by `groovescope pack` (a folder holding `zarr.json`).
     ///

@@ -103,7 +103,7 @@ impl StillReader {
     /// empty or over the size limits.
     pub fn open(path: &Path) -> Result<Self, LoadError> {
         if path.is_dir() {
-            let what = if path.join("scan.toml").is_file() || path.join("zarr.json").is_file() {
+            let what = if super::Scan::is_scan_dir(path) {
                 "a scan, not a still image: decode it with `groovescope reconstruct`"
             } else {
                 "a folder, not a still image (PNG or TIFF)"

@@ -165,8 +165,8 @@ fn groove_speed_along<S: GroupSignals + ?Sized>(groups: &S, grid: &StitchedSigna
 /// The edge method's velocity over the clip: the border tracks stitched, combined,
 /// differentiated, and scaled by the groove speed at each sample. With it, on the same grid,
 /// each channel's displacement noise in velocity units (`σ_d·Vt·sin α/Δ`, mm/s per radian per
-/// sample: the edge noise power at ω is its square times ω²; NaN where unknown), and how many
-/// displacement samples were put back on the curve as isolated outliers.
+/// sample: the edge noise power at ω is its square times ω²; NaN where unknown), and at how
+/// many samples a wall's displacement was put back on the curve as an isolated outlier.
 fn edge_velocity<S: GroupSignals + ?Sized>(
     borders: &S,
     spacing_um: f64,
@@ -175,7 +175,7 @@ fn edge_velocity<S: GroupSignals + ?Sized>(
 ) -> Result<(StitchedSignal, StitchedSignal, usize), StageError> {
     let stitched = stitch(borders, spacing_um)?;
     let decoded = decode_border_signal(&stitched, meta.record.cut, 1.0, &params.edges)?;
-    let despiked = decoded.despiked.iter().map(Vec::len).sum();
+    let despiked = decoded.despiked_samples();
     let mut velocity = decoded.velocity;
     let speed = groove_speed_along(borders, &velocity);
     for ch in &mut velocity.channels {
@@ -232,18 +232,15 @@ pub fn finish_method_clip(
 ) -> Result<FinishedClip, StageError> {
     let spacing_um = super::sampling::native_spacing_um(meta, &params.sound);
     let ends_um = signals.silent_ends_um;
-    let mut despiked = 0;
-    let (mut velocity, fusion) = match params.method {
-        Method::Flow => (stitch(&signals.flow, spacing_um)?, None),
+    let (mut velocity, fusion, despiked) = match params.method {
+        Method::Flow => (stitch(&signals.flow, spacing_um)?, None, 0),
         Method::Edges => {
             let (velocity, _, n) = edge_velocity(&signals.borders, spacing_um, meta, params)?;
-            despiked = n;
-            (velocity, None)
+            (velocity, None, n)
         }
         Method::Fused => {
             let ClipSignals { flow, borders, .. } = signals;
-            let (velocity, noise, n) = edge_velocity(&borders, spacing_um, meta, params)?;
-            despiked = n;
+            let (velocity, noise, despiked) = edge_velocity(&borders, spacing_um, meta, params)?;
             drop(borders);
             let flow_velocity = stitch(&flow, spacing_um)?;
             drop(flow);
@@ -258,15 +255,20 @@ pub fn finish_method_clip(
                 groups: fused.groups,
                 blocks: fused.blocks,
             };
-            (fused.signal, Some(report))
+            (fused.signal, Some(report), despiked)
         }
     };
     extend_with_silence(&mut velocity, ends_um);
     let mut clip = finish_stitched(velocity, params, filter_phase(params.method))?;
     clip.fusion = fusion;
     if despiked > 0 {
+        let (s, its) = if despiked == 1 {
+            ("", "its")
+        } else {
+            ("s", "their")
+        };
         clip.warnings.push(format!(
-            "{despiked} isolated displacement samples put back on the curve through their \
+            "{despiked} isolated displacement sample{s} put back on the curve through {its} \
              neighbours (edges.despike_sigmas = {})",
             params.edges.despike_sigmas
         ));

@@ -329,6 +329,21 @@ pub(crate) fn median(mut v: Vec<f64>) -> Option<f64> {
     median_in_place(&mut v)
 }
 
+/// MAD to σ for normal noise.
+const MAD_TO_SIGMA: f64 = 1.4826;
+
+/// Robust σ of the finite values of `r` about zero (1.4826 × their median |r|), never under
+/// `floor` (and `floor` when none is finite).
+pub(crate) fn robust_sigma(r: &[f64], floor: f64) -> f64 {
+    median(
+        r.iter()
+            .filter(|x| x.is_finite())
+            .map(|x| x.abs())
+            .collect(),
+    )
+    .map_or(floor, |m| (MAD_TO_SIGMA * m).max(floor))
+}
+
 /// Lagrange interpolation at `p` through the nodes `(x, y)` (distinct `x`): the one polynomial
 /// interpolant of the pipeline (stitching, gap bridging, still resampling).
 pub(crate) fn lagrange(nodes: &[(f64, f64)], p: f64) -> f64 {

@@ -49,7 +49,7 @@ pub struct SynthStillArgs {
 /// # Errors
 /// Invalid settings, an unusable sound, an output folder that is not empty, write failures.
 pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
-    crate::cli::check_folder_output(&args.out)?;
+    crate::cli::check_parent_exists(&args.out)?;
     let base = if args.preset == "demo" {
         StillConfig::demo()
     } else {

@@ -39,20 +39,14 @@ fn residuals(x: &[f64]) -> Vec<f64> {
     r
 }
 
-/// The robust scale of the residuals per block: 1.4826 × the median |r| over the block and its
-/// two neighbours, floored at [`MIN_SCALE_UM`].
+/// The robust scale of the residuals per block: their robust σ over the block and its two
+/// neighbours, floored at [`MIN_SCALE_UM`].
 fn block_scales(r: &[f64]) -> Vec<f64> {
-    let blocks = r.len().div_ceil(BLOCK);
-    (0..blocks)
+    (0..r.len().div_ceil(BLOCK))
         .map(|b| {
             let lo = b.saturating_sub(1) * BLOCK;
             let hi = ((b + 2) * BLOCK).min(r.len());
-            let abs: Vec<f64> = r[lo..hi]
-                .iter()
-                .filter(|v| v.is_finite())
-                .map(|v| v.abs())
-                .collect();
-            crate::pipeline::median(abs).map_or(f64::INFINITY, |m| (1.4826 * m).max(MIN_SCALE_UM))
+            crate::pipeline::robust_sigma(&r[lo..hi], MIN_SCALE_UM)
         })
         .collect()
 }
@@ -65,19 +59,18 @@ pub fn despike(x: &mut [f64], sigmas: f64) -> Vec<usize> {
     }
     let r = residuals(x);
     let scales = block_scales(&r);
-    let size = |k: usize| if r[k].is_finite() { r[k].abs() } else { -1.0 };
     let candidates: Vec<usize> = (0..r.len())
         .filter(|&j| {
-            // The largest |r| within two samples (the first of equals) is the spike's centre;
-            // all five must be known, or a spike next to a gap shows as its neighbour's.
+            // All five residuals within two samples must be known (a spike next to a gap shows
+            // as its neighbour's), and the largest of them (the first of equals) is the centre.
             let near = j.saturating_sub(2)..(j + 3).min(r.len());
-            let peak = near
-                .clone()
-                .reduce(|best, k| if size(k) > size(best) { k } else { best });
             near.len() == 5
                 && near.clone().all(|k| r[k].is_finite())
-                && peak == Some(j)
-                && size(j) > sigmas * scales[j / BLOCK]
+                && near
+                    .clone()
+                    .reduce(|best, k| if r[k].abs() > r[best].abs() { k } else { best })
+                    == Some(j)
+                && r[j].abs() > sigmas * scales[j / BLOCK]
         })
         .collect();
     // A block with many is motion the cubic does not follow (a loud tone near the band's top),

@@ -117,6 +117,18 @@ pub struct DecodedEdges {
     pub despiked: [Vec<usize>; 2],
 }
 
+impl DecodedEdges {
+    /// The samples at which either wall's displacement was put back on the curve.
+    #[must_use]
+    pub fn despiked_samples(&self) -> usize {
+        let [left, right] = &self.despiked;
+        let mut all: Vec<usize> = left.iter().chain(right).copied().collect();
+        all.sort_unstable();
+        all.dedup();
+        all.len()
+    }
+}
+
 /// Combines and differentiates border tracks stitched over a clip (eight channels as
 /// [`Edges::border_signal`] gives them; the stitcher's gap fill, a zero standard error, counts
 /// as not seen) into velocity by `cut`.
@@ -163,10 +175,18 @@ pub fn decode_border_signal(
             weight_window: params.weight_window_samples,
         },
     );
-    let despiked = combined
-        .walls_um
-        .each_mut()
-        .map(|w| despike(w, params.despike_sigmas));
+    let despiked = if cut == Cut::Lateral {
+        // A lateral cut's walls are one track (`e = 0`): one pass serves both.
+        let [left, right] = &mut combined.walls_um;
+        let found = despike(left, params.despike_sigmas);
+        right.clone_from(left);
+        [found.clone(), found]
+    } else {
+        combined
+            .walls_um
+            .each_mut()
+            .map(|w| despike(w, params.despike_sigmas))
+    };
     let alpha = params.wall_angle_deg.to_radians();
     let scale = groove_speed_mm_s * alpha.sin() / stitched.spacing_um;
     let velocity: Vec<Vec<f64>> = combined

@@ -24,8 +24,6 @@ use crate::pipeline::median;
 pub const OFFSET_BLOCK_LINES: usize = 256;
 /// Floor of a border's robust σ (px): below it, noise is not what rejects a fit.
 const SIGMA_FLOOR_PX: f64 = 0.02;
-/// MAD to σ for normal noise.
-const MAD_TO_SIGMA: f64 = 1.4826;
 /// Fit screening limits (see the module docs).
 const CONTRAST_RANGE: (f64, f64) = (0.5, 2.0);
 /// See [`CONTRAST_RANGE`].
@@ -133,15 +131,9 @@ pub(crate) fn slow_median(v: &[f64], block: usize) -> Vec<f64> {
         .collect()
 }
 
-/// Robust σ of the finite values (MAD around 0), floored.
+/// Robust σ of the finite values (MAD around 0), floored at [`SIGMA_FLOOR_PX`].
 pub(crate) fn robust_sigma(r: &[f64]) -> f64 {
-    median(
-        r.iter()
-            .filter(|x| x.is_finite())
-            .map(|x| x.abs())
-            .collect(),
-    )
-    .map_or(SIGMA_FLOOR_PX, |m| (MAD_TO_SIGMA * m).max(SIGMA_FLOOR_PX))
+    crate::pipeline::robust_sigma(r, SIGMA_FLOOR_PX)
 }
 
 /// Border `i`'s screened positions and how many were dropped; with each kept fit's deviation

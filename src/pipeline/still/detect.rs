@@ -275,7 +275,8 @@ pub fn detect_grooves(
         return Err(StageError::InvalidParam {
             name: "still.max_groove_width_um".into(),
             problem: format!(
-                "{} µm is {max_width_px:.1} px here, too narrow for two walls of at least                  {min_wall_px:.1} px (still.min_wall_width_um, never under 1.5 px)",
+                "{} µm is {max_width_px:.1} px here, too narrow for two walls of at least \
+                 {min_wall_px:.1} px (still.min_wall_width_um, never under 1.5 px)",
                 params.max_groove_width_um
             ),
         }

@@ -494,23 +494,17 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
         return;
     }
     // After a resume the time and the rate are this run's, so its groups are counted apart.
-    let details = if p.resumed_groups > 0 {
-        format!(
-            "{} groups: {} read back from the journal, {} run in {:.1} s, {:.1} groups/s",
-            rec.groups.len(),
-            p.resumed_groups,
-            p.groups_run,
-            rec.timings.total_secs,
-            p.groups_per_sec
-        )
-    } else {
-        format!(
-            "{} groups in {:.1} s, {:.1} groups/s",
-            rec.groups.len(),
-            rec.timings.total_secs,
-            p.groups_per_sec
-        )
-    };
+    let mut groups = format!("{} groups", rec.groups.len());
+    if p.resumed_groups > 0 {
+        groups += &format!(
+            ": {} read back from the journal, {} run",
+            p.resumed_groups, p.groups_run
+        );
+    }
+    let details = format!(
+        "{groups} in {:.1} s, {:.1} groups/s",
+        rec.timings.total_secs, p.groups_per_sec
+    );
     let text = crate::cli::wrote_sound(&args.out, &rec.audio, &details);
     let scores = rec.scores.map(|s| format!("vs reference: {}", s.line()));
     for line in std::iter::once(text).chain(scores) {
@@ -538,7 +532,7 @@ struct ShardReport<'a> {
 
 fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<()> {
     crate::cli::check_outside_scan(&[args.out.as_path()], &args.scan)?;
-    crate::cli::check_folder_output(&args.out)?;
+    crate::cli::check_parent_exists(&args.out)?;
     let plan = Plan::load(plan_path)?;
     let params = if args.params.is_none() && args.path == "auto" && args.method.is_none() {
         plan.params.clone()
