@@ -98,11 +98,23 @@ fn numbers(s: &str) -> Vec<f64> {
 pub fn plain_warning(w: &str) -> String {
     let n = numbers(w);
     let num = |i: usize| n.get(i).map_or_else(|| "some".into(), |v| format!("{v}"));
+    // "1 sample", "3 samples", "some samples".
+    let count = |i: usize, one: &str, many: &str| match n.get(i) {
+        Some(v) if *v == 1.0 => format!("1 {one}"),
+        _ => format!("{} {many}", num(i)),
+    };
+    let were = |i: usize| {
+        if n.get(i) == Some(&1.0) {
+            "was"
+        } else {
+            "were"
+        }
+    };
     if w.contains("plane scale") && w.contains("diverged") {
         format!(
-            "depth: the tracker lost {} points between frames (the surface seemed to tilt too \
+            "depth: the tracker lost {} between frames (the surface seemed to tilt too \
              steeply) and started them afresh",
-            num(0)
+            count(0, "point", "points")
         )
     } else if w.contains("were never measured") {
         let share = match (n.first(), n.get(1)) {
@@ -112,8 +124,9 @@ pub fn plain_warning(w: &str) -> String {
         format!("depth: {share} of the picture gave no depth (too little texture or light there)")
     } else if w.contains("non-positive inverse depth") {
         format!(
-            "depth: {} points moved against the record (dust or glare) and were left out",
-            num(0)
+            "depth: {} moved against the record (dust or glare) and {} left out",
+            count(0, "point", "points"),
+            were(0)
         )
     } else if w.contains("dropped: no pixel with usable flow") {
         format!(
@@ -122,22 +135,27 @@ pub fn plain_warning(w: &str) -> String {
         )
     } else if w.contains("non-finite flow") {
         format!(
-            "frame {}: {} points had no valid movement and were skipped",
+            "frame {}: {} had no valid movement and {} skipped",
             num(1),
-            num(2)
+            count(2, "point", "points"),
+            were(2)
         )
     } else if w.contains("are missing") && w.starts_with("flow") {
         format!("frames {} to {} of this group are missing", num(1), num(2))
     } else if w.contains("fits rejected for an implausible wall slope") {
         format!(
-            "{} wall readings did not match the wall's usual slope (a flaked or dusty wall?) and \
-             were left as short silences",
-            num(0)
+            "{} did not match the wall's usual slope (a flaked or dusty wall?) and \
+             {} left as short silences",
+            count(0, "wall reading", "wall readings"),
+            were(0)
         )
     } else if w.contains("short gaps") && w.contains("bridged") {
-        format!("{} tiny dropouts were filled in smoothly", num(0))
+        format!(
+            "{} filled in smoothly",
+            count(0, "tiny dropout was", "tiny dropouts were"),
+        )
     } else if w.starts_with("gap of") && w.contains("filled with silence") {
-        format!("a dropout of {} samples is silent", num(0))
+        format!("a dropout of {} is silent", count(0, "sample", "samples"))
     } else if w.starts_with("group") && w.contains("(filled with silence)") {
         format!("group {} could not be used and is silent", num(0))
     } else {
@@ -174,7 +192,17 @@ mod tests {
         let p = plain_warning(
             "3 orientation fits rejected for an implausible wall slope (left as gaps)",
         );
-        assert!(p.starts_with("3 wall readings"), "{p}");
+        assert!(
+            p.starts_with("3 wall readings") && p.contains("were left"),
+            "{p}"
+        );
+        let p = plain_warning("gap of 1 native samples at sample 480 filled with silence");
+        assert_eq!(p, "a dropout of 1 sample is silent");
+        let p = plain_warning("1 fits rejected for an implausible wall slope (left as gaps)");
+        assert!(
+            p.starts_with("1 wall reading did") && p.contains("was left"),
+            "{p}"
+        );
         assert_eq!(plain_warning("something new"), "something new");
         assert_eq!(numbers("frames 4 to 7."), vec![4.0, 7.0]);
         for v in View::ALL {
