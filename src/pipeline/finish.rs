@@ -311,9 +311,10 @@ fn finish_stitched(
         ));
     }
     for gap in &stitched.gaps {
+        let n = gap.len();
+        let samples = if n == 1 { "sample" } else { "samples" };
         warnings.push(format!(
-            "gap of {} native samples at sample {} filled with silence",
-            gap.len(),
+            "gap of {n} native {samples} at sample {} filled with silence",
             gap.start
         ));
     }

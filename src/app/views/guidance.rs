@@ -196,7 +196,7 @@ mod tests {
             p.starts_with("3 wall readings") && p.contains("were left"),
             "{p}"
         );
-        let p = plain_warning("gap of 1 native samples at sample 480 filled with silence");
+        let p = plain_warning("gap of 1 native sample at sample 480 filled with silence");
         assert_eq!(p, "a dropout of 1 sample is silent");
         let p = plain_warning("1 fits rejected for an implausible wall slope (left as gaps)");
         assert!(

@@ -189,17 +189,21 @@ pub fn decode_border_signal(
     };
     let alpha = params.wall_angle_deg.to_radians();
     let scale = groove_speed_mm_s * alpha.sin() / stitched.spacing_um;
-    let velocity: Vec<Vec<f64>> = combined
-        .walls_um
-        .iter()
-        .map(|w| {
-            differentiate(w, &params.differentiator)
-                .into_iter()
-                .map(|v| v * scale)
-                .collect()
-        })
-        .collect();
-    let mut channels = channels_by_cut(cut, &velocity[0], &velocity[1]);
+    let wall_velocity = |w: &[f64]| -> Vec<f64> {
+        differentiate(w, &params.differentiator)
+            .into_iter()
+            .map(|v| v * scale)
+            .collect()
+    };
+    let [left, right] = &combined.walls_um;
+    let left_v = wall_velocity(left);
+    // The lateral cut's one track is differentiated once.
+    let right_v = if cut == Cut::Lateral {
+        left_v.clone()
+    } else {
+        wall_velocity(right)
+    };
+    let mut channels = channels_by_cut(cut, &left_v, &right_v);
     let mut channel_gaps = Vec::with_capacity(channels.len());
     for ch in &mut channels {
         let as_f64: Vec<f64> = ch.iter().map(|&v| f64::from(v)).collect();
