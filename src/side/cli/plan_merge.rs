@@ -37,8 +37,8 @@ pub struct PlanArgs {
     /// Treat unreadable frames as silent gaps instead of failing.
     #[arg(long)]
     pub keep_going: bool,
-    /// Groups run here to measure the time per group (0: no estimate).
-    #[arg(long, default_value_t = 2)]
+    /// Groups run here to measure the time per group, the first as a warm-up (0: no estimate).
+    #[arg(long, default_value_t = 3)]
     pub probe_groups: usize,
     /// Print the Slurm commands that submit the shards and the merge.
     #[arg(long)]
@@ -138,7 +138,9 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
 }
 
 /// Seconds per group measured on the first `groups` groups of `scan`, decode included, over
-/// the groups that gave sound (None when none did).
+/// the groups that gave sound (None when none did). With two or more, the clock starts when the
+/// first group is done: it pays the start-up (threads, buffers, the first reads), which a
+/// shard pays once, and counted it made a short probe read about 15 % slow.
 fn probe_secs_per_group(
     scan: &Scan,
     params: &PipelineParams,
@@ -151,7 +153,9 @@ fn probe_secs_per_group(
     }
     let started = Instant::now();
     let mut slopes = SlopeHistory::default();
-    let mut ran = 0usize;
+    // Per group, in order: seconds from the start to when it finished, and whether it gave
+    // sound.
+    let mut done: Vec<(f64, bool)> = Vec::with_capacity(n);
     run_groups(
         &GroupStream {
             scan,
@@ -163,28 +167,50 @@ fn probe_secs_per_group(
         &mut slopes,
         interrupted(),
         &mut |o: GroupOutcome| {
-            // A group that failed (a gap under --keep-going) is not counted: most fail when
-            // read, at next to no cost, and counted they would make the side look faster. One
-            // that fails late spreads its time over the others, which errs slow.
-            ran += usize::from(o.signal.is_some());
+            done.push((started.elapsed().as_secs_f64(), o.signal.is_some()));
             Ok(())
         },
     )?;
-    if ran == 0 {
-        return Ok(None);
-    }
-    let secs = started.elapsed().as_secs_f64() / ran as f64;
     let threads = rayon::current_num_threads();
-    let failed = n - ran;
-    let basis = format!("groups 0..{n} run here with {threads} threads, decode included");
-    Ok(Some((
-        secs,
-        if failed == 0 {
-            basis
-        } else {
-            format!("{basis}, over the {ran} that gave sound ({failed} failed)")
-        },
-    )))
+    Ok(steady_secs_per_group(&done).map(|(secs, basis)| {
+        (
+            secs,
+            format!("{basis}, run here with {threads} threads, decode included"),
+        )
+    }))
+}
+
+/// Seconds per group from when each probe group finished (seconds from the start, in order)
+/// and whether it gave sound, with the groups timed in words; None when none gave sound.
+///
+/// With two or more groups the clock starts when the first is done: it pays the start-up
+/// (threads, buffers, the first reads), which a shard pays once. A group that failed (a gap
+/// under --keep-going) is not counted: most fail when read, at next to no cost, and counted
+/// they would make the side look faster; one that fails late spreads its time over the others,
+/// which errs slow.
+fn steady_secs_per_group(done: &[(f64, bool)]) -> Option<(f64, String)> {
+    let sound = |d: &[(f64, bool)]| d.iter().filter(|(_, s)| *s).count();
+    let n = done.len();
+    let end = done.last()?.0;
+    let (secs, timed, basis) = match done.split_first() {
+        Some((&(first_done, _), rest)) if sound(rest) > 0 => (
+            end - first_done,
+            rest,
+            format!("groups 1..{n} timed after group 0 (a warm-up)"),
+        ),
+        _ => (end, done, format!("groups 0..{n}")),
+    };
+    let ran = sound(timed);
+    if ran == 0 {
+        return None;
+    }
+    let failed = timed.len() - ran;
+    let basis = if failed == 0 {
+        basis
+    } else {
+        format!("{basis}, over the {ran} that gave sound ({failed} failed)")
+    };
+    Some((secs / ran as f64, basis))
 }
 
 /// Runs `plan`.
@@ -289,5 +315,32 @@ mod tests {
                 .unwrap();
             assert_eq!(String::from_utf8(out.stdout).unwrap(), p);
         }
+    }
+
+    #[test]
+    fn the_probe_times_the_groups_after_the_first() {
+        // Group 0 pays the start-up (0.5 s); the others take 0.1 s each.
+        let (secs, basis) =
+            steady_secs_per_group(&[(0.5, true), (0.6, true), (0.7, true)]).unwrap();
+        assert!((secs - 0.1).abs() < 1e-12, "{secs}");
+        assert_eq!(basis, "groups 1..3 timed after group 0 (a warm-up)");
+        // A failed group after the first is not counted, its time is.
+        let (secs, basis) =
+            steady_secs_per_group(&[(0.5, true), (0.51, false), (0.7, true)]).unwrap();
+        assert!((secs - 0.2).abs() < 1e-12, "{secs}");
+        assert!(
+            basis.ends_with("over the 1 that gave sound (1 failed)"),
+            "{basis}"
+        );
+        // One group, or none after the first with sound: the whole time.
+        let (secs, basis) = steady_secs_per_group(&[(0.5, true)]).unwrap();
+        assert!(
+            (secs - 0.5).abs() < 1e-12 && basis == "groups 0..1",
+            "{secs} {basis}"
+        );
+        let (secs, _) = steady_secs_per_group(&[(0.5, true), (0.51, false)]).unwrap();
+        assert!((secs - 0.51).abs() < 1e-12, "{secs}");
+        assert!(steady_secs_per_group(&[(0.5, false), (0.6, false)]).is_none());
+        assert!(steady_secs_per_group(&[]).is_none());
     }
 }
