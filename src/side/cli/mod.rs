@@ -501,9 +501,10 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
             p.resumed_groups, p.groups_run
         );
     }
+    // The time and the rate from one clock (this run's), so that the one follows from the other.
     let details = format!(
         "{groups} in {:.1} s, {:.1} groups/s",
-        rec.timings.total_secs, p.groups_per_sec
+        p.elapsed_secs, p.groups_per_sec
     );
     let text = crate::cli::wrote_sound(&args.out, &rec.audio, &details);
     let scores = rec.scores.map(|s| format!("vs reference: {}", s.line()));
