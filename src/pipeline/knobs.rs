@@ -132,7 +132,11 @@ knob_docs! {
     "edges.wall_angle_deg"
         => "wall angle from the record plane (°); default 45 (the standard cutter, and the 45/45 stereo cut). Sets the bottom depth from the walls' widths and a wall's velocity scale",
     "edges.band_half_height_px"
-        => "rows read on each side of the predicted border (px); default 8",
+        => "fewest rows read on each side of the predicted border (px); default 8",
+    "edges.band_sigmas"
+        => "rows read on each side of a blurred border, in its edge spreads σ (measured per border and group by pilot fits; never past half the way to the next border; edges::blur); 0 = always band_half_height_px; default 3",
+    "edges.max_band_half_height_px"
+        => "most rows a blurred border's band reads on each side (px): the fits' cost grows with it; default 24",
     "edges.bin_px"
         => "width of the sub-pixel bins of the straightened profiles (px); default 0.25",
     "edges.coarse_column_step"

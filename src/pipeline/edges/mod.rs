@@ -26,6 +26,7 @@
 //! stitches and fuses with the flow signal sample for sample. A border lost over the whole group
 //! is a gap with a warning, not an error.
 
+mod blur;
 pub mod border;
 pub mod coarse;
 pub mod despike;
@@ -46,7 +47,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use self::border::BorderParams;
-use self::coarse::{StripBorders, strip_borders};
+use self::coarse::{StripBorders, strip_borders_and_widths};
 use self::differentiator::{DifferentiatorParams, differentiate};
 use self::geometry::FrameGeometry;
 use self::predict::interpolant;
@@ -127,6 +128,10 @@ pub struct EdgeParams {
     pub wall_angle_deg: f64,
     #[doc = knob!("edges.band_half_height_px")]
     pub band_half_height_px: f64,
+    #[doc = knob!("edges.band_sigmas")]
+    pub band_sigmas: f64,
+    #[doc = knob!("edges.max_band_half_height_px")]
+    pub max_band_half_height_px: f64,
     #[doc = knob!("edges.bin_px")]
     pub bin_px: f64,
     #[doc = knob!("edges.coarse_column_step")]
@@ -169,6 +174,8 @@ impl Default for EdgeParams {
             differentiator: DifferentiatorParams::default(),
             wall_angle_deg: 45.0,
             band_half_height_px: 8.0,
+            band_sigmas: 3.0,
+            max_band_half_height_px: 24.0,
             bin_px: 0.25,
             coarse_column_step: 4,
             column_sigma_px: 1.0,
@@ -201,6 +208,13 @@ impl EdgeParams {
             "edges.band_half_height_px",
             self.band_half_height_px,
             2.0,
+            256.0,
+        )?;
+        check_range("edges.band_sigmas", self.band_sigmas, 0.0, 100.0)?;
+        check_range(
+            "edges.max_band_half_height_px",
+            self.max_band_half_height_px,
+            self.band_half_height_px,
             256.0,
         )?;
         check_range("edges.bin_px", self.bin_px, 0.01, 4.0)?;
@@ -302,6 +316,25 @@ pub struct Edges {
 }
 
 /// Median of the finite values.
+/// Median rows between border `id` and the nearest other border of its strip (NaN when no
+/// strip has both).
+fn gap_rows(coarse: &[(i64, StripBorders)], id: BorderId) -> f64 {
+    let b = id as usize;
+    let gaps: Vec<f64> = coarse
+        .iter()
+        .filter_map(|(_, rows)| {
+            [b.checked_sub(1), Some(b + 1)]
+                .into_iter()
+                .flatten()
+                .filter_map(|o| rows.get(o))
+                .map(|r| (r - rows[b]).abs())
+                .filter(|g| g.is_finite())
+                .reduce(f64::min)
+        })
+        .collect();
+    finite_median(gaps).unwrap_or(f64::NAN)
+}
+
 fn finite_median(mut v: Vec<f64>) -> Option<f64> {
     v.retain(|x| x.is_finite());
     super::median(v)
@@ -425,7 +458,7 @@ pub fn detect_edges(
         j_lo..j_hi + 1
     };
     let coarse_js = sample_range(cam_ref, cam_ref, wd);
-    let coarse_rows: Vec<(i64, StripBorders)> = coarse_js
+    let (coarse_rows, coarse_widths): (Vec<(i64, StripBorders)>, Vec<StripBorders>) = coarse_js
         .clone()
         .into_par_iter()
         .map(|j| {
@@ -433,9 +466,10 @@ pub fn detect_edges(
             let x_lo = geo.x_at(cam_ref, s - half, wd).ceil().max(0.0) as usize;
             let x_hi = (geo.x_at(cam_ref, s + half, wd).floor() as usize).min(width - 1);
             let cols: Vec<usize> = (x_lo..=x_hi).step_by(params.coarse_column_step).collect();
-            (j, strip_borders(&frames[reference], &cols, params))
+            let (rows, widths) = strip_borders_and_widths(&frames[reference], &cols, params);
+            ((j, rows), widths)
         })
-        .collect();
+        .unzip();
 
     // 2. Bottom depth.
     let tan_a = alpha.tan();
@@ -493,24 +527,40 @@ pub fn detect_edges(
                 .collect();
             let typical_row = finite_median(rows.clone()).unwrap_or(f64::NAN);
             let z_app = geo.apparent_z_um(z, typical_row);
-            let fits: Vec<Option<SampleBorder>> = if points.is_empty() {
-                vec![None; n]
-            } else {
-                let predict = interpolant(points.clone());
+            let predict = (!points.is_empty()).then(|| interpolant(points.clone()));
+            let task_at = |i: usize| {
+                let s = positions_um[i];
+                predict.as_ref().map(|p| SampleTask {
+                    s_lo_um: s - half,
+                    s_hi_um: s + half,
+                    z_um: z_app,
+                    predict_y: p,
+                })
+            };
+            let fit_all = |params: &EdgeParams| -> Vec<Option<SampleBorder>> {
                 (0..n)
                     .into_par_iter()
                     .map(|i| {
-                        let s = positions_um[i];
-                        let task = SampleTask {
-                            s_lo_um: s - half,
-                            s_hi_um: s + half,
-                            z_um: z_app,
-                            predict_y: &predict,
-                        };
+                        let task = task_at(i)?;
                         fit_sample(&frame_list, reference, &geo, &task, params)
                     })
                     .collect()
             };
+            // A blurred border is fitted over a band sized to its blur.
+            let reference_only = &frame_list[reference..=reference];
+            let strip_widths: Vec<f64> = coarse_widths.iter().map(|w| w[id as usize]).collect();
+            let sized = blur::sized_to_blur(
+                params,
+                &strip_widths,
+                n,
+                gap_rows(&coarse_rows, id),
+                &|i, pilot| {
+                    let task = task_at(i)?;
+                    fit_sample(reference_only, 0, &geo, &task, pilot).map(|f| f.fit.width_px)
+                },
+            );
+            let fits = fit_all(&sized);
+            let params = &sized;
             let refined = if params.refine && !points.is_empty() {
                 let predict = interpolant(points.clone());
                 let samples: Vec<Option<RefineSample>> = fits
