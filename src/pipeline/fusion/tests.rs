@@ -104,6 +104,28 @@ fn agreeing_inputs_come_back_unchanged() {
 }
 
 #[test]
+fn a_few_lone_samples_at_an_end_are_cut_and_a_longer_run_is_kept() {
+    let n = 1000;
+    let (truth, _, _) = inputs(n, 0.0, 0.0);
+    let x: Vec<f32> = truth.iter().map(|&v| v as f32).collect();
+    // The flow reaches 3 samples past the edges at the end (a wild last one) and 2 before them
+    // at the start: both are overhangs, so the clip is the edges' own.
+    let mut flow = vec![0.0f32, 0.0];
+    flow.extend(&x);
+    flow.extend([0.0, 0.0, 40.0]);
+    let fused = fuse_default(&signal(5, vec![flow.clone()]), &signal(7, vec![x.clone()])).unwrap();
+    assert_eq!(fused.signal.start_um, 7.0 * 21.3);
+    assert_eq!(fused.signal.channels[0].len(), n);
+    for (a, b) in fused.signal.channels[0].iter().zip(&x) {
+        assert!((a - b).abs() < 1e-3, "{a} vs {b}");
+    }
+    // Twelve samples past the edges are the flow's to fill.
+    flow.extend([0.0; 7]);
+    let fused = fuse_default(&signal(7, vec![flow]), &signal(7, vec![x])).unwrap();
+    assert_eq!(fused.signal.channels[0].len(), n + 12);
+}
+
+#[test]
 #[allow(clippy::single_range_in_vec_init)] // one gap in each signal, on purpose
 fn each_method_fills_the_others_gaps() {
     let n = 4096;
