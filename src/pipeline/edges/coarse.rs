@@ -103,11 +103,13 @@ fn crossing(profile: &[f32], i: usize, threshold: f32) -> f64 {
 }
 
 /// Refines a run end at about `row` with the border model on the profile; falls back to the
-/// threshold crossing; with the fitted edge spread σ (NaN when the crossing stands). A border whose edge spread fills the window (σ over a third of its half
-/// width) is fitted again over a window of three σ each side, with the width bound at half of
-/// it, up to `WIDEN_ROUNDS` times and never past `max_half_px` (half the way to the next run
-/// end): the blurred borders of a defocused camera (σ ≈ 8–17 px) otherwise fit a clamped width
-/// whose position follows the window rather than the edge.
+/// threshold crossing; with the fitted edge spread σ (NaN when the crossing stands). A border
+/// whose edge spread fills the window (σ over a third of its half width) is fitted again over a
+/// window of three σ each side, or twice the last one where that is wider (a σ held on its
+/// bound says only that the edge is wider still), with the width bound at half the window, up
+/// to `WIDEN_ROUNDS` times and never past `max_half_px` (half the way to the next run end): the
+/// blurred borders of a defocused camera (σ ≈ 8–17 px) otherwise fit a clamped width whose
+/// position follows the window rather than the edge.
 fn refine(
     profile: &[f32],
     edge: usize,
