@@ -24,9 +24,9 @@ const PILOT_BAND_PX: f64 = 32.0;
 /// `params` with the band and the width bound sized to the border's blur. `strip_widths` are
 /// the edge spreads σ (px) of its coarse strips (they read a moving border wider than it is, so
 /// when their median times `band_sigmas` is within the band, the border is sharp enough and no
-/// pilot runs), `samples` the border's sample count, `gap_px` the rows to the nearest other border of the groove (NaN: unknown), and
-/// `width_at(i, pilot)` the σ that sample `i` fits with the pilot's knobs (None where it fits
-/// none).
+/// pilot runs), `samples` the border's sample count, `gap_px` the rows to the nearest other
+/// border of the groove (NaN: unknown), and `width_at(i, pilot)` the σ that sample `i` fits
+/// with the pilot's knobs (None where it fits none).
 pub(super) fn sized_to_blur(
     params: &EdgeParams,
     strip_widths: &[f64],
@@ -34,11 +34,10 @@ pub(super) fn sized_to_blur(
     gap_px: f64,
     width_at: &dyn Fn(usize, &EdgeParams) -> Option<f64>,
 ) -> EdgeParams {
-    let mut sized = params.clone();
     let sharp = super::finite_median(strip_widths.to_vec())
         .is_some_and(|w| params.band_sigmas * w <= params.band_half_height_px);
     if params.band_sigmas <= 0.0 || samples == 0 || sharp {
-        return sized;
+        return params.clone();
     }
     // Half the way to the next border.
     let gap_limit = if gap_px.is_finite() && gap_px > 0.0 {
@@ -66,8 +65,9 @@ pub(super) fn sized_to_blur(
         })
         .collect();
     let Some(sigma) = super::finite_median(widths) else {
-        return sized;
+        return params.clone();
     };
+    let mut sized = params.clone();
     let limit = gap_limit
         .min(params.max_band_half_height_px)
         .max(params.band_half_height_px);

@@ -134,11 +134,12 @@ fn refine(
             return found;
         };
         found = (lo as f64 + b.position_px, b.width_px);
-        let wanted = (3.0 * b.width_px).max(2.0 * p.fit_half_window_px);
         if 3.0 * b.width_px <= p.fit_half_window_px || p.fit_half_window_px >= max_half_px {
             break;
         }
-        p.fit_half_window_px = wanted.min(max_half_px);
+        p.fit_half_window_px = (3.0 * b.width_px)
+            .max(2.0 * p.fit_half_window_px)
+            .min(max_half_px);
         p.max_width_px = p.max_width_px.max(0.5 * p.fit_half_window_px);
     }
     found
@@ -181,7 +182,7 @@ pub fn strip_borders_and_widths(
         std::mem::swap(&mut a, &mut b);
     }
     let mut out = lost;
-    // Half the rows to the nearest other run end: how far a widened fit may reach.
+    // Rows to the nearest other run end: a widened fit reaches at most half of them.
     let (left_wall, bottom, right_wall) = (a.1 - a.0, b.0.saturating_sub(a.1), b.1 - b.0);
     for id in BorderId::ALL {
         let (edge, polarity, gap) = match id {

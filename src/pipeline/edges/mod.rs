@@ -315,7 +315,6 @@ pub struct Edges {
     pub warnings: Vec<String>,
 }
 
-/// Median of the finite values.
 /// Median rows between border `id` and the nearest other border of its strip (NaN when no
 /// strip has both).
 fn gap_rows(coarse: &[(i64, StripBorders)], id: BorderId) -> f64 {
@@ -335,6 +334,7 @@ fn gap_rows(coarse: &[(i64, StripBorders)], id: BorderId) -> f64 {
     finite_median(gaps).unwrap_or(f64::NAN)
 }
 
+/// Median of the finite values.
 fn finite_median(mut v: Vec<f64>) -> Option<f64> {
     v.retain(|x| x.is_finite());
     super::median(v)
@@ -537,15 +537,6 @@ pub fn detect_edges(
                     predict_y: p,
                 })
             };
-            let fit_all = |params: &EdgeParams| -> Vec<Option<SampleBorder>> {
-                (0..n)
-                    .into_par_iter()
-                    .map(|i| {
-                        let task = task_at(i)?;
-                        fit_sample(&frame_list, reference, &geo, &task, params)
-                    })
-                    .collect()
-            };
             // A blurred border is fitted over a band sized to its blur.
             let reference_only = &frame_list[reference..=reference];
             let strip_widths: Vec<f64> = coarse_widths.iter().map(|w| w[id as usize]).collect();
@@ -559,21 +550,19 @@ pub fn detect_edges(
                     fit_sample(reference_only, 0, &geo, &task, pilot).map(|f| f.fit.width_px)
                 },
             );
-            let fits = fit_all(&sized);
             let params = &sized;
-            let refined = if params.refine && !points.is_empty() {
-                let predict = interpolant(points.clone());
+            let fits: Vec<Option<SampleBorder>> = (0..n)
+                .into_par_iter()
+                .map(|i| fit_sample(&frame_list, reference, &geo, &task_at(i)?, params))
+                .collect();
+            let refined = if params.refine && predict.is_some() {
                 let samples: Vec<Option<RefineSample>> = fits
                     .iter()
-                    .zip(&positions_um)
-                    .map(|(f, &s)| {
-                        f.as_ref().map(|f| RefineSample {
-                            task: SampleTask {
-                                s_lo_um: s - half,
-                                s_hi_um: s + half,
-                                z_um: z_app,
-                                predict_y: &predict,
-                            },
+                    .enumerate()
+                    .map(|(i, f)| {
+                        let f = f.as_ref()?;
+                        Some(RefineSample {
+                            task: task_at(i)?,
                             fit: f.fit,
                             row_px: f.row_px,
                             column_weights: &f.column_weights,

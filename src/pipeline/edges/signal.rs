@@ -175,34 +175,27 @@ pub fn decode_border_signal(
             weight_window: params.weight_window_samples,
         },
     );
-    let despiked = if cut == Cut::Lateral {
-        // A lateral cut's walls are one track (`e = 0`): one pass serves both.
-        let [left, right] = &mut combined.walls_um;
-        let found = despike(left, params.despike_sigmas);
-        right.clone_from(left);
-        [found.clone(), found]
-    } else {
-        combined
-            .walls_um
-            .each_mut()
-            .map(|w| despike(w, params.despike_sigmas))
-    };
     let alpha = params.wall_angle_deg.to_radians();
     let scale = groove_speed_mm_s * alpha.sin() / stitched.spacing_um;
-    let wall_velocity = |w: &[f64]| -> Vec<f64> {
-        differentiate(w, &params.differentiator)
+    // One wall's track despiked in place, and its velocity.
+    let decode_wall = |w: &mut Vec<f64>| -> (Vec<usize>, Vec<f64>) {
+        let found = despike(w, params.despike_sigmas);
+        let velocity = differentiate(w, &params.differentiator)
             .into_iter()
             .map(|v| v * scale)
-            .collect()
+            .collect();
+        (found, velocity)
     };
-    let [left, right] = &combined.walls_um;
-    let left_v = wall_velocity(left);
-    // The lateral cut's one track is differentiated once.
-    let right_v = if cut == Cut::Lateral {
-        left_v.clone()
+    let [left, right] = &mut combined.walls_um;
+    let (left_found, left_v) = decode_wall(left);
+    let (right_found, right_v) = if cut == Cut::Lateral {
+        // A lateral cut's walls are one track (`e = 0`): one pass serves both.
+        right.clone_from(left);
+        (left_found.clone(), left_v.clone())
     } else {
-        wall_velocity(right)
+        decode_wall(right)
     };
+    let despiked = [left_found, right_found];
     let mut channels = channels_by_cut(cut, &left_v, &right_v);
     let mut channel_gaps = Vec::with_capacity(channels.len());
     for ch in &mut channels {

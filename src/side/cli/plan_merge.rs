@@ -138,9 +138,8 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
 }
 
 /// Seconds per group measured on the first `groups` groups of `scan`, decode included, over
-/// the groups that gave sound (None when none did). With two or more, the clock starts when the
-/// first group is done: it pays the start-up (threads, buffers, the first reads), which a
-/// shard pays once, and counted it made a short probe read about 15 % slow.
+/// the groups that gave sound, the first left out as a warm-up ([`steady_secs_per_group`]);
+/// None when none did.
 fn probe_secs_per_group(
     scan: &Scan,
     params: &PipelineParams,
