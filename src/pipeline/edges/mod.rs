@@ -631,19 +631,31 @@ pub fn detect_edges(
         track.weight.clone_from(w);
     }
 
-    // 5. Velocity per wall: Vt·sin α·∂y/∂s.
+    // 5. Velocity per wall: Vt·sin α·∂y/∂s. A lateral cut's walls are one track (`e = 0`), so
+    // one differentiation serves both.
     let scale = vt * alpha.sin() / spacing;
+    let velocity = |disp: &[f64]| -> Vec<f64> {
+        differentiate(disp, &params.differentiator)
+            .into_iter()
+            .map(|v| v * scale)
+            .collect()
+    };
+    let [left, right] = &combined.walls_um;
+    let left_v = velocity(left);
+    let right_v = if meta.record.cut == Cut::Lateral {
+        left_v.clone()
+    } else {
+        velocity(right)
+    };
     let walls: Vec<WallEdges> = [WallSide::Left, WallSide::Right]
         .into_iter()
         .zip(combined.walls_um.iter().zip(&combined.walls_se_um))
-        .map(|(side, (disp, se))| WallEdges {
+        .zip([left_v, right_v])
+        .map(|((side, (disp, se)), velocity_mm_s)| WallEdges {
             side,
             displacement_um: disp.clone(),
             std_error_um: se.clone(),
-            velocity_mm_s: differentiate(disp, &params.differentiator)
-                .into_iter()
-                .map(|v| v * scale)
-                .collect(),
+            velocity_mm_s,
         })
         .collect();
     for (side, gaps) in ["left", "right"].iter().zip(&combined.gaps) {
