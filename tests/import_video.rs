@@ -196,10 +196,10 @@ fn import_video_without_the_feature_says_so() {
     assert!(!out.exists());
 }
 
-/// The workbench's File > Import video… end to end, headless (egui_kittest).
+/// The workbench's File > Import video… end to end, headless (egui_kittest): into a folder, or
+/// with the "Zarr store" box ticked into a store.
 #[cfg(all(feature = "video", feature = "gui"))]
-#[test]
-fn workbench_imports_a_clip_and_opens_the_scan() {
+fn workbench_imports(store: bool) {
     use egui_kittest::kittest::Queryable;
     use groovescope::app::WorkbenchOptions;
     use groovescope::playback::DeviceChoice;
@@ -230,6 +230,12 @@ fn workbench_imports_a_clip_and_opens_the_scan() {
         form.group_stride_frames = 7;
     }
     h.run_steps(2);
+    if store {
+        h.get_by_label_contains("Zarr store").click();
+        h.run_steps(2);
+        let wb = h.state_mut().wb.as_mut().unwrap();
+        assert!(wb.import_video_form_mut().unwrap().store);
+    }
     h.get_by_label("Import").click();
     let t0 = std::time::Instant::now();
     loop {
@@ -245,5 +251,19 @@ fn workbench_imports_a_clip_and_opens_the_scan() {
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
     let wb = h.state().wb.as_ref().unwrap();
-    assert_eq!(wb.scan().unwrap().groups.len(), 2);
+    let scan = wb.scan().unwrap();
+    assert_eq!(scan.groups.len(), 2);
+    assert_eq!(scan.groups.iter().all(|g| g.zarr.is_some()), store);
+}
+
+#[cfg(all(feature = "video", feature = "gui"))]
+#[test]
+fn workbench_imports_a_clip_and_opens_the_scan() {
+    workbench_imports(false);
+}
+
+#[cfg(all(feature = "video", feature = "gui"))]
+#[test]
+fn workbench_imports_a_clip_into_a_store_and_opens_it() {
+    workbench_imports(true);
 }

@@ -1,5 +1,9 @@
 //! "Import video…" (features `gui` + `video`): a form for the clip, its grouping and metadata, an
 //! import on a named worker thread with progress and cancel, then the new scan opens.
+//!
+//! The scan is written as a folder of PNG frames or, for long clips, as a Zarr store (one zstd
+//! chunk per group, as `import-video --zarr` writes it). A stopped store import keeps the groups
+//! it wrote, and importing into the same store again goes on from there.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -12,7 +16,10 @@ use egui::{Color32, Grid, Ui};
 use super::dialogs::DialogKind;
 use super::views::meta_ui::number_row;
 use crate::io::Cut;
-use crate::io::video::{ClipMeta, GroupLayout, ImportSummary, import_video};
+use crate::io::video::{
+    ClipMeta, GroupLayout, ImportSummary, VideoError, import_video, import_video_to_store,
+};
+use crate::io::zarr::{DEFAULT_ZSTD_LEVEL, PackOptions, kept_groups};
 use crate::job::Job;
 
 /// The form's draft: everything [`import_video`] needs.
@@ -20,8 +27,14 @@ use crate::job::Job;
 pub struct ImportForm {
     /// The clip.
     pub clip: Option<PathBuf>,
-    /// The output scan folder, as typed or picked.
+    /// The output scan folder (or store), as typed or picked.
     pub out: String,
+    /// Write a Zarr store rather than a folder of PNG frames (also chosen by an output name
+    /// ending in `.zarr`).
+    pub store: bool,
+    /// Into a store that an interrupted import left groups for: discard them and start over
+    /// (otherwise the import goes on from them).
+    pub start_over: bool,
     /// Frames per group.
     pub frames_per_group: usize,
     /// Frames between the first frames of consecutive groups.
@@ -43,6 +56,8 @@ impl Default for ImportForm {
         Self {
             clip: None,
             out: String::new(),
+            store: false,
+            start_over: false,
             frames_per_group: layout.frames_per_group,
             group_stride_frames: layout.stride(),
             max_groups: 0,
@@ -58,8 +73,10 @@ impl Default for ImportForm {
 pub struct ImportRequest {
     /// The clip.
     pub clip: PathBuf,
-    /// The output folder.
+    /// The output folder or store.
     pub out: PathBuf,
+    /// For a Zarr store, how it is written (resume or start over); None for a folder.
+    pub store: Option<PackOptions>,
     /// Grouping.
     pub layout: GroupLayout,
     /// Metadata.
@@ -100,15 +117,41 @@ impl ImportForm {
             ..self.meta.clone()
         };
         meta.scan_meta(&layout).map_err(|e| e.to_string())?;
+        let store = self.writes_store().then_some(PackOptions {
+            zstd_level: DEFAULT_ZSTD_LEVEL,
+            resume: !self.start_over,
+            force: self.start_over,
+        });
         Ok(ImportRequest {
             clip,
             out,
+            store,
             layout,
             meta,
         })
     }
 
-    /// Sets the output from a picked folder: itself when empty, else `<folder>/<clip stem>`.
+    /// Whether the import writes a Zarr store: asked for, or named `….zarr`.
+    #[must_use]
+    pub fn writes_store(&self) -> bool {
+        self.store
+            || Path::new(self.out.trim())
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("zarr"))
+    }
+
+    /// Groups that an interrupted import into the chosen store kept (None: a folder, or
+    /// nothing kept).
+    #[must_use]
+    pub fn kept_groups(&self) -> Option<usize> {
+        let out = self.out.trim();
+        (self.writes_store() && !out.is_empty())
+            .then(|| kept_groups(Path::new(out)))
+            .flatten()
+    }
+
+    /// Sets the output from a picked folder: itself when empty, else `<folder>/<clip
+    /// stem>-scan` (`.zarr` added for a store).
     pub fn set_out_from_pick(&mut self, folder: &Path) {
         let empty = std::fs::read_dir(folder).is_ok_and(|mut d| d.next().is_none());
         let out = if empty {
@@ -119,7 +162,8 @@ impl ImportForm {
                 .as_ref()
                 .and_then(|c| c.file_stem())
                 .map_or_else(|| "imported".into(), |s| s.to_string_lossy().into_owned());
-            folder.join(format!("{stem}-scan"))
+            let ext = if self.store { ".zarr" } else { "" };
+            folder.join(format!("{stem}-scan{ext}"))
         };
         self.out = out.display().to_string();
     }
@@ -158,16 +202,21 @@ impl ImportRun {
                     repaint();
                 };
                 let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    import_video(
-                        &req.clip,
-                        &req.out,
-                        &req.layout,
-                        &req.meta,
-                        Job::new(&progress, &flag),
-                    )
+                    let job = Job::new(&progress, &flag);
+                    match req.store {
+                        Some(options) => import_video_to_store(
+                            &req.clip,
+                            &req.out,
+                            &req.layout,
+                            &req.meta,
+                            options,
+                            job,
+                        ),
+                        None => import_video(&req.clip, &req.out, &req.layout, &req.meta, job),
+                    }
                 }));
                 let outcome = match result {
-                    Ok(r) => r.map_err(|e| e.to_string()),
+                    Ok(r) => r.map_err(|e| failure_line(&e)),
                     Err(_) => Err("the import crashed (a bug); nothing was written".into()),
                 };
                 let _ = tx.send(outcome);
@@ -191,7 +240,8 @@ impl ImportRun {
         )
     }
 
-    /// Asks the thread to stop; it removes what it wrote.
+    /// Asks the thread to stop: a folder import removes what it wrote, a store import keeps
+    /// the groups it wrote and checked for the next import into that store.
     pub fn cancel(&self) {
         self.cancel.store(true, Ordering::Relaxed);
     }
@@ -209,6 +259,22 @@ impl ImportRun {
 impl Drop for ImportRun {
     fn drop(&mut self) {
         self.cancel();
+    }
+}
+
+/// A failed import in one line for the window. A stopped store import says what it kept in
+/// the workbench's terms (the library's line names the command-line flags).
+fn failure_line(e: &VideoError) -> String {
+    match e {
+        VideoError::Kept { error, kept } => {
+            let of = kept.total.map_or_else(String::new, |t| format!(" of {t}"));
+            format!(
+                "{error}; the {}{of} groups written and checked so far are kept: Import into \
+                 the same store goes on from there",
+                kept.groups
+            )
+        }
+        e => e.to_string(),
     }
 }
 
@@ -277,6 +343,40 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
         }
         ui.add(egui::TextEdit::singleline(&mut form.out).hint_text("new or empty folder"));
     });
+    ui.horizontal(|ui| {
+        let named = !form.store && form.writes_store();
+        ui.add_enabled_ui(!named, |ui| {
+            let mut store = form.writes_store();
+            if ui
+                .checkbox(&mut store, "Zarr store (one zstd chunk per group)")
+                .on_hover_text(
+                    "For long clips: one file per group instead of one per frame, and a stopped \
+                     import keeps its groups and goes on from them",
+                )
+                .changed()
+            {
+                form.store = store;
+            }
+        });
+        if named {
+            ui.weak("(the name ends in .zarr)");
+        }
+    });
+    if let Some(kept) = form.kept_groups() {
+        ui.horizontal(|ui| {
+            if form.start_over {
+                ui.label(format!(
+                    "an interrupted import into this store kept {kept} groups: they are discarded"
+                ));
+            } else {
+                ui.label(format!(
+                    "an interrupted import into this store kept {kept} groups: Import goes on \
+                     from them"
+                ));
+            }
+            ui.checkbox(&mut form.start_over, "start over");
+        });
+    }
     Grid::new("import_video_form")
         .num_columns(2)
         .show(ui, |ui| {
@@ -387,8 +487,12 @@ impl VideoImport {
                         0 => String::new(),
                         n => format!(" (removed {n} unfinished import(s) left by killed runs)"),
                     };
+                    let resumed = match s.resumed_groups {
+                        0 => String::new(),
+                        n => format!(" ({n} of them kept by an interrupted import)"),
+                    };
                     events.push(ImportEvent::Info(format!(
-                        "imported {} groups of {} frames into {}{stale}",
+                        "imported {} groups of {} frames into {}{resumed}{stale}",
                         s.groups,
                         s.frames_per_group,
                         s.out_dir.display()
@@ -486,6 +590,99 @@ mod tests {
         assert_eq!(req.meta.group_step_um, None);
         f.out = dir.path().display().to_string();
         assert!(f.request().unwrap_err().contains("new or empty"));
+    }
+
+    #[test]
+    fn a_store_is_asked_for_or_named_and_goes_on_unless_started_over() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut f = ImportForm {
+            clip: Some(clip(dir.path(), 8)),
+            frames_per_group: 7,
+            ..ImportForm::default()
+        };
+        f.set_out_from_pick(dir.path());
+        assert_eq!(f.request().unwrap().store, None);
+        f.out = dir.path().join("side.ZARR").display().to_string();
+        let options = f.request().unwrap().store.unwrap();
+        assert!(options.resume && !options.force);
+        f.store = true;
+        f.start_over = true;
+        f.set_out_from_pick(dir.path());
+        assert!(f.out.ends_with("clip-scan.zarr"), "{}", f.out);
+        let options = f.request().unwrap().store.unwrap();
+        assert!(!options.resume && options.force);
+        assert_eq!(f.kept_groups(), None);
+    }
+
+    /// Starts `form`'s import and waits for its outcome. With `cancel_at`, the import is held
+    /// in its progress report of that frame until cancel is raised, so that it stops there
+    /// however fast it decodes.
+    fn finish(form: &ImportForm, cancel_at: Option<usize>) -> Result<ImportSummary, String> {
+        let reports = Arc::new(AtomicUsize::new(0));
+        let (go, wait) = mpsc::channel::<()>();
+        let wait = std::sync::Mutex::new(wait);
+        let seen = reports.clone();
+        let repaint = Box::new(move || {
+            // The first report is (0, total); the k-th after it is frame k decoded.
+            if Some(seen.fetch_add(1, Ordering::SeqCst)) == cancel_at {
+                let _ = wait.lock().map(|w| w.recv());
+            }
+        });
+        let mut run = ImportRun::start(form.request().unwrap(), repaint).unwrap();
+        let started = std::time::Instant::now();
+        loop {
+            if let Some(o) = run.poll() {
+                return o;
+            }
+            if cancel_at.is_some_and(|n| reports.load(Ordering::SeqCst) > n) {
+                run.cancel();
+                let _ = go.send(());
+            }
+            assert!(started.elapsed().as_secs() < 120, "import hung");
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+    }
+
+    #[test]
+    fn a_stopped_store_import_keeps_its_groups_and_the_next_goes_on_from_them() {
+        let dir = tempfile::tempdir().unwrap();
+        let clip = clip(dir.path(), 600);
+        let folder = ImportForm {
+            clip: Some(clip.clone()),
+            out: dir.path().join("scan").display().to_string(),
+            frames_per_group: 8,
+            group_stride_frames: 6,
+            // Groups of these 24 px frames overlap only with a short step.
+            own_group_step: true,
+            group_step_um: 2.0,
+            ..ImportForm::default()
+        };
+        let store = ImportForm {
+            out: dir.path().join("scan.zarr").display().to_string(),
+            ..folder.clone()
+        };
+        let e = finish(&store, Some(200)).unwrap_err();
+        assert!(e.contains("cancelled") && e.contains("goes on"), "{e}");
+        assert!(!e.contains("--resume"), "{e}");
+        let kept = store.kept_groups().unwrap();
+        assert!((1..99).contains(&kept), "{kept}");
+        let s = finish(&store, None).unwrap();
+        assert_eq!((s.resumed_groups, s.groups), (kept, 99));
+        assert_eq!(store.kept_groups(), None);
+        let f = finish(&folder, None).unwrap();
+        let (a, b) = (
+            crate::io::Scan::open(&f.out_dir).unwrap(),
+            crate::io::Scan::open(&s.out_dir).unwrap(),
+        );
+        assert_eq!(a.meta, b.meta);
+        assert!(b.groups.iter().all(|g| g.zarr.is_some()));
+        for (ga, gb) in a.groups.iter().zip(&b.groups) {
+            let (fa, fb) = (
+                crate::io::load_group(ga).unwrap(),
+                crate::io::load_group(gb).unwrap(),
+            );
+            assert_eq!(fa, fb, "group {}", ga.index);
+        }
     }
 
     #[test]

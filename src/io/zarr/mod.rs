@@ -28,7 +28,7 @@ use crate::image::Image;
 mod pack;
 pub mod partial;
 pub use pack::{PackError, PackSummary, pack_scan};
-pub use partial::{Kept, PROGRESS_FILE, PackOptions, PartialStore, partial_path};
+pub use partial::{Kept, PROGRESS_FILE, PackOptions, PartialStore, kept_groups, partial_path};
 
 /// Path of the frames array inside the store.
 pub const FRAMES_ARRAY: &str = "/frames";

@@ -85,6 +85,17 @@ pub fn partial_path(out: &Path) -> PathBuf {
     beside(out, "scan.zarr", |name| format!(".{name}.partial"))
 }
 
+/// Groups an interrupted writer of `out` wrote and checked, kept in its partial store for a
+/// resume (None: no partial store with a readable record).
+#[must_use]
+pub fn kept_groups(out: &Path) -> Option<usize> {
+    let path = partial_path(out);
+    if !path.join(PROGRESS_FILE).is_file() {
+        return None;
+    }
+    read_progress(&path).ok().map(|p| p.groups_checked)
+}
+
 /// Reads the progress record of the partial store `partial`.
 fn read_progress(partial: &Path) -> Result<Progress, LoadError> {
     let file = partial.join(PROGRESS_FILE);
