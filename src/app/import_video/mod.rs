@@ -205,6 +205,13 @@ impl ImportRun {
                     t.store(of, Ordering::Relaxed);
                     repaint();
                 };
+                // A store keeps what it checked before a crash (its record is on disk).
+                let crashed = if req.store.is_some() {
+                    "the import crashed (a bug); any groups it wrote and checked are kept: \
+                     Import into the same store goes on from there"
+                } else {
+                    "the import crashed (a bug); nothing was written"
+                };
                 let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                     let job = Job::new(&progress, &flag);
                     match req.store {
@@ -221,7 +228,7 @@ impl ImportRun {
                 }));
                 let outcome = match result {
                     Ok(r) => r.map_err(|e| failure_line(&e)),
-                    Err(_) => Err("the import crashed (a bug); nothing was written".into()),
+                    Err(_) => Err(crashed.into()),
                 };
                 let _ = tx.send(outcome);
                 repaint();
