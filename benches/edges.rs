@@ -9,8 +9,8 @@ use std::hint::black_box;
 
 use common::render_group;
 use criterion::{Criterion, criterion_group, criterion_main};
-use groovescope::pipeline::edges::detect_edges;
-use groovescope::pipeline::{GroupInput, PipelineParams};
+use groovescope::pipeline::edges::{EdgeParams, detect_edges};
+use groovescope::pipeline::{GroupInput, PipelineParams, frames_read};
 use groovescope::synth::SynthConfig;
 
 fn bench(c: &mut Criterion) {
@@ -40,6 +40,27 @@ fn bench(c: &mut Criterion) {
                 )
             });
         });
+        // With `edges.all_frames` off: the flow stages' frames (on the dual-focus path their
+        // middle window of 7; on the depth path all 12, the same work as above).
+        let lean = PipelineParams {
+            edges: EdgeParams {
+                all_frames: false,
+                ..params.edges.clone()
+            },
+            ..params.clone()
+        };
+        let window = frames_read(frames.len(), &meta, &lean);
+        if window.len() < frames.len() {
+            let held = &frames[window.clone()];
+            g.bench_function(format!("{name}: edge stage, flow window"), |b| {
+                b.iter(|| {
+                    black_box(
+                        detect_edges(held, window.start, 0, &meta, &lean.sound, &lean.edges)
+                            .map(|e| e.positions_um.len()),
+                    )
+                });
+            });
+        }
     }
     g.finish();
 }

@@ -390,6 +390,34 @@ mod tests {
         );
     }
 
+    #[test]
+    fn edges_on_the_flow_window_fit_the_same_frames_whether_or_not_the_rest_are_held() {
+        let full = dual_focus_group(12);
+        let window = middle_window_range(12, DerivativeMode::Simoncelli);
+        let part = GroupInput {
+            frames: Arc::new(full.frames[window.clone()].to_vec()),
+            first_frame: window.start,
+            ..full.clone()
+        };
+        let run = |input: &GroupInput, all_frames: bool| {
+            let mut params = PipelineParams::default();
+            params.edges.all_frames = all_frames;
+            assert_eq!(
+                crate::pipeline::frames_read(12, &input.meta, &params),
+                if all_frames { 0..12 } else { window.clone() }
+            );
+            let mut c = StageCache::default();
+            c.run_from(Stage::Edges, input, &params, &mut |_, _| true)
+                .unwrap();
+            format!("{:?}", c.edges().unwrap())
+        };
+        // The workbench holds the whole group, reconstruction only the window it reads.
+        let (held_all, held_window) = (run(&full, false), run(&part, false));
+        assert_eq!(held_all, held_window);
+        // Every frame is read by default, and gives other fits.
+        assert_ne!(run(&full, true), held_all);
+    }
+
     /// The frames of the middle derivative window of a group (the window the full group's
     /// `derivs[len / 2]` would be) and the index of its first frame. Too few frames: all of them,
     /// so the derivative stage reports the shortage.

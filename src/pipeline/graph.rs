@@ -233,10 +233,14 @@ pub static GRAPH: [StageSpec; Stage::COUNT] = [
         stage: Stage::Edges,
         reads: &[],
         // The sample grid follows the sound table (output rate, native spacing).
+        // Without `all_frames` its frames are the flow stages' window, which the path and the
+        // derivative mode choose.
         knobs_changed: |a, b| {
             a.method.reads_edges() != b.method.reads_edges()
                 || differ(&a.edges, &b.edges)
                 || differ(&a.sound, &b.sound)
+                || (!a.edges.all_frames
+                    && (a.path != b.path || a.derivatives.mode != b.derivatives.mode))
         },
         reads_slope_reference: false,
         needed: |p| p.method.reads_edges(),
@@ -425,9 +429,13 @@ fn run_edges(r: &StageRun<'_>) -> Result<StageOutput, StageError> {
         return Ok(StageOutput::Edges(None));
     }
     let input = r.input;
+    // Relative to the frames held, as the derivative stage picks its window: the engine holds
+    // just these (`frames_read`), the workbench the whole group, and both fit the same frames.
+    let range = edge_frames(input.frames.len(), &input.meta, r.params);
+    let frames = input.frames.get(range.clone()).unwrap_or(&input.frames[..]);
     let edges = detect_edges(
-        &input.frames,
-        input.first_frame,
+        frames,
+        input.first_frame + range.start,
         input.group,
         &input.meta,
         &r.params.sound,
@@ -453,12 +461,23 @@ fn wall_depth_um(depth: &DepthMap, walls: &[WallLine]) -> Option<f64> {
     median(zs)
 }
 
-/// The frames of a group of `n` that its stages read: all of them for a method that reads the
-/// edges (the edge stage fits every frame); else the flow stages' ([`flow_frames`]).
-/// Reconstruction decodes only these.
+/// The frames of a group of `n` that its stages read: the edge stage's ([`edge_frames`]) for a
+/// method that reads the edges, else the flow stages' ([`flow_frames`]); the edge stage's hold
+/// the flow stages'. Reconstruction decodes only these.
 #[must_use]
 pub fn frames_read(n: usize, meta: &ScanMeta, params: &PipelineParams) -> std::ops::Range<usize> {
     if params.method.reads_edges() {
+        edge_frames(n, meta, params)
+    } else {
+        flow_frames(n, meta, params)
+    }
+}
+
+/// The frames of a group of `n` the edge stage fits: all of them, or with `edges.all_frames`
+/// off the flow stages' ([`flow_frames`]).
+#[must_use]
+pub fn edge_frames(n: usize, meta: &ScanMeta, params: &PipelineParams) -> std::ops::Range<usize> {
+    if params.edges.all_frames {
         0..n
     } else {
         flow_frames(n, meta, params)

@@ -153,6 +153,8 @@ knob_docs! {
         => "longest run of missing samples bridged by interpolation; default 3",
     "edges.weight_window_samples"
         => "samples over which a border's squared standard error is averaged (geometric mean) into its weight when the borders are combined, so the mix of borders stays steady; 0 or 1 = each sample its own; default 32",
+    "edges.all_frames"
+        => "fit every frame of a group (true), or only the frames the flow stages read (false): on the dual-focus path their middle 7-frame window, about 30 % less CPU a group on the paper's dual-focus camera for 0–0.5 dB of SNR (docs/PERFORMANCE.md), on the depth path every frame either way; default true",
     "edges.despike_sigmas"
         => "a wall's displacement sample further than this many robust σ from the cubic through its two neighbours on each side, and the largest such within two samples, is an isolated outlier and put back on that cubic (edges::despike); 0 = off; default 5",
     "edges.refine"

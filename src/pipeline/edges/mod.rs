@@ -148,6 +148,8 @@ pub struct EdgeParams {
     pub max_bridge_samples: usize,
     #[doc = knob!("edges.weight_window_samples")]
     pub weight_window_samples: usize,
+    #[doc = knob!("edges.all_frames")]
+    pub all_frames: bool,
     #[doc = knob!("edges.despike_sigmas")]
     pub despike_sigmas: f64,
     #[doc = knob!("edges.refine")]
@@ -184,6 +186,7 @@ impl Default for EdgeParams {
             border_floor_um: 0.02,
             max_bridge_samples: 3,
             weight_window_samples: 32,
+            all_frames: true,
             despike_sigmas: DEFAULT_DESPIKE,
             refine: true,
             hard_width_px: 0.45,
