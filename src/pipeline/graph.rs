@@ -273,16 +273,24 @@ fn missing(stage: Stage) -> StageError {
     }
 }
 
+/// The frames `range` picks out of those `input` holds, and the group index of the first. A
+/// stage's range is taken of the frames held, so the engine, which holds only the frames the
+/// stages read ([`frames_read`]), and the workbench, which holds the whole group, pick the same.
+fn held(input: &GroupInput, range: std::ops::Range<usize>) -> (&[crate::image::Image], usize) {
+    match input.frames.get(range.clone()) {
+        Some(frames) => (frames, input.first_frame + range.start),
+        None => (&input.frames[..], input.first_frame),
+    }
+}
+
 fn run_derivatives(r: &StageRun<'_>) -> Result<StageOutput, StageError> {
     let (input, params) = (r.input, r.params);
     let meta = &input.meta;
     // The dual-focus path reads only the middle window: derive just its frames.
-    let range = flow_frames(input.frames.len(), meta, params);
-    let first = range.start;
-    let frames = input.frames.get(range).unwrap_or(&input.frames[..]);
+    let (frames, first) = held(input, flow_frames(input.frames.len(), meta, params));
     let mut d = compute_derivatives(frames, meta.geometry().land_flow_px(), &params.derivatives)?;
     for set in &mut d {
-        set.frame_index += input.first_frame + first;
+        set.frame_index += first;
     }
     Ok(StageOutput::Derivatives(Arc::new(d)))
 }
@@ -429,13 +437,13 @@ fn run_edges(r: &StageRun<'_>) -> Result<StageOutput, StageError> {
         return Ok(StageOutput::Edges(None));
     }
     let input = r.input;
-    // Relative to the frames held, as the derivative stage picks its window: the engine holds
-    // just these (`frames_read`), the workbench the whole group, and both fit the same frames.
-    let range = edge_frames(input.frames.len(), &input.meta, r.params);
-    let frames = input.frames.get(range.clone()).unwrap_or(&input.frames[..]);
+    let (frames, first) = held(
+        input,
+        edge_frames(input.frames.len(), &input.meta, r.params),
+    );
     let edges = detect_edges(
         frames,
-        input.first_frame + range.start,
+        first,
         input.group,
         &input.meta,
         &r.params.sound,

@@ -298,6 +298,9 @@ pub struct VideoImport {
     pub run: Option<ImportRun>,
     /// The last failure, shown in the window.
     pub problem: Option<String>,
+    /// The store output last looked at and the groups an interrupted import kept there: read
+    /// from disk when the output changes or an import ends, not on every frame.
+    kept: Option<(String, Option<usize>)>,
 }
 
 /// What the window asks for.
@@ -373,7 +376,14 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
             ui.weak("(the name ends in .zarr)");
         }
     });
-    if let Some(kept) = form.kept_groups() {
+    let store_out = form
+        .writes_store()
+        .then(|| form.out.trim().to_owned())
+        .filter(|o| !o.is_empty());
+    if state.kept.as_ref().map(|k| &k.0) != store_out.as_ref() {
+        state.kept = store_out.map(|out| (out, form.kept_groups()));
+    }
+    if let Some(kept) = state.kept.as_ref().and_then(|k| k.1) {
         ui.horizontal(|ui| {
             if form.start_over {
                 ui.label(format!(
@@ -420,9 +430,10 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
                 0.01,
             );
             number_row(ui, "frame step (µm)", &mut form.meta.frame_step_um, 0.01);
-            ui.checkbox(&mut form.own_group_step, "group step (µm)");
+            let own = ui.checkbox(&mut form.own_group_step, "group step (µm)");
             if form.own_group_step {
-                ui.add(egui::DragValue::new(&mut form.group_step_um).speed(0.1));
+                ui.add(egui::DragValue::new(&mut form.group_step_um).speed(0.1))
+                    .labelled_by(own.id);
             } else {
                 ui.weak(format!(
                     "{:.4} (stride × frame step)",
@@ -492,6 +503,8 @@ impl VideoImport {
             && let Some(outcome) = run.poll()
         {
             self.run = None;
+            // What the store keeps may have changed.
+            self.kept = None;
             match outcome {
                 Ok(s) => {
                     let stale = match s.removed_stale.len() {

@@ -117,6 +117,27 @@ fn a_stopped_store_import_keeps_its_groups_and_the_next_goes_on_from_them() {
     assert!(!e.contains("--resume"), "{e}");
     let kept = store.kept_groups().unwrap();
     assert!((1..99).contains(&kept), "{kept}");
+    // The window says so, and what ticking "start over" does.
+    {
+        use egui_kittest::kittest::Queryable;
+        let mut state = VideoImport {
+            form: Some(store.clone()),
+            ..VideoImport::default()
+        };
+        let mut h = egui_kittest::Harness::new_ui_state(
+            |ui, state: &mut VideoImport| {
+                import_video_ui(ui, state);
+            },
+            state,
+        );
+        h.run();
+        h.get_by_label_contains(&format!("kept {kept} groups: Import goes on"));
+        h.get_by_label("start over").click();
+        h.run();
+        h.get_by_label_contains("they are discarded");
+        state = std::mem::take(h.state_mut());
+        assert!(state.form.unwrap().start_over);
+    }
     let s = finish(&store, None).unwrap();
     assert_eq!((s.resumed_groups, s.groups), (kept, 99));
     assert_eq!(store.kept_groups(), None);

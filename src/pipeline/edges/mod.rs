@@ -48,7 +48,7 @@ use serde::{Deserialize, Serialize};
 
 use self::border::BorderParams;
 use self::coarse::{StripBorders, strip_borders_and_widths};
-use self::differentiator::{DifferentiatorParams, differentiate};
+use self::differentiator::DifferentiatorParams;
 use self::geometry::FrameGeometry;
 use self::predict::interpolant;
 use self::profile::{SampleBorder, SampleTask, fit_sample};
@@ -634,26 +634,17 @@ pub fn detect_edges(
         track.weight.clone_from(w);
     }
 
-    // 5. Velocity per wall: Vt·sin α·∂y/∂s. A lateral cut's walls are one track (`e = 0`), so
-    // one differentiation serves both.
-    let scale = vt * alpha.sin() / spacing;
-    let velocity = |disp: &[f64]| -> Vec<f64> {
-        differentiate(disp, &params.differentiator)
-            .into_iter()
-            .map(|v| v * scale)
-            .collect()
-    };
-    let [left, right] = &combined.walls_um;
-    let left_v = velocity(left);
-    let right_v = if meta.record.cut == Cut::Lateral {
-        left_v.clone()
-    } else {
-        velocity(right)
-    };
+    // 5. Velocity per wall: Vt·sin α·∂y/∂s.
+    let velocities = signal::wall_velocities(
+        &combined.walls_um,
+        meta.record.cut,
+        vt * alpha.sin() / spacing,
+        &params.differentiator,
+    );
     let walls: Vec<WallEdges> = [WallSide::Left, WallSide::Right]
         .into_iter()
         .zip(combined.walls_um.iter().zip(&combined.walls_se_um))
-        .zip([left_v, right_v])
+        .zip(velocities)
         .map(|((side, (disp, se)), velocity_mm_s)| WallEdges {
             side,
             displacement_um: disp.clone(),

@@ -16,7 +16,7 @@ use std::f64::consts::SQRT_2;
 use std::ops::Range;
 
 use super::despike::despike;
-use super::differentiator::differentiate;
+use super::differentiator::{DifferentiatorParams, differentiate};
 use super::robust::{CombineParams, Combined, combine_borders, nan_runs};
 use super::{EdgeParams, Edges};
 use crate::meta::Cut;
@@ -31,6 +31,30 @@ pub struct BorderChannels;
 impl BorderChannels {
     /// Channels in a border signal.
     pub const COUNT: usize = 8;
+}
+
+/// Each wall's velocity `Vt·sin α·∂y/∂s` (mm/s) from its displacement track (µm), `scale` being
+/// `Vt·sin α` over the sample spacing. A lateral cut's walls are one track (`e = 0`), so it is
+/// differentiated once for both.
+pub(super) fn wall_velocities(
+    walls_um: &[Vec<f64>; 2],
+    cut: Cut,
+    scale: f64,
+    params: &DifferentiatorParams,
+) -> [Vec<f64>; 2] {
+    let velocity = |w: &[f64]| -> Vec<f64> {
+        differentiate(w, params)
+            .into_iter()
+            .map(|v| v * scale)
+            .collect()
+    };
+    let left = velocity(&walls_um[0]);
+    let right = if cut == Cut::Lateral {
+        left.clone()
+    } else {
+        velocity(&walls_um[1])
+    };
+    [left, right]
 }
 
 /// Velocity channels by cut from the walls' velocities (NaN = gap).
@@ -177,25 +201,17 @@ pub fn decode_border_signal(
     );
     let alpha = params.wall_angle_deg.to_radians();
     let scale = groove_speed_mm_s * alpha.sin() / stitched.spacing_um;
-    // One wall's track despiked in place, and its velocity.
-    let decode_wall = |w: &mut Vec<f64>| -> (Vec<usize>, Vec<f64>) {
-        let found = despike(w, params.despike_sigmas);
-        let velocity = differentiate(w, &params.differentiator)
-            .into_iter()
-            .map(|v| v * scale)
-            .collect();
-        (found, velocity)
-    };
     let [left, right] = &mut combined.walls_um;
-    let (left_found, left_v) = decode_wall(left);
-    let (right_found, right_v) = if cut == Cut::Lateral {
+    let left_found = despike(left, params.despike_sigmas);
+    let right_found = if cut == Cut::Lateral {
         // A lateral cut's walls are one track (`e = 0`): one pass serves both.
         right.clone_from(left);
-        (left_found.clone(), left_v.clone())
+        left_found.clone()
     } else {
-        decode_wall(right)
+        despike(right, params.despike_sigmas)
     };
     let despiked = [left_found, right_found];
+    let [left_v, right_v] = wall_velocities(&combined.walls_um, cut, scale, &params.differentiator);
     let mut channels = channels_by_cut(cut, &left_v, &right_v);
     let mut channel_gaps = Vec::with_capacity(channels.len());
     for ch in &mut channels {

@@ -415,12 +415,16 @@ pub fn fuse(
         [index(flow) + len(flow), index(edges) + len(edges)],
     );
     // The union of both grids, less an end where one method reaches only a few samples past
-    // the other.
-    let overhang = |outer: i64, inner: i64| (outer - inner).unsigned_abs() <= MAX_END_OVERHANG;
-    let (first, last) = (starts[0].min(starts[1]), starts[0].max(starts[1]));
-    let origin = if overhang(first, last) { last } else { first };
-    let (first, last) = (ends[0].max(ends[1]), ends[0].min(ends[1]));
-    let end = if overhang(first, last) { last } else { first };
+    // the other: that end is the inner one.
+    let end_at = |outer: i64, inner: i64| {
+        if (outer - inner).unsigned_abs() <= MAX_END_OVERHANG {
+            inner
+        } else {
+            outer
+        }
+    };
+    let origin = end_at(starts[0].min(starts[1]), starts[0].max(starts[1]));
+    let end = end_at(ends[0].max(ends[1]), ends[0].min(ends[1]));
     let n = usize::try_from(end - origin).unwrap_or(0);
     if n == 0 {
         return Err(bad("both signals are empty".into()));
