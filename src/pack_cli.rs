@@ -55,6 +55,9 @@ impl ResumeArgs {
     }
 }
 
+/// What the command line adds to the line of a store writer that stopped and kept groups.
+pub(crate) const RESUME_ADVICE: &str = ": run the same command with --resume to go on";
+
 /// Runs `pack`: converts, reads every chunk back, then opens the store as a scan and checks
 /// that it is the same scan (metadata, group names, frame counts).
 ///
@@ -76,7 +79,10 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
         Job::reporting(&|done, _| pb.set_position(done as u64)),
     );
     pb.finish_and_clear();
-    let summary = summary?;
+    let summary = summary.map_err(|e| {
+        let advice = if e.kept.is_some() { RESUME_ADVICE } else { "" };
+        anyhow::anyhow!("{e}{advice}")
+    })?;
     if summary.resumed > 0 && !args.quiet {
         println!(
             "resumed: {} of {} groups were packed and checked before",

@@ -89,6 +89,16 @@ impl ImportForm {
     /// # Errors
     /// A sentence for the form.
     pub fn request(&self) -> Result<ImportRequest, String> {
+        let (clip, out) = self.check_files()?;
+        self.request_for(clip, out)
+    }
+
+    /// The clip and the output, checked on disk: the clip is a file, the output's folder
+    /// exists and the output is new or empty.
+    ///
+    /// # Errors
+    /// A sentence for the form.
+    fn check_files(&self) -> Result<(PathBuf, PathBuf), String> {
         let Some(clip) = self.clip.clone() else {
             return Err("choose a video clip".into());
         };
@@ -109,6 +119,11 @@ impl ImportForm {
                 out.display()
             ));
         }
+        Ok((clip, out))
+    }
+
+    /// The request for checked files: the grouping and the metadata checked.
+    fn request_for(&self, clip: PathBuf, out: PathBuf) -> Result<ImportRequest, String> {
         let layout = GroupLayout {
             frames_per_group: self.frames_per_group,
             group_stride_frames: Some(self.group_stride_frames),
@@ -273,18 +288,11 @@ impl Drop for ImportRun {
     }
 }
 
-/// A failed import in one line for the window. A stopped store import says what it kept in
-/// the workbench's terms (the library's line names the command-line flags).
+/// A failed import in one line for the window; a stopped store import says how to go on in
+/// the workbench's terms.
 fn failure_line(e: &VideoError) -> String {
     match e {
-        VideoError::Kept { error, kept } => {
-            let of = kept.total.map_or_else(String::new, |t| format!(" of {t}"));
-            format!(
-                "{error}; the {}{of} groups written and checked so far are kept: Import into \
-                 the same store goes on from there",
-                kept.groups
-            )
-        }
+        VideoError::Kept { .. } => format!("{e}: Import into the same store goes on from there"),
         e => e.to_string(),
     }
 }
@@ -298,9 +306,21 @@ pub struct VideoImport {
     pub run: Option<ImportRun>,
     /// The last failure, shown in the window.
     pub problem: Option<String>,
-    /// The store output last looked at and the groups an interrupted import kept there: read
-    /// from disk when the output changes or an import ends, not on every frame.
-    kept: Option<(String, Option<usize>)>,
+    /// The form's files as last looked at on disk.
+    on_disk: Option<OnDisk>,
+}
+
+/// What the form's files look like on disk: read when the clip, the output or the choice of a
+/// store changes, or an import ends, not on every frame the window draws (a stalled network
+/// folder would stall the window with it). Import checks them afresh.
+#[derive(Debug)]
+struct OnDisk {
+    /// The clip, the output as typed, and whether it is a store.
+    key: (Option<PathBuf>, String, bool),
+    /// [`ImportForm::check_files`].
+    files: Result<(PathBuf, PathBuf), String>,
+    /// [`ImportForm::kept_groups`].
+    kept: Option<usize>,
 }
 
 /// What the window asks for.
@@ -376,14 +396,20 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
             ui.weak("(the name ends in .zarr)");
         }
     });
-    let store_out = form
-        .writes_store()
-        .then(|| form.out.trim().to_owned())
-        .filter(|o| !o.is_empty());
-    if state.kept.as_ref().map(|k| &k.0) != store_out.as_ref() {
-        state.kept = store_out.map(|out| (out, form.kept_groups()));
+    let key = (
+        form.clip.clone(),
+        form.out.trim().to_owned(),
+        form.writes_store(),
+    );
+    if state.on_disk.as_ref().map(|d| &d.key) != Some(&key) {
+        state.on_disk = Some(OnDisk {
+            files: form.check_files(),
+            kept: form.kept_groups(),
+            key,
+        });
     }
-    if let Some(kept) = state.kept.as_ref().and_then(|k| k.1) {
+    let files = state.on_disk.as_ref().map(|d| d.files.clone());
+    if let Some(kept) = state.on_disk.as_ref().and_then(|d| d.kept) {
         ui.horizontal(|ui| {
             if form.start_over {
                 ui.label(format!(
@@ -442,7 +468,9 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
             }
             ui.end_row();
         });
-    let request = form.request();
+    let request = files
+        .unwrap_or_else(|| form.check_files())
+        .and_then(|(clip, out)| form.request_for(clip, out));
     if let Err(problem) = &request {
         ui.colored_label(Color32::from_rgb(235, 90, 80), problem);
     } else if let Some(p) = &state.problem {
@@ -452,9 +480,12 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
         if ui
             .add_enabled(request.is_ok(), egui::Button::new("Import"))
             .clicked()
-            && let Ok(req) = request
         {
-            action = Some(ImportAction::Start(req));
+            // Checked afresh: the disk may have changed since the files were looked at.
+            match form.request() {
+                Ok(req) => action = Some(ImportAction::Start(req)),
+                Err(_) => state.on_disk = None,
+            }
         }
         if ui.button("Close").clicked() {
             action = Some(ImportAction::Close);
@@ -479,6 +510,7 @@ pub enum ImportEvent {
 impl VideoImport {
     /// Opens the window.
     pub fn open(&mut self) {
+        self.on_disk = None;
         if self.form.is_none() {
             self.form = Some(ImportForm::default());
         }
@@ -503,8 +535,8 @@ impl VideoImport {
             && let Some(outcome) = run.poll()
         {
             self.run = None;
-            // What the store keeps may have changed.
-            self.kept = None;
+            // The output, and what the store keeps, have changed.
+            self.on_disk = None;
             match outcome {
                 Ok(s) => {
                     let stale = match s.removed_stale.len() {

@@ -68,6 +68,50 @@ fn a_store_is_asked_for_or_named_and_goes_on_unless_started_over() {
 /// Starts `form`'s import and waits for its outcome. With `cancel_at`, the import is held
 /// in its progress report of that frame until cancel is raised, so that it stops there
 /// however fast it decodes.
+#[test]
+fn the_form_looks_at_the_disk_when_its_files_change_and_import_looks_again() {
+    use egui_kittest::kittest::{NodeT, Queryable};
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scan");
+    let form = ImportForm {
+        clip: Some(clip(dir.path(), 16)),
+        out: out.display().to_string(),
+        ..ImportForm::default()
+    };
+    let state = VideoImport {
+        form: Some(form),
+        ..VideoImport::default()
+    };
+    let mut h = egui_kittest::Harness::new_ui_state(
+        |ui, (state, action): &mut (VideoImport, Option<ImportAction>)| {
+            if let Some(a) = import_video_ui(ui, state) {
+                *action = Some(a);
+            }
+        },
+        (state, None),
+    );
+    h.run();
+    assert!(!h.get_by_label("Import").accesskit_node().is_disabled());
+    // The output fills after the window looked: Import looks again, starts nothing, and the
+    // window names the problem.
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    h.get_by_label("Import").click();
+    h.run();
+    assert_eq!(h.state().1, None);
+    h.get_by_label_contains("must be new or empty");
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    // Emptied and renamed: a new output is looked at as soon as it is typed.
+    h.state_mut().0.form.as_mut().unwrap().out = dir.path().join("scan2").display().to_string();
+    h.run();
+    h.get_by_label("Import").click();
+    h.run();
+    assert!(matches!(h.state().1, Some(ImportAction::Start(_))));
+}
+
 fn finish(form: &ImportForm, cancel_at: Option<usize>) -> Result<ImportSummary, String> {
     let reports = Arc::new(AtomicUsize::new(0));
     let (go, wait) = mpsc::channel::<()>();
@@ -117,6 +161,7 @@ fn a_stopped_store_import_keeps_its_groups_and_the_next_goes_on_from_them() {
     assert!(!e.contains("--resume"), "{e}");
     let kept = store.kept_groups().unwrap();
     assert!((1..99).contains(&kept), "{kept}");
+    assert!(e.contains(&format!("the {kept} groups written")), "{e}");
     // The window says so, and what ticking "start over" does.
     {
         use egui_kittest::kittest::Queryable;

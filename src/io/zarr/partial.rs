@@ -39,7 +39,8 @@ pub struct PackOptions {
     pub force: bool,
 }
 
-/// What a stopped writer kept to go on from.
+/// What a stopped writer kept to go on from. Its line states the facts; each front end adds
+/// how to go on in its own terms (the command line's `--resume`, the workbench's Import).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Kept {
     /// Groups written, checked and kept.
@@ -55,8 +56,7 @@ impl fmt::Display for Kept {
         let of = self.total.map_or_else(String::new, |t| format!(" of {t}"));
         write!(
             f,
-            "; the {}{of} groups written and checked so far are kept in {}: run the same \
-             command with --resume to go on",
+            "; the {}{of} groups written and checked so far are kept in {}",
             self.groups,
             self.partial.display()
         )

@@ -622,13 +622,7 @@ pub fn detect_edges(
     let combined = combine_borders(
         &ys,
         &ses,
-        &CombineParams {
-            cut: meta.record.cut,
-            sigma_um: params.border_sigma_um,
-            floor_um: params.border_floor_um,
-            max_bridge: params.max_bridge_samples,
-            weight_window: params.weight_window_samples,
-        },
+        &CombineParams::from_edges(meta.record.cut, params),
     );
     for (track, w) in borders.iter_mut().zip(combined.border_weights.iter()) {
         track.weight.clone_from(w);

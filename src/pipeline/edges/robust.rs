@@ -58,6 +58,20 @@ pub struct CombineParams {
     pub weight_window: usize,
 }
 
+impl CombineParams {
+    /// The edge knobs' combination settings for a scan of `cut`.
+    #[must_use]
+    pub fn from_edges(cut: Cut, params: &super::EdgeParams) -> Self {
+        Self {
+            cut,
+            sigma_um: params.border_sigma_um,
+            floor_um: params.border_floor_um,
+            max_bridge: params.max_bridge_samples,
+            weight_window: params.weight_window_samples,
+        }
+    }
+}
+
 /// Each border's weight `1/se²` per sample (None where the border is not seen), `se` floored
 /// at `floor` and, with `window` > 1, `se²` the geometric mean of the floored `se²` of the
 /// seen samples within `window/2` on each side.

@@ -188,17 +188,7 @@ pub fn decode_border_signal(
             ses[b].push(if seen { f64::from(sv) } else { f64::NAN });
         }
     }
-    let mut combined = combine_borders(
-        &ys,
-        &ses,
-        &CombineParams {
-            cut,
-            sigma_um: params.border_sigma_um,
-            floor_um: params.border_floor_um,
-            max_bridge: params.max_bridge_samples,
-            weight_window: params.weight_window_samples,
-        },
-    );
+    let mut combined = combine_borders(&ys, &ses, &CombineParams::from_edges(cut, params));
     let alpha = params.wall_angle_deg.to_radians();
     let scale = groove_speed_mm_s * alpha.sin() / stitched.spacing_um;
     let [left, right] = &mut combined.walls_um;
