@@ -137,6 +137,10 @@ knob_docs! {
         => "rows read on each side of a blurred border, in its edge spreads σ (measured per border and group by pilot fits; never past half the way to the next border; edges::blur); 0 = always band_half_height_px; default 3",
     "edges.max_band_half_height_px"
         => "most rows a blurred border's band reads on each side (px): the fits' cost grows with it; default 24",
+    "edges.noisy_band_half_height_px"
+        => "that most on a noisy camera (pixel noise at least noisy_grey_levels): more rows average the noise down (edges::noise); at or below max_band_half_height_px = off; default 40",
+    "edges.noisy_grey_levels"
+        => "pixel noise σ, in grey levels of 255, from which a group's frames count as noisy (Immerkær's estimate on the reference frame); default 0.75",
     "edges.bin_px"
         => "width of the sub-pixel bins of the straightened profiles (px); default 0.25",
     "edges.coarse_column_step"

@@ -33,6 +33,7 @@ pub mod despike;
 pub mod differentiator;
 pub mod erf;
 pub mod geometry;
+mod noise;
 mod predict;
 pub mod profile;
 #[cfg(test)]
@@ -132,6 +133,10 @@ pub struct EdgeParams {
     pub band_sigmas: f64,
     #[doc = knob!("edges.max_band_half_height_px")]
     pub max_band_half_height_px: f64,
+    #[doc = knob!("edges.noisy_band_half_height_px")]
+    pub noisy_band_half_height_px: f64,
+    #[doc = knob!("edges.noisy_grey_levels")]
+    pub noisy_grey_levels: f64,
     #[doc = knob!("edges.bin_px")]
     pub bin_px: f64,
     #[doc = knob!("edges.coarse_column_step")]
@@ -178,6 +183,8 @@ impl Default for EdgeParams {
             band_half_height_px: 8.0,
             band_sigmas: 3.0,
             max_band_half_height_px: 24.0,
+            noisy_band_half_height_px: 40.0,
+            noisy_grey_levels: 0.75,
             bin_px: 0.25,
             coarse_column_step: 4,
             column_sigma_px: 1.0,
@@ -219,6 +226,18 @@ impl EdgeParams {
             self.max_band_half_height_px,
             self.band_half_height_px,
             256.0,
+        )?;
+        check_range(
+            "edges.noisy_band_half_height_px",
+            self.noisy_band_half_height_px,
+            2.0,
+            256.0,
+        )?;
+        check_range(
+            "edges.noisy_grey_levels",
+            self.noisy_grey_levels,
+            0.0,
+            255.0,
         )?;
         check_range("edges.bin_px", self.bin_px, 0.01, 4.0)?;
         check_range("edges.column_sigma_px", self.column_sigma_px, 1e-3, 1e3)?;
@@ -504,7 +523,8 @@ pub fn detect_edges(
     let n = usize::try_from(js.end - js.start).unwrap_or(0);
     let positions_um: Vec<f64> = js.clone().map(|j| j as f64 * spacing).collect();
 
-    // 3. Predictions and fine fits.
+    // 3. Predictions and fine fits; a noisy camera's blurred borders read wider bands.
+    let params = &noise::capped_for_noise(params, &frames[reference]);
     let frame_list: Vec<(&Image, f64, usize)> = frames
         .iter()
         .zip(&cams)
