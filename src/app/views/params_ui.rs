@@ -5,16 +5,30 @@ use egui::{Grid, Response, Ui, emath::Numeric};
 use super::StageStatus;
 use crate::pipeline::derivatives::DerivativeMode;
 use crate::pipeline::dsp::EqCurve;
+use crate::pipeline::edges::border::BorderParams;
 use crate::pipeline::knobs::knob_doc;
 use crate::pipeline::optical_flow::{FlowMethod, Solver};
+use crate::pipeline::still::WallTone;
 use crate::pipeline::walls::WallMethod;
-use crate::pipeline::{PathChoice, PipelineParams, Stage};
+use crate::pipeline::{Method, PathChoice, PipelineParams, Stage};
 
 /// Drag speed of decade-spanning values, as a share of the value per point dragged.
 const LOG_SPEED: f64 = 0.01;
 
+#[cfg(test)]
+thread_local! {
+    /// While Some (a test): every section opens, and each row's key is written down.
+    static DRAWN: std::cell::RefCell<Option<Vec<String>>> = const { std::cell::RefCell::new(None) };
+}
+
 /// The row label; hovering shows the knob's TOML key and its documentation line.
 fn label(ui: &mut Ui, text: &str, key: &str) -> Response {
+    #[cfg(test)]
+    DRAWN.with(|d| {
+        if let Some(keys) = d.borrow_mut().as_mut() {
+            keys.push(key.to_owned());
+        }
+    });
     let doc = knob_doc(key).unwrap_or("");
     ui.label(text).on_hover_text(format!("{key}\n{doc}"))
 }
@@ -98,6 +112,8 @@ fn section(
     open: bool,
     add: impl FnOnce(&mut Ui),
 ) {
+    #[cfg(test)]
+    let open = open || DRAWN.with(|d| d.borrow().is_some());
     let text = match status {
         Some(s) => egui::RichText::new(format!("{title}  ·  {}", s.word())).color(s.colour()),
         None => egui::RichText::new(title),
@@ -116,25 +132,84 @@ fn section(
 /// Rows of one params table, `kind "label" field (further arguments);` each: a call of `kind`
 /// (`num`, `log_num`, `check` or `choice`) on the field, its TOML key `table.field`.
 macro_rules! rows {
-    ($ui:expr, $table:literal, $s:expr; $($kind:ident $text:literal $field:ident ($($arg:expr),*);)*) => {
-        $($kind($ui, $text, concat!($table, ".", stringify!($field)), &mut $s.$field $(, $arg)*);)*
+    ($ui:expr, $table:expr, $s:expr; $($kind:ident $text:literal $field:ident ($($arg:expr),*);)*) => {
+        $($kind($ui, $text, &format!("{}.{}", $table, stringify!($field)), &mut $s.$field $(, $arg)*);)*
     };
 }
+
+/// The rows of a border model's fit (`edges.border`, `still.border`).
+fn border_rows(ui: &mut Ui, table: &str, b: &mut BorderParams) {
+    rows!(ui, table, b;
+        num "fit half window (px)" fit_half_window_px (0.5, 1.0..=10_000.0);
+        num "edge width min (px)" min_width_px (0.01, 0.001..=1000.0);
+        num "edge width max (px)" max_width_px (0.1, 0.001..=10_000.0);
+        num "min contrast" min_contrast (0.001, 0.0..=1e6);
+        num "fit iterations" max_iterations (0.5, 1..=1000);
+        log_num "fit τ (px)" tolerance_px (0.0..=1.0);
+    );
+}
+
+/// The reconstruction paths, as the panel names them.
+const PATHS: [(PathChoice, &str); 3] = [
+    (PathChoice::Auto, "auto (from scan.toml)"),
+    (PathChoice::Depth, "depth (Kalman)"),
+    (PathChoice::DualFocus, "dual focus (stripes)"),
+];
+
+/// The decoders, as the panel names them.
+const METHODS: [(Method, &str); 3] = [
+    (Method::Fused, "fused (edges + flow)"),
+    (Method::Edges, "edges"),
+    (Method::Flow, "flow"),
+];
 
 /// The parameter panel. Edits `p` in place; the caller compares it with the applied params.
 pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Stage::ALL.len()]) {
     let st = |s: Stage| Some(&status[s.index()]);
     section(ui, "path", None, false, |ui| {
-        choice(
-            ui,
-            "reconstruction path",
-            "path",
-            &mut p.path,
-            &[
-                (PathChoice::Auto, "auto (from scan.toml)"),
-                (PathChoice::Depth, "depth (Kalman)"),
-                (PathChoice::DualFocus, "dual focus (stripes)"),
-            ],
+        choice(ui, "reconstruction path", "path", &mut p.path, &PATHS);
+    });
+    section(ui, "decoder", None, true, |ui| {
+        choice(ui, "method", "method", &mut p.method, &METHODS);
+        rows!(ui, "fusion", p.fusion;
+            choice "fusion block (samples)" block_samples (&[
+                (64, "64"), (128, "128"), (256, "256"), (512, "512"), (1024, "1024"), (2048, "2048"),
+            ]);
+            num "fusion smoothing (blocks)" smoothing_blocks (0.1, 0..=1024);
+        );
+    });
+    section(ui, "edges", st(Stage::Edges), false, |ui| {
+        rows!(ui, "edges", p.edges;
+            num "wall angle (°)" wall_angle_deg (0.1, 1.0..=89.0);
+            check "all frames" all_frames ();
+            num "band (px)" band_half_height_px (0.5, 2.0..=256.0);
+            num "band (σ of a blurred border)" band_sigmas (0.05, 0.0..=100.0);
+            num "max band (px)" max_band_half_height_px (0.5, 2.0..=256.0);
+            num "max band, noisy camera (px)" noisy_band_half_height_px (0.5, 2.0..=256.0);
+            num "noisy from (grey levels)" noisy_grey_levels (0.05, 0.0..=255.0);
+            num "profile bin (px)" bin_px (0.01, 0.01..=4.0);
+            num "coarse column step" coarse_column_step (0.1, 1..=64);
+            num "column σ (px)" column_sigma_px (0.05, 0.001..=1000.0);
+            num "column rounds" column_rounds (0.1, 1..=20);
+            num "border σ (µm)" border_sigma_um (0.01, 0.0001..=10_000.0);
+            log_num "border floor (µm)" border_floor_um (1e-6..=1e4);
+            num "max bridge (samples)" max_bridge_samples (0.1, 0..=1000);
+            num "weight window (samples)" weight_window_samples (0.5, 0..=10_000);
+            num "despike (σs, 0 = off)" despike_sigmas (0.1, 0.0..=1000.0);
+            check "refine sharp borders" refine ();
+            num "sharp below width (px)" hard_width_px (0.01, 0.0..=100.0);
+            log_num "crossing σ (px)" crossing_sigma_px (1e-4..=100.0);
+            log_num "anchor σ (px)" anchor_sigma_px (1e-4..=100.0);
+            num "spline smoothness" spline_smoothness (0.1, 0.0..=1e9);
+            num "spline frames" spline_frames (0.1, 1..=64);
+        );
+        border_rows(ui, "edges.border", &mut p.edges.border);
+        rows!(ui, "edges.differentiator", p.edges.differentiator;
+            num "differentiator half taps" half_taps (0.1, 1..=32);
+            num "differentiator band" band (0.005, 0.05..=0.99);
+            num "differentiator aperture (samples)" aperture_samples (0.01, 0.0..=4.0);
+            log_num "differentiator ridge" ridge (0.0..=1e6);
+            num "differentiator min run" min_run (0.1, 2..=1000);
         );
     });
     section(ui, "derivatives", st(Stage::Derivatives), false, |ui| {
@@ -158,6 +233,8 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Sta
                 (Solver::Jacobi, "Jacobi"),
             ]);
             log_num "λ (smoothness)" lambda (1e-5..=1e3);
+            num "groove weight (× λ)" groove_weight (0.01, 0.0..=1e6);
+            num "SOR ω (Gauss–Seidel)" sor_omega (0.01, 0.01..=1.99);
             num "iterations" max_iterations (1.0, 1..=10_000);
             log_num "τ (px)" tolerance_px (1e-9..=1.0);
             log_num "gradient threshold" gradient_threshold (1e-7..=10.0);
@@ -192,6 +269,8 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Sta
             num "θ step (°)" theta_step_deg (0.05, 0.01..=10.0);
             num "ρ step (px)" rho_step_px (0.05, 0.05..=20.0);
             num "peaks" peak_count (0.1, 1..=8);
+            num "min peak (share of the top)" min_peak_ratio (0.01, 0.0..=1.0);
+            num "peak ρ band (px, 0 = auto)" peak_rho_band_px (0.5, 0.0..=2000.0);
             num "window ±θ (°)" window_theta_deg (0.1, 0.1..=90.0);
             num "window ±ρ (px)" window_rho_px (0.5, 0.5..=2000.0);
             num "line smoothing (px)" line_smoothing_px (0.5, 0..=200);
@@ -224,6 +303,23 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Sta
             num "normalise to peak (0 = off)" normalize_peak (0.01, 0.0..=1.0);
             num "full scale (mm/s)" full_scale_mm_s (1.0, 0.001..=10_000.0);
         );
+    });
+    section(ui, "still image", None, false, |ui| {
+        rows!(ui, "still", p.still;
+            num "block (lines)" block_lines (1.0, 4..=4096);
+            num "widest groove (µm)" max_groove_width_um (1.0, 0.001..=1e6);
+            num "narrowest wall (µm)" min_wall_width_um (0.1, 0.0..=1e6);
+            choice "walls" walls (&[(WallTone::Dark, "dark"), (WallTone::Bright, "bright")]);
+            num "min contrast" min_contrast (0.005, 0.0..=1.0);
+            num "max gap (blocks)" max_gap_blocks (0.1, 0..=10_000);
+            num "min track (blocks)" min_track_blocks (0.1, 1..=10_000);
+            num "search (share of the wall)" search_share (0.01, 0.05..=2.0);
+            num "outlier σs" outlier_sigmas (0.05, 1.0..=1000.0);
+            num "path window (µm)" path_window_um (10.0, 1.0..=1e9);
+            num "wall angle (°)" wall_angle_deg (0.1, 10.0..=80.0);
+            num "max lost share" max_lost_share (0.01, 0.0..=1.0);
+        );
+        border_rows(ui, "still.border", &mut p.still.border);
     });
     section(ui, "filter / EQ (clip)", None, false, |ui| {
         rows!(ui, "dsp", p.dsp;
@@ -299,4 +395,36 @@ pub fn toml_ui(ui: &mut Ui, p: &PipelineParams, ed: &mut TomlEditor) -> Option<P
         ed.text = None;
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::app::views::StageStatus;
+    use crate::pipeline::knobs::KNOB_DOCS;
+
+    #[test]
+    fn every_knob_has_a_row_under_its_own_key() {
+        DRAWN.with(|d| *d.borrow_mut() = Some(Vec::new()));
+        let status: [StageStatus; Stage::ALL.len()] = std::array::from_fn(|_| StageStatus::Fresh);
+        let mut h = egui_kittest::Harness::new_ui_state(
+            |ui, p: &mut PipelineParams| params_ui(ui, p, &status),
+            PipelineParams::default(),
+        );
+        h.run();
+        let p = h.state().clone();
+        let drawn = DRAWN.with(|d| d.borrow_mut().take()).unwrap();
+        let missing: Vec<&str> = KNOB_DOCS
+            .iter()
+            .map(|(k, _)| *k)
+            .filter(|k| !drawn.iter().any(|d| d == k))
+            .collect();
+        assert!(missing.is_empty(), "no row: {missing:?}");
+        let unknown: Vec<&String> = drawn
+            .iter()
+            .filter(|d| !KNOB_DOCS.iter().any(|(k, _)| k == d))
+            .collect();
+        assert!(unknown.is_empty(), "rows under no knob's key: {unknown:?}");
+        assert_eq!(p, PipelineParams::default(), "drawing changed a knob");
+    }
 }
