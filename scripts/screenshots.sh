@@ -37,7 +37,7 @@ trap 'kill "$xvfb_pid" 2>/dev/null || true; rm -rf "$XDG_RUNTIME_DIR" "$GROOVESC
 export DISPLAY="$display"
 sleep 1
 status=0
-for view in ${VIEWS:-overview frame flow hough stripes depth orientation waveform metadata ab still}; do
+for view in ${VIEWS:-overview frame flow hough stripes depth orientation edges waveform metadata ab still}; do
     s="$scan"
     if [ "$view" = depth ]; then
         if [ -z "$depth" ]; then

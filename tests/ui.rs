@@ -735,3 +735,44 @@ fn the_groups_finished_so_far_can_be_played_while_reconstructing() {
     assert!(partial > 0 && partial < full, "{partial} of {full}");
     assert_eq!(wb(&h).player().buffers().unwrap().len(), full);
 }
+
+/// The edges view says what the edge stage read, border by border: on the demo scan every
+/// border is seen on at least 90 % of the group's samples. With the flow method alone the stage
+/// does not run, and the view says so.
+#[test]
+fn the_edges_view_shows_each_border_read_or_why_none() {
+    use egui_kittest::kittest::NodeT;
+    let (_tmp, mut h) = settled_on(&demo_scan());
+    wb_mut(&mut h).set_view(View::Edges);
+    h.run_ok();
+    let node = h.get_by_label_contains("seen: left land");
+    let line = node
+        .accesskit_node()
+        .label()
+        .or_else(|| node.accesskit_node().value())
+        .unwrap()
+        .to_string();
+    let seen: Vec<(usize, usize)> = line
+        .split("seen: ")
+        .nth(1)
+        .unwrap()
+        .split(", ")
+        .map(|part| {
+            let frac = part.split_whitespace().find(|w| w.contains('/')).unwrap();
+            let (a, b) = frac.split_once('/').unwrap();
+            (a.parse().unwrap(), b.parse().unwrap())
+        })
+        .collect();
+    assert_eq!(seen.len(), 4, "{line}");
+    assert!(
+        seen.iter().all(|&(a, b)| b > 50 && 10 * a >= 9 * b),
+        "{line}"
+    );
+    h.get_by_label_contains("a lateral cut: both walls move as one");
+    let mut p = wb(&h).params().clone();
+    p.method = groovescope::pipeline::Method::Flow;
+    wb_mut(&mut h).set_params(p);
+    settle(&mut h);
+    h.run_ok();
+    h.get_by_label_contains("the flow method alone reads none");
+}

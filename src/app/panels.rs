@@ -310,6 +310,7 @@ impl Workbench {
                 View::Stripes => v.stripes.ui(ui, &data, textures),
                 View::Depth => v.depth.ui(ui, &data, textures),
                 View::Orientation => v.orientation.ui(ui, &data, textures),
+                View::Edges => v.edges.ui(ui, &data, textures),
                 View::Waveform => {
                     wave_actions = waveform_ui(
                         ui,

@@ -137,14 +137,7 @@ impl FlowViewState {
         let dim = status.dim();
         let land = data.land_flow_px();
         let (tex, hi) = if self.arrows_over_frame {
-            let Some(frames) = data.frames else {
-                empty_note(ui, "frames not loaded");
-                return;
-            };
-            let Some(t) = textures
-                .frame(ui.ctx(), data.group, field.frame_index, frames)
-                .cloned()
-            else {
+            let Some(t) = data.frame_texture(ui, textures, field.frame_index) else {
                 return;
             };
             (t, None)

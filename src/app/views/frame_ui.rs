@@ -42,6 +42,30 @@ pub struct StageData<'a> {
 }
 
 impl StageData<'_> {
+    /// The texture of frame `index` of the group, or None after a note saying why (the frames
+    /// are loading or failed to load, or the group has no such frame).
+    pub fn frame_texture(
+        &self,
+        ui: &mut Ui,
+        textures: &mut Textures,
+        index: usize,
+    ) -> Option<egui::TextureHandle> {
+        let Some(frames) = self.frames else {
+            match self.load_error {
+                Some(e) => {
+                    ui.colored_label(StageStatus::Failed(String::new()).colour(), e);
+                }
+                None => empty_note(ui, "loading frames…"),
+            }
+            return None;
+        };
+        let tex = textures.frame(ui.ctx(), self.group, index, frames).cloned();
+        if tex.is_none() {
+            empty_note(ui, "no such frame");
+        }
+        tex
+    }
+
     /// Status of `stage`.
     #[must_use]
     pub fn status(&self, stage: Stage) -> &StageStatus {
@@ -232,20 +256,7 @@ pub struct FrameViewState {
 impl FrameViewState {
     /// The frame viewer.
     pub fn ui(&mut self, ui: &mut Ui, data: &StageData<'_>, textures: &mut Textures) {
-        let Some(frames) = data.frames else {
-            match data.load_error {
-                Some(e) => {
-                    ui.colored_label(StageStatus::Failed(String::new()).colour(), e);
-                }
-                None => empty_note(ui, "loading frames…"),
-            }
-            return;
-        };
-        let Some(tex) = textures
-            .frame(ui.ctx(), data.group, data.frame, frames)
-            .cloned()
-        else {
-            empty_note(ui, "no such frame");
+        let Some(tex) = data.frame_texture(ui, textures, data.frame) else {
             return;
         };
         arrow_controls(ui, &mut self.arrows);

@@ -50,6 +50,10 @@ pub fn guidance(view: View, dual: bool) -> &'static str {
              and bright (trusted) wall bands. Chunks missing from a wall: the \"flaked wall\" \
              preset."
         }
+        View::Edges => {
+            "Where each wall meets the land and the bottom; their movement is the sound. Good: \
+             dots along all four borders, smooth wall curves. A grainy frame: the \"noisy\" preset."
+        }
         View::Waveform => {
             "The sound of the whole clip, beside the reference when the scan has one. Good: the \
              envelopes agree; red cells in the health strip mark damaged groups. Hiss: lower \

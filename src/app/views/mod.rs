@@ -2,6 +2,7 @@
 
 pub mod compare_ui;
 pub mod depth_ui;
+pub mod edges_ui;
 pub mod flow_ui;
 pub mod frame_ui;
 pub mod guidance;
@@ -41,6 +42,8 @@ pub enum View {
     Depth,
     /// Wall orientation and robust-fit outliers.
     Orientation,
+    /// The edge decoder's borders on their frame, and the walls' displacement.
+    Edges,
     /// The whole clip: waveform, reference, envelopes, spectrum, playback.
     Waveform,
     /// The scan's metadata form.
@@ -49,7 +52,7 @@ pub enum View {
 
 impl View {
     /// Every view, in tab order.
-    pub const ALL: [View; 9] = [
+    pub const ALL: [View; 10] = [
         View::Overview,
         View::Frame,
         View::Flow,
@@ -57,6 +60,7 @@ impl View {
         View::Stripes,
         View::Depth,
         View::Orientation,
+        View::Edges,
         View::Waveform,
         View::Metadata,
     ];
@@ -72,6 +76,7 @@ impl View {
             View::Stripes => "stripes",
             View::Depth => "depth",
             View::Orientation => "orientation",
+            View::Edges => "edges",
             View::Waveform => "waveform",
             View::Metadata => "metadata",
         }
@@ -94,6 +99,7 @@ impl View {
             View::Hough | View::Stripes => Some(Stage::Stripes),
             View::Depth => Some(Stage::Depth),
             View::Orientation => Some(Stage::Orientation),
+            View::Edges => Some(Stage::Edges),
             View::Overview | View::Waveform | View::Metadata => None,
         }
     }
@@ -197,14 +203,42 @@ pub fn image_item(name: &str, tex: &TextureHandle, dim: bool) -> PlotImage {
     .tint(tint(dim))
 }
 
-/// Splits a per-column row list into plot lines (pixel centres), breaking at NaN.
+/// A plot of one curve a wall, each split into runs where it has a value, coloured by wall;
+/// `axes` are the x and y labels.
+pub fn wall_curves(
+    ui: &mut Ui,
+    id: &str,
+    height: f32,
+    axes: [&str; 2],
+    curves: Vec<(String, Vec<Vec<[f64; 2]>>)>,
+) {
+    Plot::new(id)
+        .y_axis_min_width(AXIS_WIDTH_PT)
+        .height(height)
+        .legend(egui_plot::Legend::default())
+        .x_axis_label(axes[0])
+        .y_axis_label(axes[1])
+        .show(ui, |plot_ui| {
+            for (i, (name, runs)) in curves.into_iter().enumerate() {
+                for (k, run) in runs.into_iter().enumerate() {
+                    plot_ui.line(
+                        Line::new(name.clone(), PlotPoints::from(run))
+                            .id(format!("{name}/{k}"))
+                            .color(crate::app::render::region_colour(i)),
+                    );
+                }
+            }
+        });
+}
+
+/// Splits `(x, y)` points into plot lines, breaking where `y` is not finite.
 #[must_use]
-pub fn row_segments(rows: &[f32]) -> Vec<Vec<[f64; 2]>> {
+pub fn finite_runs(points: impl IntoIterator<Item = [f64; 2]>) -> Vec<Vec<[f64; 2]>> {
     let mut out = Vec::new();
-    let mut cur: Vec<[f64; 2]> = Vec::new();
-    for (x, &r) in rows.iter().enumerate() {
-        if r.is_finite() {
-            cur.push([x as f64 + 0.5, f64::from(r) + 0.5]);
+    let mut cur = Vec::new();
+    for p in points {
+        if p[1].is_finite() {
+            cur.push(p);
         } else if !cur.is_empty() {
             out.push(std::mem::take(&mut cur));
         }
@@ -213,6 +247,16 @@ pub fn row_segments(rows: &[f32]) -> Vec<Vec<[f64; 2]>> {
         out.push(cur);
     }
     out
+}
+
+/// Splits a per-column row list into plot lines (pixel centres), breaking at NaN.
+#[must_use]
+pub fn row_segments(rows: &[f32]) -> Vec<Vec<[f64; 2]>> {
+    finite_runs(
+        rows.iter()
+            .enumerate()
+            .map(|(x, &r)| [x as f64 + 0.5, f64::from(r) + 0.5]),
+    )
 }
 
 /// Draws wall or centroid lines (and their filled voids) over an image plot.

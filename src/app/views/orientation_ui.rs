@@ -1,11 +1,10 @@
 //! Orientation view: wall tilt tan θ along x per wall, and the robust fit's weight (outlier) map.
 
 use egui::{Color32, Ui};
-use egui_plot::{Legend, Line, Plot, PlotPoints};
 
 use super::frame_ui::StageData;
-use super::{AXIS_WIDTH_PT, hovered_pixel, image_item, image_plot, wall_lines};
-use crate::app::render::{NO_FIT_COLOUR, region_colour};
+use super::{hovered_pixel, image_item, image_plot, wall_curves, wall_lines};
+use crate::app::render::NO_FIT_COLOUR;
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
 use crate::pipeline::orientation::WallOrientation;
@@ -21,19 +20,14 @@ pub struct OrientationViewState {
 /// Splits a wall's samples into lines of (x, tan θ), breaking where a fit is missing.
 #[must_use]
 pub fn tan_segments(wall: &WallOrientation) -> Vec<Vec<[f64; 2]>> {
-    let mut out = Vec::new();
-    let mut cur = Vec::new();
-    for s in &wall.samples {
-        if s.fit.is_some() && s.tan_theta.is_finite() {
-            cur.push([f64::from(s.x_px), s.tan_theta]);
-        } else if !cur.is_empty() {
-            out.push(std::mem::take(&mut cur));
-        }
-    }
-    if !cur.is_empty() {
-        out.push(cur);
-    }
-    out
+    super::finite_runs(wall.samples.iter().map(|s| {
+        let tan = if s.fit.is_some() {
+            s.tan_theta
+        } else {
+            f64::NAN
+        };
+        [f64::from(s.x_px), tan]
+    }))
 }
 
 /// What the outlier share means, for the hover of its read-out.
@@ -75,25 +69,13 @@ impl OrientationViewState {
             .on_hover_text(outlier_note(data.params));
         });
         let plot_h = data.height * 0.4;
-        Plot::new("orientation_plot")
-            .y_axis_min_width(AXIS_WIDTH_PT)
-            .height(plot_h)
-            .legend(Legend::default())
-            .x_axis_label("x (px)")
-            .y_axis_label("tan θ (= V / Vt)")
-            .show(ui, |plot_ui| {
-                for (i, w) in o.walls.iter().enumerate() {
-                    let c = region_colour(i);
-                    let name = format!("{:?} wall", w.side);
-                    for (k, seg) in tan_segments(w).into_iter().enumerate() {
-                        plot_ui.line(
-                            Line::new(name.clone(), PlotPoints::from(seg))
-                                .id(format!("{name}/{k}"))
-                                .color(c),
-                        );
-                    }
-                }
-            });
+        let curves = o
+            .walls
+            .iter()
+            .map(|w| (format!("{:?} wall", w.side), tan_segments(w)))
+            .collect();
+        let axes = ["x (px)", "tan θ (= V / Vt)"];
+        wall_curves(ui, "orientation_plot", plot_h, axes, curves);
         let Some(tex) = textures.get_or_note(ui, ViewImage::Weights, "weight map not rendered yet")
         else {
             return;

@@ -17,6 +17,8 @@ pub struct ViewStates {
     pub depth: super::depth_ui::DepthViewState,
     /// Orientation view.
     pub orientation: super::orientation_ui::OrientationViewState,
+    /// Edges view.
+    pub edges: super::edges_ui::EdgesViewState,
     /// Waveform view.
     pub wave: super::transport_ui::WaveViewState,
     /// Navigation panel.
@@ -36,5 +38,6 @@ impl ViewStates {
         self.stripes.readout = None;
         self.depth.readout = None;
         self.orientation.readout = None;
+        self.edges.readout = None;
     }
 }
