@@ -737,7 +737,8 @@ fn the_groups_finished_so_far_can_be_played_while_reconstructing() {
 }
 
 /// The edges view says what the edge stage read, border by border: on the demo scan every
-/// border is seen on at least 90 % of the group's samples. With the flow method alone the stage
+/// border is seen on at least 90 % of the group's samples, and the frames' pixel noise reads
+/// near the σ they were rendered with. With the flow method alone the stage
 /// does not run, and the view says so.
 #[test]
 fn the_edges_view_shows_each_border_read_or_why_none() {
@@ -764,6 +765,15 @@ fn the_edges_view_shows_each_border_read_or_why_none() {
         })
         .collect();
     assert_eq!(seen.len(), 4, "{line}");
+    // The demo was rendered 8-bit with σ = 0.5 grey levels of noise: under the noisy threshold.
+    let noise: f64 = line
+        .split("pixel noise ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|t| t.parse().ok())
+        .unwrap();
+    assert!((0.35..0.65).contains(&noise), "{line}");
+    assert!(line.contains("at most ±24 px"), "{line}");
     assert!(
         seen.iter().all(|&(a, b)| b > 50 && 10 * a >= 9 * b),
         "{line}"

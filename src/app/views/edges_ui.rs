@@ -80,10 +80,15 @@ pub fn summary(e: &Edges) -> String {
     } else {
         ""
     };
+    let noise = e.pixel_noise_grey_levels.map_or_else(
+        || "pixel noise not measured".into(),
+        |l| format!("pixel noise {l:.2} grey levels of 255"),
+    );
     format!(
-        "read on frame {}  ·  {n} samples {:.2} µm apart  ·  bottom {bottom} below the land  ·  \
-         seen: {}{one_track}",
+        "read on frame {} ({noise}: blurred borders read at most ±{:.0} px)  ·  {n} samples \
+         {:.2} µm apart  ·  bottom {bottom} below the land  ·  seen: {}{one_track}",
         e.reference_frame,
+        e.band_cap_px,
         e.spacing_um,
         seen.join(", ")
     )

@@ -10,6 +10,7 @@
 //! (rising), right land (falling), each refined by the border model on the profile.
 
 use super::border::{BorderParams, Polarity, find_border};
+use super::geometry::FrameGeometry;
 use super::{BorderId, EdgeParams};
 use crate::image::Image;
 
@@ -205,6 +206,58 @@ pub fn strip_borders_and_widths(
         );
     }
     out
+}
+
+/// Median rows between border `id` and the nearest other border of its strip (NaN when no
+/// strip has both).
+pub(super) fn gap_rows(coarse: &[(i64, StripBorders)], id: BorderId) -> f64 {
+    let b = id as usize;
+    let gaps: Vec<f64> = coarse
+        .iter()
+        .filter_map(|(_, rows)| {
+            [b.checked_sub(1), Some(b + 1)]
+                .into_iter()
+                .flatten()
+                .filter_map(|o| rows.get(o))
+                .map(|r| (r - rows[b]).abs())
+                .filter(|g| g.is_finite())
+                .reduce(f64::min)
+        })
+        .collect();
+    super::finite_median(gaps).unwrap_or(f64::NAN)
+}
+
+/// Bottom depth (µm) from one sample's coarse rows: a wall reaching from the land to a corner
+/// `D` deeper spans `D/tan α` in record `y`, and the corner is seen at distance `WD + D`.
+pub(super) fn depth_from_widths(rows: &StripBorders, geo: &FrameGeometry, tan_a: f64) -> [f64; 2] {
+    let p = geo.pitch_um;
+    let wd = geo.working_distance_um;
+    let [ll, lc, rc, rl] = *rows;
+    // Left: (lc − cy)p(1 + D/WD) − (ll − cy)p = D/tan α.
+    let left = (lc - ll) * p / (1.0 / tan_a - (lc - geo.cy) * p / wd);
+    // Right: (rl − cy)p − (rc − cy)p(1 + D/WD) = D/tan α.
+    let right = (rl - rc) * p / (1.0 / tan_a + (rc - geo.cy) * p / wd);
+    [left, right].map(|d| {
+        if d.is_finite() && d > 0.0 {
+            d
+        } else {
+            f64::NAN
+        }
+    })
+}
+
+/// Median of each value with its two neighbours (keeps NaN where the value is NaN).
+pub(super) fn median3(v: &[f64]) -> Vec<f64> {
+    (0..v.len())
+        .map(|i| {
+            if !v[i].is_finite() {
+                return f64::NAN;
+            }
+            let lo = i.saturating_sub(1);
+            let hi = (i + 2).min(v.len());
+            super::finite_median(v[lo..hi].to_vec()).unwrap_or(v[i])
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -48,7 +48,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use self::border::BorderParams;
-use self::coarse::{StripBorders, strip_borders_and_widths};
+use self::coarse::{StripBorders, depth_from_widths, gap_rows, median3, strip_borders_and_widths};
 use self::differentiator::DifferentiatorParams;
 use self::geometry::FrameGeometry;
 use self::predict::interpolant;
@@ -321,6 +321,11 @@ pub struct Edges {
     pub bottom_depth_um: f64,
     /// Index in the group of the frame the coarse borders were read on.
     pub reference_frame: usize,
+    /// That frame's pixel noise (σ, grey levels of 255; None where the frame is too small to say).
+    pub pixel_noise_grey_levels: Option<f64>,
+    /// The most rows a blurred border's band read on each side (px): the noisy cap on a noisy
+    /// frame (`edges::noise`).
+    pub band_cap_px: f64,
     /// Coarse border rows on the reference frame per sample (NaN = not found).
     pub coarse_rows: Vec<StripBorders>,
     /// The four borders, in [`BorderId`] order.
@@ -337,62 +342,10 @@ pub struct Edges {
     pub warnings: Vec<String>,
 }
 
-/// Median rows between border `id` and the nearest other border of its strip (NaN when no
-/// strip has both).
-fn gap_rows(coarse: &[(i64, StripBorders)], id: BorderId) -> f64 {
-    let b = id as usize;
-    let gaps: Vec<f64> = coarse
-        .iter()
-        .filter_map(|(_, rows)| {
-            [b.checked_sub(1), Some(b + 1)]
-                .into_iter()
-                .flatten()
-                .filter_map(|o| rows.get(o))
-                .map(|r| (r - rows[b]).abs())
-                .filter(|g| g.is_finite())
-                .reduce(f64::min)
-        })
-        .collect();
-    finite_median(gaps).unwrap_or(f64::NAN)
-}
-
 /// Median of the finite values.
 fn finite_median(mut v: Vec<f64>) -> Option<f64> {
     v.retain(|x| x.is_finite());
     super::median(v)
-}
-
-/// Bottom depth (µm) from one sample's coarse rows: a wall reaching from the land to a corner
-/// `D` deeper spans `D/tan α` in record `y`, and the corner is seen at distance `WD + D`.
-fn depth_from_widths(rows: &StripBorders, geo: &FrameGeometry, tan_a: f64) -> [f64; 2] {
-    let p = geo.pitch_um;
-    let wd = geo.working_distance_um;
-    let [ll, lc, rc, rl] = *rows;
-    // Left: (lc − cy)p(1 + D/WD) − (ll − cy)p = D/tan α.
-    let left = (lc - ll) * p / (1.0 / tan_a - (lc - geo.cy) * p / wd);
-    // Right: (rl − cy)p − (rc − cy)p(1 + D/WD) = D/tan α.
-    let right = (rl - rc) * p / (1.0 / tan_a + (rc - geo.cy) * p / wd);
-    [left, right].map(|d| {
-        if d.is_finite() && d > 0.0 {
-            d
-        } else {
-            f64::NAN
-        }
-    })
-}
-
-/// Median of each value with its two neighbours (keeps NaN where the value is NaN).
-fn median3(v: &[f64]) -> Vec<f64> {
-    (0..v.len())
-        .map(|i| {
-            if !v[i].is_finite() {
-                return f64::NAN;
-            }
-            let lo = i.saturating_sub(1);
-            let hi = (i + 2).min(v.len());
-            finite_median(v[lo..hi].to_vec()).unwrap_or(v[i])
-        })
-        .collect()
 }
 
 /// `count` frame indices spread evenly over `len` frames, `reference` among them.
@@ -524,7 +477,8 @@ pub fn detect_edges(
     let positions_um: Vec<f64> = js.clone().map(|j| j as f64 * spacing).collect();
 
     // 3. Predictions and fine fits; a noisy camera's blurred borders read wider bands.
-    let params = &noise::capped_for_noise(params, &frames[reference]);
+    let (capped, pixel_noise_grey_levels) = noise::capped_for_noise(params, &frames[reference]);
+    let params = &capped;
     let frame_list: Vec<(&Image, f64, usize)> = frames
         .iter()
         .zip(&cams)
@@ -683,6 +637,8 @@ pub fn detect_edges(
         wall_angle_rad: alpha,
         bottom_depth_um,
         reference_frame: reference,
+        pixel_noise_grey_levels,
+        band_cap_px: params.max_band_half_height_px,
         coarse_rows: coarse_rows.into_iter().map(|(_, r)| r).collect(),
         borders,
         constants_um: combined.constants_um,

@@ -72,16 +72,18 @@ pub(super) fn pixel_noise(frame: &Image) -> Option<f64> {
 }
 
 /// `params` with the band cap raised to `noisy_band_half_height_px` where the pixel noise of
-/// `frame` (a frame of the group, grey in `[0, 1]`) reaches `noisy_grey_levels` of 255.
+/// `frame` (a frame of the group, grey in `[0, 1]`) reaches `noisy_grey_levels` of 255, and that
+/// noise in grey levels of 255 (None where the frame is too small to say).
 #[must_use]
-pub(super) fn capped_for_noise(params: &EdgeParams, frame: &Image) -> EdgeParams {
+pub(super) fn capped_for_noise(params: &EdgeParams, frame: &Image) -> (EdgeParams, Option<f64>) {
+    let levels = pixel_noise(frame).map(|s| s * 255.0);
     let mut capped = params.clone();
     if params.noisy_band_half_height_px > params.max_band_half_height_px
-        && pixel_noise(frame).is_some_and(|s| s * 255.0 >= params.noisy_grey_levels)
+        && levels.is_some_and(|l| l >= params.noisy_grey_levels)
     {
         capped.max_band_half_height_px = params.noisy_band_half_height_px;
     }
-    capped
+    (capped, levels)
 }
 
 #[cfg(test)]
@@ -121,9 +123,13 @@ mod tests {
     #[test]
     fn the_cap_rises_on_a_noisy_frame_only() {
         let p = EdgeParams::default();
-        let clean = capped_for_noise(&p, &frame(0.3 / 255.0, 5));
+        let (clean, levels) = capped_for_noise(&p, &frame(0.3 / 255.0, 5));
         assert_eq!(clean, p);
-        let noisy = capped_for_noise(&p, &frame(2.0 / 255.0, 6));
+        assert!(
+            levels.is_some_and(|l| (0.24..=0.32).contains(&l)),
+            "{levels:?}"
+        );
+        let (noisy, _) = capped_for_noise(&p, &frame(2.0 / 255.0, 6));
         assert_eq!(noisy.max_band_half_height_px, p.noisy_band_half_height_px);
         assert_eq!(
             EdgeParams {
@@ -137,6 +143,6 @@ mod tests {
             noisy_band_half_height_px: p.max_band_half_height_px,
             ..p.clone()
         };
-        assert_eq!(capped_for_noise(&off, &frame(2.0 / 255.0, 6)), off);
+        assert_eq!(capped_for_noise(&off, &frame(2.0 / 255.0, 6)).0, off);
     }
 }
