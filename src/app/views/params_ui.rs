@@ -156,6 +156,23 @@ const PATHS: [(PathChoice, &str); 3] = [
     (PathChoice::DualFocus, "dual focus (stripes)"),
 ];
 
+/// Every fusion block length the knob accepts (a power of two from 16 to 65 536).
+const FUSION_BLOCKS: [(usize, &str); 13] = [
+    (16, "16"),
+    (32, "32"),
+    (64, "64"),
+    (128, "128"),
+    (256, "256"),
+    (512, "512"),
+    (1024, "1024"),
+    (2048, "2048"),
+    (4096, "4096"),
+    (8192, "8192"),
+    (16_384, "16384"),
+    (32_768, "32768"),
+    (65_536, "65536"),
+];
+
 /// The decoders, as the panel names them.
 const METHODS: [(Method, &str); 3] = [
     (Method::Fused, "fused (edges + flow)"),
@@ -172,9 +189,7 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Sta
     section(ui, "decoder", None, true, |ui| {
         choice(ui, "method", "method", &mut p.method, &METHODS);
         rows!(ui, "fusion", p.fusion;
-            choice "fusion block (samples)" block_samples (&[
-                (64, "64"), (128, "128"), (256, "256"), (512, "512"), (1024, "1024"), (2048, "2048"),
-            ]);
+            choice "fusion block (samples)" block_samples (&FUSION_BLOCKS);
             num "fusion smoothing (blocks)" smoothing_blocks (0.1, 0..=1024);
         );
     });
@@ -426,5 +441,19 @@ mod tests {
             .collect();
         assert!(unknown.is_empty(), "rows under no knob's key: {unknown:?}");
         assert_eq!(p, PipelineParams::default(), "drawing changed a knob");
+        // The block list offers exactly the lengths the knob accepts.
+        let accepted = |n: usize| {
+            crate::pipeline::fusion::FusionParams {
+                block_samples: n,
+                ..Default::default()
+            }
+            .validate()
+            .is_ok()
+        };
+        for (n, name) in FUSION_BLOCKS {
+            assert!(accepted(n) && name == n.to_string(), "{n}");
+        }
+        let powers = (0..=20).map(|k| 1_usize << k).filter(|&n| accepted(n));
+        assert_eq!(powers.count(), FUSION_BLOCKS.len());
     }
 }
