@@ -55,8 +55,15 @@ impl ResumeArgs {
     }
 }
 
-/// What the command line adds to the line of a store writer that stopped and kept groups.
-pub(crate) const RESUME_ADVICE: &str = ": run the same command with --resume to go on";
+/// The line of a store writer that stopped: with groups kept, the command line's way on.
+pub(crate) fn stopped(e: impl std::fmt::Display, kept: bool) -> anyhow::Error {
+    let advice = if kept {
+        ": run the same command with --resume to go on"
+    } else {
+        ""
+    };
+    anyhow::anyhow!("{e}{advice}")
+}
 
 /// Runs `pack`: converts, reads every chunk back, then opens the store as a scan and checks
 /// that it is the same scan (metadata, group names, frame counts).
@@ -80,8 +87,8 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
     );
     pb.finish_and_clear();
     let summary = summary.map_err(|e| {
-        let advice = if e.kept.is_some() { RESUME_ADVICE } else { "" };
-        anyhow::anyhow!("{e}{advice}")
+        let kept = e.kept.is_some();
+        stopped(e, kept)
     })?;
     if summary.resumed > 0 && !args.quiet {
         println!(

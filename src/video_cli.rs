@@ -124,12 +124,8 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
         let options = args.interrupted.options(DEFAULT_ZSTD_LEVEL);
         let job = Job::reporting(&progress);
         import_video_to_store(&args.clip, &args.out, &layout, &meta, options, job).map_err(|e| {
-            let advice = if matches!(e, crate::io::video::VideoError::Kept { .. }) {
-                crate::pack_cli::RESUME_ADVICE
-            } else {
-                ""
-            };
-            anyhow::anyhow!("{e}{advice}")
+            let kept = matches!(e, crate::io::video::VideoError::Kept { .. });
+            crate::pack_cli::stopped(e, kept)
         })?
     } else {
         import_video(

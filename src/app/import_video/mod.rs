@@ -222,10 +222,11 @@ impl ImportRun {
                 };
                 // A store keeps what it checked before a crash (its record is on disk).
                 let crashed = if req.store.is_some() {
-                    "the import crashed (a bug); any groups it wrote and checked are kept: \
-                     Import into the same store goes on from there"
+                    format!(
+                        "the import crashed (a bug); any groups it wrote and checked are kept{GO_ON}"
+                    )
                 } else {
-                    "the import crashed (a bug); nothing was written"
+                    "the import crashed (a bug); nothing was written".to_owned()
                 };
                 let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                     let job = Job::new(&progress, &flag);
@@ -243,7 +244,7 @@ impl ImportRun {
                 }));
                 let outcome = match result {
                     Ok(r) => r.map_err(|e| failure_line(&e)),
-                    Err(_) => Err(crashed.into()),
+                    Err(_) => Err(crashed),
                 };
                 let _ = tx.send(outcome);
                 repaint();
@@ -288,11 +289,14 @@ impl Drop for ImportRun {
     }
 }
 
+/// What the window adds to a line saying that a store import stopped and kept groups.
+const GO_ON: &str = ": Import into the same store goes on from there";
+
 /// A failed import in one line for the window; a stopped store import says how to go on in
 /// the workbench's terms.
 fn failure_line(e: &VideoError) -> String {
     match e {
-        VideoError::Kept { .. } => format!("{e}: Import into the same store goes on from there"),
+        VideoError::Kept { .. } => format!("{e}{GO_ON}"),
         e => e.to_string(),
     }
 }
@@ -396,16 +400,18 @@ pub fn import_video_ui(ui: &mut Ui, state: &mut VideoImport) -> Option<ImportAct
             ui.weak("(the name ends in .zarr)");
         }
     });
-    let key = (
-        form.clip.clone(),
-        form.out.trim().to_owned(),
-        form.writes_store(),
-    );
-    if state.on_disk.as_ref().map(|d| &d.key) != Some(&key) {
+    let looked = state.on_disk.as_ref().is_some_and(|d| {
+        d.key.0 == form.clip && d.key.1 == form.out.trim() && d.key.2 == form.writes_store()
+    });
+    if !looked {
         state.on_disk = Some(OnDisk {
             files: form.check_files(),
             kept: form.kept_groups(),
-            key,
+            key: (
+                form.clip.clone(),
+                form.out.trim().to_owned(),
+                form.writes_store(),
+            ),
         });
     }
     let files = state.on_disk.as_ref().map(|d| d.files.clone());

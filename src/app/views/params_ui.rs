@@ -131,7 +131,12 @@ fn section(
 
 /// Rows of one params table, `kind "label" field (further arguments);` each: a call of `kind`
 /// (`num`, `log_num`, `check` or `choice`) on the field, its TOML key `table.field`.
+/// A literal table builds its keys at compile time; a table named at run time (the border fit,
+/// shared by `edges` and `still`) formats them.
 macro_rules! rows {
+    ($ui:expr, $table:literal, $s:expr; $($kind:ident $text:literal $field:ident ($($arg:expr),*);)*) => {
+        $($kind($ui, $text, concat!($table, ".", stringify!($field)), &mut $s.$field $(, $arg)*);)*
+    };
     ($ui:expr, $table:expr, $s:expr; $($kind:ident $text:literal $field:ident ($($arg:expr),*);)*) => {
         $($kind($ui, $text, &format!("{}.{}", $table, stringify!($field)), &mut $s.$field $(, $arg)*);)*
     };
