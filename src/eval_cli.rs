@@ -81,7 +81,7 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
             text += &format!("r            {:.4}\n", scores.r);
             text += &format!("envelope r   {}\n", scores.envelope_r_text(4));
             text += &format!("SNR          {:.2} dB\n", scores.snr_db);
-            text += &format!("lag          {} samples\n", scores.lag_samples);
+            text += &format!("lag          {} samples\n", scores.lag_text(3));
             text += &format!("samples      {}\n", scores.samples);
             if let Some(i) = scores.inverted {
                 text += &format!(

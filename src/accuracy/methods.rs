@@ -161,7 +161,9 @@ mod tests {
         for (name, s) in [("flow", &m.flow), ("edges", &m.edges), ("fused", &m.fused)] {
             eprintln!(
                 "{name:16} r {:.4} SNR {:6.2} dB lag {}",
-                s.r, s.snr_db, s.lag_samples
+                s.r,
+                s.snr_db,
+                s.lag_text(3)
             );
         }
         for b in m.fusion.iter().flat_map(|f| &f.blocks) {

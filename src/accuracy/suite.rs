@@ -126,7 +126,7 @@ pub fn run_suite(
         "Made by `groovescope accuracy{}` (groovescope {}, {} threads). Every figure is measured \
          against the generator's ground truth: the reference sound of a rendered scan or the \
          true depth map of a rendered scene. r: Pearson r of the waveforms at the best lag \
-         (±0.3 ms); env r: r of the peak envelopes; SNR: 10·log10(Σref²/Σ(ref − g·rec)²) after \
+         (searched within ±0.3 ms, refined to a fraction of a sample); env r: r of the peak envelopes; SNR: 10·log10(Σref²/Σ(ref − g·rec)²) after \
          the best gain (a DC offset counts as noise); SNR(r): the SNR that r alone implies, \
          10·log10(r²/(1 − r²)). Steady tones have flat envelopes, so their tables leave \
          envelope r out.",

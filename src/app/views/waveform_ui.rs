@@ -159,7 +159,7 @@ pub fn waveform_ui(
                         s.r,
                         s.envelope_r_text(3),
                         s.snr_db,
-                        s.lag_samples
+                        s.lag_text(2)
                     ));
                     if let Some(i) = s.inverted {
                         ui.colored_label(

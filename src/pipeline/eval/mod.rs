@@ -6,11 +6,14 @@
 //! overlapping parts from sums kept only near where an overlap can start or end, so the
 //! search costs O(N log max_lag) in time and O(max_lag) in memory beside the two signals (a
 //! whole side scores in the memory of a clip; a window as wide as the signals costs one FFT
-//! of both).
+//! of both). The best whole-sample lag is then refined to a fraction of a sample, and every
+//! score is measured there (`eval::fraction`): a sub-sample delay is not noise.
 
 use serde::{Deserialize, Serialize};
 
 use super::dsp::lag_cross_correlation;
+
+mod fraction;
 
 /// Fewest overlapping samples for any score.
 const MIN_OVERLAP_SAMPLES: usize = 16;
@@ -33,20 +36,24 @@ const MAX_SNR_DB: f64 = 300.0;
 /// Scores of a recovered signal against its reference.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Scores {
-    /// Pearson r of the waveforms at the best lag (negative when the recovered signal is
+    /// Pearson r of the waveforms at the refined lag (negative when the recovered signal is
     /// inverted; the lag maximises the signed r, so a polarity error shows).
     pub r: f64,
-    /// Pearson r of the peak envelopes at the best lag (see [`peak_envelope`]); `None` when
+    /// Pearson r of the peak envelopes at the refined lag (see [`peak_envelope`]); `None` when
     /// the overlap is shorter than 10 envelope blocks (50 ms) or the reference's envelope is
     /// steady (a tone: within 1 % of its peak).
     pub envelope_r: Option<f64>,
-    /// SNR (dB) of the recovered signal after best gain and lag:
+    /// SNR (dB) of the recovered signal after best gain, at the refined lag:
     /// 10·log10(Σref² / Σ(ref − g·rec)²) with the least-squares g. For rec = ref + noise this
     /// reads 10·log10(1 + S/N), within 0.05 dB of the true S/N above 20 dB.
     pub snr_db: f64,
-    /// Best lag in samples: `reference[i] ≈ g·recovered[i + lag]` (positive: recovered is late).
+    /// Best whole-sample lag: `reference[i] ≈ g·recovered[i + lag]` (positive: recovered is
+    /// late).
     pub lag_samples: i64,
-    /// Samples compared (the overlap at the best lag).
+    /// That lag refined to a fraction of a sample (within one sample of it): the scores are
+    /// measured at it, the reference read between its samples (see the module docs).
+    pub lag_refined_samples: f64,
+    /// Samples compared (the overlap at the refined lag).
     pub samples: usize,
     /// Where the recovered signal correlates more strongly inverted than upright (its most
     /// negative r beats `r` in size): that r and its lag. Its polarity is likely reversed (a
@@ -77,6 +84,16 @@ impl Scores {
             },
             |e| format!("{e:.decimals$}"),
         )
+    }
+
+    /// The refined lag with `decimals` decimals (a lag that rounds to zero reads `0.000`, not
+    /// `-0.000`).
+    #[must_use]
+    pub fn lag_text(&self, decimals: usize) -> String {
+        let scale = 10f64.powi(i32::try_from(decimals).unwrap_or(9).min(9));
+        // Adding +0 turns a rounded −0 into 0.
+        let lag = (self.lag_refined_samples * scale).round() / scale + 0.0;
+        format!("{lag:.decimals$}")
     }
 
     /// The scores on one line: `r = 0.973, envelope r = 0.991, SNR = 12.7 dB`, and what an
@@ -321,12 +338,12 @@ pub fn evaluate(
         .filter(|&(nr, _)| -nr > best_r.max(0.0) + INVERTED_MARGIN)
         .map(|(r, lag_samples)| Inverted { r, lag_samples });
 
-    // Exact scores on the aligned overlap (direct sums, not differences of running sums).
-    let (lo, hi, ylo) = lag_overlap(n_ref, n_rec, lag)?;
-    let len = hi - lo;
-    let ref_part = reference.get(lo..hi)?;
-    let rec_part = recovered.get(ylo..ylo + len)?;
-    let r = pearson(rec_part, ref_part);
+    // Exact scores at the lag refined to a fraction of a sample (direct sums, not differences
+    // of running sums).
+    let aligned = fraction::refine(reference, recovered, lag)?;
+    let rec_part = recovered.get(aligned.lo..aligned.hi)?;
+    let ref_part = aligned.reference.as_slice();
+    let (len, r) = (rec_part.len(), aligned.r);
     let (mut srr, mut sry, mut syy) = (0.0, 0.0, 0.0);
     for (a, b) in ref_part.iter().zip(rec_part) {
         let (a, b) = (val(a), val(b));
@@ -362,6 +379,7 @@ pub fn evaluate(
         envelope_r,
         snr_db,
         lag_samples: lag,
+        lag_refined_samples: aligned.lag,
         samples: len,
         inverted,
     })
@@ -369,262 +387,4 @@ pub fn evaluate(
 
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // tests unwrap known-good results
-mod tests {
-    use super::*;
-    use std::f64::consts::PI;
-
-    const FS: u32 = 44_100;
-
-    /// A deterministic broadband test signal: an amplitude-modulated chord.
-    fn music(n: usize) -> Vec<f32> {
-        (0..n)
-            .map(|i| {
-                let t = i as f64 / f64::from(FS);
-                let env = 0.6 + 0.4 * (2.0 * PI * 3.0 * t).sin();
-                (env * (0.5 * (2.0 * PI * 440.0 * t).sin()
-                    + 0.3 * (2.0 * PI * 1234.5 * t).sin()
-                    + 0.2 * (2.0 * PI * 97.0 * t).sin())) as f32
-            })
-            .collect()
-    }
-
-    /// Deterministic white-ish noise (xorshift), zero mean, unit variance.
-    fn noise(n: usize, seed: u64) -> Vec<f32> {
-        let mut s = seed.max(1);
-        (0..n)
-            .map(|_| {
-                // Sum of 4 uniforms ≈ Gaussian; variance 4/12 → scale by √3.
-                let mut acc = 0.0;
-                for _ in 0..4 {
-                    s ^= s << 13;
-                    s ^= s >> 7;
-                    s ^= s << 17;
-                    acc += (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
-                }
-                (acc * 3f64.sqrt()) as f32
-            })
-            .collect()
-    }
-
-    fn energy(s: &[f32]) -> f64 {
-        s.iter().map(|&v| f64::from(v).powi(2)).sum()
-    }
-
-    #[test]
-    fn identical_signals_score_perfectly() {
-        let x = music(22_050);
-        let s = evaluate(&x, &x, 100, FS).unwrap();
-        assert!((s.r - 1.0).abs() < 1e-9, "{s:?}");
-        assert!((s.envelope_r.unwrap() - 1.0).abs() < 1e-9, "{s:?}");
-        assert!(s.snr_db > 100.0, "{s:?}");
-        assert_eq!(s.lag_samples, 0);
-        assert_eq!(s.samples, x.len());
-    }
-
-    #[test]
-    fn a_delay_is_found_with_its_sign() {
-        let x = music(22_050);
-        for d in [7usize, 1, 33] {
-            // Recovered is late by d samples.
-            let mut late = vec![0.0f32; d];
-            late.extend_from_slice(&x);
-            let s = evaluate(&late, &x, 50, FS).unwrap();
-            assert_eq!(s.lag_samples, d as i64, "{s:?}");
-            assert!(s.r > 0.999_999 && s.snr_db > 100.0, "{s:?}");
-            // Recovered is early by d samples.
-            let s = evaluate(&x[d..], &x, 50, FS).unwrap();
-            assert_eq!(s.lag_samples, -(d as i64), "{s:?}");
-            assert!(s.r > 0.999_999, "{s:?}");
-        }
-        // A delay outside the search range is not found.
-        let mut late = vec![0.0f32; 60];
-        late.extend_from_slice(&x);
-        let s = evaluate(&late, &x, 50, FS).unwrap();
-        assert!(s.r < 0.99, "{s:?}");
-    }
-
-    #[test]
-    fn known_snr_is_measured() {
-        let x = music(44_100);
-        let e = energy(&x) / x.len() as f64;
-        for target_db in [10.0, 20.0, 30.0] {
-            let nz = noise(x.len(), 7);
-            let en = energy(&nz) / nz.len() as f64;
-            let k = (e / en / 10f64.powf(target_db / 10.0)).sqrt() as f32;
-            let rec: Vec<f32> = x.iter().zip(&nz).map(|(a, b)| 2.5 * (a + k * b)).collect();
-            let s = evaluate(&rec, &x, 20, FS).unwrap();
-            assert!(
-                (s.snr_db - target_db).abs() < 0.5,
-                "{target_db}: {} ({s:?})",
-                s.snr_db
-            );
-            assert_eq!(s.lag_samples, 0);
-            let expected_r = (1.0 / (1.0 + 10f64.powf(-target_db / 10.0))).sqrt();
-            assert!((s.r - expected_r).abs() < 0.01, "{s:?} vs {expected_r}");
-        }
-    }
-
-    #[test]
-    fn inverted_and_scaled_signals() {
-        let x = music(10_000);
-        let inv: Vec<f32> = x.iter().map(|v| -0.3 * v + 0.1).collect();
-        // The lag maximises the signed r: a polarity error shows as a poor score rather than
-        // hiding behind a half-period lag on tonal material.
-        let s = evaluate(&inv, &x, 30, FS).unwrap();
-        assert!(s.r < 0.5, "{s:?}");
-        // ... and is named: inverted, the recovered signal reads r = −1 at lag 0.
-        let inverted = s.inverted.unwrap();
-        assert!(
-            (inverted.r + 1.0).abs() < 1e-6 && inverted.lag_samples == 0,
-            "{s:?}"
-        );
-        assert!(
-            s.line().contains("polarity is likely reversed"),
-            "{}",
-            s.line()
-        );
-        assert_eq!(evaluate(&x, &x, 30, FS).unwrap().inverted, None);
-        // A tone at a fractional lag, upright, searched over more than a period: inverted at
-        // half a period it correlates about as well, which says nothing about polarity.
-        for f in [500.0, 2000.0, 5000.0] {
-            let w = 2.0 * PI * f / f64::from(FS);
-            let tone = |shift: f64| -> Vec<f32> {
-                (0..4410)
-                    .map(|i| (w * (i as f64 + shift)).sin() as f32)
-                    .collect()
-            };
-            let s = evaluate(&tone(0.37), &tone(0.0), 220, FS).unwrap();
-            assert_eq!(s.inverted, None, "{f} Hz: {s:?}");
-        }
-        assert!((pearson(&inv, &x) + 1.0).abs() < 1e-9);
-        // The gain-only SNR does not remove a DC offset: it counts as noise.
-        assert!(s.snr_db < 20.0, "{s:?}");
-        let scaled: Vec<f32> = x.iter().map(|v| 0.3 * v).collect();
-        let s = evaluate(&scaled, &x, 30, FS).unwrap();
-        assert!(s.snr_db > 100.0, "{s:?}");
-        assert!(s.envelope_r.unwrap() > 0.999, "{s:?}");
-    }
-
-    #[test]
-    fn unrelated_signals_score_low() {
-        let a = noise(20_000, 1);
-        let b = noise(20_000, 99);
-        let s = evaluate(&a, &b, 40, FS).unwrap();
-        assert!(s.r.abs() < 0.05, "{s:?}");
-        assert!(s.snr_db < 0.1, "{s:?}");
-    }
-
-    #[test]
-    fn clips_under_fifty_ms_get_no_envelope_r() {
-        let tone = |ms: usize| -> Vec<f32> {
-            (0..44_100 * ms / 1000)
-                .map(|i| (i as f32 * 0.07).sin() * (1.0 + (i as f32 * 0.002).sin()))
-                .collect()
-        };
-        let short = tone(30);
-        let s = evaluate(&short, &short, 0, 44_100).unwrap();
-        assert!(s.r > 0.999 && s.envelope_r.is_none(), "{s:?}");
-        assert_eq!(s.envelope_r_text(3), "n/a (< 50 ms or steady)");
-        let long = tone(60);
-        let s = evaluate(&long, &long, 0, 44_100).unwrap();
-        assert!(s.envelope_r.is_some_and(|e| e > 0.999), "{s:?}");
-        assert_eq!(s.envelope_r_text(2), "1.00");
-    }
-
-    #[test]
-    fn a_steady_tone_gets_no_envelope_r_and_a_fading_one_does() {
-        let tone = |fade: f32| -> Vec<f32> {
-            (0..48_000)
-                .map(|i| (i as f32 * 0.0916).sin() * (1.0 - fade * i as f32 / 48_000.0))
-                .collect()
-        };
-        let steady = tone(0.0);
-        let s = evaluate(&steady, &steady, 0, 48_000).unwrap();
-        assert!(s.r > 0.999 && s.envelope_r.is_none(), "{s:?}");
-        let fading = tone(0.5);
-        let s = evaluate(&fading, &fading, 0, 48_000).unwrap();
-        assert!(s.envelope_r.is_some_and(|e| e > 0.999), "{s:?}");
-    }
-
-    #[test]
-    fn envelope_r_tracks_loudness_not_waveform() {
-        // Same envelope, different carrier: waveform r is low, envelope r high.
-        let n = 44_100;
-        let env = |t: f64| 0.5 + 0.45 * (2.0 * PI * 2.0 * t).sin();
-        let a: Vec<f32> = (0..n)
-            .map(|i| {
-                let t = i as f64 / f64::from(FS);
-                (env(t) * (2.0 * PI * 500.0 * t).sin()) as f32
-            })
-            .collect();
-        let b: Vec<f32> = (0..n)
-            .map(|i| {
-                let t = i as f64 / f64::from(FS);
-                (env(t) * (2.0 * PI * 733.0 * t).sin()) as f32
-            })
-            .collect();
-        let s = evaluate(&a, &b, 10, FS).unwrap();
-        assert!(s.r.abs() < 0.1, "{s:?}");
-        assert!(s.envelope_r.unwrap() > 0.98, "{s:?}");
-    }
-
-    #[test]
-    fn too_short_or_empty_is_none() {
-        assert!(evaluate(&[1.0; 10], &[1.0; 10], 2, FS).is_none());
-        assert!(evaluate(&[], &[1.0; 100], 2, FS).is_none());
-        // Constant inputs: defined, r = 0 (no variance), no panic.
-        let s = evaluate(&[1.0; 100], &[1.0; 100], 5, FS).unwrap();
-        assert_eq!(s.r, 0.0);
-    }
-
-    #[test]
-    fn fft_search_matches_direct_search() {
-        // Equal and unequal lengths either way, the recovered sound late or early, a window
-        // wider than both signals (one FFT of both whole), and signals long enough to be
-        // correlated block by block; the reference is the recovered sound's source.
-        let source = music(50_000);
-        let noisy: Vec<f32> = source
-            .iter()
-            .zip(noise(50_000, 5))
-            .map(|(a, b)| 0.7 * a + 0.5 * b)
-            .collect();
-        for (n_ref, n_rec, shift, max_lag) in [
-            (3000, 3000, 0, 40usize),
-            (3000, 1700, 25, 40),
-            (1700, 3000, -30, 40),
-            (400, 2500, 7, 3000),
-            (2500, 400, 900, 3000),
-            (45_000, 41_000, -12, 40),
-        ] {
-            let x = &source[1000..1000 + n_ref];
-            let start = (1000 + shift) as usize;
-            let y = &noisy[start..start + n_rec];
-            let s = evaluate(y, x, max_lag, FS).unwrap();
-            // Direct O(n·lag) search with pearson().
-            let min_overlap = (n_ref.min(n_rec) / 2).max(16);
-            let mut best = (f64::NEG_INFINITY, 0i64);
-            for lag in -(max_lag as i64)..=max_lag as i64 {
-                let (lo, hi) = overlap(x.len(), y.len(), lag);
-                if hi - lo < min_overlap {
-                    continue;
-                }
-                let ylo = (lo as i64 + lag) as usize;
-                let r = pearson(&y[ylo..ylo + hi - lo], &x[lo..hi]);
-                if r > best.0 + 1e-12 {
-                    best = (r, lag);
-                }
-            }
-            let case = format!("{n_ref} / {n_rec}, shift {shift}, window {max_lag}");
-            assert_eq!(s.lag_samples, best.1, "{case}");
-            assert!((s.r - best.0).abs() < 1e-9, "{case}: {} vs {}", s.r, best.0);
-        }
-    }
-
-    #[test]
-    fn pearson_basics() {
-        assert!((pearson(&[1.0, 2.0, 3.0], &[2.0, 4.0, 6.5]) - 0.9986).abs() < 1e-3);
-        assert!((pearson(&[1.0, 2.0, 3.0], &[3.0, 2.0, 1.0]) + 1.0).abs() < 1e-12);
-        assert_eq!(pearson(&[1.0], &[1.0]), 0.0);
-        assert_eq!(pearson(&[1.0, 1.0, 1.0], &[1.0, 2.0, 3.0]), 0.0);
-    }
-}
+mod tests;
