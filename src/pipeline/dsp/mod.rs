@@ -316,8 +316,7 @@ fn run_forward_backward(section: &Biquad, samples: &mut [f32], pad: usize) {
     let (Some(&first), Some(&last)) = (samples.first(), samples.last()) else {
         return;
     };
-    let mut lead: Vec<f32> = (1..=pad).rev().map(|k| 2.0 * first - samples[k]).collect();
-    let mut tail: Vec<f32> = (1..=pad).map(|k| 2.0 * last - samples[n - 1 - k]).collect();
+    let (mut lead, mut tail) = odd_extension(samples, pad);
     let start = lead.first().copied().unwrap_or(first);
     section.settled(f64::from(start)).run(
         lead.iter_mut()
@@ -328,6 +327,27 @@ fn run_forward_backward(section: &Biquad, samples: &mut [f32], pad: usize) {
     section
         .settled(f64::from(end))
         .run(tail.iter_mut().rev().chain(samples.iter_mut().rev()));
+}
+
+/// `len` samples of `samples`' odd reflection about each end, in time order: before the start
+/// `2·x[0] − x[k]` for `k = len … 1`, after the end `2·x[n−1] − x[n−1−k]` for `k = 1 … len`.
+/// The reflection carries the signal's level and slope past its ends, so a filter run over
+/// the extended signal meets no step there. Where `len` reaches further than the signal
+/// (`k > n − 1`), the farthest reflected value is held. Empty for an empty signal.
+pub(crate) fn odd_extension(samples: &[f32], len: usize) -> (Vec<f32>, Vec<f32>) {
+    let n = samples.len();
+    let (Some(&first), Some(&last)) = (samples.first(), samples.last()) else {
+        return (Vec::new(), Vec::new());
+    };
+    let far = n - 1;
+    let lead = (1..=len)
+        .rev()
+        .map(|k| 2.0 * first - samples[k.min(far)])
+        .collect();
+    let tail = (1..=len)
+        .map(|k| 2.0 * last - samples[far - k.min(far)])
+        .collect();
+    (lead, tail)
 }
 
 /// Time constants of the DC block over which [`settle_level`] reads a clip's first samples.
