@@ -48,7 +48,7 @@ pub(super) fn resampler_delay_in(ratio: f64) -> f64 {
 /// within about 1/`DELAY_PAD_SEARCH` sample for irrational ratios; upsampling by more than 16
 /// tries fewer counts, so that the lead costs at most `DELAY_PAD_MAX_OUTPUT` output samples).
 /// The lead and a tail as long are the clip's odd reflection about its ends
-/// ([`odd_extension`]), so the filter meets no step at either end. Non-finite samples count
+/// (`dsp::odd_extension`), so the filter meets no step at either end. Non-finite samples count
 /// as 0.
 ///
 /// # Errors
@@ -179,7 +179,7 @@ const DELAY_HALF_TAPS: usize = 32;
 /// `samples` read from position `start` (in samples, ≥ 0, may be fractional) on: output `k` is
 /// the band-limited value at `start + k` — a whole `start` is an exact slice, a fractional one
 /// is interpolated by a Blackman-windowed sinc of 2·32 taps (past either end the samples are
-/// continued by their odd reflection, [`odd_extension`]). Used to align a reference sound to a
+/// continued by their odd reflection, `dsp::odd_extension`). Used to align a reference sound to a
 /// clip that starts between its samples.
 #[must_use]
 pub fn read_from(samples: &[f32], start: f64) -> Vec<f32> {
