@@ -507,7 +507,8 @@ fn a_side_long_transfer_is_scored_in_bounded_memory() {
     // Three minutes at 44.1 kHz, scored against a copy with noise 13.1 dB down (the score
     // reads 10·log10(1 + S/N) = 13.3 dB), under a 600 MB address-space limit: the whole-signal
     // FFT the lag search used before held six buffers of 2^24 points (1.7 GB resident); by
-    // blocks it needs about 100 MB.
+    // blocks it needs about 100 MB, and the lag's refinement to a fraction of a sample 32 MB
+    // more (the reference read at the fraction: 4 bytes a sample).
     let dir = tempfile::tempdir().unwrap();
     let n = 180 * 44_100;
     let mut rng = common::Rng(0x5eed);
@@ -531,6 +532,8 @@ fn a_side_long_transfer_is_scored_in_bounded_memory() {
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(json["samples"].as_u64(), Some(n as u64), "{json}");
     assert_eq!(json["lag_samples"].as_i64(), Some(0), "{json}");
+    let fraction = json["lag_refined_samples"].as_f64().unwrap();
+    assert!(fraction.abs() < 0.05, "{json}");
     let snr = json["snr_db"].as_f64().unwrap();
     assert!((snr - 13.3).abs() < 0.2, "{json}");
 }
