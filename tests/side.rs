@@ -507,8 +507,8 @@ fn a_side_long_transfer_is_scored_in_bounded_memory() {
     // Three minutes at 44.1 kHz, scored against a copy with noise 13.1 dB down (the score
     // reads 10·log10(1 + S/N) = 13.3 dB), under a 600 MB address-space limit: the whole-signal
     // FFT the lag search used before held six buffers of 2^24 points (1.7 GB resident); by
-    // blocks it needs about 100 MB, and the lag's refinement to a fraction of a sample 32 MB
-    // more (the reference read at the fraction: 4 bytes a sample).
+    // blocks it needs about 100 MB, and the lag's refinement to a fraction of a sample one
+    // buffer of the reference read at the fraction (4 bytes a sample, 32 MB).
     let dir = tempfile::tempdir().unwrap();
     let n = 180 * 44_100;
     let mut rng = common::Rng(0x5eed);

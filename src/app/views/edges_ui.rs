@@ -7,12 +7,10 @@ use super::frame_ui::StageData;
 use super::{finite_runs, hovered_pixel, image_item, image_plot, wall_curves};
 use crate::app::textures::Textures;
 use crate::io::Cut;
-use crate::pipeline::edges::{BorderId, BorderTrack, Edges};
+use crate::pipeline::edges::{BorderTrack, Edges};
 use crate::pipeline::{Stage, StageCache};
 
-/// Colour of the warnings above the plots.
-const WARN_COLOUR: Color32 = Color32::from_rgb(235, 150, 60);
-/// The borders' colours, in [`BorderId`] order: each land border warm, each bottom border cool.
+/// The borders' colours, in [`crate::pipeline::edges::BorderId`] order: each land border warm, each bottom border cool.
 const BORDER_COLOURS: [Color32; 4] = [
     Color32::from_rgb(255, 170, 40),
     Color32::from_rgb(0, 200, 80),
@@ -25,17 +23,6 @@ const BORDER_COLOURS: [Color32; 4] = [
 pub struct EdgesViewState {
     /// Last read-out.
     pub readout: Option<String>,
-}
-
-/// A border's name in the view.
-#[must_use]
-pub fn border_name(id: BorderId) -> &'static str {
-    match id {
-        BorderId::LeftLand => "left land",
-        BorderId::LeftBottom => "left bottom",
-        BorderId::RightBottom => "right bottom",
-        BorderId::RightLand => "right land",
-    }
 }
 
 /// Where a border's fine fit lies on the reference frame, per sample: the column (the mean of
@@ -67,7 +54,7 @@ pub fn summary(e: &Edges) -> String {
         .iter()
         .map(|b| {
             let found = b.y_um.iter().filter(|y| y.is_finite()).count();
-            format!("{} {found}/{n}", border_name(b.id))
+            format!("{} {found}/{n}", b.id.name())
         })
         .collect();
     let bottom = if e.bottom_depth_um.is_finite() {
@@ -103,9 +90,7 @@ impl EdgesViewState {
             return;
         };
         ui.label(summary(&e));
-        for w in &e.warnings {
-            ui.colored_label(WARN_COLOUR, w);
-        }
+        super::guidance::warnings_ui(ui, &e.warnings, 3);
         let plot_h = data.height * 0.35;
         let start = e.positions_um.first().copied().unwrap_or(0.0);
         let curves = e
@@ -138,7 +123,7 @@ impl EdgesViewState {
                 for (b, pts) in e.borders.iter().zip(&points) {
                     let seen: Vec<[f64; 2]> = pts.iter().flatten().copied().collect();
                     plot_ui.add(
-                        Points::new(border_name(b.id), PlotPoints::from(seen))
+                        Points::new(b.id.name(), PlotPoints::from(seen))
                             .color(BORDER_COLOURS[b.id as usize])
                             .radius(1.5),
                     );
@@ -177,12 +162,12 @@ fn readout(e: &Edges, points: &[Vec<Option<[f64; 2]>>], x: f64) -> String {
         if y.is_finite() {
             text += &format!(
                 "  ·  {}: {y:.3} ± {:.3} µm, weight {:.2}",
-                border_name(b.id),
+                b.id.name(),
                 b.std_error_um.get(i).copied().unwrap_or(f64::NAN),
                 b.weight.get(i).copied().unwrap_or(f64::NAN)
             );
         } else {
-            text += &format!("  ·  {}: not found", border_name(b.id));
+            text += &format!("  ·  {}: not found", b.id.name());
         }
     }
     text

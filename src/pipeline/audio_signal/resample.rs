@@ -124,18 +124,17 @@ pub fn resample(samples: &[f32], from_hz: f64, to_hz: u32) -> Result<Vec<f32>, S
     // The clip continued past each end by its odd reflection, not by silence: a band-limited
     // filter over a step to silence rings through the clip's first and last samples (a 1 kHz
     // tone of 8 ms, 48 → 44.1 kHz, came out 33.5 dB clean; reflected, 63.7 dB).
-    // The tail reaches as far as the lead (two samples more for the resampler's delay).
-    let cleaned: Vec<f32> = samples.iter().map(clean).collect();
-    let (lead, tail) = odd_extension(&cleaned, pad.max(reach + 2));
-    let lead = lead.get(lead.len() - pad..).unwrap_or(&[]);
-    let tail = tail.get(..reach + 2).unwrap_or(&[]);
-    let mut input: Vec<f64> = Vec::with_capacity(pad + cleaned.len() + tail.len());
-    input.extend(
-        lead.iter()
-            .chain(&cleaned)
-            .chain(tail)
-            .map(|&v| f64::from(v)),
-    );
+    // The tail reaches as far as the filter (two samples more for the resampler's delay). A
+    // reflection reads only the samples it mirrors, so only the ends are cleaned for it.
+    let tail_len = reach + 2;
+    let cleaned = |part: &[f32]| part.iter().map(clean).collect::<Vec<f32>>();
+    let n = samples.len();
+    let (lead, _) = odd_extension(&cleaned(&samples[..(pad + 1).min(n)]), pad);
+    let (_, tail) = odd_extension(&cleaned(&samples[n - (tail_len + 1).min(n)..]), tail_len);
+    let mut input: Vec<f64> = Vec::with_capacity(pad + n + tail_len);
+    input.extend(lead.iter().map(|&v| f64::from(v)));
+    input.extend(samples.iter().map(|v| f64::from(clean(v))));
+    input.extend(tail.iter().map(|&v| f64::from(v)));
     let mut out: Vec<f64> = Vec::with_capacity(needed + RESAMPLE_CHUNK);
     let mut buf = resampler.output_buffer_allocate(true);
     let mut chunks = input.chunks_exact(RESAMPLE_CHUNK);

@@ -131,13 +131,13 @@ pub(super) fn refine(reference: &[f32], recovered: &[f32], lag: i64) -> Option<A
         (coarse.0 + COARSE_STEP).min(1.0),
     );
     let (d, r) = best(coarse, around);
-    let mut reference_read = Vec::with_capacity(compared.len());
-    read_into(reference, span.clone(), -(lag_f + d), &mut reference_read);
+    // The search's buffer holds its last fraction: read the best one into it.
+    read_into(reference, span.clone(), -(lag_f + d), &mut buffer);
     Some(Aligned {
         lag: lag_f + d,
         lo: span.start,
         hi: span.end,
-        reference: reference_read,
+        reference: buffer,
         r,
     })
 }
