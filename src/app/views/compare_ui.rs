@@ -82,6 +82,20 @@ pub fn compare_window(
     actions
 }
 
+/// What the comparison did to B's timing: `B aligned: it was 1.83 samples (0.04 ms) early`.
+#[must_use]
+pub fn delay_text(delay_samples: f64, rate_hz: u32) -> String {
+    if delay_samples == 0.0 {
+        return "B already aligned with A".to_string();
+    }
+    let ms = delay_samples.abs() / f64::from(rate_hz.max(1)) * 1000.0;
+    format!(
+        "B aligned: it was {:.2} samples ({ms:.2} ms) {}",
+        delay_samples.abs(),
+        if delay_samples > 0.0 { "late" } else { "early" }
+    )
+}
+
 fn body(
     ui: &mut Ui,
     state: &mut CompareState,
@@ -151,6 +165,11 @@ fn body(
             agreement_line(&cmp.overall),
             cmp.groups.len()
         ));
+        ui.label(delay_text(cmp.b_delay_samples, cmp.a.rate_hz()))
+            .on_hover_text(
+                "each decoder delays the sound a little of its own: B is moved by its delay \
+                 against A before the figures, the difference and listening",
+            );
         if let Some(w) = cmp.worst_group() {
             ui.label(format!("worst group {}: {}", w.group, agreement_line(w)));
         }
