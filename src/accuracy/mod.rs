@@ -230,7 +230,8 @@ pub fn speak(phrase: &str, dir: &Path) -> Option<PathBuf> {
 }
 
 /// First time (s) the sound rises above 2% of its peak (skips leading silence).
-fn onset_secs(audio: &Audio) -> f64 {
+#[must_use]
+pub fn onset_secs(audio: &Audio) -> f64 {
     let Some(ch) = audio.channels.first() else {
         return 0.0;
     };

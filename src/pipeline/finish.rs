@@ -162,20 +162,68 @@ fn groove_speed_along<S: GroupSignals + ?Sized>(groups: &S, grid: &StitchedSigna
         .collect()
 }
 
+/// What the edge method mended in a clip's displacement tracks.
+#[derive(Clone, Copy, Debug, Default)]
+struct EdgeRepairs {
+    /// Samples put back on the curve as isolated outliers (`edges::despike`).
+    despiked: usize,
+    /// Samples of excursions solved again or left as gaps (`edges::plausible`).
+    excursion_samples: usize,
+}
+
+impl EdgeRepairs {
+    /// A warning line for each repair made.
+    fn warnings(self, params: &PipelineParams) -> Vec<String> {
+        let plural = |n: usize| if n == 1 { ("", "its") } else { ("s", "their") };
+        let mut out = Vec::new();
+        if self.despiked > 0 {
+            let (s, its) = plural(self.despiked);
+            out.push(format!(
+                "{} isolated displacement sample{s} put back on the curve through {its} \
+                 neighbours (edges.despike_sigmas = {})",
+                self.despiked, params.edges.despike_sigmas
+            ));
+        }
+        if self.excursion_samples > 0 {
+            let (s, _) = plural(self.excursion_samples);
+            out.push(format!(
+                "{} displacement sample{s} moved faster than a groove can and {} solved again \
+                 from the track around them, or left as gaps (edges.max_slope = {})",
+                self.excursion_samples,
+                if self.excursion_samples == 1 {
+                    "was"
+                } else {
+                    "were"
+                },
+                params.edges.max_slope
+            ));
+        }
+        out
+    }
+}
+
 /// The edge method's velocity over the clip: the border tracks stitched, combined,
 /// differentiated, and scaled by the groove speed at each sample. With it, on the same grid,
 /// each channel's displacement noise in velocity units (`σ_d·Vt·sin α/Δ`, mm/s per radian per
-/// sample: the edge noise power at ω is its square times ω²; NaN where unknown), and at how
-/// many samples a wall's displacement was put back on the curve as an isolated outlier.
+/// sample: the edge noise power at ω is its square times ω²; NaN where unknown), and what was
+/// mended in the displacement tracks.
 fn edge_velocity<S: GroupSignals + ?Sized>(
     borders: &S,
     spacing_um: f64,
     meta: &ScanMeta,
     params: &PipelineParams,
-) -> Result<(StitchedSignal, StitchedSignal, usize), StageError> {
+) -> Result<(StitchedSignal, StitchedSignal, EdgeRepairs), StageError> {
     let stitched = stitch(borders, spacing_um)?;
     let decoded = decode_border_signal(&stitched, meta.record.cut, 1.0, &params.edges)?;
-    let despiked = decoded.despiked_samples();
+    let repairs = EdgeRepairs {
+        despiked: decoded.despiked_samples(),
+        excursion_samples: decoded
+            .combined
+            .excursions
+            .iter()
+            .map(ExactSizeIterator::len)
+            .sum(),
+    };
     let mut velocity = decoded.velocity;
     let speed = groove_speed_along(borders, &velocity);
     for ch in &mut velocity.channels {
@@ -214,7 +262,7 @@ fn edge_velocity<S: GroupSignals + ?Sized>(
         gaps: Vec::new(),
         ..velocity.clone()
     };
-    Ok((velocity, noise, despiked))
+    Ok((velocity, noise, repairs))
 }
 
 /// Finishes a clip by `params.method` (see the module docs), extended over its silent ends
@@ -232,15 +280,19 @@ pub fn finish_method_clip(
 ) -> Result<FinishedClip, StageError> {
     let spacing_um = super::sampling::native_spacing_um(meta, &params.sound);
     let ends_um = signals.silent_ends_um;
-    let (mut velocity, fusion, despiked) = match params.method {
-        Method::Flow => (stitch(&signals.flow, spacing_um)?, None, 0),
+    let (mut velocity, fusion, repairs) = match params.method {
+        Method::Flow => (
+            stitch(&signals.flow, spacing_um)?,
+            None,
+            EdgeRepairs::default(),
+        ),
         Method::Edges => {
             let (velocity, _, n) = edge_velocity(&signals.borders, spacing_um, meta, params)?;
             (velocity, None, n)
         }
         Method::Fused => {
             let ClipSignals { flow, borders, .. } = signals;
-            let (velocity, noise, despiked) = edge_velocity(&borders, spacing_um, meta, params)?;
+            let (velocity, noise, repairs) = edge_velocity(&borders, spacing_um, meta, params)?;
             drop(borders);
             let flow_velocity = stitch(&flow, spacing_um)?;
             drop(flow);
@@ -255,24 +307,13 @@ pub fn finish_method_clip(
                 groups: fused.groups,
                 blocks: fused.blocks,
             };
-            (fused.signal, Some(report), despiked)
+            (fused.signal, Some(report), repairs)
         }
     };
     extend_with_silence(&mut velocity, ends_um);
     let mut clip = finish_stitched(velocity, params, filter_phase(params.method))?;
     clip.fusion = fusion;
-    if despiked > 0 {
-        let (s, its) = if despiked == 1 {
-            ("", "its")
-        } else {
-            ("s", "their")
-        };
-        clip.warnings.push(format!(
-            "{despiked} isolated displacement sample{s} put back on the curve through {its} \
-             neighbours (edges.despike_sigmas = {})",
-            params.edges.despike_sigmas
-        ));
-    }
+    clip.warnings.extend(repairs.warnings(params));
     Ok(clip)
 }
 

@@ -34,6 +34,7 @@ pub mod differentiator;
 pub mod erf;
 pub mod geometry;
 mod noise;
+pub mod plausible;
 mod predict;
 pub mod profile;
 #[cfg(test)]
@@ -157,6 +158,10 @@ pub struct EdgeParams {
     pub all_frames: bool,
     #[doc = knob!("edges.despike_sigmas")]
     pub despike_sigmas: f64,
+    #[doc = knob!("edges.max_slope")]
+    pub max_slope: f64,
+    #[doc = knob!("edges.max_excursion_samples")]
+    pub max_excursion_samples: usize,
     #[doc = knob!("edges.refine")]
     pub refine: bool,
     #[doc = knob!("edges.hard_width_px")]
@@ -195,6 +200,8 @@ impl Default for EdgeParams {
             weight_window_samples: 32,
             all_frames: true,
             despike_sigmas: DEFAULT_DESPIKE,
+            max_slope: 1.0,
+            max_excursion_samples: 16,
             refine: true,
             hard_width_px: 0.45,
             crossing_sigma_px: 0.05,
@@ -244,6 +251,7 @@ impl EdgeParams {
         check_range("edges.border_sigma_um", self.border_sigma_um, 1e-4, 1e4)?;
         check_range("edges.border_floor_um", self.border_floor_um, 1e-6, 1e4)?;
         check_range("edges.despike_sigmas", self.despike_sigmas, 0.0, 1e3)?;
+        check_range("edges.max_slope", self.max_slope, 0.0, 1e3)?;
         check_range("edges.hard_width_px", self.hard_width_px, 0.0, 100.0)?;
         check_range(
             "edges.crossing_sigma_px",
@@ -596,7 +604,7 @@ pub fn detect_edges(
     let combined = combine_borders(
         &ys,
         &ses,
-        &CombineParams::from_edges(meta.record.cut, params),
+        &CombineParams::from_edges(meta.record.cut, params, spacing),
     );
     for (track, w) in borders.iter_mut().zip(combined.border_weights.iter()) {
         track.weight.clone_from(w);

@@ -29,6 +29,7 @@
 
 use std::ops::Range;
 
+use super::plausible::resolve_excursions;
 use super::profile::lorentzian_weight;
 use crate::meta::Cut;
 
@@ -56,18 +57,26 @@ pub struct CombineParams {
     /// Samples over which a border's squared standard error is averaged (geometrically) into
     /// its weight; 0 or 1 weighs each sample by its own.
     pub weight_window: usize,
+    /// Most a wall may move between neighbouring samples (µm): the steepest groove slope
+    /// times the samples' spacing; 0 = no check ([`super::plausible`]).
+    pub max_step_um: f64,
+    /// Longest excursion solved again (samples).
+    pub max_excursion: usize,
 }
 
 impl CombineParams {
-    /// The edge knobs' combination settings for a scan of `cut`.
+    /// The edge knobs' combination settings for a scan of `cut` whose samples lie
+    /// `spacing_um` apart along the groove.
     #[must_use]
-    pub fn from_edges(cut: Cut, params: &super::EdgeParams) -> Self {
+    pub fn from_edges(cut: Cut, params: &super::EdgeParams, spacing_um: f64) -> Self {
         Self {
             cut,
             sigma_um: params.border_sigma_um,
             floor_um: params.border_floor_um,
             max_bridge: params.max_bridge_samples,
             weight_window: params.weight_window_samples,
+            max_step_um: params.max_slope * spacing_um,
+            max_excursion: params.max_excursion_samples,
         }
     }
 }
@@ -121,6 +130,43 @@ pub struct Combined {
     pub gaps: [Vec<Range<usize>>; 2],
     /// Per wall: sample ranges filled by interpolation.
     pub bridged: [Vec<Range<usize>>; 2],
+    /// Sample ranges where the track moved faster than a groove can and was solved again
+    /// ([`super::plausible`]); a sample still out of reach is a gap.
+    pub excursions: Vec<Range<usize>>,
+}
+
+/// Every sample's solve: `d`, `e`, their covariance (var_d, var_e, cov) and each border's
+/// relative weight.
+pub(super) struct Solves {
+    /// Lateral displacement (µm, NaN = gap).
+    pub d: Vec<f64>,
+    /// `e` (µm; 0 for a lateral cut, NaN = gap).
+    pub e: Vec<f64>,
+    /// (var_d, var_e, cov(d, e)) (µm²).
+    pub cov: Vec<[f64; 3]>,
+    /// Each border's relative weight (0 where not seen).
+    pub rel: Vec<[f64; 4]>,
+}
+
+impl Solves {
+    /// `n` gaps.
+    fn new(n: usize, lateral: bool) -> Self {
+        Self {
+            d: vec![f64::NAN; n],
+            e: vec![if lateral { 0.0 } else { f64::NAN }; n],
+            cov: vec![[f64::NAN; 3]; n],
+            rel: vec![[0.0; 4]; n],
+        }
+    }
+
+    /// Stores sample `j`'s solution, or a gap.
+    pub(super) fn store(&mut self, j: usize, solution: Option<Solution>, lateral: bool) {
+        let (d, e, cov, rel) = solution.unwrap_or((f64::NAN, f64::NAN, [f64::NAN; 3], [0.0; 4]));
+        self.d[j] = d;
+        self.e[j] = if lateral && d.is_finite() { 0.0 } else { e };
+        self.cov[j] = cov;
+        self.rel[j] = rel;
+    }
 }
 
 fn finite_median(mut v: Vec<f64>) -> Option<f64> {
@@ -128,35 +174,76 @@ fn finite_median(mut v: Vec<f64>) -> Option<f64> {
     crate::pipeline::median(v)
 }
 
-/// One sample's robust solve: borders `(k, z = y − c, w)`; returns (d, e, var_d, var_e,
-/// cov, relative weights). `lateral` fixes e = 0.
+/// One sample's solution: d, e, (var_d, var_e, cov), each border's relative weight.
+pub(super) type Solution = (f64, f64, [f64; 3], [f64; 4]);
+
+/// One sample's robust solve: borders `(k, z = y − c, w)`. `lateral` fixes e = 0. The
+/// Lorentzian starts from `start` (d, e) where given. Else it starts from the medians of the
+/// borders, and where that solve rejects a border it starts again from each border's own
+/// reading: the Lorentzian's cost has a minimum for every set of borders that agree, and the
+/// median of four (two of them off, say a dust grain on one corner and a flake at a land) can
+/// start it at the wrong one. The solution whose cost ([`robust_cost`], which counts each
+/// border once, so one border read precisely cannot outvote two that agree) is lower by more
+/// than [`SWITCH_COST`] wins, so borders that agree keep their solve to the bit.
 fn solve_sample(
     obs: &[(usize, f64, f64)],
     lateral: bool,
     sigma: f64,
-) -> Option<(f64, f64, [f64; 3], [f64; 4])> {
+    start: Option<(f64, f64)>,
+) -> Option<Solution> {
+    if let Some(de) = start {
+        return iterate_sample(obs, lateral, sigma, de);
+    }
+    let first = iterate_sample(obs, lateral, sigma, median_start(obs, lateral)?)?;
+    if obs.iter().all(|o| first.3[o.0] >= REJECTED_WEIGHT) {
+        return Some(first);
+    }
+    let e0 = if lateral || !first.1.is_finite() {
+        0.0
+    } else {
+        first.1
+    };
+    let mut best_cost = robust_cost(obs, sigma, &first);
+    let mut best = first;
+    for &(b, z, _) in obs {
+        let Some(alt) = iterate_sample(obs, lateral, sigma, (z - K[b] * e0, e0)) else {
+            continue;
+        };
+        let cost = robust_cost(obs, sigma, &alt);
+        if cost < best_cost - SWITCH_COST {
+            best = alt;
+            best_cost = cost;
+        }
+    }
+    Some(best)
+}
+
+/// How much lower another start's Lorentzian cost must be to replace the median start's
+/// solution: ln 2, the cost of one border at half weight.
+const SWITCH_COST: f64 = std::f64::consts::LN_2;
+
+/// The Lorentzian cost of a solution, each border counted once: `Σ ln(1 + r²/(2σ²))`.
+fn robust_cost(obs: &[(usize, f64, f64)], sigma: f64, sol: &Solution) -> f64 {
+    let (d, e) = (sol.0, if sol.1.is_finite() { sol.1 } else { 0.0 });
+    obs.iter()
+        .map(|&(b, z, _)| {
+            let r = z - d - K[b] * e;
+            (1.0 + r * r / (2.0 * sigma * sigma)).ln()
+        })
+        .sum()
+}
+
+/// [`solve_sample`]'s Lorentzian reweightings from `(d, e)`.
+fn iterate_sample(
+    obs: &[(usize, f64, f64)],
+    lateral: bool,
+    sigma: f64,
+    (mut d, mut e): (f64, f64),
+) -> Option<Solution> {
     if obs.is_empty() {
         return None;
     }
     let k = |b: usize| K.get(b).copied().unwrap_or(0.0);
-    // Median start: d from the borders that do not see e (or all, laterally), e from the lands.
-    let corners: Vec<f64> = obs
-        .iter()
-        .filter(|o| lateral || k(o.0) == 0.0)
-        .map(|o| o.1)
-        .collect();
-    let lands: Vec<(f64, f64)> = obs
-        .iter()
-        .filter(|o| k(o.0) != 0.0)
-        .map(|o| (k(o.0), o.1))
-        .collect();
-    let mut d =
-        finite_median(corners).or_else(|| finite_median(lands.iter().map(|l| l.1).collect()))?;
-    let mut e = if lateral {
-        0.0
-    } else {
-        finite_median(lands.iter().map(|(kk, z)| (z - d) * kk).collect()).unwrap_or(f64::NAN)
-    };
     let mut rel = [0.0; 4];
     let mut cov = [f64::NAN; 3];
     for _ in 0..SAMPLE_ITERATIONS {
@@ -200,6 +287,30 @@ fn solve_sample(
     Some((d, e, cov, rel))
 }
 
+/// The median start of a sample's solve: d from the borders that do not see e (or all,
+/// laterally), e from the lands.
+fn median_start(obs: &[(usize, f64, f64)], lateral: bool) -> Option<(f64, f64)> {
+    let k = |b: usize| K.get(b).copied().unwrap_or(0.0);
+    let corners: Vec<f64> = obs
+        .iter()
+        .filter(|o| lateral || k(o.0) == 0.0)
+        .map(|o| o.1)
+        .collect();
+    let lands: Vec<(f64, f64)> = obs
+        .iter()
+        .filter(|o| k(o.0) != 0.0)
+        .map(|o| (k(o.0), o.1))
+        .collect();
+    let d =
+        finite_median(corners).or_else(|| finite_median(lands.iter().map(|l| l.1).collect()))?;
+    let e = if lateral {
+        0.0
+    } else {
+        finite_median(lands.iter().map(|(kk, z)| (z - d) * kk).collect()).unwrap_or(f64::NAN)
+    };
+    Some((d, e))
+}
+
 /// Combines the four border tracks (record `y` and standard error per sample, µm; NaN = not
 /// seen), all the same length (see the module docs).
 #[must_use]
@@ -211,38 +322,26 @@ pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams)
     let weight = |b: usize, j: usize| -> Option<f64> { weights[b].get(j).copied().flatten() };
     let mut c: [f64; 4] =
         std::array::from_fn(|b| finite_median(y[b][..n].to_vec()).unwrap_or(f64::NAN));
-    let mut d = vec![f64::NAN; n];
-    let mut e = vec![if lateral { 0.0 } else { f64::NAN }; n];
-    let mut cov = vec![[f64::NAN; 3]; n];
-    let mut rel = vec![[0.0; 4]; n];
+    let mut s = Solves::new(n, lateral);
+    let observations = |j: usize, c: &[f64; 4]| -> Vec<(usize, f64, f64)> {
+        (0..4)
+            .filter_map(|b| Some((b, y[b][j] - c[b], weight(b, j)?)))
+            .filter(|o| o.1.is_finite())
+            .collect()
+    };
     for _ in 0..ROUNDS {
         for j in 0..n {
-            let obs: Vec<(usize, f64, f64)> = (0..4)
-                .filter_map(|b| Some((b, y[b][j] - c[b], weight(b, j)?)))
-                .filter(|o| o.1.is_finite())
-                .collect();
-            match solve_sample(&obs, lateral, p.sigma_um) {
-                Some((dj, ej, cj, rj)) => {
-                    d[j] = dj;
-                    e[j] = if lateral { 0.0 } else { ej };
-                    cov[j] = cj;
-                    rel[j] = rj;
-                }
-                None => {
-                    d[j] = f64::NAN;
-                    e[j] = f64::NAN;
-                    rel[j] = [0.0; 4];
-                }
-            }
+            let obs = observations(j, &c);
+            s.store(j, solve_sample(&obs, lateral, p.sigma_um, None), lateral);
         }
         for (b, cb) in c.iter_mut().enumerate() {
             let (mut sw, mut sz) = (0.0, 0.0);
-            for j in 0..n {
+            for (j, &yj) in y[b][..n].iter().enumerate() {
                 let Some(w) = weight(b, j) else { continue };
-                let ej = if K[b] == 0.0 { 0.0 } else { e[j] };
-                let r = y[b][j] - d[j] - K[b] * ej;
+                let ej = if K[b] == 0.0 { 0.0 } else { s.e[j] };
+                let r = yj - s.d[j] - K[b] * ej;
                 if r.is_finite() {
-                    let ww = w * rel[j][b];
+                    let ww = w * s.rel[j][b];
                     sw += ww;
                     sz += ww * r;
                 }
@@ -261,14 +360,18 @@ pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams)
             }
         }
     }
-    if !lateral && let Some(m) = finite_median(e.clone()) {
+    if !lateral && let Some(m) = finite_median(s.e.clone()) {
         // e → e − m moves the lands' constants by ∓m and leaves every border's y alone.
-        for v in &mut e {
+        for v in &mut s.e {
             *v -= m;
         }
         c[0] -= m;
         c[3] += m;
     }
+    let excursions = resolve_excursions(&mut s, p, |j, start| {
+        solve_sample(&observations(j, &c), lateral, p.sigma_um, Some(start))
+    });
+    let Solves { d, e, cov, rel } = s;
     let mut walls_um = [vec![f64::NAN; n], vec![f64::NAN; n]];
     let mut walls_se_um = [vec![f64::NAN; n], vec![f64::NAN; n]];
     for j in 0..n {
@@ -295,6 +398,7 @@ pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams)
     }
     let border_weights = std::array::from_fn(|b| (0..n).map(|j| rel[j][b]).collect());
     Combined {
+        excursions,
         constants_um: c,
         d_um: d,
         e_um: e,
@@ -368,6 +472,8 @@ mod tests {
             floor_um: 0.01,
             max_bridge: 3,
             weight_window: 0,
+            max_step_um: 0.0,
+            max_excursion: 0,
         }
     }
 
@@ -415,6 +521,87 @@ mod tests {
         }
         assert!(c.border_weights[1][12] > 0.5);
         assert!(c.gaps[0].is_empty() && c.gaps[1].is_empty());
+    }
+
+    #[test]
+    fn a_stretch_where_most_borders_are_off_is_solved_again_from_the_track_around_it() {
+        // As on a heavily damaged scan: for five samples dust moves the right bottom corner
+        // 25 µm, a flake moves the left land 45 µm and the right land is not seen, so the
+        // median start falls on the wrong borders; only the left bottom corner is right.
+        let n = 120;
+        let d = |j: usize| 2.0 * (j as f64 * 0.15).sin();
+        let mut y = tracks(n, d, |_| 0.0);
+        let stretch = 50..55;
+        y[0][stretch.clone()].iter_mut().for_each(|v| *v += 45.0);
+        y[2][stretch.clone()].iter_mut().for_each(|v| *v += 25.0);
+        y[3][stretch].fill(f64::NAN);
+        let se: [Vec<f64>; 4] = std::array::from_fn(|_| vec![0.02; n]);
+        let off = combine_borders(&y, &se, &params(Cut::Lateral));
+        assert!(off.excursions.is_empty());
+        assert!(
+            (off.walls_um[0][52] - (3.0 + d(52))).abs() > 10.0,
+            "the median start fails"
+        );
+        // Samples 1 µm apart along the groove, slopes up to 1: the track may move 1 µm a sample.
+        let p = CombineParams {
+            max_step_um: 1.0,
+            max_excursion: 16,
+            ..params(Cut::Lateral)
+        };
+        let c = combine_borders(&y, &se, &p);
+        assert_eq!(c.excursions, vec![50..55]);
+        for j in 0..n {
+            let want = 3.0 + d(j);
+            // One border alone carries the excursion: its own jitter (±0.02 µm) and constant.
+            let tol = if (50..55).contains(&j) { 0.1 } else { 0.05 };
+            assert!(
+                (c.walls_um[0][j] - want).abs() < tol,
+                "{j}: {}",
+                c.walls_um[0][j]
+            );
+        }
+        assert!(c.border_weights[1][52] > 0.5 && c.border_weights[2][52] < REJECTED_WEIGHT);
+    }
+
+    #[test]
+    fn two_borders_that_agree_outvote_one_read_precisely() {
+        // Laterally, z = y − c per border: the left land 40 µm off (a flake), the left bottom
+        // 5 µm off (dust) but read four times as precisely, the two right borders on the
+        // groove. The median of the four (2.5 µm) starts the Lorentzian where the precise
+        // border's weight carries it.
+        let sigma = 0.5;
+        let obs = [
+            (0, 40.0, 100.0),
+            (1, 5.0, 400.0),
+            (2, 0.0, 100.0),
+            (3, 0.0, 100.0),
+        ];
+        let from_median = iterate_sample(&obs, true, sigma, median_start(&obs, true).unwrap());
+        assert!(
+            (from_median.unwrap().0 - 5.0).abs() < 0.3,
+            "{from_median:?}"
+        );
+        let (d, _, _, rel) = solve_sample(&obs, true, sigma, None).unwrap();
+        assert!(d.abs() < 0.3, "d {d}");
+        assert!(
+            rel[1] < REJECTED_WEIGHT && rel[2] > 0.5 && rel[3] > 0.5,
+            "{rel:?}"
+        );
+        // Borders that agree: the median start's solve, to the bit.
+        let clean = [
+            (0, 0.1, 100.0),
+            (1, -0.1, 400.0),
+            (2, 0.05, 100.0),
+            (3, 0.0, 100.0),
+        ];
+        // (Debug text: the covariance holds NaN, which equals nothing.)
+        assert_eq!(
+            format!("{:?}", solve_sample(&clean, true, sigma, None)),
+            format!(
+                "{:?}",
+                iterate_sample(&clean, true, sigma, median_start(&clean, true).unwrap())
+            )
+        );
     }
 
     #[test]

@@ -188,7 +188,11 @@ pub fn decode_border_signal(
             ses[b].push(if seen { f64::from(sv) } else { f64::NAN });
         }
     }
-    let mut combined = combine_borders(&ys, &ses, &CombineParams::from_edges(cut, params));
+    let mut combined = combine_borders(
+        &ys,
+        &ses,
+        &CombineParams::from_edges(cut, params, stitched.spacing_um),
+    );
     let alpha = params.wall_angle_deg.to_radians();
     let scale = groove_speed_mm_s * alpha.sin() / stitched.spacing_um;
     let [left, right] = &mut combined.walls_um;
