@@ -4,13 +4,16 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::methods::{MethodScores, score_methods};
 use super::{
     AccuracyError, AccuracyOptions, PHRASE, SceneDepthRow, TABLE2_FRAMES, case_err, heavy_damage,
     onset_secs, output_rate_hz, render, render_tone, scene_depth_table, score_scan,
     small_dual_focus, small_lateral, snr_from_r_db, sound_params, speak, two_sample_window_px,
 };
 use crate::io::wav::read_wav;
+use crate::pipeline::edges::EdgeParams;
 use crate::pipeline::eval::Scores;
+use crate::pipeline::fusion::FusionParams;
 use crate::pipeline::walls::WallMethod;
 use crate::pipeline::{PathChoice, PipelineParams};
 use crate::synth::{BUILTIN_RATE_HZ, SceneConfig, SceneKind, SynthConfig, arpeggio};
@@ -41,13 +44,15 @@ struct ToneScans<'a> {
 }
 
 /// A tone table: its head, then per frequency one scan rendered and scored with each of `runs`
-/// (column label, params), a row of r, SNR and SNR(r) per run, and one log line.
+/// (column label, params), a row of r, SNR and SNR(r) per run, and one log line. Each scan is
+/// added to `decoders` for the decoders' section.
 fn tone_table(
     rep: &mut Report,
     log: &mut dyn FnMut(&str),
     scans: &ToneScans<'_>,
     freqs: &[f64],
     runs: &[(String, PipelineParams)],
+    decoders: &mut Vec<DecoderCase>,
 ) -> Result<(), AccuracyError> {
     let mut head = String::from("| tone |");
     for (label, _) in runs {
@@ -59,6 +64,11 @@ fn tone_table(
         let case = format!("{f} Hz tone ({})", scans.name);
         let dir = scans.work.join(format!("{}_{f}", scans.folder));
         render_tone(&case, f, &scans.cfg, &dir)?;
+        decoders.push(DecoderCase {
+            label: format!("{f} Hz tone, {}", scans.name),
+            dir: dir.clone(),
+            steady: true,
+        });
         let mut cells = Vec::new();
         for (_, params) in runs {
             cells.push(score_scan(&case, &dir, params)?.0);
@@ -77,6 +87,75 @@ fn tone_table(
     }
     rep.line("");
     Ok(())
+}
+
+/// A rendered scan that the decoders' section scores with every method.
+struct DecoderCase {
+    /// The row's name.
+    label: String,
+    /// The scan folder.
+    dir: PathBuf,
+    /// A steady tone (its envelope r says nothing, so the row leaves it out).
+    steady: bool,
+}
+
+/// The params of the decoders' section: `reconstruct`'s defaults with the low-pass off, so
+/// that tones above its 3 kHz are measured too.
+fn decoder_params() -> PipelineParams {
+    let mut p = PipelineParams::default();
+    p.dsp.lowpass = false;
+    p
+}
+
+/// The decoders' section: every scan of `cases` scored with the flow, edge and fused methods
+/// (`accuracy::methods::score_methods`), one row each, and one log line each.
+fn decoder_section(
+    log: &mut dyn FnMut(&str),
+    cases: &[DecoderCase],
+) -> Result<String, AccuracyError> {
+    let mut rep = Report { md: String::new() };
+    rep.line("## The three decoders: flow, edges and fused (the default)");
+    rep.line("");
+    rep.line(
+        "Every scan of the sections below, reconstructed as `groovescope reconstruct SCAN \
+         --method M` does with the default params but the low-pass off (so that tones above its \
+         3 kHz are measured): the flow method (the paper's), the edge method (the borders \
+         between wall and land, which move by the whole displacement) and the fused decoder \
+         that `reconstruct` uses unless told otherwise. The sections after this one measure \
+         the flow method's own knobs. env r: only where the sound is not a steady tone.",
+    );
+    rep.line("");
+    rep.line(
+        "| scan | flow r | flow SNR dB | edges r | edges SNR dB | fused r | fused env r | fused SNR dB |",
+    );
+    rep.line("|---|---:|---:|---:|---:|---:|---:|---:|");
+    let params = decoder_params();
+    for case in cases {
+        let MethodScores {
+            flow, edges, fused, ..
+        } = score_methods(
+            &case.label,
+            &case.dir,
+            &params,
+            &EdgeParams::default(),
+            &FusionParams::default(),
+        )?;
+        let env = if case.steady {
+            "—".to_string()
+        } else {
+            fused.envelope_r_text(3)
+        };
+        rep.line(&format!(
+            "| {} | {:.3} | {:.1} | {:.3} | {:.1} | {:.3} | {env} | {:.1} |",
+            case.label, flow.r, flow.snr_db, edges.r, edges.snr_db, fused.r, fused.snr_db
+        ));
+        log(&format!(
+            "{} by decoder: SNR flow {:.1}, edges {:.1}, fused {:.1} dB",
+            case.label, flow.snr_db, edges.snr_db, fused.snr_db
+        ));
+    }
+    rep.line("");
+    Ok(rep.md)
 }
 
 fn score_cells(s: &Scores) -> String {
@@ -135,6 +214,9 @@ pub fn run_suite(
         threads
     ));
     rep.line("");
+    // The decoders' section goes here once every scan is rendered.
+    let decoders_at = rep.md.len();
+    let mut decoders = Vec::new();
 
     // --- Tones, dual-focus path.
     let small = small_dual_focus(1);
@@ -175,7 +257,7 @@ pub fn run_suite(
         work: &work,
         cfg: small_dual_focus(tone_groups),
     };
-    tone_table(&mut rep, log, &scans, freqs, &runs)?;
+    tone_table(&mut rep, log, &scans, freqs, &runs, &mut decoders)?;
 
     // --- Tones, depth path.
     let lat = small_lateral(1);
@@ -227,7 +309,7 @@ pub fn run_suite(
         work: &work,
         cfg: small_lateral(depth_groups),
     };
-    tone_table(&mut rep, log, &scans, depth_freqs, &runs)?;
+    tone_table(&mut rep, log, &scans, depth_freqs, &runs, &mut decoders)?;
 
     // --- Speech, clean and damaged.
     let speech_groups = if opts.quick { 45 } else { 228 };
@@ -266,6 +348,11 @@ pub fn run_suite(
                 let case = format!("speech ({name})");
                 let dir = work.join(format!("speech_{name}"));
                 render(&case, &speech, cfg, &dir)?;
+                decoders.push(DecoderCase {
+                    label: case.clone(),
+                    dir: dir.clone(),
+                    steady: false,
+                });
                 let fits: &[bool] = if name == "clean" {
                     &[true]
                 } else {
@@ -300,6 +387,11 @@ pub fn run_suite(
         let groups = (4.0 * note * small.groove_speed_um_s() / small.group_step_um()) as usize;
         let dir = work.join("melody");
         render(case, &sound, &small_dual_focus(groups.max(1)), &dir)?;
+        decoders.push(DecoderCase {
+            label: case.to_string(),
+            dir: dir.clone(),
+            steady: false,
+        });
         let (s, _) = score_scan(case, &dir, &sound_params(w2, true))?;
         rep.line("## Melody");
         rep.line("");
@@ -326,6 +418,11 @@ pub fn run_suite(
         };
         let dir = work.join("fig20");
         render_tone(case, 1000.0, &cfg, &dir)?;
+        decoders.push(DecoderCase {
+            label: format!("{case} (1 kHz tone)"),
+            dir: dir.clone(),
+            steady: true,
+        });
         let robust = score_scan(case, &dir, &sound_params(100, true))?.0;
         let ls = score_scan(case, &dir, &sound_params(100, false))?.0;
         rep.line("## Paper Fig. 20: nearly half of a wall missing");
@@ -396,6 +493,8 @@ pub fn run_suite(
         }
     }
     rep.line("");
+    let section = decoder_section(log, &decoders)?;
+    rep.md.insert_str(decoders_at, &section);
     let _ = writeln!(
         rep.md,
         "Suite time: {:.0} s.",

@@ -1,6 +1,7 @@
 //! Tests of the scores: lag search, SNR, envelopes, polarity and the sub-sample refinement.
 
 use super::*;
+use crate::test_support::delayed_chord;
 use std::f64::consts::PI;
 
 const FS: u32 = 44_100;
@@ -73,31 +74,12 @@ fn a_delay_is_found_with_its_sign() {
     assert!(s.r < 0.99, "{s:?}");
 }
 
-/// A chord of 97 Hz to 5 kHz sampled `delay` samples late (a fraction of a sample included).
-fn chord(n: usize, delay: f64) -> Vec<f32> {
-    (0..n)
-        .map(|i| {
-            let t = (i as f64 - delay) / f64::from(FS);
-            [
-                (97.0, 0.3),
-                (440.0, 0.4),
-                (1234.5, 0.3),
-                (2900.0, 0.2),
-                (5000.0, 0.1),
-            ]
-            .iter()
-            .map(|&(f, a)| a * (2.0 * PI * f * t + f / 1000.0).sin())
-            .sum::<f64>() as f32
-        })
-        .collect()
-}
-
 #[test]
 fn a_fraction_of_a_sample_is_found_and_not_scored_as_noise() {
     // At the whole-sample lag alone, 0.37 of a sample reads as noise (this chord: 22.7 dB).
-    let x = chord(8_820, 0.0);
+    let x = delayed_chord(8_820, 0.0);
     for delay in [0.37, -0.5, 2.25, -3.9] {
-        let late = chord(8_820, delay);
+        let late = delayed_chord(8_820, delay);
         let s = evaluate(&late, &x, 20, FS).unwrap();
         assert!(
             (s.lag_refined_samples - delay).abs() < 2e-3,
