@@ -3,10 +3,9 @@
 //! The robust combination solves each sample on its own, from a median start over its
 //! borders. Where damage takes out or moves most of a sample's borders at once (a dust grain
 //! on the bottom corners while a flake moves a land), the start can fall among the wrong
-//! borders and the solve follows them: on a heavily damaged small-camera scan the track left
-//! the groove by 10–46 µm for one to five samples, and the differentiator turned each such
-//! excursion into a click a thousand times louder than the sound (the edge method read r 0.08
-//! on speech that the flow method read at r 0.65).
+//! borders and the solve follows them: the track leaves the groove by tens of µm for a few
+//! samples, and the differentiator turns each such excursion into a click far louder than the
+//! sound, which the output's normalisation then makes the loudest thing in the clip.
 //!
 //! A groove cannot do that. The cutting stylus moves the groove sideways by at most
 //! `max_slope` µm per µm along it (a slope of 1 is a 45° wall of the modulation itself; a loud
