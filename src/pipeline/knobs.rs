@@ -165,6 +165,8 @@ knob_docs! {
         => "steepest slope a groove's modulation can have (µm sideways per µm along it; 1 = 45°, a loud record about 0.1): a wall's displacement track that moves faster between samples splits there, and a stretch of at most max_excursion_samples beside a longer one is solved again from the track around it, or left as a gap (edges::plausible); 0 = off; default 1",
     "edges.max_excursion_samples"
         => "longest stretch of a wall's displacement track, split from the rest by steps steeper than max_slope, that is taken for an excursion and solved again; default 16",
+    "edges.restart_solves"
+        => "where a sample's solve, started from the median of its borders, rejects one, solve it again from each border's own reading and keep a solution fewer borders disagree with (edges::robust); false = the median start alone, as before 0.3.0; default true",
     "edges.refine"
         => "refine each border with one smooth curve over the group (edges::refine); default true",
     "edges.hard_width_px"

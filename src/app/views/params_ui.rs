@@ -218,6 +218,7 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Sta
             num "despike (σs, 0 = off)" despike_sigmas (0.1, 0.0..=1000.0);
             num "steepest groove slope (0 = off)" max_slope (0.01, 0.0..=1000.0);
             num "longest excursion (samples)" max_excursion_samples (0.5, 0..=1_000_000);
+            check "restart disagreeing solves" restart_solves ();
             check "refine sharp borders" refine ();
             num "sharp below width (px)" hard_width_px (0.01, 0.0..=100.0);
             log_num "crossing σ (px)" crossing_sigma_px (1e-4..=100.0);

@@ -162,6 +162,8 @@ pub struct EdgeParams {
     pub max_slope: f64,
     #[doc = knob!("edges.max_excursion_samples")]
     pub max_excursion_samples: usize,
+    #[doc = knob!("edges.restart_solves")]
+    pub restart_solves: bool,
     #[doc = knob!("edges.refine")]
     pub refine: bool,
     #[doc = knob!("edges.hard_width_px")]
@@ -202,6 +204,7 @@ impl Default for EdgeParams {
             despike_sigmas: DEFAULT_DESPIKE,
             max_slope: 1.0,
             max_excursion_samples: 16,
+            restart_solves: true,
             refine: true,
             hard_width_px: 0.45,
             crossing_sigma_px: 0.05,

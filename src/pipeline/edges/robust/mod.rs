@@ -62,6 +62,8 @@ pub struct CombineParams {
     pub max_step_um: f64,
     /// Longest excursion solved again (samples).
     pub max_excursion: usize,
+    /// Start a sample's solve again from each border where the median start rejects one.
+    pub restart: bool,
 }
 
 impl CombineParams {
@@ -77,6 +79,7 @@ impl CombineParams {
             weight_window: params.weight_window_samples,
             max_step_um: params.max_slope * spacing_um,
             max_excursion: params.max_excursion_samples,
+            restart: params.restart_solves,
         }
     }
 }
@@ -177,25 +180,39 @@ fn finite_median(mut v: Vec<f64>) -> Option<f64> {
 /// One sample's solution: d, e, (var_d, var_e, cov), each border's relative weight.
 pub(super) type Solution = (f64, f64, [f64; 3], [f64; 4]);
 
+/// Where a sample's solve starts.
+#[derive(Clone, Copy, Debug)]
+enum Start {
+    /// From this (d, e).
+    At(f64, f64),
+    /// From the medians of the borders; with `restart`, again from each border's own reading
+    /// where that solve rejects a border.
+    Median {
+        /// Start again where a border is rejected (`edges.restart_solves`).
+        restart: bool,
+    },
+}
+
 /// One sample's robust solve: borders `(k, z = y − c, w)`. `lateral` fixes e = 0. The
-/// Lorentzian starts from `start` (d, e) where given. Else it starts from the medians of the
-/// borders, and where that solve rejects a border it starts again from each border's own
-/// reading: the Lorentzian's cost has a minimum for every set of borders that agree, and the
-/// median of four (two of them off, say a dust grain on one corner and a flake at a land) can
-/// start it at the wrong one. The solution whose cost ([`robust_cost`], which counts each
-/// border once, so one border read precisely cannot outvote two that agree) is lower by more
-/// than [`SWITCH_COST`] wins, so borders that agree keep their solve to the bit.
+/// Lorentzian starts as `start` says. From the medians with `restart`, where that solve rejects
+/// a border it starts again from each border's own reading: the Lorentzian's cost has a minimum
+/// for every set of borders that agree, and the median of four (two of them off, say a dust
+/// grain on one corner and a flake at a land) can start it at the wrong one. The solution whose
+/// cost ([`robust_cost`], which counts each border once, so one border read precisely cannot
+/// outvote two that agree) is lower by more than [`SWITCH_COST`] wins, so borders that agree
+/// keep their solve to the bit.
 fn solve_sample(
     obs: &[(usize, f64, f64)],
     lateral: bool,
     sigma: f64,
-    start: Option<(f64, f64)>,
+    start: Start,
 ) -> Option<Solution> {
-    if let Some(de) = start {
-        return iterate_sample(obs, lateral, sigma, de);
-    }
+    let restart = match start {
+        Start::At(d, e) => return iterate_sample(obs, lateral, sigma, (d, e)),
+        Start::Median { restart } => restart,
+    };
     let first = iterate_sample(obs, lateral, sigma, median_start(obs, lateral)?)?;
-    if obs.iter().all(|o| first.3[o.0] >= REJECTED_WEIGHT) {
+    if !restart || obs.iter().all(|o| first.3[o.0] >= REJECTED_WEIGHT) {
         return Some(first);
     }
     let e0 = if lateral || !first.1.is_finite() {
@@ -332,7 +349,8 @@ pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams)
     for _ in 0..ROUNDS {
         for j in 0..n {
             let obs = observations(j, &c);
-            s.store(j, solve_sample(&obs, lateral, p.sigma_um, None), lateral);
+            let start = Start::Median { restart: p.restart };
+            s.store(j, solve_sample(&obs, lateral, p.sigma_um, start), lateral);
         }
         for (b, cb) in c.iter_mut().enumerate() {
             let (mut sw, mut sz) = (0.0, 0.0);
@@ -369,7 +387,12 @@ pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams)
         c[3] += m;
     }
     let excursions = resolve_excursions(&mut s, p, |j, start| {
-        solve_sample(&observations(j, &c), lateral, p.sigma_um, Some(start))
+        solve_sample(
+            &observations(j, &c),
+            lateral,
+            p.sigma_um,
+            Start::At(start.0, start.1),
+        )
     });
     let Solves { d, e, cov, rel } = s;
     let mut walls_um = [vec![f64::NAN; n], vec![f64::NAN; n]];

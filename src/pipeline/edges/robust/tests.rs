@@ -12,6 +12,7 @@ fn params(cut: Cut) -> CombineParams {
         weight_window: 0,
         max_step_um: 0.0,
         max_excursion: 0,
+        restart: true,
     }
 }
 
@@ -119,7 +120,11 @@ fn two_borders_that_agree_outvote_one_read_precisely() {
         (from_median.unwrap().0 - 5.0).abs() < 0.3,
         "{from_median:?}"
     );
-    let (d, _, _, rel) = solve_sample(&obs, true, sigma, None).unwrap();
+    // `edges.restart_solves = false`: the median start alone, as before.
+    let median_only = solve_sample(&obs, true, sigma, Start::Median { restart: false });
+    assert_eq!(format!("{median_only:?}"), format!("{from_median:?}"));
+    let restart = Start::Median { restart: true };
+    let (d, _, _, rel) = solve_sample(&obs, true, sigma, restart).unwrap();
     assert!(d.abs() < 0.3, "d {d}");
     assert!(
         rel[1] < REJECTED_WEIGHT && rel[2] > 0.5 && rel[3] > 0.5,
@@ -134,7 +139,7 @@ fn two_borders_that_agree_outvote_one_read_precisely() {
     ];
     // (Debug text: the covariance holds NaN, which equals nothing.)
     assert_eq!(
-        format!("{:?}", solve_sample(&clean, true, sigma, None)),
+        format!("{:?}", solve_sample(&clean, true, sigma, restart)),
         format!(
             "{:?}",
             iterate_sample(&clean, true, sigma, median_start(&clean, true).unwrap())
