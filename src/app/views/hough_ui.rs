@@ -9,7 +9,7 @@ use super::{empty_note, tint};
 use crate::app::render::region_colour;
 use crate::app::textures::Textures;
 use crate::app::worker::ViewImage;
-use crate::pipeline::hough::HoughParams;
+use crate::pipeline::hough::{HoughParams, MAX_WINDOW_THETA_DEG};
 use crate::pipeline::{Stage, StageCache};
 
 /// Pointer distance (screen points) that grabs a window edge.
@@ -86,7 +86,7 @@ pub fn hough_controls(ui: &mut Ui, draft: &mut HoughParams) {
             "window ±θ°",
             &mut draft.window_theta_deg,
             0.1,
-            0.1..=90.0,
+            0.1..=f64::from(MAX_WINDOW_THETA_DEG),
         );
         labelled_drag(ui, "±ρ px", &mut draft.window_rho_px, 0.5, 0.5..=2000.0);
         ui.separator();
@@ -237,7 +237,8 @@ impl HoughViewState {
             match edge {
                 Edge::Theta(i) => {
                     if let Some(&(t, _)) = peaks.get(i) {
-                        draft.window_theta_deg = ((v.x - t).abs() as f32).max(0.1);
+                        draft.window_theta_deg =
+                            ((v.x - t).abs() as f32).clamp(0.1, MAX_WINDOW_THETA_DEG);
                     }
                 }
                 Edge::Rho(i) => {

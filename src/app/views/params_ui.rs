@@ -3,9 +3,11 @@
 use egui::{Grid, Response, Ui, emath::Numeric};
 
 use super::StageStatus;
+use crate::pipeline::depth::MAX_MEDIAN_PX;
 use crate::pipeline::derivatives::DerivativeMode;
 use crate::pipeline::dsp::EqCurve;
 use crate::pipeline::edges::border::BorderParams;
+use crate::pipeline::hough::{MAX_WINDOW_THETA_DEG, STRIPE_COUNT};
 use crate::pipeline::knobs::knob_doc;
 use crate::pipeline::optical_flow::{FlowMethod, Solver};
 use crate::pipeline::still::WallTone;
@@ -19,6 +21,19 @@ const LOG_SPEED: f64 = 0.01;
 thread_local! {
     /// While Some (a test): every section opens, and each row's key is written down.
     static DRAWN: std::cell::RefCell<Option<Vec<String>>> = const { std::cell::RefCell::new(None) };
+    /// While Some (a test): each number row's key and the range it offers.
+    static RANGES: std::cell::RefCell<Option<Vec<(String, f64, f64)>>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+/// Writes down a number row's range while a test asks for it.
+#[cfg(test)]
+fn note_range<T: Numeric>(key: &str, range: &std::ops::RangeInclusive<T>) {
+    RANGES.with(|r| {
+        if let Some(rows) = r.borrow_mut().as_mut() {
+            rows.push((key.to_owned(), range.start().to_f64(), range.end().to_f64()));
+        }
+    });
 }
 
 /// The row label; hovering shows the knob's TOML key and its documentation line.
@@ -42,6 +57,8 @@ fn num<T: Numeric>(
     speed: f64,
     range: std::ops::RangeInclusive<T>,
 ) {
+    #[cfg(test)]
+    note_range(key, &range);
     let l = label(ui, text, key);
     ui.add(
         egui::DragValue::new(value)
@@ -62,6 +79,8 @@ fn log_num<T: Numeric>(
     value: &mut T,
     range: std::ops::RangeInclusive<T>,
 ) {
+    #[cfg(test)]
+    note_range(key, &range);
     let l = label(ui, text, key);
     let speed = value.to_f64().abs().max(1e-12) * LOG_SPEED;
     ui.add(
@@ -269,7 +288,7 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Sta
             check "Kalman filter" kalman ();
             log_num "process noise" process_noise (1e-12..=1.0);
             log_num "measurement noise (px²)" measurement_noise_px2 (1e-10..=10.0);
-            num "median (px)" median_px (2.0, 1..=31);
+            num "median (px)" median_px (2.0, 1..=MAX_MEDIAN_PX);
             log_num "min confidence" min_confidence (1e-8..=10.0);
             num "neighbourhood (px)" neighbourhood_px (0.5, 1..=63);
         );
@@ -291,10 +310,11 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Sta
             num "θ max (°)" theta_max_deg (0.5, -90.0..=90.0);
             num "θ step (°)" theta_step_deg (0.05, 0.01..=10.0);
             num "ρ step (px)" rho_step_px (0.05, 0.05..=20.0);
-            num "peaks" peak_count (0.1, 1..=8);
+            // The dual-focus geometry fixes it; the row shows it.
+            num "peaks" peak_count (0.1, STRIPE_COUNT..=STRIPE_COUNT);
             num "min peak (share of the top)" min_peak_ratio (0.01, 0.0..=1.0);
             num "peak ρ band (px, 0 = auto)" peak_rho_band_px (0.5, 0.0..=2000.0);
-            num "window ±θ (°)" window_theta_deg (0.1, 0.1..=90.0);
+            num "window ±θ (°)" window_theta_deg (0.1, 0.1..=MAX_WINDOW_THETA_DEG);
             num "window ±ρ (px)" window_rho_px (0.5, 0.5..=2000.0);
             num "line smoothing (px)" line_smoothing_px (0.5, 0..=200);
             num "min votes per column" min_votes_per_column (0.01, 0.0..=100.0);
@@ -463,5 +483,68 @@ mod tests {
         }
         let powers = (0..=20).map(|k| 1_usize << k).filter(|&n| accepted(n));
         assert_eq!(powers.count(), FUSION_BLOCKS.len());
+    }
+
+    /// The panel never offers a number its knob refuses: each row's range ends, set alone on
+    /// the defaults, pass `PipelineParams::validate`. A knob bounded by a partner (a lower
+    /// limit that must not pass its upper one) passes with the partner set to the same value.
+    #[test]
+    fn every_number_row_offers_only_values_its_knob_accepts() {
+        const PARTNERS: [(&str, &str); 3] = [
+            ("theta_min_deg", "theta_max_deg"),
+            ("band_half_height_px", "max_band_half_height_px"),
+            ("min_width_px", "max_width_px"),
+        ];
+        DRAWN.with(|d| *d.borrow_mut() = Some(Vec::new()));
+        RANGES.with(|r| *r.borrow_mut() = Some(Vec::new()));
+        let status: [StageStatus; Stage::ALL.len()] = std::array::from_fn(|_| StageStatus::Fresh);
+        let mut h = egui_kittest::Harness::new_ui_state(
+            |ui, p: &mut PipelineParams| params_ui(ui, p, &status),
+            PipelineParams::default(),
+        );
+        h.run();
+        DRAWN.with(|d| d.borrow_mut().take());
+        let mut rows = RANGES.with(|r| r.borrow_mut().take()).unwrap();
+        rows.sort_by(|a, b| a.0.cmp(&b.0));
+        rows.dedup_by(|a, b| a.0 == b.0);
+        assert!(rows.len() > 50, "{} number rows", rows.len());
+        let base = toml::Value::try_from(PipelineParams::default()).unwrap();
+        // The defaults with `keys` (same table) set to `v`, validated.
+        let check = |table: &str, keys: &[&str], v: f64| -> Result<(), String> {
+            let mut doc = base.clone();
+            for key in keys {
+                let mut slot = &mut doc;
+                for part in table.split('.').chain([*key]) {
+                    slot = slot
+                        .get_mut(part)
+                        .unwrap_or_else(|| panic!("{table}.{key}"));
+                }
+                *slot = match slot {
+                    #[allow(clippy::cast_possible_truncation)] // integer rows have integer ends
+                    toml::Value::Integer(_) => toml::Value::Integer(v as i64),
+                    _ => toml::Value::Float(v),
+                };
+            }
+            let p: PipelineParams = doc.try_into().map_err(|e| e.to_string())?;
+            p.validate().map_err(|e| e.to_string())
+        };
+        let mut refused = Vec::new();
+        for (key, lo, hi) in &rows {
+            let (table, name) = key.rsplit_once('.').unwrap();
+            let partner = PARTNERS.iter().find_map(|&(a, b)| match name {
+                n if n == a => Some(b),
+                n if n == b => Some(a),
+                _ => None,
+            });
+            for v in [*lo, *hi] {
+                let alone = check(table, &[name], v);
+                let ok =
+                    alone.is_ok() || partner.is_some_and(|q| check(table, &[name, q], v).is_ok());
+                if let (false, Err(e)) = (ok, alone) {
+                    refused.push(format!("{key} = {v}: {e}"));
+                }
+            }
+        }
+        assert!(refused.is_empty(), "{refused:#?}");
     }
 }

@@ -133,7 +133,7 @@ const UNMEASURED_SHARE: f64 = 0.5;
 /// pixel's state is reset to the prior.
 const MIN_PLANE_SCALE: f64 = 0.5;
 /// Largest accepted `median_px`.
-const MAX_MEDIAN_PX: usize = 15;
+pub const MAX_MEDIAN_PX: usize = 15;
 /// Largest accepted `neighbourhood_px`.
 const MAX_NEIGHBOURHOOD_PX: usize = 255;
 /// Values of the per-pixel state: α̃, β̃, ι̃, then the covariance P00 P01 P02 P11 P12 P22.

@@ -56,7 +56,10 @@ pub use votes::{Accumulator, Peak};
 /// Stage name used in errors.
 const STAGE: &str = "stripes";
 /// The dual-focus geometry shows exactly this many stripes.
-const STRIPE_COUNT: usize = 3;
+pub const STRIPE_COUNT: usize = 3;
+/// Largest accepted `window_theta_deg`: below 90° so that a window's θ interval is shorter
+/// than π (see `WindowTest::rho_range`).
+pub const MAX_WINDOW_THETA_DEG: f32 = 89.0;
 /// Largest accumulator the stage agrees to allocate (cells).
 pub const MAX_ACCUMULATOR_CELLS: usize = 64 << 20;
 /// Fraction of the peak's votes a ρ bin needs to count in the peak's sub-bin centroid.
@@ -355,12 +358,11 @@ impl HoughParams {
                 ),
             ));
         }
-        // Below 90° so a window's θ interval is shorter than π (see `WindowTest::rho_range`).
         check_range(
             "hough.window_theta_deg",
             f64::from(p.window_theta_deg),
             0.0,
-            89.0,
+            f64::from(MAX_WINDOW_THETA_DEG),
         )?;
         check_range(
             "hough.window_rho_px",
