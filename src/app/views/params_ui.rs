@@ -446,17 +446,30 @@ mod tests {
     use crate::app::views::StageStatus;
     use crate::pipeline::knobs::KNOB_DOCS;
 
-    #[test]
-    fn every_knob_has_a_row_under_its_own_key() {
+    /// The rows written down: every row's key, every number row's key and range (a row per
+    /// frame drawn), and the params after drawing the panel on the defaults with every section
+    /// open.
+    type Drawn = (Vec<String>, Vec<(String, f64, f64)>, PipelineParams);
+
+    fn draw_every_row() -> Drawn {
         DRAWN.with(|d| *d.borrow_mut() = Some(Vec::new()));
+        RANGES.with(|r| *r.borrow_mut() = Some(Vec::new()));
         let status: [StageStatus; Stage::ALL.len()] = std::array::from_fn(|_| StageStatus::Fresh);
         let mut h = egui_kittest::Harness::new_ui_state(
             |ui, p: &mut PipelineParams| params_ui(ui, p, &status),
             PipelineParams::default(),
         );
         h.run();
-        let p = h.state().clone();
-        let drawn = DRAWN.with(|d| d.borrow_mut().take()).unwrap();
+        (
+            DRAWN.with(|d| d.borrow_mut().take()).unwrap(),
+            RANGES.with(|r| r.borrow_mut().take()).unwrap(),
+            h.state().clone(),
+        )
+    }
+
+    #[test]
+    fn every_knob_has_a_row_under_its_own_key() {
+        let (drawn, _, p) = draw_every_row();
         let missing: Vec<&str> = KNOB_DOCS
             .iter()
             .map(|(k, _)| *k)
@@ -495,16 +508,7 @@ mod tests {
             ("band_half_height_px", "max_band_half_height_px"),
             ("min_width_px", "max_width_px"),
         ];
-        DRAWN.with(|d| *d.borrow_mut() = Some(Vec::new()));
-        RANGES.with(|r| *r.borrow_mut() = Some(Vec::new()));
-        let status: [StageStatus; Stage::ALL.len()] = std::array::from_fn(|_| StageStatus::Fresh);
-        let mut h = egui_kittest::Harness::new_ui_state(
-            |ui, p: &mut PipelineParams| params_ui(ui, p, &status),
-            PipelineParams::default(),
-        );
-        h.run();
-        DRAWN.with(|d| d.borrow_mut().take());
-        let mut rows = RANGES.with(|r| r.borrow_mut().take()).unwrap();
+        let (_, mut rows, _) = draw_every_row();
         rows.sort_by(|a, b| a.0.cmp(&b.0));
         rows.dedup_by(|a, b| a.0 == b.0);
         assert!(rows.len() > 50, "{} number rows", rows.len());
