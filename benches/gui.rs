@@ -157,6 +157,7 @@ fn health_strip(c: &mut Criterion) {
             rejected_fits: usize::from(g % 101 == 0),
             samples: 22,
             warning: None,
+            pixel_noise_grey_levels: None,
         })
         .collect();
     let health = ClipHealth::new(GROUPS, &tracks, &reports);

@@ -165,6 +165,68 @@ fn merged_shards_are_byte_identical_to_one_process_for_flow_and_edges() {
     assert!(flow != edges, "--method changes the sound");
 }
 
+/// Each group's report row carries the pixel noise the edge stage measured, near the noise the
+/// scan was rendered with, and a plan's merged report carries the same figures; a failed group
+/// and the flow method, which reads no edges, report none.
+#[test]
+fn report_rows_carry_the_pixel_noise_through_parts() {
+    let (_keep, scan, _) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let t = |name: &str| tmp.path().join(name);
+    // Each row's sample count and pixel noise.
+    let rows = |report: &Path| -> Vec<(u64, Option<f64>)> {
+        let r: serde_json::Value = serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
+        r["groups"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|g| {
+                let samples = g["samples"].as_u64().unwrap();
+                (samples, g["pixel_noise_grey_levels"].as_f64())
+            })
+            .collect()
+    };
+    let reconstruct = |method: &str, name: &str| {
+        let (wav, report) = (t(&format!("{name}.wav")), t(&format!("{name}.json")));
+        let args = ["reconstruct", s(scan), "--method", method, "--out", s(&wav)];
+        let o = groovescope(&[&args[..], &["--report", s(&report), "--quiet"]].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        rows(&report)
+    };
+    let one = reconstruct("fused", "one");
+    assert_eq!(one.len(), GROUPS);
+    // Rendered with σ = 0.5 grey levels and quantised to 8 bits: σ² + 1/12 in all.
+    let truth = (0.25_f64 + 1.0 / 12.0).sqrt();
+    let mut measured = 0;
+    for (g, &(samples, noise)) in one.iter().enumerate() {
+        match noise {
+            Some(n) => {
+                assert!(
+                    (n / truth - 1.0).abs() < 0.3,
+                    "group {g}: {n} against {truth}"
+                );
+                measured += 1;
+            }
+            None => assert_eq!(samples, 0, "group {g} made sound but reports no noise"),
+        }
+    }
+    assert!(measured > GROUPS * 9 / 10, "{measured} of {GROUPS} groups");
+    let p = t("plan.json");
+    plan(scan, 2, &p, &[]);
+    let mut args = vec!["merge".to_string()];
+    for k in 0..2 {
+        let dir = t(&format!("part-{k}"));
+        run_shard(scan, &p, k, &dir);
+        args.push(s(&dir).to_string());
+    }
+    let (wav, report) = (t("merged.wav"), t("merged.json"));
+    args.extend(["--out", s(&wav), "--report", s(&report), "--quiet"].map(String::from));
+    let o = groovescope(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(rows(&report), one);
+    assert!(reconstruct("flow", "flow").iter().all(|r| r.1.is_none()));
+}
+
 #[test]
 fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() {
     let (_keep, scan, _) = shared();

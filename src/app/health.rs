@@ -249,6 +249,7 @@ mod tests {
             rejected_fits: rejected,
             samples: 4,
             warning: None,
+            pixel_noise_grey_levels: None,
         }
     }
 

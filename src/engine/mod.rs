@@ -101,6 +101,11 @@ pub struct GroupReport {
     pub samples: usize,
     /// Failure or warning text.
     pub warning: Option<String>,
+    /// Pixel noise (σ, grey levels of 255) of the frame the edge stage read the group's coarse
+    /// borders on; None where the method reads no edges, the group failed or the frame is too
+    /// small to say.
+    #[serde(default)]
+    pub pixel_noise_grey_levels: Option<f64>,
 }
 
 /// Total seconds spent per stage over all groups.

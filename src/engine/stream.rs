@@ -55,6 +55,7 @@ impl GroupOutcome {
                 rejected_fits: 0,
                 samples: 0,
                 warning: Some(warning),
+                pixel_noise_grey_levels: None,
             }),
             signal: None,
             borders: None,
@@ -277,6 +278,7 @@ fn process_group(
         rejected_fits: orientation.map_or(0, |o| o.rejected_fits),
         samples: sig.positions_um.len(),
         warning: (!edge_warnings.is_empty()).then(|| edge_warnings.join("; ")),
+        pixel_noise_grey_levels: edges.and_then(|e| e.pixel_noise_grey_levels),
     });
     Ok(GroupOutcome {
         group: input.group,

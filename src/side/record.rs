@@ -124,8 +124,13 @@ pub fn encode(record: &Record) -> Vec<u8> {
             for t in &o.stage_secs {
                 b.extend_from_slice(&t.to_bits().to_le_bytes());
             }
-            // Last, so records written before the edge stage read back with none.
+            // Last, so records written before the edge stage read back with none, and the pixel
+            // noise after them, so records written before it read back with none.
             put_signal(&mut b, o.borders.as_deref());
+            put_opt_f64(
+                &mut b,
+                o.report.as_ref().and_then(|r| r.pixel_noise_grey_levels),
+            );
         }
         Record::Seed(history) => {
             b.push(TAG_SEED);
@@ -156,7 +161,7 @@ pub fn decode(payload: &[u8]) -> Result<Record, String> {
     let record = match r.u8()? {
         TAG_GROUP => {
             let group = r.usize()?;
-            let report = match r.u8()? {
+            let mut report = match r.u8()? {
                 0 => None,
                 _ => Some(GroupReport {
                     group: r.usize()?,
@@ -170,6 +175,8 @@ pub fn decode(payload: &[u8]) -> Result<Record, String> {
                                 .map_err(|_| "a warning is not UTF-8".to_string())?,
                         ),
                     },
+                    // Read from the record's end, below.
+                    pixel_noise_grey_levels: None,
                 }),
             };
             let signal = r.signal()?;
@@ -188,6 +195,14 @@ pub fn decode(payload: &[u8]) -> Result<Record, String> {
             } else {
                 None
             };
+            let noise = if r.at < payload.len() {
+                r.opt_f64()?
+            } else {
+                None
+            };
+            if let Some(report) = &mut report {
+                report.pixel_noise_grey_levels = noise;
+            }
             Record::Group(GroupOutcome {
                 group,
                 report,
@@ -367,6 +382,7 @@ mod tests {
                 rejected_fits: 3,
                 samples: 2,
                 warning: Some("group 7: ünïcode".into()),
+                pixel_noise_grey_levels: Some(1.75),
             }),
             signal: Some(std::sync::Arc::new(GroupSignal {
                 group: 7,
@@ -399,16 +415,33 @@ mod tests {
         assert_eq!(a.channels[0][0].to_bits(), b.channels[0][0].to_bits());
         assert_eq!(a.channels[0][1], b.channels[0][1]);
         assert_eq!(back.borders, o.borders);
-        // A record written before the edge stage (no border field) reads back with none.
+        // A record written before the pixel noise (no field after the borders) reads back with
+        // none, its borders kept.
+        let mut old = encode(&Record::Group(o.clone()));
+        old.truncate(old.len() - 9);
+        let Record::Group(back) = decode(&old).unwrap() else {
+            panic!("not a group record");
+        };
+        let report = back.report.unwrap();
+        assert_eq!(report.pixel_noise_grey_levels, None);
+        assert_eq!(report.warning, o.report.as_ref().unwrap().warning);
+        assert_eq!(back.borders, o.borders);
+        // One written before the edge stage (no border field either) reads back with neither.
         let mut old = encode(&Record::Group(GroupOutcome {
             borders: None,
+            report: o.report.clone().map(|r| GroupReport {
+                pixel_noise_grey_levels: None,
+                ..r
+            }),
             ..o.clone()
         }));
+        assert_eq!(old.pop(), Some(0));
         assert_eq!(old.pop(), Some(0));
         let Record::Group(back) = decode(&old).unwrap() else {
             panic!("not a group record");
         };
         assert!(back.borders.is_none() && back.signal.is_some());
+        assert_eq!(back.report.unwrap().pixel_noise_grey_levels, None);
         let seed = vec![(WallSide::Right, vec![0.3, 0.31])];
         let Record::Seed(s) = decode(&encode(&Record::Seed(seed.clone()))).unwrap() else {
             panic!("not a seed");
