@@ -131,7 +131,7 @@ pub struct ReconstructArgs {
     /// Parameters TOML (see `groovescope params`).
     #[arg(long)]
     pub params: Option<PathBuf>,
-    /// JSON report (timings, per-group outliers, scores against reference.wav).
+    /// JSON report (timings, per-group outliers and pixel noise, scores against reference.wav).
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Force a path instead of choosing by the `[dual_focus]` table.

@@ -86,6 +86,9 @@ pub struct GroupHealth {
     pub rejected_fits: usize,
     /// Disagreement between two decoders, in `[0, 1]`, where the scan has two.
     pub disagreement: Option<f32>,
+    /// Pixel noise of its frames (σ, grey levels of 255) where the edge stage read them; shown,
+    /// not counted in the severity (a noisy camera is not a damaged groove).
+    pub pixel_noise: Option<f32>,
     /// All of it in `[0, 1]`: 0 sound, 1 lost (see [`ClipHealth::new`]).
     pub severity: f32,
 }
@@ -126,6 +129,7 @@ impl ClipHealth {
                 c.ran = true;
                 c.outlier_fraction = r.outlier_fraction.map(|o| o as f32);
                 c.rejected_fits = r.rejected_fits;
+                c.pixel_noise = r.pixel_noise_grey_levels.map(|n| n as f32);
                 if r.outlier_fraction.is_none() && r.samples == 0 {
                     c.failed = true;
                     c.gap_fraction = 1.0;
@@ -223,6 +227,9 @@ impl ClipHealth {
         if let Some(d) = c.disagreement {
             s += &format!(", decoders disagree {:.0} %", 100.0 * d);
         }
+        if let Some(n) = c.pixel_noise {
+            s += &format!(", pixel noise {n:.1} grey levels");
+        }
         s
     }
 }
@@ -267,7 +274,10 @@ mod tests {
             report(0, Some(0.9), 0),
             report(1, Some(0.9), 0),
             report(2, None, 0),
-            report(3, Some(0.95), 2),
+            GroupReport {
+                pixel_noise_grey_levels: Some(2.31),
+                ..report(3, Some(0.95), 2)
+            },
         ];
         let h = ClipHealth::new(5, &tracks, &reports);
         assert_eq!(h.len(), 5);
@@ -284,10 +294,12 @@ mod tests {
         assert_eq!(h.worst_in(0..5), Some(2));
         assert_eq!(h.worst_in(3..5), Some(3), "reconstructed groups first");
         assert!(
-            h.describe(3).contains("2 wall fits rejected"),
+            h.describe(3).contains("2 wall fits rejected")
+                && h.describe(3).contains("pixel noise 2.3 grey levels"),
             "{}",
             h.describe(3)
         );
+        assert!(!h.describe(0).contains("pixel noise"));
         assert!(h.describe(4).contains("not reconstructed"));
     }
 }
