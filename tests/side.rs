@@ -10,6 +10,7 @@ use std::process::{Command, Stdio};
 use std::sync::OnceLock;
 
 use common::{groovescope, stderr};
+use groovescope::io::wav::read_wav;
 use groovescope::job::Job;
 use groovescope::synth::{BUILTIN_RATE_HZ, SynthConfig, render_scan, tone};
 
@@ -163,6 +164,60 @@ fn merged_shards_are_byte_identical_to_one_process_for_flow_and_edges() {
     let flow = std::fs::read(tmp.path().join("flow-one.wav")).unwrap();
     let edges = std::fs::read(tmp.path().join("edges-one.wav")).unwrap();
     assert!(flow != edges, "--method changes the sound");
+}
+
+/// The fused method reads a group the flow method's stages fail on by the edges alone instead
+/// of leaving it silent (the rough scan's stripes fail on a few groups); where they fail on
+/// every group, the clip is the edge method's, sample for sample, and says so.
+#[test]
+fn a_group_the_flow_method_loses_is_read_by_the_edges_alone() {
+    let (_keep, scan, _) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let t = |name: &str| tmp.path().join(name);
+    let run = |method: &str, name: &str, params: Option<&Path>| {
+        let (wav, report) = (t(&format!("{name}.wav")), t(&format!("{name}.json")));
+        let mut args = vec!["reconstruct", s(scan), "--method", method, "--out", s(&wav)];
+        args.extend(["--report", s(&report), "--quiet"]);
+        if let Some(p) = params {
+            args.extend(["--params", s(p)]);
+        }
+        let o = groovescope(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let r: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+        let warnings: Vec<String> = r["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|w| w.as_str().unwrap().to_string())
+            .collect();
+        let silent = r["groups"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|g| g["samples"] == 0)
+            .count();
+        (read_wav(&wav).unwrap(), warnings, silent)
+    };
+    let (_, warnings, silent) = run("fused", "fused", None);
+    let alone = warnings
+        .iter()
+        .filter(|w| w.ends_with("(read by the edges alone)"));
+    assert!(alone.count() >= 2, "{warnings:#?}");
+    assert_eq!(silent, 0, "{warnings:#?}");
+    // An in-focus gradient no pixel reaches: the stripe stage fails on every group.
+    let params = t("no-stripes.toml");
+    std::fs::write(&params, "[hough]\ngradient_threshold = 10.0\n").unwrap();
+    let (fused, warnings, silent) = run("fused", "fused-alone", Some(&params));
+    assert_eq!(silent, 0, "{warnings:#?}");
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("the edges alone made the clip")),
+        "{warnings:#?}"
+    );
+    let (edges, _, _) = run("edges", "edges", Some(&params));
+    assert_eq!(fused.channels, edges.channels);
 }
 
 /// Each group's report row carries the pixel noise the edge stage measured, near the noise the

@@ -130,6 +130,12 @@ impl ClipHealth {
                 c.outlier_fraction = r.outlier_fraction.map(|o| o as f32);
                 c.rejected_fits = r.rejected_fits;
                 c.pixel_noise = r.pixel_noise_grey_levels.map(|n| n as f32);
+                // A fused group the flow method lost but the edges read has sound, though its
+                // track (the flow method's signal) has none.
+                if c.failed && r.samples > 0 {
+                    c.failed = false;
+                    c.gap_fraction = 0.0;
+                }
                 if r.outlier_fraction.is_none() && r.samples == 0 {
                     c.failed = true;
                     c.gap_fraction = 1.0;

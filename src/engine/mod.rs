@@ -327,13 +327,12 @@ pub fn finish_reconstruction(
         stage_secs,
         ..
     } = clip;
-    // The decoder the method needs that has nothing (fused needs both; flow's is named first).
+    // The decoder the method needs that has nothing (fused needs the edges; without any group
+    // of the flow method's it is the edge method, below).
     let (flow, edges) = ("the flow method", "the edge method");
     let silent = match params.method {
         Method::Flow => signals.is_empty().then_some(flow),
-        Method::Edges => borders.is_empty().then_some(edges),
-        Method::Fused if signals.is_empty() => Some(flow),
-        Method::Fused => borders.is_empty().then_some(edges),
+        Method::Edges | Method::Fused => borders.is_empty().then_some(edges),
     };
     if let Some(decoder) = silent {
         return Err(EngineError::NoSound {
@@ -352,6 +351,23 @@ pub fn finish_reconstruction(
         ..StageTimings::default()
     };
     let t_finish = Instant::now();
+    // A fused clip whose every group the flow method lost (each read by the edges alone) has
+    // nothing to fuse: it is the edge method's clip, and says so.
+    let edges_alone;
+    let params = if params.method == Method::Fused && signals.is_empty() {
+        warnings.push(
+            "the flow method gave no group any sound: the edges alone made the clip \
+             (method edges)"
+                .into(),
+        );
+        edges_alone = PipelineParams {
+            method: Method::Edges,
+            ..params.clone()
+        };
+        &edges_alone
+    } else {
+        params
+    };
     let rejected: usize = reports.iter().map(|r| r.rejected_fits).sum();
     if rejected > 0 {
         warnings.push(format!(

@@ -11,7 +11,9 @@ use crate::image::Image;
 use crate::io::{GroupEntry, LoadError, Scan, load_group_frames};
 use crate::pipeline::audio_signal::GroupSignal;
 use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
-use crate::pipeline::{GroupInput, PipelineParams, Stage, StageError, frames_read};
+use crate::pipeline::{
+    FlowDetail, GroupInput, Method, PipelineParams, Stage, StageCache, StageError, frames_read,
+};
 
 /// How a group meets the clip's slope history.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -243,8 +245,47 @@ pub fn run_groups(
     Ok(())
 }
 
+/// A group the flow method's stages failed on, read by the edge stage alone (which reads none
+/// of theirs), so that the fused decoder hears the edges there instead of silence. None where
+/// the edge stage fails too. The report row says why the flow method is missing.
+fn edges_alone(
+    input: &GroupInput,
+    params: &PipelineParams,
+    flow_error: &StageError,
+) -> Option<GroupOutcome> {
+    let started = Instant::now();
+    let mut cache = StageCache::new(FlowDetail::InFocusMap).sound_only();
+    cache
+        .run_from(Stage::Edges, input, params, &mut |_, _| true)
+        .ok()?;
+    let edges = cache.edges()?;
+    let samples = edges.positions_um.len();
+    let mut stage_secs = vec![0.0; Stage::ALL.len()];
+    stage_secs[Stage::Edges.index()] = started.elapsed().as_secs_f64();
+    Some(GroupOutcome {
+        group: input.group,
+        report: Some(GroupReport {
+            group: input.group,
+            outlier_fraction: None,
+            rejected_fits: 0,
+            samples,
+            warning: Some(format!(
+                "group {}: {flow_error} (read by the edges alone)",
+                input.group
+            )),
+            pixel_noise_grey_levels: edges.pixel_noise_grey_levels,
+        }),
+        signal: None,
+        borders: Some(Arc::new(edges.border_signal())),
+        slopes: Vec::new(),
+        load_secs: 0.0,
+        stage_secs,
+    })
+}
+
 /// One decoded group through the stages with the clip's slope reference; its own slope
-/// medians go into the history (a failed group adds none).
+/// medians go into the history (a failed group adds none). With the fused method, a group the
+/// flow method's stages fail on is read by the edges alone ([`edges_alone`]).
 fn process_group(
     input: &GroupInput,
     params: &PipelineParams,
@@ -255,7 +296,12 @@ fn process_group(
         SlopeMode::Check => slopes.reference(params.orientation.max_wall_slope_change),
         SlopeMode::RecordOnly => SlopeReference::default(),
     };
-    let (cache, times) = run_group(input, params, &reference)?;
+    let (cache, times) = match run_group(input, params, &reference) {
+        Ok(done) => done,
+        Err(e @ StageError::InvalidParam { .. }) => return Err(e),
+        Err(e) if params.method == Method::Fused => return edges_alone(input, params, &e).ok_or(e),
+        Err(e) => return Err(e),
+    };
     let entries: Vec<SlopeEntry> = cache
         .orientation()
         .map(|o| o.own_slopes.clone())

@@ -162,6 +162,13 @@ pub fn plain_warning(w: &str) -> String {
         format!("a dropout of {} is silent", count(0, "sample", "samples"))
     } else if w.starts_with("group") && w.contains("(filled with silence)") {
         format!("group {} could not be used and is silent", num(0))
+    } else if w.starts_with("group") && w.contains("(read by the edges alone)") {
+        format!(
+            "group {} could not be read by the flow method; the edges alone give its sound",
+            num(0)
+        )
+    } else if w.contains("the edges alone made the clip") {
+        "the flow method could read no group, so the whole clip is the edge method's".into()
     } else {
         w.to_string()
     }
@@ -205,6 +212,13 @@ mod tests {
         let p = plain_warning("1 fits rejected for an implausible wall slope (left as gaps)");
         assert!(
             p.starts_with("1 wall reading did") && p.contains("was left"),
+            "{p}"
+        );
+        let p = plain_warning(
+            "group 41: stripes: stripe 1 has no pixels of its own (read by the edges alone)",
+        );
+        assert!(
+            p.starts_with("group 41 could not") && p.contains("edges alone"),
             "{p}"
         );
         assert_eq!(plain_warning("something new"), "something new");
