@@ -273,20 +273,26 @@ mod tests {
             GroupTrack::new(1, Some(&signal(1, &[0.1, f32::NAN, 0.3, 0.4]))),
             GroupTrack::new(2, None),
             GroupTrack::new(3, Some(&signal(3, &[0.1, 0.2, 0.3, 0.4]))),
+            // Fused, read by the edges alone: no flow signal, but its report row has samples.
+            GroupTrack::new(5, None),
         ];
         assert_eq!(tracks[1].gap_samples, 1);
         assert_eq!(tracks[1].span_um, (100.0, 103.0));
         let reports = [
             report(0, Some(0.9), 0),
             report(1, Some(0.9), 0),
-            report(2, None, 0),
+            GroupReport {
+                samples: 0,
+                ..report(2, None, 0)
+            },
             GroupReport {
                 pixel_noise_grey_levels: Some(2.31),
                 ..report(3, Some(0.95), 2)
             },
+            report(5, None, 0),
         ];
-        let h = ClipHealth::new(5, &tracks, &reports);
-        assert_eq!(h.len(), 5);
+        let h = ClipHealth::new(6, &tracks, &reports);
+        assert_eq!(h.len(), 6);
         assert_eq!(
             h.cell(0).unwrap().severity,
             0.0,
@@ -297,6 +303,11 @@ mod tests {
         // 2 rejected fits of 4 samples; outliers 0.95 against the median 0.9: (0.05 / 0.1).
         assert!((h.cell(3).unwrap().severity - 0.5).abs() < 1e-6);
         assert!(!h.cell(4).unwrap().ran);
+        let alone = h.cell(5).unwrap();
+        assert!(
+            alone.ran && !alone.failed && alone.severity == 0.0,
+            "{alone:?}"
+        );
         assert_eq!(h.worst_in(0..5), Some(2));
         assert_eq!(h.worst_in(3..5), Some(3), "reconstructed groups first");
         assert!(
