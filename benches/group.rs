@@ -46,7 +46,11 @@ fn bench(c: &mut Criterion) {
                 format!("{name}: every stage, as reconstruct runs it"),
                 |b| {
                     b.iter(|| {
-                        black_box(run_group(&input, &params, &SlopeReference::default()).is_ok())
+                        black_box(
+                            run_group(&input, &params, &SlopeReference::default())
+                                .2
+                                .is_ok(),
+                        )
                     });
                 },
             );

@@ -11,9 +11,7 @@ use crate::image::Image;
 use crate::io::{GroupEntry, LoadError, Scan, load_group_frames};
 use crate::pipeline::audio_signal::GroupSignal;
 use crate::pipeline::slope_reference::{SlopeHistory, SlopeReference};
-use crate::pipeline::{
-    FlowDetail, GroupInput, Method, PipelineParams, Stage, StageCache, StageError, frames_read,
-};
+use crate::pipeline::{GroupInput, Method, PipelineParams, Stage, StageError, frames_read};
 
 /// How a group meets the clip's slope history.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -245,47 +243,11 @@ pub fn run_groups(
     Ok(())
 }
 
-/// A group the flow method's stages failed on, read by the edge stage alone (which reads none
-/// of theirs), so that the fused decoder hears the edges there instead of silence. None where
-/// the edge stage fails too. The report row says why the flow method is missing.
-fn edges_alone(
-    input: &GroupInput,
-    params: &PipelineParams,
-    flow_error: &StageError,
-) -> Option<GroupOutcome> {
-    let started = Instant::now();
-    let mut cache = StageCache::new(FlowDetail::InFocusMap).sound_only();
-    cache
-        .run_from(Stage::Edges, input, params, &mut |_, _| true)
-        .ok()?;
-    let edges = cache.edges()?;
-    let samples = edges.positions_um.len();
-    let mut stage_secs = vec![0.0; Stage::ALL.len()];
-    stage_secs[Stage::Edges.index()] = started.elapsed().as_secs_f64();
-    Some(GroupOutcome {
-        group: input.group,
-        report: Some(GroupReport {
-            group: input.group,
-            outlier_fraction: None,
-            rejected_fits: 0,
-            samples,
-            warning: Some(format!(
-                "group {}: {flow_error} (read by the edges alone)",
-                input.group
-            )),
-            pixel_noise_grey_levels: edges.pixel_noise_grey_levels,
-        }),
-        signal: None,
-        borders: Some(Arc::new(edges.border_signal())),
-        slopes: Vec::new(),
-        load_secs: 0.0,
-        stage_secs,
-    })
-}
-
 /// One decoded group through the stages with the clip's slope reference; its own slope
 /// medians go into the history (a failed group adds none). With the fused method, a group the
-/// flow method's stages fail on is read by the edges alone ([`edges_alone`]).
+/// flow method's stages fail on is read by the edges alone: the edge stage reads none of their
+/// outputs, but runs after them, so it is run on its own; the report row says why the flow
+/// method is missing.
 fn process_group(
     input: &GroupInput,
     params: &PipelineParams,
@@ -296,16 +258,33 @@ fn process_group(
         SlopeMode::Check => slopes.reference(params.orientation.max_wall_slope_change),
         SlopeMode::RecordOnly => SlopeReference::default(),
     };
-    let (cache, times) = match run_group(input, params, &reference) {
-        Ok(done) => done,
+    let (mut cache, mut times, ran) = run_group(input, params, &reference);
+    let flow_lost = match ran {
+        Ok(()) => None,
         Err(e @ StageError::InvalidParam { .. }) => return Err(e),
-        Err(e) if params.method == Method::Fused => return edges_alone(input, params, &e).ok_or(e),
+        Err(e) if params.method == Method::Fused && cache.signal().is_none() => {
+            let t0 = Instant::now();
+            if cache
+                .run_from(Stage::Edges, input, params, &mut |_, _| true)
+                .is_err()
+            {
+                return Err(e);
+            }
+            times[Stage::Edges.index()] = t0.elapsed();
+            Some(format!(
+                "group {}: {e} (read by the edges alone)",
+                input.group
+            ))
+        }
         Err(e) => return Err(e),
     };
-    let entries: Vec<SlopeEntry> = cache
-        .orientation()
-        .map(|o| o.own_slopes.clone())
-        .unwrap_or_default();
+    let entries: Vec<SlopeEntry> = match flow_lost {
+        Some(_) => Vec::new(),
+        None => cache
+            .orientation()
+            .map(|o| o.own_slopes.clone())
+            .unwrap_or_default(),
+    };
     slopes.push(&entries);
     let orientation = cache.orientation().map(|o| &o.orientation);
     let edges = cache.edges();
@@ -315,15 +294,21 @@ fn process_group(
         edges.map(|e| Arc::new(e.to_group_signal()))
     };
     // A border lost over the group is a gap marked in the report, not a failure.
-    let edge_warnings: Vec<&str> = edges
+    let mut notes: Vec<&str> = edges
         .map(|e| e.warnings.iter().map(String::as_str).collect())
         .unwrap_or_default();
-    let report = signal.as_ref().map(|sig| GroupReport {
+    notes.extend(flow_lost.as_deref());
+    // No signal only where the flow method was lost and the edges read the group.
+    let samples = signal
+        .as_ref()
+        .map(|sig| sig.positions_um.len())
+        .or_else(|| edges.map(|e| e.positions_um.len()));
+    let report = samples.map(|samples| GroupReport {
         group: input.group,
         outlier_fraction: orientation.map(|o| o.outlier_fraction),
         rejected_fits: orientation.map_or(0, |o| o.rejected_fits),
-        samples: sig.positions_um.len(),
-        warning: (!edge_warnings.is_empty()).then(|| edge_warnings.join("; ")),
+        samples,
+        warning: (!notes.is_empty()).then(|| notes.join("; ")),
         pixel_noise_grey_levels: edges.and_then(|e| e.pixel_noise_grey_levels),
     });
     Ok(GroupOutcome {

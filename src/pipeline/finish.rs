@@ -174,10 +174,16 @@ struct EdgeRepairs {
 impl EdgeRepairs {
     /// A warning line for each repair made.
     fn warnings(self, params: &PipelineParams) -> Vec<String> {
-        let plural = |n: usize| if n == 1 { ("", "its") } else { ("s", "their") };
+        let plural = |n: usize| {
+            if n == 1 {
+                ("", "its", "was")
+            } else {
+                ("s", "their", "were")
+            }
+        };
         let mut out = Vec::new();
         if self.despiked > 0 {
-            let (s, its) = plural(self.despiked);
+            let (s, its, _) = plural(self.despiked);
             out.push(format!(
                 "{} isolated displacement sample{s} put back on the curve through {its} \
                  neighbours (edges.despike_sigmas = {})",
@@ -185,17 +191,11 @@ impl EdgeRepairs {
             ));
         }
         if self.excursion_samples > 0 {
-            let (s, _) = plural(self.excursion_samples);
+            let (s, _, was) = plural(self.excursion_samples);
             out.push(format!(
-                "{} displacement sample{s} moved faster than a groove can and {} solved again \
+                "{} displacement sample{s} moved faster than a groove can and {was} solved again \
                  from the track around them, or left as gaps (edges.max_slope = {})",
-                self.excursion_samples,
-                if self.excursion_samples == 1 {
-                    "was"
-                } else {
-                    "were"
-                },
-                params.edges.max_slope
+                self.excursion_samples, params.edges.max_slope
             ));
         }
         out

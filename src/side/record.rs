@@ -190,16 +190,8 @@ pub fn decode(payload: &[u8]) -> Result<Record, String> {
             let n = r.count(8)?;
             let mut stage_secs: Vec<f64> = (0..n).map(|_| r.f64()).collect::<Result<_, _>>()?;
             stage_secs.resize(Stage::ALL.len(), 0.0);
-            let borders = if r.at < payload.len() {
-                r.signal()?
-            } else {
-                None
-            };
-            let noise = if r.at < payload.len() {
-                r.opt_f64()?
-            } else {
-                None
-            };
+            let borders = r.trailing(Reader::signal)?;
+            let noise = r.trailing(Reader::opt_f64)?;
             if let Some(report) = &mut report {
                 report.pixel_noise_grey_levels = noise;
             }
@@ -282,6 +274,19 @@ struct Reader<'a> {
 }
 
 impl Reader<'_> {
+    /// A field a later version added at the end of a record: None where the record ends
+    /// before it (one written before that version).
+    fn trailing<T>(
+        &mut self,
+        read: impl FnOnce(&mut Self) -> Result<Option<T>, String>,
+    ) -> Result<Option<T>, String> {
+        if self.at < self.b.len() {
+            read(self)
+        } else {
+            Ok(None)
+        }
+    }
+
     fn take(&mut self, n: usize) -> Result<&[u8], String> {
         let s = self
             .b

@@ -166,13 +166,22 @@ pub fn allowance(track: &[f64]) -> f64 {
     NOISE_SIGMAS * difference_sigma(track)
 }
 
-/// The walls' tracks `d ∓ e` (`d` alone on a lateral cut).
+/// Wall `side`'s displacement from a sample's `d` and `e`: `d ∓ e` (`d` alone on a lateral
+/// cut).
+fn wall_value(side: usize, d: f64, e: f64, lateral: bool) -> f64 {
+    match (lateral, side) {
+        (true, _) => d,
+        (false, 0) => d - e,
+        (false, _) => d + e,
+    }
+}
+
+/// The walls' tracks ([`wall_value`] per sample).
 fn wall_tracks(d: &[f64], e: &[f64], lateral: bool) -> [Vec<f64>; 2] {
     std::array::from_fn(|side| {
-        let sign = if side == 0 { -1.0 } else { 1.0 };
         d.iter()
             .zip(e)
-            .map(|(&dj, &ej)| if lateral { dj } else { dj + sign * ej })
+            .map(|(&dj, &ej)| wall_value(side, dj, ej, lateral))
             .collect()
     })
 }
@@ -212,8 +221,7 @@ pub(super) fn resolve_excursions(
             });
             let kept = start.and_then(|de| solve(j, de)).filter(|&(dj, ej, _, _)| {
                 (0..sides).all(|side| {
-                    let sign = if side == 0 { -1.0 } else { 1.0 };
-                    let v = if lateral { dj } else { dj + sign * ej };
+                    let v = wall_value(side, dj, ej, lateral);
                     within_reach(&walls[side], run, j, v, p.max_step_um, allow[side])
                 })
             });
