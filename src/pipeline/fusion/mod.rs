@@ -10,8 +10,10 @@
 //!    which reconstruct exactly) of both. Each block's noise levels come from the periodogram of
 //!    their difference, averaged over `smoothing_blocks` blocks on each side and fitted by
 //!    [`noise::fit_noise`]: flow noise `b` flat plus `c·|S|²` following the signal, edge noise
-//!    `a·ω²` (blocks where more than
-//!    [`MAX_FILLED_SHARE`] of the samples were filled from the other method lend no spectrum).
+//!    `a·ω²`. Blocks where more than [`MAX_FILLED_SHARE`] of the samples were filled from the
+//!    other method lend no spectrum, unless none near a block does: then blocks filled up to
+//!    [`MAX_GAPPY_FILLED_SHARE`] lend theirs, corrected for the gaps (a flow with a third of
+//!    its fits rejected would otherwise leave the whole clip at equal weights).
 //! 3. Each bin is the Wiener combination `w·E + (1 − w)·F` with `w = N_F/(N_F + a·ω²)`, `N_F = b + c·|E_k|²` (the block's own edge periodogram standing for the signal power), and the
 //!    blocks are added back.
 //!
@@ -35,6 +37,12 @@ use crate::meta::ScanMeta;
 /// Blocks lend their spectrum to the noise estimate only when less than this share of their
 /// samples was filled from the other method.
 pub const MAX_FILLED_SHARE: f64 = 0.1;
+/// Where no block within `smoothing_blocks` of a block lends its spectrum, blocks with up to
+/// this share of filled samples do, their difference periodogram divided by the share of the
+/// window's energy where both methods have data (the filled samples' difference is zero, so
+/// it reads low by about that share). Without them a flow whose fits are rejected all along
+/// leaves every block without a model, and the clip is fused at equal weights.
+pub const MAX_GAPPY_FILLED_SHARE: f64 = 0.5;
 /// An end of the clip where one method reaches at most this many samples past the other ends
 /// with the other. Those lone samples are an overhang of the two grids, not a group's sound, and
 /// one from the method that reads the scan poorly (the flow method on the small dual-focus
@@ -171,8 +179,17 @@ fn sqrt_hann(n: usize) -> Vec<f64> {
         .collect()
 }
 
-/// One block's spectra: flow (re, im), edges (re, im), and the share of filled samples.
-type BlockSpectra = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, f64);
+/// One block's spectra: flow (re, im), edges (re, im), and its [`Filled`] shares.
+type BlockSpectra = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Filled);
+
+/// How much of a block was filled from the other method.
+#[derive(Clone, Copy, Debug)]
+struct Filled {
+    /// Share of its samples where one method was missing.
+    samples: f64,
+    /// Share of its window's energy where both methods had data.
+    both_energy: f64,
+}
 
 /// Inverse FFT (normalised) by the conjugate trick.
 fn ifft_in_place(fft: &ComplexFft, re: &mut [f64], im: &mut [f64]) {
@@ -257,6 +274,7 @@ fn fuse_channel(
             let (mut er, mut ei) = (vec![0.0; block], vec![0.0; block]);
             let mut filled = 0usize;
             let mut inside = 0usize;
+            let (mut energy, mut both_energy) = (0.0, 0.0);
             for (k, &w) in window.iter().enumerate() {
                 let Ok(i) = usize::try_from(s + k as i64) else {
                     continue;
@@ -265,7 +283,10 @@ fn fuse_channel(
                     continue;
                 }
                 inside += 1;
-                if !(flow_ok[i] && edges_ok[i]) {
+                energy += w * w;
+                if flow_ok[i] && edges_ok[i] {
+                    both_energy += w * w;
+                } else {
                     filled += 1;
                 }
                 fr[k] = w * f[i];
@@ -273,31 +294,47 @@ fn fuse_channel(
             }
             fft.forward(&mut fr, &mut fi);
             fft.forward(&mut er, &mut ei);
-            let share = if inside > 0 {
-                filled as f64 / inside as f64
-            } else {
-                1.0
+            let share = Filled {
+                samples: if inside > 0 {
+                    filled as f64 / inside as f64
+                } else {
+                    1.0
+                },
+                both_energy: if energy > 0.0 {
+                    both_energy / energy
+                } else {
+                    0.0
+                },
             };
             (fr, fi, er, ei, share)
         })
         .collect();
     // Difference and edge periodograms of the blocks that may lend them (positive-frequency
-    // bins 1..=N/2).
+    // bins 1..=N/2): the clean ones as measured, the gappy ones with the difference scaled up
+    // by the energy its gaps took out.
     let half = block / 2;
     type Periodograms = (Vec<f64>, Vec<f64>);
+    let periodograms = |(fr, fi, er, ei, _): &BlockSpectra, scale: f64| -> Periodograms {
+        (1..=half)
+            .map(|k| {
+                (
+                    ((fr[k] - er[k]).powi(2) + (fi[k] - ei[k]).powi(2)) * scale,
+                    er[k].powi(2) + ei[k].powi(2),
+                )
+            })
+            .unzip()
+    };
     let diff: Vec<Option<Periodograms>> = spectra
         .iter()
-        .map(|(fr, fi, er, ei, share)| {
-            (*share <= MAX_FILLED_SHARE).then(|| {
-                (1..=half)
-                    .map(|k| {
-                        (
-                            (fr[k] - er[k]).powi(2) + (fi[k] - ei[k]).powi(2),
-                            er[k].powi(2) + ei[k].powi(2),
-                        )
-                    })
-                    .unzip()
-            })
+        .map(|b| (b.4.samples <= MAX_FILLED_SHARE).then(|| periodograms(b, 1.0)))
+        .collect();
+    let gappy: Vec<Option<Periodograms>> = spectra
+        .iter()
+        .map(|b| {
+            (b.4.samples > MAX_FILLED_SHARE
+                && b.4.samples <= MAX_GAPPY_FILLED_SHARE
+                && b.4.both_energy > 0.0)
+                .then(|| periodograms(b, 1.0 / b.4.both_energy))
         })
         .collect();
     let omega: Vec<f64> = (1..=half)
@@ -317,7 +354,13 @@ fn fuse_channel(
             let mut acc = vec![0.0; half];
             let mut sig = vec![0.0; half];
             let mut count = 0usize;
-            for (d, e) in diff[lo..hi].iter().flatten() {
+            // The clean blocks near it lend their spectra; where there are none, the gappy ones.
+            let lenders = if diff[lo..hi].iter().any(Option::is_some) {
+                &diff[lo..hi]
+            } else {
+                &gappy[lo..hi]
+            };
+            for (d, e) in lenders.iter().flatten() {
                 for ((a, v), (sa, sv)) in acc.iter_mut().zip(d).zip(sig.iter_mut().zip(e)) {
                     *a += v;
                     *sa += sv;

@@ -195,3 +195,39 @@ fn the_group_report_covers_each_sampled_group_once_whatever_the_step() {
     );
     assert!(fused.groups.windows(2).all(|w| w[0].group < w[1].group));
 }
+
+/// A flow with a third of its samples missing everywhere (a rough scan's rejected fits) leaves
+/// no block clean enough to lend its spectrum; the gappy blocks lend theirs instead, so a flow
+/// that reads the sound inverted and noisy is weighed down rather than averaged in at one half.
+#[test]
+fn a_flow_gappy_everywhere_still_gets_its_noise_measured() {
+    let n = 4096;
+    let (truth, flow, edges) = inputs(n, 20.0, 0.5);
+    let inverted: Vec<f32> = flow
+        .iter()
+        .zip(&truth)
+        .map(|(&f, &t)| f - 1.5 * t as f32)
+        .collect();
+    let mut f = signal(0, vec![inverted]);
+    // Runs of 2 to 10 samples missing, 4 to 20 apart: every block is about a third filled.
+    let mut rng = Rng::new(11);
+    let mut at = 0;
+    while at < n {
+        let (gap, run) = (rng.range(2.0, 10.0) as usize, rng.range(4.0, 20.0) as usize);
+        f.gaps.push(at..(at + gap).min(n));
+        at += gap + run;
+    }
+    let fills = f.gaps.iter().map(ExactSizeIterator::len).sum::<usize>();
+    assert!((0.2..0.45).contains(&(fills as f64 / n as f64)), "{fills}");
+    let e = signal(0, vec![edges.clone()]);
+    let fused = fuse_default(&f, &e).unwrap();
+    // Every block has a noise model (a block without one is left out of the list).
+    assert_eq!(fused.blocks.len(), 4096 / 128 + 1);
+    assert!(fused.blocks.iter().all(|b| b.crossover_hz.is_finite()));
+    let inner = 300..n - 300;
+    let (ee, eu) = (
+        error_power(&edges, &truth, inner.clone()),
+        error_power(&fused.signal.channels[0], &truth, inner),
+    );
+    assert!(eu < 1.2 * ee, "fused {eu} vs edges {ee}");
+}
