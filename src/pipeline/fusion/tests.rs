@@ -231,3 +231,33 @@ fn a_flow_gappy_everywhere_still_gets_its_noise_measured() {
     );
     assert!(eu < 1.2 * ee, "fused {eu} vs edges {ee}");
 }
+
+/// A flow that under-reads the sound by a fifth (an error that follows the signal) beside edges
+/// whose noise rises far above the sound's high tone: the edges' noise must not read as signal
+/// the flow missed. Standing the edges' own periodogram for the signal, as the fusion did
+/// before, left 0.101 of the better input's error power; the cross-spectrum leaves 0.054.
+#[test]
+fn noisy_edges_do_not_pass_for_signal_the_flow_missed() {
+    let n = 8192;
+    let (truth, flow, edges) = inputs(n, 1.0, 6.0);
+    let under: Vec<f32> = flow
+        .iter()
+        .zip(&truth)
+        .map(|(&f, &t)| f - 0.2 * t as f32)
+        .collect();
+    let fused = fuse_default(
+        &signal(0, vec![under.clone()]),
+        &signal(0, vec![edges.clone()]),
+    )
+    .unwrap();
+    let inner = 300..n - 300;
+    let (ef, ee, eu) = (
+        error_power(&under, &truth, inner.clone()),
+        error_power(&edges, &truth, inner.clone()),
+        error_power(&fused.signal.channels[0], &truth, inner),
+    );
+    assert!(
+        eu < 0.075 * ef.min(ee),
+        "fused {eu} vs flow {ef}, edges {ee}"
+    );
+}
