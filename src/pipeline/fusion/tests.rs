@@ -60,6 +60,25 @@ fn error_power(x: &[f32], truth: &[f64], range: Range<usize>) -> f64 {
         .sum::<f64>()
 }
 
+/// `x` with `k` times the truth added: a reading whose gain is off by `k`.
+fn gain_off(x: &[f32], truth: &[f64], k: f64) -> Vec<f32> {
+    x.iter()
+        .zip(truth)
+        .map(|(&v, &t)| v + (k * t) as f32)
+        .collect()
+}
+
+/// Error powers of the flow input, the edge input and the fused output against `truth`, 300
+/// samples in from each end.
+fn error_powers(flow: &[f32], edges: &[f32], fused: &Fused, truth: &[f64]) -> (f64, f64, f64) {
+    let inner = 300..truth.len() - 300;
+    (
+        error_power(flow, truth, inner.clone()),
+        error_power(edges, truth, inner.clone()),
+        error_power(&fused.signal.channels[0], truth, inner),
+    )
+}
+
 #[test]
 fn fusion_beats_both_inputs() {
     let n = 8192;
@@ -69,12 +88,7 @@ fn fusion_beats_both_inputs() {
         &signal(100, vec![edges.clone()]),
     )
     .unwrap();
-    let inner = 300..n - 300;
-    let (ef, ee, eu) = (
-        error_power(&flow, &truth, inner.clone()),
-        error_power(&edges, &truth, inner.clone()),
-        error_power(&fused.signal.channels[0], &truth, inner),
-    );
+    let (ef, ee, eu) = error_powers(&flow, &edges, &fused, &truth);
     eprintln!("error power: flow {ef:.0}, edges {ee:.0}, fused {eu:.0}");
     assert!(eu < 0.6 * ef.min(ee), "fused {eu} vs flow {ef}, edges {ee}");
     // Flow noise σ² = 4, edge noise 4·ω²: equal at ω = 1 rad/sample, i.e. 7.0 kHz.
@@ -203,12 +217,7 @@ fn the_group_report_covers_each_sampled_group_once_whatever_the_step() {
 fn a_flow_gappy_everywhere_still_gets_its_noise_measured() {
     let n = 4096;
     let (truth, flow, edges) = inputs(n, 20.0, 0.5);
-    let inverted: Vec<f32> = flow
-        .iter()
-        .zip(&truth)
-        .map(|(&f, &t)| f - 1.5 * t as f32)
-        .collect();
-    let mut f = signal(0, vec![inverted]);
+    let mut f = signal(0, vec![gain_off(&flow, &truth, -1.5)]);
     // Runs of 2 to 10 samples missing, 4 to 20 apart: every block is about a third filled.
     let mut rng = Rng::new(11);
     let mut at = 0;
@@ -224,11 +233,7 @@ fn a_flow_gappy_everywhere_still_gets_its_noise_measured() {
     // Every block has a noise model (a block without one is left out of the list).
     assert_eq!(fused.blocks.len(), 4096 / 128 + 1);
     assert!(fused.blocks.iter().all(|b| b.crossover_hz.is_finite()));
-    let inner = 300..n - 300;
-    let (ee, eu) = (
-        error_power(&edges, &truth, inner.clone()),
-        error_power(&fused.signal.channels[0], &truth, inner),
-    );
+    let (_, ee, eu) = error_powers(&f.channels[0], &edges, &fused, &truth);
     assert!(eu < 1.2 * ee, "fused {eu} vs edges {ee}");
 }
 
@@ -240,22 +245,13 @@ fn a_flow_gappy_everywhere_still_gets_its_noise_measured() {
 fn noisy_edges_do_not_pass_for_signal_the_flow_missed() {
     let n = 8192;
     let (truth, flow, edges) = inputs(n, 1.0, 6.0);
-    let under: Vec<f32> = flow
-        .iter()
-        .zip(&truth)
-        .map(|(&f, &t)| f - 0.2 * t as f32)
-        .collect();
+    let under = gain_off(&flow, &truth, -0.2);
     let fused = fuse_default(
         &signal(0, vec![under.clone()]),
         &signal(0, vec![edges.clone()]),
     )
     .unwrap();
-    let inner = 300..n - 300;
-    let (ef, ee, eu) = (
-        error_power(&under, &truth, inner.clone()),
-        error_power(&edges, &truth, inner.clone()),
-        error_power(&fused.signal.channels[0], &truth, inner),
-    );
+    let (ef, ee, eu) = error_powers(&under, &edges, &fused, &truth);
     assert!(
         eu < 0.075 * ef.min(ee),
         "fused {eu} vs flow {ef}, edges {ee}"
