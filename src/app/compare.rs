@@ -6,7 +6,7 @@
 //! B is laid on A by groove position and then by its own delay: a decoder can delay the sound
 //! by a few samples of its own, and a delay read as disagreement would hide how alike the two
 //! sounds are (on the demo scan, fused against flow: r 0.892 and 6.7 dB with flow 3.0 samples
-//! late, r 0.945 and 9.6 dB once aligned). The delay is the lag within [`ALIGN_MAX_LAG_S`] at
+//! late, r 0.944 and 9.6 dB once aligned). The delay is the lag within [`ALIGN_MAX_LAG_S`] at
 //! which B correlates best with A, to a fraction of a sample (`pipeline::eval::evaluate`); B
 //! is read there by band-limited interpolation (`read_from`), both for the figures and for
 //! listening, and the window says how far it moved.

@@ -10,10 +10,10 @@ use groovescope::pipeline::Method;
 use super::gui_common::*;
 
 /// Lowest r between fused and flow over the whole clean demo scan, flow's delay taken out
-/// (measured 0.945, SNR 9.6 dB; 0.892 and 6.7 dB with the delay left in): the two decoders
+/// (measured 0.944, SNR 9.6 dB; 0.892 and 6.7 dB with the delay left in): the two decoders
 /// differ in their noise, not in the sound they recover.
 const CLEAN_MIN_R: f64 = 0.92;
-/// Lowest r of any one group there (measured 0.74 to 0.99, 0.60 with the delay left in: a
+/// Lowest r of any one group there (measured 0.75 to 0.99, 0.60 with the delay left in: a
 /// group is about 100 samples).
 const CLEAN_GROUP_MIN_R: f64 = 0.65;
 /// Flow's delay against fused on the demo scan, in samples at 44.1 kHz (measured 3.02).
