@@ -36,21 +36,50 @@ fn small_side_config(groups: usize) -> SynthConfig {
     }
 }
 
-fn shared() -> &'static (tempfile::TempDir, PathBuf, Vec<u8>) {
-    static SCAN: OnceLock<(tempfile::TempDir, PathBuf, Vec<u8>)> = OnceLock::new();
+/// The shared scan, rendered once: its folder, and the WAV and JSON report of one default
+/// (fused) `reconstruct` of it in one process.
+type Shared = (tempfile::TempDir, PathBuf, Vec<u8>, serde_json::Value);
+
+fn shared() -> &'static Shared {
+    static SCAN: OnceLock<Shared> = OnceLock::new();
     SCAN.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
         let scan = dir.path().join("scan");
         let cfg = small_side_config(GROUPS);
         let sound = tone(1000.0, 0.03, BUILTIN_RATE_HZ);
         render_scan(&sound, &cfg, &scan, Job::unwatched()).unwrap();
-        let out = dir.path().join("one.wav");
-        let o = groovescope(&["reconstruct", s(&scan), "--out", s(&out), "--quiet"]);
-        assert!(o.status.success(), "{}", stderr(&o));
+        let (out, report) = reconstruct_with_report(&scan, dir.path(), "one", &[]);
         assert!(!groovescope::side::cli::journal_path(&out).exists());
         let wav = std::fs::read(&out).unwrap();
-        (dir, scan, wav)
+        (dir, scan, wav, report)
     })
+}
+
+/// `reconstruct SCAN` with `args` (a method, params) into `dir`'s `NAME.wav`, with its report
+/// `NAME.json`: the WAV's path and the report.
+fn reconstruct_with_report(
+    scan: &Path,
+    dir: &Path,
+    name: &str,
+    args: &[&str],
+) -> (PathBuf, serde_json::Value) {
+    let (wav, report) = (
+        dir.join(format!("{name}.wav")),
+        dir.join(format!("{name}.json")),
+    );
+    let fixed = [
+        "reconstruct",
+        s(scan),
+        "--out",
+        s(&wav),
+        "--report",
+        s(&report),
+        "--quiet",
+    ];
+    let o = groovescope(&[&fixed[..], args].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    (wav, r)
 }
 
 fn plan(scan: &Path, shards: usize, out: &Path, extra: &[&str]) {
@@ -109,7 +138,7 @@ fn assert_merges_to(parts: &[PathBuf], out: &Path, want: &[u8], what: &str) {
 
 #[test]
 fn merged_shards_are_byte_identical_to_one_process_for_1_2_3_and_7_shards() {
-    let (_keep, scan, one) = shared();
+    let (_keep, scan, one, _) = shared();
     let tmp = tempfile::tempdir().unwrap();
     for n in [1, 2, 3, 7] {
         let p = tmp.path().join(format!("plan{n}.json"));
@@ -133,7 +162,7 @@ fn merged_shards_are_byte_identical_to_one_process_for_1_2_3_and_7_shards() {
 /// (whose shards rebuild the slope history) and `edges` merge to the one-process bytes too.
 #[test]
 fn merged_shards_are_byte_identical_to_one_process_for_flow_and_edges() {
-    let (_keep, scan, _) = shared();
+    let (_keep, scan, _, _) = shared();
     let tmp = tempfile::tempdir().unwrap();
     for method in ["flow", "edges"] {
         let params = tmp.path().join(format!("{method}.toml"));
@@ -174,59 +203,59 @@ fn merged_shards_are_byte_identical_to_one_process_for_flow_and_edges() {
 /// edges: at equal weights, which it fell back on before, it read r 0.24 against the edges' 0.998.
 #[test]
 fn a_group_the_flow_method_loses_is_read_by_the_edges_alone() {
-    let (_keep, scan, _) = shared();
+    let (_keep, scan, _, fused) = shared();
     let tmp = tempfile::tempdir().unwrap();
-    let t = |name: &str| tmp.path().join(name);
-    let run = |method: &str, name: &str, params: Option<&Path>| {
-        let (wav, report) = (t(&format!("{name}.wav")), t(&format!("{name}.json")));
-        let mut args = vec!["reconstruct", s(scan), "--method", method, "--out", s(&wav)];
-        args.extend(["--report", s(&report), "--quiet"]);
-        if let Some(p) = params {
-            args.extend(["--params", s(p)]);
-        }
-        let o = groovescope(&args);
-        assert!(o.status.success(), "{}", stderr(&o));
-        let r: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
-        let warnings: Vec<String> = r["warnings"]
+    let params = tmp.path().join("no-stripes.toml");
+    let run = |name: &str, args: &[&str]| reconstruct_with_report(scan, tmp.path(), name, args);
+    let warnings = |r: &serde_json::Value| -> Vec<String> {
+        r["warnings"]
             .as_array()
             .unwrap()
             .iter()
             .map(|w| w.as_str().unwrap().to_string())
-            .collect();
-        let silent = r["groups"]
+            .collect()
+    };
+    let silent = |r: &serde_json::Value| {
+        r["groups"]
             .as_array()
             .unwrap()
             .iter()
             .filter(|g| g["samples"] == 0)
-            .count();
-        let r = r["scores"]["r"].as_f64().unwrap();
-        (read_wav(&wav).unwrap(), warnings, silent, r)
+            .count()
     };
-    let (_, warnings, silent, fused_r) = run("fused", "fused", None);
-    let (_, _, _, edges_r) = run("edges", "edges-rough", None);
+    let r = |r: &serde_json::Value| r["scores"]["r"].as_f64().unwrap();
+    let (_, edges) = run("edges-rough", &["--method", "edges"]);
+    let (fused_r, edges_r) = (r(fused), r(&edges));
     assert!(
         fused_r > 0.99 && fused_r > edges_r - 0.005,
         "fused r {fused_r}, edges r {edges_r}"
     );
-    let alone = warnings
+    let fused_warnings = warnings(fused);
+    let alone = fused_warnings
         .iter()
         .filter(|w| w.ends_with("(read by the edges alone)"));
-    assert!(alone.count() >= 2, "{warnings:#?}");
-    assert_eq!(silent, 0, "{warnings:#?}");
+    assert!(alone.count() >= 2, "{fused_warnings:#?}");
+    assert_eq!(silent(fused), 0, "{fused_warnings:#?}");
     // An in-focus gradient no pixel reaches: the stripe stage fails on every group.
-    let params = t("no-stripes.toml");
     std::fs::write(&params, "[hough]\ngradient_threshold = 10.0\n").unwrap();
-    let (fused, warnings, silent, _) = run("fused", "fused-alone", Some(&params));
-    assert_eq!(silent, 0, "{warnings:#?}");
+    let no_stripes = ["--params", s(&params)];
+    let (wav, report) = run(
+        "fused-alone",
+        &[&["--method", "fused"][..], &no_stripes].concat(),
+    );
+    let warnings = warnings(&report);
+    assert_eq!(silent(&report), 0, "{warnings:#?}");
     assert!(
         warnings
             .iter()
             .any(|w| w.contains("the edges alone made the clip")),
         "{warnings:#?}"
     );
-    let (edges, _, _, _) = run("edges", "edges", Some(&params));
-    assert_eq!(fused.channels, edges.channels);
+    let (edges, _) = run("edges", &[&["--method", "edges"][..], &no_stripes].concat());
+    assert_eq!(
+        read_wav(&wav).unwrap().channels,
+        read_wav(&edges).unwrap().channels
+    );
 }
 
 /// Each group's report row carries the pixel noise the edge stage measured, near the noise the
@@ -234,12 +263,11 @@ fn a_group_the_flow_method_loses_is_read_by_the_edges_alone() {
 /// and the flow method, which reads no edges, report none.
 #[test]
 fn report_rows_carry_the_pixel_noise_through_parts() {
-    let (_keep, scan, _) = shared();
+    let (_keep, scan, _, fused) = shared();
     let tmp = tempfile::tempdir().unwrap();
     let t = |name: &str| tmp.path().join(name);
     // Each row's sample count and pixel noise.
-    let rows = |report: &Path| -> Vec<(u64, Option<f64>)> {
-        let r: serde_json::Value = serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
+    let rows = |r: &serde_json::Value| -> Vec<(u64, Option<f64>)> {
         r["groups"]
             .as_array()
             .unwrap()
@@ -250,14 +278,7 @@ fn report_rows_carry_the_pixel_noise_through_parts() {
             })
             .collect()
     };
-    let reconstruct = |method: &str, name: &str| {
-        let (wav, report) = (t(&format!("{name}.wav")), t(&format!("{name}.json")));
-        let args = ["reconstruct", s(scan), "--method", method, "--out", s(&wav)];
-        let o = groovescope(&[&args[..], &["--report", s(&report), "--quiet"]].concat());
-        assert!(o.status.success(), "{}", stderr(&o));
-        rows(&report)
-    };
-    let one = reconstruct("fused", "one");
+    let one = rows(fused);
     assert_eq!(one.len(), GROUPS);
     // Rendered with σ = 0.5 grey levels and quantised to 8 bits: σ² + 1/12 in all.
     let truth = (0.25_f64 + 1.0 / 12.0).sqrt();
@@ -287,13 +308,15 @@ fn report_rows_carry_the_pixel_noise_through_parts() {
     args.extend(["--out", s(&wav), "--report", s(&report), "--quiet"].map(String::from));
     let o = groovescope(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(o.status.success(), "{}", stderr(&o));
-    assert_eq!(rows(&report), one);
-    assert!(reconstruct("flow", "flow").iter().all(|r| r.1.is_none()));
+    let merged = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(rows(&merged), one);
+    let (_, flow) = reconstruct_with_report(scan, tmp.path(), "flow", &["--method", "flow"]);
+    assert!(rows(&flow).iter().all(|r| r.1.is_none()));
 }
 
 #[test]
 fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() {
-    let (_keep, scan, _) = shared();
+    let (_keep, scan, _, _) = shared();
     let tmp = tempfile::tempdir().unwrap();
     let t = tmp.path();
     let (p2, p3) = (t.join("p2.json"), t.join("p3.json"));
@@ -374,7 +397,7 @@ fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() 
 
 #[test]
 fn a_plan_for_another_scan_and_a_shard_out_of_range_are_refused() {
-    let (_keep, scan, _) = shared();
+    let (_keep, scan, _, _) = shared();
     let tmp = tempfile::tempdir().unwrap();
     let t = tmp.path();
     let p = t.join("plan.json");
@@ -474,7 +497,7 @@ fn random_group(lo: usize, hi: usize) -> usize {
 
 #[test]
 fn a_run_killed_at_a_random_group_resumes_to_the_same_bytes() {
-    let (_keep, scan, one) = shared();
+    let (_keep, scan, one, _) = shared();
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("side.wav");
     let journal = tmp.path().join("side.wav.journal");
@@ -552,7 +575,7 @@ fn copy_dir(from: &Path, to: &Path) {
 
 #[test]
 fn ctrl_c_stops_at_the_next_group_keeps_the_journal_and_says_so() {
-    let (_keep, scan, one) = shared();
+    let (_keep, scan, one, _) = shared();
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("side.wav");
     let args = ["reconstruct", s(scan), "--out", s(&out)];
@@ -581,7 +604,7 @@ fn ctrl_c_stops_at_the_next_group_keeps_the_journal_and_says_so() {
 
 #[test]
 fn ctrl_c_stops_plan_inspect_and_merge_and_they_write_nothing() {
-    let (_keep, scan, _) = shared();
+    let (_keep, scan, _, _) = shared();
     let tmp = tempfile::tempdir().unwrap();
     // plan: Ctrl-C before its probe (13 groups) runs, or with no probe; inspect: before its
     // first stage.

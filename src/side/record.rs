@@ -124,8 +124,8 @@ pub fn encode(record: &Record) -> Vec<u8> {
             for t in &o.stage_secs {
                 b.extend_from_slice(&t.to_bits().to_le_bytes());
             }
-            // Last, so records written before the edge stage read back with none, and the pixel
-            // noise after them, so records written before it read back with none.
+            // Fields added later go last, in the order added (the borders, then the pixel
+            // noise), so a record written before one reads back with none (`Reader::trailing`).
             put_signal(&mut b, o.borders.as_deref());
             put_opt_f64(
                 &mut b,

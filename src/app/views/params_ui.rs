@@ -22,6 +22,7 @@ thread_local! {
     /// While Some (a test): every section opens, and each row's key is written down.
     static DRAWN: std::cell::RefCell<Option<Vec<String>>> = const { std::cell::RefCell::new(None) };
     /// While Some (a test): each number row's key and the range it offers.
+    #[cfg(test)]
     static RANGES: std::cell::RefCell<Option<Vec<(String, f64, f64)>>> =
         const { std::cell::RefCell::new(None) };
 }

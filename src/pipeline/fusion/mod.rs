@@ -15,8 +15,8 @@
 //!    [`MAX_GAPPY_FILLED_SHARE`] lend theirs, corrected for the gaps (a flow with a third of
 //!    its fits rejected would otherwise leave the whole clip at equal weights).
 //! 3. Each bin is the Wiener combination `w·E + (1 − w)·F` with `w = N_F/(N_F + a·ω²)`,
-//!    `N_F = b + c·|F_k·E_k*|` (the block's own cross-spectrum standing for the signal power,
-//!    as it does in the fit), and the blocks are added back.
+//!    `N_F = b + c·|F_k|·|E_k|` (the geometric mean of the block's own periodograms standing for
+//!    the signal power, as it does in the fit), and the blocks are added back.
 //!
 //! Stereo channels fuse separately (each wall gives its channel). The report lists every block's
 //! crossover and edge weights, and maps the blocks onto the scan's groups.
@@ -243,14 +243,15 @@ fn block_edge_levels(
 }
 
 /// The signal power at a bin as the flow's signal-following error is fitted to and weighed by:
-/// the magnitude of the two readings' cross-spectrum, `|F·E*|`. The edges' own periodogram
-/// would count their noise as signal: where the edge noise is the larger (speech's quiet high
-/// band, a damaged wall) it would read as signal the flow missed and hand the edges the
-/// weight. The cross-spectrum's noise terms are independent and average out. Its magnitude,
-/// not its real part: where the flow's reading of a band is delayed or rotated against the
-/// edges', the real part vanishes while the error it follows does not.
+/// the geometric mean of the two readings' periodograms, `|F|·|E|` (the magnitude of their
+/// cross-spectrum). The edges' own periodogram would count all of their noise as signal: where
+/// the edge noise is the larger (speech's quiet high band, a damaged wall) it would read as
+/// signal the flow missed and hand the edges the weight; in the mean it counts half as many
+/// decibels. Not the cross-spectrum's real part, which would drop the noise but vanishes where
+/// the flow's reading of a band is delayed or rotated against the edges', while the error it
+/// follows does not.
 fn signal_power(fr: f64, fi: f64, er: f64, ei: f64) -> f64 {
-    (fr * er + fi * ei).hypot(fi * er - fr * ei)
+    fr.hypot(fi) * er.hypot(ei)
 }
 
 fn fuse_channel(
@@ -321,9 +322,9 @@ fn fuse_channel(
             (fr, fi, er, ei, share)
         })
         .collect();
-    // Difference periodograms and cross-spectra of the blocks that may lend them (positive-frequency
-    // bins 1..=N/2): the clean ones as measured, the gappy ones with the difference scaled up
-    // by the energy its gaps took out.
+    // Difference periodograms and signal powers of the blocks that may lend them
+    // (positive-frequency bins 1..=N/2): the clean ones as measured, the gappy ones with the
+    // difference scaled up by the energy its gaps took out.
     let half = block / 2;
     type Periodograms = (Vec<f64>, Vec<f64>);
     let periodograms = |(fr, fi, er, ei, _): &BlockSpectra, scale: f64| -> Periodograms {
@@ -406,7 +407,7 @@ fn fuse_channel(
             // Bin k and its mirror share a frequency.
             let kk = if k <= half { k } else { block - k };
             let omega = 2.0 * PI * kk as f64 / block as f64;
-            // The block's own cross-spectrum stands for the signal power at the bin.
+            // The block's own periodograms stand for the signal power at the bin.
             let signal = signal_power(fr[k], fi[k], er[k], ei[k]);
             let w = model.map_or(0.5, |m| m.edge_weight(omega, signal));
             re[k] = w * er[k] + (1.0 - w) * fr[k];

@@ -7,8 +7,9 @@
 //! the flow's error is not flat: it rises where the signal is, because the tilt reading
 //! under-reads and smears the wall's motion (its window and the robust fit low-pass it), while
 //! the edges' scale is fixed by the pixel pitch and a differentiator within 0.3 dB of iω. So
-//! the model is `N = b + a·ω² + c·|S(ω)|²` (ω in radians per sample, `|S|²` the edge estimate's
-//! smoothed periodogram), and disagreement that follows the signal counts as flow error. The
+//! the model is `N = b + a·ω² + c·|S(ω)|²` (ω in radians per sample, `|S|²` the smoothed
+//! geometric mean of the two estimates' periodograms, which counts either one's noise at half
+//! its decibels), and disagreement that follows the signal counts as flow error. The
 //! three levels are the weighted least squares fit to the smoothed periodogram of the
 //! difference, each bin weighted by `1/model²` (a periodogram's spread grows with its mean) and
 //! by a Lorentzian of its relative residual, none negative (the best fit over the subsets of
@@ -134,8 +135,8 @@ fn fit_levels(rows: &[([f64; 3], f64, f64)], fixed: [bool; 3]) -> [f64; 3] {
     best.map_or([0.0; 3], |b| b.0)
 }
 
-/// Fits the model to a difference power spectrum `power[k]` at `omega[k]`, with the edge
-/// estimate's power `signal[k]` there (bins with a zero or non-finite power are skipped). With
+/// Fits the model to a difference power spectrum `power[k]` at `omega[k]`, with the signal
+/// power `signal[k]` there (the caller's estimate) (bins with a zero or non-finite power are skipped). With
 /// `edge` given (the edge noise level `a`, known from the border fits' standard errors) only the
 /// flow's levels are fitted, to what the edge noise leaves of the difference: a rising
 /// difference is then the flow's. None when fewer than three bins are usable.

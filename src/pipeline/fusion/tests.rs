@@ -240,7 +240,8 @@ fn a_flow_gappy_everywhere_still_gets_its_noise_measured() {
 /// A flow that under-reads the sound by a fifth (an error that follows the signal) beside edges
 /// whose noise rises far above the sound's high tone: the edges' noise must not read as signal
 /// the flow missed. Standing the edges' own periodogram for the signal, as the fusion did
-/// before, left 0.101 of the better input's error power; the cross-spectrum leaves 0.054.
+/// before, left 0.101 of the better input's error power; the periodograms' geometric mean leaves
+/// 0.054.
 #[test]
 fn noisy_edges_do_not_pass_for_signal_the_flow_missed() {
     let n = 8192;
