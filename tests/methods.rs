@@ -192,7 +192,9 @@ fn edges_and_fused_hold_speech_on_a_heavily_damaged_groove() {
     // 45 groups (0.1 s), scratches, dust and missing wall chunks. Where most of a sample's
     // borders were off at once the edge track left the groove by 10–46 µm for a few samples,
     // and those clicks held the edges and fused at r 0.081 (flow 0.646); solved again from
-    // the track around them (edges::plausible): edges 0.694, fused 0.776.
+    // the track around them (edges::plausible): edges 0.694, fused 0.776. With the borders'
+    // scatter raising the fusion's edge noise level (edges::robust::scatter): fused 0.858
+    // (`accuracy --quick`'s damaged speech read 0.792 fused before it, 0.858 after).
     let dir = tempfile::tempdir().unwrap();
     let wav = speak(PHRASE, dir.path())
         .expect("espeak-ng is needed for the speech cases (scripts/setup.sh installs it)");
@@ -209,7 +211,7 @@ fn edges_and_fused_hold_speech_on_a_heavily_damaged_groove() {
     let m = score("damaged speech", &scan, &params);
     assert!(m.edges.r > 0.6, "edges r {:.3}", m.edges.r);
     assert!(
-        m.fused.r > 0.72 && m.fused.r > m.flow.r.max(m.edges.r),
+        m.fused.r > 0.83 && m.fused.r > m.flow.r.max(m.edges.r),
         "fused r {:.3}, flow {:.3}, edges {:.3}",
         m.fused.r,
         m.flow.r,

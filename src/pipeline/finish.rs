@@ -18,7 +18,7 @@ use serde::Serialize;
 use super::audio_signal::{GroupSignals, SignalPack, StitchedSignal, resample, stitch};
 use super::dsp::{FilterPhase, apply_dsp_with};
 use super::edges::decode_border_signal;
-use super::fusion::{FusionBlock, GroupFusion, fuse};
+use super::fusion::{EdgeNoise, FusionBlock, GroupFusion, fuse};
 use super::{Method, PipelineParams, StageError};
 use crate::meta::ScanMeta;
 
@@ -204,15 +204,14 @@ impl EdgeRepairs {
 
 /// The edge method's velocity over the clip: the border tracks stitched, combined,
 /// differentiated, and scaled by the groove speed at each sample. With it, on the same grid,
-/// each channel's displacement noise in velocity units (`σ_d·Vt·sin α/Δ`, mm/s per radian per
-/// sample: the edge noise power at ω is its square times ω²; NaN where unknown), and what was
-/// mended in the displacement tracks.
+/// each channel's displacement noise ([`EdgeNoise`], `σ_d·Vt·sin α/Δ`, with and without the
+/// borders' scatter), and what was mended in the displacement tracks.
 fn edge_velocity<S: GroupSignals + ?Sized>(
     borders: &S,
     spacing_um: f64,
     meta: &ScanMeta,
     params: &PipelineParams,
-) -> Result<(StitchedSignal, StitchedSignal, EdgeRepairs), StageError> {
+) -> Result<(StitchedSignal, EdgeNoise, EdgeRepairs), StageError> {
     let stitched = stitch(borders, spacing_um)?;
     let decoded = decode_border_signal(&stitched, meta.record.cut, 1.0, &params.edges)?;
     let repairs = EdgeRepairs {
@@ -257,10 +256,25 @@ fn edge_velocity<S: GroupSignals + ?Sized>(
             .collect();
         vec![sigma(&se, std::f64::consts::SQRT_2)]
     };
-    let noise = StitchedSignal {
+    let scatter = &decoded.combined.scatter;
+    #[allow(clippy::cast_possible_truncation)] // noise levels are stored as f32
+    let scattered = channels
+        .iter()
+        .map(|ch| {
+            ch.iter()
+                .zip(scatter)
+                .map(|(&s, &f)| s * f.sqrt() as f32)
+                .collect()
+        })
+        .collect();
+    let noise = |channels| StitchedSignal {
         channels,
         gaps: Vec::new(),
         ..velocity.clone()
+    };
+    let noise = EdgeNoise {
+        fitted: noise(channels),
+        scattered: noise(scattered),
     };
     Ok((velocity, noise, repairs))
 }

@@ -289,6 +289,27 @@ pub fn sampled_quantiles(values: &[f32], lo: f64, hi: f64, samples: usize) -> Op
     Some((a, b))
 }
 
+/// The mean of the finite entries of `values` within `half` of each index (None where there
+/// are none), by prefix sums: a moving average that skips what was not measured.
+#[must_use]
+pub(crate) fn finite_window_means(values: &[f64], half: usize) -> Vec<Option<f64>> {
+    let n = values.len();
+    let mut sum = vec![0.0_f64; n + 1];
+    let mut count = vec![0usize; n + 1];
+    for (i, &v) in values.iter().enumerate() {
+        let known = v.is_finite();
+        sum[i + 1] = sum[i] + if known { v } else { 0.0 };
+        count[i + 1] = count[i] + usize::from(known);
+    }
+    (0..n)
+        .map(|i| {
+            let (lo, hi) = (i.saturating_sub(half), (i + half + 1).min(n));
+            let k = count[hi] - count[lo];
+            (k > 0).then(|| (sum[hi] - sum[lo]) / k as f64)
+        })
+        .collect()
+}
+
 /// Values a median is taken of: a total order (floats by `total_cmp`, so NaN sorts last).
 pub(crate) trait TotalOrder: Copy {
     /// The order.

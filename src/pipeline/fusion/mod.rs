@@ -10,7 +10,9 @@
 //!    which reconstruct exactly) of both. Each block's noise levels come from the periodogram of
 //!    their difference, averaged over `smoothing_blocks` blocks on each side and fitted by
 //!    [`noise::fit_noise`]: flow noise `b` flat plus `c·|S|²` following the signal, edge noise
-//!    `a·ω²`. Blocks where more than [`MAX_FILLED_SHARE`] of the samples were filled from the
+//!    `a·ω²`, `a` known from the border fits' standard errors, raised by how much more the
+//!    borders scatter where the flow is within reach ([`noise::fit_with_scatter`], [`EdgeNoise`]).
+//!    Blocks where more than [`MAX_FILLED_SHARE`] of the samples were filled from the
 //!    other method lend no spectrum, unless none near a block does: then blocks filled up to
 //!    [`MAX_GAPPY_FILLED_SHARE`] lend theirs, corrected for the gaps (a flow with a third of
 //!    its fits rejected would otherwise leave the whole clip at equal weights).
@@ -28,7 +30,7 @@ use std::ops::Range;
 
 use serde::{Deserialize, Serialize};
 
-use self::noise::{NoiseModel, fit_noise};
+use self::noise::{NoiseModel, fit_with_scatter};
 use super::audio_signal::StitchedSignal;
 use super::dsp::ComplexFft;
 use super::edges::robust::false_runs;
@@ -259,7 +261,7 @@ fn fuse_channel(
     flow_ok: &[bool],
     edges: &[f64],
     edges_ok: &[bool],
-    edge_sigma: Option<(&[f64], &[bool])>,
+    edge_sigma: Option<[(&[f64], &[bool]); 2]>,
     block: usize,
     smoothing: usize,
 ) -> ChannelFusion {
@@ -353,17 +355,22 @@ fn fuse_channel(
     let omega: Vec<f64> = (1..=half)
         .map(|k| 2.0 * PI * k as f64 / block as f64)
         .collect();
-    let edge_levels =
-        edge_sigma.map(|(sigma, known)| block_edge_levels(sigma, known, &starts, &window));
+    // The known edge levels per block: from the fits' standard errors, and with the scatter.
+    let edge_levels = edge_sigma.map(|sigmas| {
+        sigmas.map(|(sigma, known)| block_edge_levels(sigma, known, &starts, &window))
+    });
     let models: Vec<Option<NoiseModel>> = (0..spectra.len())
         .map(|b| {
             let lo = b.saturating_sub(smoothing);
             let hi = (b + smoothing + 1).min(diff.len());
-            // The known edge level, averaged over the same blocks as the spectra.
-            let edge = edge_levels.as_ref().and_then(|levels| {
+            // The known edge levels, averaged over the same blocks as the spectra.
+            let mean_level = |levels: &[Option<f64>]| {
                 let known: Vec<f64> = levels[lo..hi].iter().flatten().copied().collect();
                 (!known.is_empty()).then(|| known.iter().sum::<f64>() / known.len() as f64)
-            });
+            };
+            let (edge, scattered) = edge_levels
+                .as_ref()
+                .map_or((None, None), |[f, s]| (mean_level(f), mean_level(s)));
             let mut acc = vec![0.0; half];
             let mut sig = vec![0.0; half];
             let mut count = 0usize;
@@ -387,7 +394,7 @@ fn fuse_channel(
                 *a /= count as f64;
                 *sa /= count as f64;
             }
-            fit_noise(&omega, &acc, &sig, edge)
+            fit_with_scatter(&omega, &acc, &sig, edge, scattered)
         })
         .collect();
     // A block with no model of its own takes the nearest block's.
@@ -428,11 +435,22 @@ fn fuse_channel(
     }
 }
 
+/// The edge method's displacement noise per sample, on the edge signal's grid, in velocity
+/// units (mm/s per radian per sample: the edge noise power at ω is its square times ω²; NaN
+/// where unknown), one channel per output channel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EdgeNoise {
+    /// From the border fits' standard errors.
+    pub fitted: StitchedSignal,
+    /// The same raised by how much more the borders scatter from sample to sample
+    /// ([`crate::pipeline::edges::robust::scatter`]), which the fit may take instead
+    /// ([`noise::fit_with_scatter`]).
+    pub scattered: StitchedSignal,
+}
+
 /// Fuses the flow method's and the edge method's stitched velocity (mm/s, same spacing and
-/// channel count; any start on the scan's grid) — see the module docs. `edge_noise`, on the edge
-/// signal's grid, gives each channel's displacement noise per sample in velocity units (mm/s
-/// per radian per sample, from the border fits' standard errors); with it the edge noise level
-/// is known and only the flow's is fitted.
+/// channel count; any start on the scan's grid) — see the module docs. With `edge_noise` the edge
+/// noise level is known ([`EdgeNoise`]) and only the flow's is fitted.
 ///
 /// # Errors
 /// [`StageError::InvalidParam`] for bad params, [`StageError::BadInput`] when the signals'
@@ -440,7 +458,7 @@ fn fuse_channel(
 pub fn fuse(
     flow: &StitchedSignal,
     edges: &StitchedSignal,
-    edge_noise: Option<&StitchedSignal>,
+    edge_noise: Option<&EdgeNoise>,
     meta: &ScanMeta,
     params: &FusionParams,
 ) -> Result<Fused, StageError> {
@@ -495,13 +513,20 @@ pub fn fuse(
     for ch in 0..flow.channels.len() {
         let (fv, fok) = place(flow, ch, origin, n);
         let (ev, eok) = place(edges, ch, origin, n);
-        let sigma = edge_noise.map(|s| place(s, ch, origin, n));
+        let sigma = edge_noise.map(|s| {
+            [
+                place(&s.fitted, ch, origin, n),
+                place(&s.scattered, ch, origin, n),
+            ]
+        });
         let fused = fuse_channel(
             &fv,
             &fok,
             &ev,
             &eok,
-            sigma.as_ref().map(|(v, ok)| (v.as_slice(), ok.as_slice())),
+            sigma
+                .as_ref()
+                .map(|s| s.each_ref().map(|(v, ok)| (v.as_slice(), ok.as_slice()))),
             block,
             params.smoothing_blocks,
         );

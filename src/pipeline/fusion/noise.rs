@@ -206,6 +206,33 @@ pub fn fit_noise(
     Some(model)
 }
 
+/// [`fit_noise`] with the edge level known twice: `fitted` from the border fits' standard
+/// errors, `scattered` raised by how much more the borders scatter from sample to sample. The
+/// fit takes the scattered level where the model with the fitted one leaves the flow's flat
+/// noise at or below the edges' at Nyquist (the two readings are within reach of each other
+/// somewhere in the band), else the fitted one. Where the edges win at every frequency by
+/// their fits' own errors (the sharp optics, where the flow reads 15–25 dB worse), a stretch
+/// where a border glitches would otherwise hand the flow bands it reads far worse
+/// (docs/ACCURACY.md).
+#[must_use]
+pub fn fit_with_scatter(
+    omega: &[f64],
+    power: &[f64],
+    signal: &[f64],
+    fitted: Option<f64>,
+    scattered: Option<f64>,
+) -> Option<NoiseModel> {
+    let plain = fit_noise(omega, power, signal, fitted);
+    let (Some(model), Some(raised)) = (plain, scattered) else {
+        return plain;
+    };
+    let nyquist = std::f64::consts::PI;
+    if raised <= model.edge || model.flow > model.edge_at(nyquist) {
+        return plain;
+    }
+    fit_noise(omega, power, signal, Some(raised)).or(plain)
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
@@ -268,6 +295,32 @@ mod tests {
         let k = fit_noise(&omega, &rising, &none, Some(0.1)).unwrap();
         assert!((k.edge - 0.1).abs() < 1e-12 && k.flow > 1.0, "{k:?}");
         assert!(k.edge_weight(3.0, 0.0) > 0.7, "{k:?}");
+    }
+
+    #[test]
+    fn the_scattered_edge_level_is_taken_only_where_the_flow_is_within_reach() {
+        let omega = bin_frequencies(128);
+        let none = vec![0.0; omega.len()];
+        let spectrum =
+            |flat: f64| -> Vec<f64> { omega.iter().map(|w| flat + 2.0 * w * w).collect() };
+        // The edges' noise is twice what their fits say, and the flow's flat noise (1) is below
+        // the edges' at Nyquist: the scattered level is taken, and the flow's is what is left.
+        let near = fit_with_scatter(&omega, &spectrum(1.0), &none, Some(1.0), Some(2.0)).unwrap();
+        assert!(
+            (near.edge - 2.0).abs() < 1e-12 && (near.flow - 1.0).abs() < 0.05,
+            "{near:?}"
+        );
+        let plain = fit_noise(&omega, &spectrum(1.0), &none, Some(1.0)).unwrap();
+        assert!(plain.flow > 2.0, "{plain:?}");
+        // A flow 30 times noisier: by the fits' own level the edges win at every frequency, so
+        // their level stays.
+        let far = fit_with_scatter(&omega, &spectrum(30.0), &none, Some(1.0), Some(2.0)).unwrap();
+        assert!((far.edge - 1.0).abs() < 1e-12, "{far:?}");
+        // No scatter above the fitted level, or none known: the plain fit.
+        for scattered in [Some(0.5), Some(1.0), None] {
+            let m = fit_with_scatter(&omega, &spectrum(1.0), &none, Some(1.0), scattered);
+            assert_eq!(m, Some(plain));
+        }
     }
 
     #[test]

@@ -197,25 +197,12 @@ pub(super) fn running_median(values: &[f64], half: usize) -> Vec<f64> {
 
 /// Moving average over ±`half` of the finite entries; NaN stays NaN.
 pub(super) fn smooth_measured(values: &[f64], half: usize) -> Vec<f64> {
-    let n = values.len();
-    let mut sum = vec![0.0_f64; n + 1];
-    let mut cnt = vec![0u32; n + 1];
-    for (i, &v) in values.iter().enumerate() {
-        let ok = v.is_finite();
-        sum[i + 1] = sum[i] + if ok { v } else { 0.0 };
-        cnt[i + 1] = cnt[i] + u32::from(ok);
-    }
     values
         .iter()
-        .enumerate()
-        .map(|(i, &v)| {
-            if !v.is_finite() {
-                return f64::NAN;
-            }
-            let lo = i.saturating_sub(half);
-            let hi = (i + half + 1).min(n);
-            let c = cnt[hi] - cnt[lo];
-            (sum[hi] - sum[lo]) / f64::from(c.max(1))
+        .zip(crate::pipeline::finite_window_means(values, half))
+        .map(|(&v, mean)| match mean {
+            Some(m) if v.is_finite() => m,
+            _ => f64::NAN,
         })
         .collect()
 }

@@ -27,6 +27,8 @@
 //! most `max_bridge_samples` with two samples on each side are bridged by a cubic through
 //! them and listed.
 
+pub mod scatter;
+
 use std::ops::Range;
 
 use super::plausible::resolve_excursions;
@@ -95,21 +97,16 @@ fn border_weights(y: &[f64], se: &[f64], n: usize, floor: f64, window: usize) ->
     if window <= 1 {
         return (0..n).map(|j| var(j).map(|v| 1.0 / v)).collect();
     }
-    let logs: Vec<Option<f64>> = (0..n).map(|j| var(j).map(f64::ln)).collect();
-    // Prefix sums of the logs and of the count of seen samples.
-    let mut sum = vec![0.0; n + 1];
-    let mut count = vec![0usize; n + 1];
-    for (j, l) in logs.iter().enumerate() {
-        sum[j + 1] = sum[j] + l.unwrap_or(0.0);
-        count[j + 1] = count[j] + usize::from(l.is_some());
-    }
-    let half = window / 2;
-    (0..n)
-        .map(|j| {
-            logs[j]?;
-            let (lo, hi) = (j.saturating_sub(half), j.saturating_add(half + 1).min(n));
-            let k = count[hi] - count[lo];
-            (k > 0).then(|| (-(sum[hi] - sum[lo]) / k as f64).exp())
+    let logs: Vec<f64> = (0..n).map(|j| var(j).map_or(f64::NAN, f64::ln)).collect();
+    let means = crate::pipeline::finite_window_means(&logs, window / 2);
+    logs.iter()
+        .zip(means)
+        .map(|(l, mean)| {
+            if l.is_finite() {
+                mean.map(|m| (-m).exp())
+            } else {
+                None
+            }
         })
         .collect()
 }
@@ -133,6 +130,10 @@ pub struct Combined {
     pub gaps: [Vec<Range<usize>>; 2],
     /// Per wall: sample ranges filled by interpolation.
     pub bridged: [Vec<Range<usize>>; 2],
+    /// Per sample, how much more the kept borders scatter from sample to sample than their
+    /// standard errors say (at least 1; [`scatter`]): the factor the fused decoder may raise
+    /// `walls_se_um`'s variance by.
+    pub scatter: Vec<f64>,
     /// Sample ranges where the track moved faster than a groove can and was solved again
     /// ([`super::plausible`]); a sample still out of reach is a gap.
     pub excursions: Vec<Range<usize>>,
@@ -395,6 +396,12 @@ pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams)
         )
     });
     let Solves { d, e, cov, rel } = s;
+    let residual = |b: usize, j: usize| -> f64 {
+        let ej = if K[b] == 0.0 { 0.0 } else { e[j] };
+        y[b][j] - c[b] - d[j] - K[b] * ej
+    };
+    let scatter =
+        scatter::scatter_factors(n, &residual, &weight, &rel, if lateral { 1 } else { 2 });
     let mut walls_um = [vec![f64::NAN; n], vec![f64::NAN; n]];
     let mut walls_se_um = [vec![f64::NAN; n], vec![f64::NAN; n]];
     for j in 0..n {
@@ -421,6 +428,7 @@ pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams)
     }
     let border_weights = std::array::from_fn(|b| (0..n).map(|j| rel[j][b]).collect());
     Combined {
+        scatter,
         excursions,
         constants_um: c,
         d_um: d,
