@@ -18,6 +18,7 @@ use serde::Serialize;
 use super::audio_signal::{GroupSignals, SignalPack, StitchedSignal, resample, stitch};
 use super::dsp::{FilterPhase, apply_dsp_with};
 use super::edges::decode_border_signal;
+use super::edges::robust::Combined;
 use super::fusion::{EdgeNoise, FusionBlock, GroupFusion, fuse};
 use super::{Method, PipelineParams, StageError};
 use crate::meta::ScanMeta;
@@ -203,15 +204,16 @@ impl EdgeRepairs {
 }
 
 /// The edge method's velocity over the clip: the border tracks stitched, combined,
-/// differentiated, and scaled by the groove speed at each sample. With it, on the same grid,
-/// each channel's displacement noise ([`EdgeNoise`], `σ_d·Vt·sin α/Δ`, with and without the
-/// borders' scatter), and what was mended in the displacement tracks.
+/// differentiated, and scaled by the groove speed at each sample. With it, `with_noise`, each
+/// channel's displacement noise on the same grid ([`edge_noise`]; only the fused decoder reads
+/// it), and what was mended in the displacement tracks.
 fn edge_velocity<S: GroupSignals + ?Sized>(
     borders: &S,
     spacing_um: f64,
     meta: &ScanMeta,
     params: &PipelineParams,
-) -> Result<(StitchedSignal, EdgeNoise, EdgeRepairs), StageError> {
+    with_noise: bool,
+) -> Result<(StitchedSignal, Option<EdgeNoise>, EdgeRepairs), StageError> {
     let stitched = stitch(borders, spacing_um)?;
     let decoded = decode_border_signal(&stitched, meta.record.cut, 1.0, &params.edges)?;
     let repairs = EdgeRepairs {
@@ -232,20 +234,29 @@ fn edge_velocity<S: GroupSignals + ?Sized>(
             *v = scaled;
         }
     }
+    let noise =
+        with_noise.then(|| edge_noise(&velocity, &decoded.combined, &speed, spacing_um, params));
+    Ok((velocity, noise, repairs))
+}
+
+/// Each channel of `velocity`'s displacement noise in velocity units (`σ_d·Vt·sin α/Δ`, with
+/// `speed` the groove speed Vt at each sample), from the combined borders' standard errors and
+/// raised by their scatter ([`EdgeNoise`]).
+fn edge_noise(
+    velocity: &StitchedSignal,
+    combined: &Combined,
+    speed: &[f64],
+    spacing_um: f64,
+    params: &PipelineParams,
+) -> EdgeNoise {
     let sin_a = params.edges.wall_angle_deg.to_radians().sin();
-    let [left, right] = &decoded.combined.walls_se_um;
-    #[allow(clippy::cast_possible_truncation)] // noise levels are stored as f32
-    let sigma = |se: &[f64], gain: f64| -> Vec<f32> {
-        se.iter()
-            .zip(&speed)
-            .map(|(&e, &vt)| (e * gain * vt * sin_a / spacing_um) as f32)
-            .collect()
-    };
+    let [left, right] = &combined.walls_se_um;
     // Stereo: each wall its channel; mono cuts: √2 times a wall's (the walls share d).
-    let channels = if velocity.channels.len() == 2 {
-        vec![sigma(left, 1.0), sigma(right, 1.0)]
+    let mono: Vec<f64>;
+    let per_channel: Vec<(&[f64], f64)> = if velocity.channels.len() == 2 {
+        vec![(left, 1.0), (right, 1.0)]
     } else {
-        let se: Vec<f64> = left
+        mono = left
             .iter()
             .zip(right)
             .map(|(&l, &r)| match (l.is_finite(), r.is_finite()) {
@@ -254,29 +265,37 @@ fn edge_velocity<S: GroupSignals + ?Sized>(
                 (false, _) => r,
             })
             .collect();
-        vec![sigma(&se, std::f64::consts::SQRT_2)]
+        vec![(&mono, std::f64::consts::SQRT_2)]
     };
-    let scatter = &decoded.combined.scatter;
     #[allow(clippy::cast_possible_truncation)] // noise levels are stored as f32
-    let scattered = channels
-        .iter()
-        .map(|ch| {
-            ch.iter()
-                .zip(scatter)
-                .map(|(&s, &f)| s * f.sqrt() as f32)
-                .collect()
-        })
-        .collect();
-    let noise = |channels| StitchedSignal {
-        channels,
+    let sigma = |se: &[f64], gain: f64, raised: bool| -> Vec<f32> {
+        se.iter()
+            .zip(speed)
+            .zip(&combined.scatter)
+            .map(|((&e, &vt), &f)| {
+                let fitted = (e * gain * vt * sin_a / spacing_um) as f32;
+                if raised {
+                    fitted * f.sqrt() as f32
+                } else {
+                    fitted
+                }
+            })
+            .collect()
+    };
+    let signal = |raised: bool| StitchedSignal {
+        channels: per_channel
+            .iter()
+            .map(|&(se, gain)| sigma(se, gain, raised))
+            .collect(),
         gaps: Vec::new(),
-        ..velocity.clone()
+        start_um: velocity.start_um,
+        spacing_um: velocity.spacing_um,
+        native_rate_hz: velocity.native_rate_hz,
     };
-    let noise = EdgeNoise {
-        fitted: noise(channels),
-        scattered: noise(scattered),
-    };
-    Ok((velocity, noise, repairs))
+    EdgeNoise {
+        fitted: signal(false),
+        scattered: signal(true),
+    }
 }
 
 /// Finishes a clip by `params.method` (see the module docs), extended over its silent ends
@@ -301,19 +320,21 @@ pub fn finish_method_clip(
             EdgeRepairs::default(),
         ),
         Method::Edges => {
-            let (velocity, _, n) = edge_velocity(&signals.borders, spacing_um, meta, params)?;
+            let (velocity, _, n) =
+                edge_velocity(&signals.borders, spacing_um, meta, params, false)?;
             (velocity, None, n)
         }
         Method::Fused => {
             let ClipSignals { flow, borders, .. } = signals;
-            let (velocity, noise, repairs) = edge_velocity(&borders, spacing_um, meta, params)?;
+            let (velocity, noise, repairs) =
+                edge_velocity(&borders, spacing_um, meta, params, true)?;
             drop(borders);
             let flow_velocity = stitch(&flow, spacing_um)?;
             drop(flow);
             let fused = fuse(
                 &flow_velocity,
                 &velocity,
-                Some(&noise),
+                noise.as_ref(),
                 meta,
                 &params.fusion,
             )?;

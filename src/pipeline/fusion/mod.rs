@@ -365,8 +365,11 @@ fn fuse_channel(
             let hi = (b + smoothing + 1).min(diff.len());
             // The known edge levels, averaged over the same blocks as the spectra.
             let mean_level = |levels: &[Option<f64>]| {
-                let known: Vec<f64> = levels[lo..hi].iter().flatten().copied().collect();
-                (!known.is_empty()).then(|| known.iter().sum::<f64>() / known.len() as f64)
+                let (sum, known) = levels[lo..hi]
+                    .iter()
+                    .flatten()
+                    .fold((0.0, 0usize), |(s, k), v| (s + v, k + 1));
+                (known > 0).then(|| sum / known as f64)
             };
             let (edge, scattered) = edge_levels
                 .as_ref()

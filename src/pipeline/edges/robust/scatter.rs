@@ -29,30 +29,31 @@ pub fn scatter_factors(
     rel: &[[f64; 4]],
     params: usize,
 ) -> Vec<f64> {
-    let chi: Vec<f64> = (0..n)
-        .map(|j| {
-            if j == 0 || j + 1 >= n {
-                return f64::NAN;
-            }
+    let row = |j: usize| -> [f64; 4] { std::array::from_fn(|b| residual(b, j)) };
+    let mut chi = vec![f64::NAN; n];
+    // Each sample's residuals are read once, three rows held at a time (a whole side's clip
+    // has tens of millions of samples).
+    if n >= 3 {
+        let (mut prev, mut here) = (row(0), row(1));
+        for (j, c) in chi.iter_mut().enumerate().take(n - 1).skip(1) {
+            let next = row(j + 1);
             let (mut sum, mut kept) = (0.0, 0usize);
             for b in 0..4 {
                 let (Some(w), Some(r)) = (weight(b, j), rel.get(j).map(|r| r[b])) else {
                     continue;
                 };
-                let s = (residual(b, j) - 0.5 * (residual(b, j - 1) + residual(b, j + 1)))
-                    / 1.5f64.sqrt();
+                let s = (here[b] - 0.5 * (prev[b] + next[b])) / 1.5f64.sqrt();
                 if s.is_finite() && r >= KEPT_WEIGHT {
                     sum += w * r * s * s;
                     kept += 1;
                 }
             }
             if kept > params {
-                sum / (kept - params) as f64
-            } else {
-                f64::NAN
+                *c = sum / (kept - params) as f64;
             }
-        })
-        .collect();
+            (prev, here) = (here, next);
+        }
+    }
     crate::pipeline::finite_window_means(&chi, HALF_WINDOW)
         .into_iter()
         .map(|mean| mean.map_or(1.0, |m| m.max(1.0)))
