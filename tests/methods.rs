@@ -121,7 +121,7 @@ fn edges_and_fused_hold_a_2_khz_tone_above_30_db_on_the_papers_pixels() {
         };
         let scan = groovescope::io::Scan::open(&scan).unwrap();
         let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false)).unwrap();
-        rec.warnings.into_iter().find(|w| w.contains("put back"))
+        rec.warnings.into_iter().find(|w| w.contains("isolated"))
     };
     let line = said(5.0).expect("this scan has isolated outliers");
     assert!(line.contains("edges.despike_sigmas = 5"), "{line}");

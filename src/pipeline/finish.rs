@@ -168,6 +168,8 @@ fn groove_speed_along<S: GroupSignals + ?Sized>(groups: &S, grid: &StitchedSigna
 struct EdgeRepairs {
     /// Samples put back on the curve as isolated outliers (`edges::despike`).
     despiked: usize,
+    /// Short bursts put back on the curve (`edges::bursts`), and the samples they hold.
+    bursts: (usize, usize),
     /// Samples of excursions solved again or left as gaps (`edges::plausible`).
     excursion_samples: usize,
 }
@@ -189,6 +191,17 @@ impl EdgeRepairs {
                 "{} isolated displacement sample{s} put back on the curve through {its} \
                  neighbours (edges.despike_sigmas = {})",
                 self.despiked, params.edges.despike_sigmas
+            ));
+        }
+        let (bursts, burst_samples) = self.bursts;
+        if bursts > 0 {
+            let (s, _, _) = plural(burst_samples);
+            let (bs, _, _) = plural(bursts);
+            let them = if bursts == 1 { "it" } else { "them" };
+            out.push(format!(
+                "{burst_samples} displacement sample{s} in {bursts} short burst{bs} put back on \
+                 the curve through the samples around {them} (edges.burst_sigmas = {})",
+                params.edges.burst_sigmas
             ));
         }
         if self.excursion_samples > 0 {
@@ -218,6 +231,7 @@ fn edge_velocity<S: GroupSignals + ?Sized>(
     let decoded = decode_border_signal(&stitched, meta.record.cut, 1.0, &params.edges)?;
     let repairs = EdgeRepairs {
         despiked: decoded.despiked_samples(),
+        bursts: decoded.burst_samples(),
         excursion_samples: decoded
             .combined
             .excursions

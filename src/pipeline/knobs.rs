@@ -161,6 +161,8 @@ knob_docs! {
         => "fit every frame of a group (true), or only the frames the flow stages read (false): on the dual-focus path their middle 7-frame window, about 30 % less CPU a group on the paper's dual-focus camera for 0–0.5 dB of SNR (docs/PERFORMANCE.md), on the depth path every frame either way; default true",
     "edges.despike_sigmas"
         => "a wall's displacement sample further than this many robust σ from the cubic through its two neighbours on each side, and the largest such within two samples, is an isolated outlier and put back on that cubic (edges::despike); 0 = off; default 5",
+    "edges.burst_sigmas"
+        => "a burst of 2 to 8 samples of a wall's displacement whose mean lies further than this many σ from the cubic through the two samples on each side (σ the larger of its block's scale for such bursts and the local noise), read on the track smoothed by [1, 2, 1]/4, is a click and put on that cubic (edges::bursts); 0 = off, as before 0.3.0; default 8",
     "edges.max_slope"
         => "steepest slope a groove's modulation can have (µm sideways per µm along it; 1 = 45°, a loud record about 0.1): a wall's displacement track that moves faster between samples splits there, and a stretch of at most max_excursion_samples beside a longer one is solved again from the track around it, or left as a gap (edges::plausible); 0 = off; default 1",
     "edges.max_excursion_samples"

@@ -236,6 +236,7 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Sta
             num "max bridge (samples)" max_bridge_samples (0.1, 0..=1000);
             num "weight window (samples)" weight_window_samples (0.5, 0..=10_000);
             num "despike (σs, 0 = off)" despike_sigmas (0.1, 0.0..=1000.0);
+            num "burst despike (σs, 0 = off)" burst_sigmas (0.1, 0.0..=1000.0);
             num "steepest groove slope (0 = off)" max_slope (0.01, 0.0..=1000.0);
             num "longest excursion (samples)" max_excursion_samples (0.5, 0..=1_000_000);
             check "restart disagreeing solves" restart_solves ();

@@ -24,13 +24,13 @@ pub const BLOCK: usize = 128;
 
 /// Smallest robust scale (µm): a noiseless track (synthetic, or a bridged stretch) has
 /// residuals of rounding size only, which are not spikes.
-const MIN_SCALE_UM: f64 = 1e-3;
+pub(super) const MIN_SCALE_UM: f64 = 1e-3;
 
 /// Most spikes a block may hold; more are not isolated outliers.
 pub const MAX_PER_BLOCK: usize = 4;
 
 /// The cubic prediction's residual at every sample (NaN where a neighbour is missing).
-fn residuals(x: &[f64]) -> Vec<f64> {
+pub(super) fn residuals(x: &[f64]) -> Vec<f64> {
     let mut r = vec![f64::NAN; x.len()];
     for j in 2..x.len().saturating_sub(2) {
         let p = (-x[j - 2] + 4.0 * x[j - 1] + 4.0 * x[j + 1] - x[j + 2]) / 6.0;
@@ -41,7 +41,7 @@ fn residuals(x: &[f64]) -> Vec<f64> {
 
 /// The robust scale of the residuals per block: their robust σ over the block and its two
 /// neighbours, floored at [`MIN_SCALE_UM`].
-fn block_scales(r: &[f64]) -> Vec<f64> {
+pub(super) fn block_scales(r: &[f64]) -> Vec<f64> {
     (0..r.len().div_ceil(BLOCK))
         .map(|b| {
             let lo = b.saturating_sub(1) * BLOCK;
@@ -90,18 +90,27 @@ pub fn despike(x: &mut [f64], sigmas: f64) -> Vec<usize> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     #![allow(clippy::unwrap_used)] // tests may panic
     use super::*;
 
-    fn tone(n: usize, cycles_per_sample: f64, amp: f64) -> Vec<f64> {
+    pub(crate) fn tone(n: usize, cycles_per_sample: f64, amp: f64) -> Vec<f64> {
         (0..n)
             .map(|j| amp * (std::f64::consts::TAU * cycles_per_sample * j as f64).sin())
             .collect()
     }
 
+    /// A tone with [`noise`] of `a` on it.
+    pub(crate) fn noisy_tone(n: usize, cycles_per_sample: f64, amp: f64, a: f64) -> Vec<f64> {
+        tone(n, cycles_per_sample, amp)
+            .iter()
+            .zip(noise(n, a))
+            .map(|(c, e)| c + e)
+            .collect()
+    }
+
     /// Deterministic noise in [−a, a].
-    fn noise(n: usize, a: f64) -> Vec<f64> {
+    pub(crate) fn noise(n: usize, a: f64) -> Vec<f64> {
         let mut s = 0x9E37_79B9_7F4A_7C15_u64;
         (0..n)
             .map(|_| {
@@ -117,11 +126,7 @@ mod tests {
     fn a_spike_on_a_noisy_tone_is_found_and_put_back_on_the_curve() {
         let n = 2000;
         let clean = tone(n, 500.0 / 44_100.0, 15.9);
-        let mut x: Vec<f64> = clean
-            .iter()
-            .zip(noise(n, 0.02))
-            .map(|(c, e)| c + e)
-            .collect();
+        let mut x = noisy_tone(n, 500.0 / 44_100.0, 15.9, 0.02);
         let noisy = x.clone();
         for (j, d) in [(300, 0.4), (301 + 700, -0.3), (1500, 0.25)] {
             x[j] += d;
@@ -143,15 +148,15 @@ mod tests {
 
     #[test]
     fn tones_pass_untouched() {
+        // Neither despike touches a tone up to 0.3 of the sample rate.
         for f in [0.01, 0.05, 0.113, 0.2, 0.25, 0.3] {
             let n = 3000;
-            let mut x: Vec<f64> = tone(n, f, 2.0)
-                .iter()
-                .zip(noise(n, 0.01))
-                .map(|(c, e)| c + e)
-                .collect();
+            let mut x = noisy_tone(n, f, 2.0, 0.01);
             let before = x.clone();
             assert_eq!(despike(&mut x, 6.0), Vec::<usize>::new(), "f = {f}");
+            // Nor are they short bursts.
+            let bursts = super::super::bursts::despike_bursts(&mut x, 8.0);
+            assert!(bursts.is_empty(), "f = {f}: {bursts:?}");
             assert_eq!(x, before);
         }
     }

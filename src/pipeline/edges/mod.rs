@@ -28,6 +28,7 @@
 
 mod blur;
 pub mod border;
+pub mod bursts;
 pub mod coarse;
 pub mod despike;
 pub mod differentiator;
@@ -158,6 +159,8 @@ pub struct EdgeParams {
     pub all_frames: bool,
     #[doc = knob!("edges.despike_sigmas")]
     pub despike_sigmas: f64,
+    #[doc = knob!("edges.burst_sigmas")]
+    pub burst_sigmas: f64,
     #[doc = knob!("edges.max_slope")]
     pub max_slope: f64,
     #[doc = knob!("edges.max_excursion_samples")]
@@ -202,6 +205,7 @@ impl Default for EdgeParams {
             weight_window_samples: 32,
             all_frames: true,
             despike_sigmas: DEFAULT_DESPIKE,
+            burst_sigmas: 8.0,
             max_slope: 1.0,
             max_excursion_samples: 16,
             restart_solves: true,
@@ -254,6 +258,7 @@ impl EdgeParams {
         check_range("edges.border_sigma_um", self.border_sigma_um, 1e-4, 1e4)?;
         check_range("edges.border_floor_um", self.border_floor_um, 1e-6, 1e4)?;
         check_range("edges.despike_sigmas", self.despike_sigmas, 0.0, 1e3)?;
+        check_range("edges.burst_sigmas", self.burst_sigmas, 0.0, 1e3)?;
         check_range("edges.max_slope", self.max_slope, 0.0, 1e3)?;
         check_range("edges.hard_width_px", self.hard_width_px, 0.0, 100.0)?;
         check_range(

@@ -15,6 +15,7 @@
 use std::f64::consts::SQRT_2;
 use std::ops::Range;
 
+use super::bursts::despike_bursts;
 use super::despike::despike;
 use super::differentiator::{DifferentiatorParams, differentiate};
 use super::robust::{CombineParams, Combined, combine_borders, nan_runs};
@@ -139,6 +140,8 @@ pub struct DecodedEdges {
     pub channel_gaps: Vec<Vec<Range<usize>>>,
     /// Per wall: the displacement samples put back on the curve as isolated outliers.
     pub despiked: [Vec<usize>; 2],
+    /// Per wall: the short bursts of displacement samples put back on the curve (`bursts`).
+    pub bursts: [Vec<Range<usize>>; 2],
 }
 
 impl DecodedEdges {
@@ -150,6 +153,21 @@ impl DecodedEdges {
         all.sort_unstable();
         all.dedup();
         all.len()
+    }
+
+    /// The bursts of either wall put back on the curve, and the samples they hold (where both
+    /// walls have one, counted once).
+    #[must_use]
+    pub fn burst_samples(&self) -> (usize, usize) {
+        let [left, right] = &self.bursts;
+        let mut all: Vec<Range<usize>> = left.iter().chain(right).cloned().collect();
+        all.sort_by_key(|b| (b.start, b.end));
+        all.dedup();
+        let samples = crate::pipeline::merge_ranges(all.clone())
+            .iter()
+            .map(ExactSizeIterator::len)
+            .sum();
+        (all.len(), samples)
     }
 }
 
@@ -197,14 +215,17 @@ pub fn decode_border_signal(
     let scale = groove_speed_mm_s * alpha.sin() / stitched.spacing_um;
     let [left, right] = &mut combined.walls_um;
     let left_found = despike(left, params.despike_sigmas);
-    let right_found = if cut == Cut::Lateral {
+    let left_bursts = despike_bursts(left, params.burst_sigmas);
+    let (right_found, right_bursts) = if cut == Cut::Lateral {
         // A lateral cut's walls are one track (`e = 0`): one pass serves both.
         right.clone_from(left);
-        left_found.clone()
+        (left_found.clone(), left_bursts.clone())
     } else {
-        despike(right, params.despike_sigmas)
+        let found = despike(right, params.despike_sigmas);
+        (found, despike_bursts(right, params.burst_sigmas))
     };
     let despiked = [left_found, right_found];
+    let bursts = [left_bursts, right_bursts];
     let [left_v, right_v] = wall_velocities(&combined.walls_um, cut, scale, &params.differentiator);
     let mut channels = channels_by_cut(cut, &left_v, &right_v);
     let mut channel_gaps = Vec::with_capacity(channels.len());
@@ -229,5 +250,6 @@ pub fn decode_border_signal(
         },
         channel_gaps,
         despiked,
+        bursts,
     })
 }

@@ -347,31 +347,35 @@ fn the_interpolants_search_is_the_partition_point() {
     }
 }
 
-#[test]
-fn a_sample_all_four_borders_misplace_is_no_click_in_the_decoded_velocity() {
-    // A 500 Hz tone at 44.1 kHz, 16 µm of displacement, the four borders' constants apart; at
-    // sample 300 every border is 0.4 µm off, which their combination cannot see.
-    let n = 600;
+/// The four borders of a 500 Hz tone at 44.1 kHz (16 µm of displacement, their constants
+/// apart), each with `extra(j)` µm on sample `j` and a standard error of 0.05 µm.
+fn four_borders_on_a_tone(n: usize, extra: impl Fn(usize) -> f64) -> StitchedSignal {
     let d = |j: usize| 16.0 * (std::f64::consts::TAU * 500.0 / 44_100.0 * j as f64).sin();
     let mut channels = Vec::new();
     for c in [-90.0, -20.0, 20.0, 90.0] {
         #[allow(clippy::cast_possible_truncation)] // the stitched tracks are f32
-        let y = (0..n)
-            .map(|j| (c + d(j) + if j == 300 { 0.4 } else { 0.0 }) as f32)
-            .collect();
+        let y = (0..n).map(|j| (c + d(j) + extra(j)) as f32).collect();
         channels.push(y);
         channels.push(vec![0.05_f32; n]);
     }
-    let stitched = StitchedSignal {
+    StitchedSignal {
         start_um: 0.0,
         spacing_um: 21.3,
         native_rate_hz: 44_100.0,
         channels,
         gaps: Vec::new(),
-    };
+    }
+}
+
+#[test]
+fn a_sample_all_four_borders_misplace_is_no_click_in_the_decoded_velocity() {
+    // A 500 Hz tone at 44.1 kHz, 16 µm of displacement, the four borders' constants apart; at
+    // sample 300 every border is 0.4 µm off, which their combination cannot see.
+    let stitched = four_borders_on_a_tone(600, |j| if j == 300 { 0.4 } else { 0.0 });
     let click = |despike_sigmas: f64| {
         let params = EdgeParams {
             despike_sigmas,
+            burst_sigmas: 0.0,
             ..EdgeParams::default()
         };
         let decoded = decode_border_signal(&stitched, Cut::Lateral, 1.0, &params).unwrap();
@@ -388,5 +392,51 @@ fn a_sample_all_four_borders_misplace_is_no_click_in_the_decoded_velocity() {
     assert!(
         taken < 0.05 * kept,
         "click {taken} against {kept} without the despike"
+    );
+}
+
+#[test]
+fn a_five_sample_bump_all_four_borders_read_is_no_click_in_the_decoded_velocity() {
+    // The same 500 Hz tone with a little jitter; at samples 300–304 every border reads a bump
+    // of up to 3 µm (a flake's rim taken for the borders), within the groove's slope limit.
+    let bump = |j: usize| match j {
+        300..=304 => [1.0, 2.5, 3.0, 2.2, 0.8][j - 300],
+        _ => 0.0,
+    };
+    let jitter = |j: usize| 0.02 * ((j * 7919 % 101) as f64 / 50.0 - 1.0);
+    let decode = |with_bump: bool, burst_sigmas: f64| {
+        let stitched =
+            four_borders_on_a_tone(800, |j| jitter(j) + if with_bump { bump(j) } else { 0.0 });
+        let params = EdgeParams {
+            burst_sigmas,
+            ..EdgeParams::default()
+        };
+        decode_border_signal(&stitched, Cut::Lateral, 1.0, &params).unwrap()
+    };
+    let on = EdgeParams::default().burst_sigmas;
+    let truth = decode(false, on);
+    assert!(truth.bursts.iter().all(Vec::is_empty));
+    // The velocity's largest distance from the bump-free track's around the bump.
+    let worst = |decoded: &DecodedEdges| {
+        let (v, t) = (&decoded.velocity.channels[0], &truth.velocity.channels[0]);
+        (290..315)
+            .map(|j| f64::from(v[j] - t[j]).abs())
+            .fold(0.0, f64::max)
+    };
+    let peak = truth.velocity.channels[0]
+        .iter()
+        .fold(0.0_f32, |m, v| m.max(v.abs()));
+    let kept = decode(true, 0.0);
+    let taken = decode(true, on);
+    assert!(kept.bursts.iter().all(Vec::is_empty));
+    assert_eq!(taken.burst_samples().0, 1, "{:?}", taken.bursts);
+    let (with, without) = (worst(&taken), worst(&kept));
+    assert!(
+        without > f64::from(peak) / 10.0,
+        "the bump: {without} against a peak of {peak}"
+    );
+    assert!(
+        with < 0.05 * without,
+        "click {with} against {without} without the burst despike"
     );
 }
