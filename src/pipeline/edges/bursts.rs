@@ -57,16 +57,12 @@ impl Measure {
     fn new(len: usize) -> Self {
         let l = len as f64;
         let nodes = [-2.0, -1.0, l, l + 1.0];
+        // Each node's Lagrange weight at each sample: the cubic through it alone.
         let weights: Vec<[f64; 4]> = (0..len)
             .map(|i| {
-                let t = i as f64;
                 std::array::from_fn(|k| {
-                    nodes
-                        .iter()
-                        .enumerate()
-                        .filter(|&(m, _)| m != k)
-                        .map(|(_, &xm)| (t - xm) / (nodes[k] - xm))
-                        .product()
+                    let unit = std::array::from_fn::<_, 4, _>(|m| (nodes[m], f64::from(m == k)));
+                    crate::pipeline::lagrange(&unit, i as f64)
                 })
             })
             .collect();
@@ -169,23 +165,14 @@ const LOCAL_HALF: usize = 16;
 const RESIDUAL_GAIN: f64 = 1.394_433_377_556_792_5;
 
 /// Robust σ of the displacement noise around the burst `j..j + len` from the one-sample
-/// residuals `r1` of the [`LOCAL_HALF`] samples beyond its nodes on each side; `buf` is
-/// scratch space.
-fn local_noise(r1: &[f64], j: usize, len: usize, buf: &mut Vec<f64>) -> f64 {
+/// residuals `r1` of the [`LOCAL_HALF`] samples beyond its nodes on each side (read only for
+/// the few bursts the block's scale lets through).
+fn local_noise(r1: &[f64], j: usize, len: usize) -> f64 {
     let before = j.saturating_sub(2 + LOCAL_HALF)..j.saturating_sub(2);
     let after_start = (j + len + 2).min(r1.len());
     let after = after_start..(after_start + LOCAL_HALF).min(r1.len());
-    buf.clear();
-    buf.extend(
-        r1[before]
-            .iter()
-            .chain(&r1[after])
-            .filter(|v| v.is_finite())
-            .map(|v| v.abs()),
-    );
-    crate::pipeline::median_in_place(buf.as_mut_slice()).map_or(MIN_SCALE_UM, |m| {
-        (1.4826 * m / RESIDUAL_GAIN).max(MIN_SCALE_UM)
-    })
+    let local: Vec<f64> = r1[before].iter().chain(&r1[after]).copied().collect();
+    crate::pipeline::robust_sigma(&local, MIN_SCALE_UM * RESIDUAL_GAIN) / RESIDUAL_GAIN
 }
 
 /// Puts the short bursts of outliers of `x` (µm, NaN = gap) on the cubic through the samples
@@ -201,7 +188,6 @@ pub fn despike_bursts(x: &mut [f64], sigmas: f64) -> Vec<Range<usize>> {
     // Bursts taken per block, and the blocks found to hold too many.
     let mut taken_in_block = vec![0usize; blocks];
     let mut left_alone = vec![false; blocks];
-    let mut buf = Vec::with_capacity(2 * LOCAL_HALF);
     for _ in 0..ROUNDS {
         let s = smoothed(x);
         let r1 = residuals(&s);
@@ -216,7 +202,7 @@ pub fn despike_bursts(x: &mut [f64], sigmas: f64) -> Vec<Range<usize>> {
                 if !mean.is_finite() || mean.abs() <= sigmas * scales[j / BLOCK] {
                     continue;
                 }
-                let noise = local_noise(&r1, j, measure.len, &mut buf);
+                let noise = local_noise(&r1, j, measure.len);
                 let z = mean.abs() / (measure.noise_gain * noise).max(scales[j / BLOCK]);
                 if z > sigmas {
                     candidates.push((z, j, m, noise));

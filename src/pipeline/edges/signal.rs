@@ -163,11 +163,12 @@ impl DecodedEdges {
         let mut all: Vec<Range<usize>> = left.iter().chain(right).cloned().collect();
         all.sort_by_key(|b| (b.start, b.end));
         all.dedup();
-        let samples = crate::pipeline::merge_ranges(all.clone())
+        let bursts = all.len();
+        let samples = crate::pipeline::merge_ranges(all)
             .iter()
             .map(ExactSizeIterator::len)
             .sum();
-        (all.len(), samples)
+        (bursts, samples)
     }
 }
 
@@ -214,17 +215,20 @@ pub fn decode_border_signal(
     let alpha = params.wall_angle_deg.to_radians();
     let scale = groove_speed_mm_s * alpha.sin() / stitched.spacing_um;
     let [left, right] = &mut combined.walls_um;
-    let left_found = despike(left, params.despike_sigmas);
-    let left_bursts = despike_bursts(left, params.burst_sigmas);
-    let (right_found, right_bursts) = if cut == Cut::Lateral {
+    // Isolated outliers, then short bursts of them, put back on the curve.
+    let mend = |track: &mut [f64]| {
+        let spikes = despike(track, params.despike_sigmas);
+        (spikes, despike_bursts(track, params.burst_sigmas))
+    };
+    let (left_spikes, left_bursts) = mend(left);
+    let (right_spikes, right_bursts) = if cut == Cut::Lateral {
         // A lateral cut's walls are one track (`e = 0`): one pass serves both.
         right.clone_from(left);
-        (left_found.clone(), left_bursts.clone())
+        (left_spikes.clone(), left_bursts.clone())
     } else {
-        let found = despike(right, params.despike_sigmas);
-        (found, despike_bursts(right, params.burst_sigmas))
+        mend(right)
     };
-    let despiked = [left_found, right_found];
+    let despiked = [left_spikes, right_spikes];
     let bursts = [left_bursts, right_bursts];
     let [left_v, right_v] = wall_velocities(&combined.walls_um, cut, scale, &params.differentiator);
     let mut channels = channels_by_cut(cut, &left_v, &right_v);
