@@ -67,7 +67,7 @@ fn import_video_writes_a_scan_that_opens() {
     assert!(text.contains("3 groups of 8 frames, stride 6"), "{text}");
     let scan = groovescope::io::Scan::open(&out).unwrap();
     assert_eq!(scan.groups.len(), 3);
-    assert!(scan.groups.iter().all(|g| g.frames.len() == 8));
+    assert!(scan.groups.iter().all(|g| g.frame_count() == 8));
     assert_eq!(scan.meta.record.cut, groovescope::io::Cut::Stereo);
     assert!((scan.meta.motion.group_step_um - 6.0 * 0.78).abs() < 1e-9);
 

@@ -271,8 +271,8 @@ fn a_store_packed_in_name_order_or_short_of_a_group_keeps_every_group_in_its_pla
         groups.sort_by_key(|&g| names(g));
         let store = dir.path().join(name);
         let raw = |g: usize| -> Vec<_> {
-            let frames = &scan.groups[g].frames;
-            frames.iter().map(|p| load_frame_raw(p).unwrap()).collect()
+            let paths = scan.groups[g].frame_paths();
+            paths.map(|p| load_frame_raw(&p).unwrap()).collect()
         };
         let first = raw(0);
         let (w, h) = (first[0].width, first[0].height);

@@ -174,7 +174,7 @@ pub fn scan_folder(data: &[u8]) {
     assert!(!scan.groups.is_empty());
     for group in &scan.groups {
         if let Ok(frames) = load_group(group) {
-            assert!(frames.len() == group.frames.len());
+            assert!(frames.len() == group.frame_count());
         }
     }
     // The whole pipeline on one input in eight (it costs about ten loads).

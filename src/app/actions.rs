@@ -66,12 +66,12 @@ impl Workbench {
             return Err("no scan open".into());
         };
         let path = scan.dir.join("scan.toml");
-        let first_frame = scan.groups.first().and_then(|g| g.frames.first());
+        let first_frame = scan.groups.first().and_then(|g| g.frame_path(0));
         let result = meta
             .validate()
             .and_then(|()| match first_frame {
                 // What the scan folder holds must agree too (the next open checks it).
-                Some(f) => crate::io::frames::frame_dimensions(f)
+                Some(f) => crate::io::frames::frame_dimensions(&f)
                     .map_err(|e| e.to_string())
                     .and_then(|size| meta.check_against_scan(scan.groups.len(), size)),
                 None => Ok(()),

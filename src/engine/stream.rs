@@ -93,7 +93,7 @@ fn sized_as_scan(
             found_h: f.height,
             want_w: size.0,
             want_h: size.1,
-            path: entry.frames.get(first).unwrap_or(&entry.dir).clone(),
+            path: entry.frame_path(first).unwrap_or_else(|| entry.dir.clone()),
         }),
         _ => Ok(frames),
     }

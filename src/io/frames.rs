@@ -1,6 +1,6 @@
 //! Frame loading: PNG or TIFF, 8 or 16 bit, grey or colour, converted to grey `f32` in `[0, 1]`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use image::{DynamicImage, ImageBuffer, Luma};
 use rayon::prelude::*;
@@ -143,10 +143,10 @@ pub fn missing_or(group: &GroupEntry, error: LoadError) -> LoadError {
     if let Some(missing) = group.missing_error() {
         return missing;
     }
-    match group.frames.iter().find(|p| !p.exists()) {
+    match group.frame_paths().find(|p| !p.exists()) {
         Some(gone) => LoadError::Missing {
             what: "frame",
-            path: gone.clone(),
+            path: gone,
         },
         None => error,
     }
@@ -178,7 +178,7 @@ fn load_folder_frames(
     group: &GroupEntry,
     range: std::ops::Range<usize>,
 ) -> Result<Vec<Image>, LoadError> {
-    let n = group.frames.len();
+    let n = group.frame_names.len();
     if n < super::scan::MIN_FRAMES_PER_GROUP {
         return Err(LoadError::TooFewFrames {
             found: n,
@@ -186,10 +186,11 @@ fn load_folder_frames(
             path: group.dir.clone(),
         });
     }
-    let paths = group
-        .frames
-        .get(range.start.min(n)..range.end.min(n))
-        .unwrap_or_default();
+    let paths: Vec<PathBuf> = group
+        .frame_paths()
+        .take(range.end.min(n))
+        .skip(range.start.min(n))
+        .collect();
     let frames: Vec<Image> = paths
         .par_iter()
         .map(|p| load_frame(p))
@@ -211,15 +212,18 @@ fn load_folder_frames(
             })
         }
     };
-    for (img, path) in frames.iter().zip(paths) {
+    for (img, path) in frames.iter().zip(&paths) {
         same_size((img.width, img.height), path)?;
     }
     group
-        .frames
+        .frame_names
         .par_iter()
         .enumerate()
         .filter(|(k, _)| !range.contains(k))
-        .try_for_each(|(_, path)| same_size(check_undecoded_frame(path)?, path))?;
+        .try_for_each(|(_, name)| {
+            let path = group.dir.join(name);
+            same_size(check_undecoded_frame(&path)?, &path)
+        })?;
     Ok(frames)
 }
 
@@ -457,7 +461,10 @@ mod tests {
         GroupEntry {
             index: 0,
             dir: dir.to_path_buf(),
-            frames: paths.to_vec(),
+            frame_names: paths
+                .iter()
+                .map(|p| p.file_name().unwrap_or_default().to_owned())
+                .collect(),
             zarr: None,
             missing: None,
         }

@@ -124,10 +124,10 @@ pub fn check_hough_accumulator(
     if !params.uses_dual_focus(&scan.meta) {
         return Ok(());
     }
-    let Some(frame) = scan.groups.first().and_then(|g| g.frames.first()) else {
+    let Some(frame) = scan.groups.first().and_then(|g| g.frame_path(0)) else {
         return Ok(());
     };
-    let (_, height) = super::frames::frame_dimensions(frame).map_err(|e| e.to_string())?;
+    let (_, height) = super::frames::frame_dimensions(&frame).map_err(|e| e.to_string())?;
     let cells = crate::pipeline::hough::accumulator_cells(&params.hough, height);
     if cells > MAX_HOUGH_CELLS {
         let h = &params.hough;

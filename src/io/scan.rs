@@ -1,6 +1,8 @@
 //! The scan directory contract: `scan.toml` metadata, group folders and their frames (see docs/FORMAT.md).
 
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use super::LoadError;
 use super::frames::frame_dimensions;
@@ -59,9 +61,11 @@ pub struct GroupEntry {
     /// The group folder (in a Zarr store: the store joined with the group's name, which
     /// names the group in messages).
     pub dir: PathBuf,
-    /// Frame files in order: by name, or by number (a skipped one kept as the path it would
-    /// have; see docs/FORMAT.md). Empty in a Zarr store.
-    pub frames: Vec<PathBuf>,
+    /// The names of its frame files inside `dir`, in order: by name, or by number (a skipped
+    /// one kept as the name it would have; see docs/FORMAT.md). Empty in a Zarr store. Groups
+    /// whose frames are named alike share one list, so a side's 367,000 groups hold one list
+    /// rather than a path a frame (about 1 kB a group).
+    pub frame_names: Arc<[OsString]>,
     /// Where the frames are in a Zarr store (None for a scan folder).
     pub zarr: Option<super::zarr::ZarrGroup>,
     /// For a place the scan's numbering skips (it keeps its place; see docs/FORMAT.md): what
@@ -76,7 +80,19 @@ impl GroupEntry {
     pub fn frame_count(&self) -> usize {
         self.zarr
             .as_ref()
-            .map_or(self.frames.len(), |z| z.layout.frames)
+            .map_or(self.frame_names.len(), |z| z.layout.frames)
+    }
+
+    /// The file of frame `k` of a scan folder's group (None past its frames, and in a Zarr
+    /// store).
+    #[must_use]
+    pub fn frame_path(&self, k: usize) -> Option<PathBuf> {
+        self.frame_names.get(k).map(|name| self.dir.join(name))
+    }
+
+    /// The files of a scan folder's group, in order (none in a Zarr store).
+    pub fn frame_paths(&self) -> impl ExactSizeIterator<Item = PathBuf> + '_ {
+        self.frame_names.iter().map(|name| self.dir.join(name))
     }
 
     /// True for a place the scan's numbering skips (see [`GroupEntry::missing`]).
@@ -133,11 +149,11 @@ fn is_frame_file(p: &Path) -> bool {
 fn majority_frame_size(groups: &[GroupEntry], first: (usize, usize)) -> (usize, usize) {
     let usable: Vec<&GroupEntry> = groups
         .iter()
-        .filter(|g| g.frames.len() >= MIN_FRAMES_PER_GROUP)
+        .filter(|g| g.frame_names.len() >= MIN_FRAMES_PER_GROUP)
         .collect();
     let size_of = |g: Option<&&GroupEntry>| {
-        g.and_then(|g| g.frames.first())
-            .and_then(|f| frame_dimensions(f).ok())
+        g.and_then(|g| g.frame_path(0))
+            .and_then(|f| frame_dimensions(&f).ok())
     };
     if usable.len() < 3 {
         return first;
@@ -241,6 +257,39 @@ fn sorted_entries(
     Ok(out)
 }
 
+/// Frame-name lists shared between groups: the frames of each group folder as names inside it,
+/// one list kept for each run of groups that name their frames alike (every group of a
+/// regular scan).
+#[derive(Default)]
+struct FrameNames {
+    last: Option<Arc<[OsString]>>,
+}
+
+impl FrameNames {
+    /// The names of `files` (paths inside one folder), shared with the last group's list
+    /// when they are the same.
+    fn shared(&mut self, files: &[PathBuf]) -> Arc<[OsString]> {
+        let same = |last: &[OsString]| {
+            last.len() == files.len()
+                && last
+                    .iter()
+                    .zip(files)
+                    .all(|(name, file)| file.file_name() == Some(name.as_os_str()))
+        };
+        match &self.last {
+            Some(last) if same(last) => Arc::clone(last),
+            _ => {
+                let names: Arc<[OsString]> = files
+                    .iter()
+                    .map(|file| file.file_name().unwrap_or_default().to_owned())
+                    .collect();
+                self.last = Some(Arc::clone(&names));
+                names
+            }
+        }
+    }
+}
+
 impl Scan {
     /// Whether `dir` looks like a scan [`Scan::open`] reads: a folder holding `scan.toml`, or a
     /// Zarr store (`zarr.json`).
@@ -287,6 +336,7 @@ impl Scan {
             "group folders",
         )?;
         let mut frames_of = std::collections::HashMap::new();
+        let mut names = FrameNames::default();
         for path in &folders {
             let files = sorted_entries(
                 path,
@@ -302,7 +352,7 @@ impl Scan {
                 "frames",
                 meta.motion.numbered_names,
             )?;
-            frames_of.insert(path.clone(), files);
+            frames_of.insert(path.clone(), names.shared(&files));
         }
         let holds_frames = |i: usize| frames_of.get(&folders[i]).is_some_and(|f| !f.is_empty());
         let stray = strays(&folders, holds_frames);
@@ -321,18 +371,18 @@ impl Scan {
                 index: groups.len(),
                 dir: path,
                 missing: frames.is_none().then_some("group folder"),
-                frames: frames.unwrap_or_default(),
+                frame_names: frames.unwrap_or_else(|| Arc::new([])),
                 zarr: None,
             });
         }
         let Some(first) = groups
             .iter()
-            .find(|g| g.frames.len() >= MIN_FRAMES_PER_GROUP)
-            .and_then(|g| g.frames.first())
+            .find(|g| g.frame_names.len() >= MIN_FRAMES_PER_GROUP)
+            .and_then(|g| g.frame_path(0))
         else {
-            return Err(match groups.iter().find(|g| !g.frames.is_empty()) {
+            return Err(match groups.iter().find(|g| !g.frame_names.is_empty()) {
                 Some(short) => LoadError::TooFewFrames {
-                    found: short.frames.len(),
+                    found: short.frame_names.len(),
                     needed: MIN_FRAMES_PER_GROUP,
                     path: short.dir.clone(),
                 },
@@ -342,7 +392,7 @@ impl Scan {
                 },
             });
         };
-        let frame_size = majority_frame_size(&groups, frame_dimensions(first)?);
+        let frame_size = majority_frame_size(&groups, frame_dimensions(&first)?);
         check_meta_against(&meta, &groups, frame_size, &meta_path)?;
         let reference = reference_in(dir);
         Ok(Self {
@@ -517,5 +567,32 @@ mod tests {
             msg.contains("numbered_names") && msg.contains("`order`"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn groups_that_name_their_frames_alike_share_one_list() {
+        let files = |dir: &str, names: &[&str]| -> Vec<PathBuf> {
+            names.iter().map(|n| Path::new(dir).join(n)).collect()
+        };
+        let mut names = FrameNames::default();
+        let a = names.shared(&files("s/g0", &["f0.png", "f1.png"]));
+        let b = names.shared(&files("s/g1", &["f0.png", "f1.png"]));
+        let c = names.shared(&files("s/g2", &["f0.png", "f2.png"]));
+        let d = names.shared(&files("s/g3", &["f0.png"]));
+        assert!(Arc::ptr_eq(&a, &b));
+        assert!(!Arc::ptr_eq(&b, &c));
+        assert_eq!(&*d, &[OsString::from("f0.png")]);
+        let entry = GroupEntry {
+            index: 2,
+            dir: PathBuf::from("s/g2"),
+            frame_names: c,
+            zarr: None,
+            missing: None,
+        };
+        assert_eq!(entry.frame_count(), 2);
+        assert_eq!(entry.frame_path(1), Some(PathBuf::from("s/g2/f2.png")));
+        assert_eq!(entry.frame_path(2), None);
+        let paths: Vec<PathBuf> = entry.frame_paths().collect();
+        assert_eq!(paths, files("s/g2", &["f0.png", "f2.png"]));
     }
 }

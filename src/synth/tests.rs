@@ -359,7 +359,7 @@ fn scan_folder_loads_and_reference_matches_the_scanned_length() {
     assert_eq!(*calls.lock().unwrap(), vec![(0, 3), (1, 3), (2, 3), (3, 3)]);
     let scan = Scan::open(&out).unwrap();
     assert_eq!(scan.groups.len(), 3);
-    assert_eq!(scan.groups[0].frames.len(), 7);
+    assert_eq!(scan.groups[0].frame_count(), 7);
     assert!((scan.meta.motion.group_step_um - 216.0 * 0.39).abs() < 1e-9);
     let back: SynthConfig = scan.meta.extra["synth"].clone().try_into().unwrap();
     assert_eq!(back, cfg);
@@ -377,7 +377,7 @@ fn scan_folder_loads_and_reference_matches_the_scanned_length() {
         let want = (std::f64::consts::TAU * 1000.0 * i as f64 / 44_100.0).sin();
         assert!((f64::from(*v) - want).abs() < 2e-3, "{i}");
     }
-    let frame = crate::io::load_frame(&scan.groups[1].frames[2]).unwrap();
+    let frame = crate::io::load_frame(&scan.groups[1].frame_path(2).unwrap()).unwrap();
     let g = Groove::new(&sound, &cfg).unwrap();
     assert_eq!(frame, g.render_frame(1, 2));
 }

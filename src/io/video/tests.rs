@@ -104,7 +104,7 @@ fn eight_bit_clip_imports_into_exact_overlapping_groups() {
     assert_eq!(info["source"].as_str(), Some("clip.avi"));
     assert_eq!(info["group_stride_frames"].as_integer(), Some(5));
     for (g, entry) in scan.groups.iter().enumerate() {
-        assert_eq!(entry.frames.len(), 7);
+        assert_eq!(entry.frame_count(), 7);
         for (k, frame) in load_group(entry).unwrap().iter().enumerate() {
             assert_same(frame, &imgs[g * 5 + k], 0.0);
         }

@@ -224,7 +224,7 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
                 },
             }),
             dir: path,
-            frames: Vec::new(),
+            frame_names: std::sync::Arc::new([]),
         })
         .collect();
     check_meta_against(&meta, &entries, (width, height), &dir.join("zarr.json"))?;

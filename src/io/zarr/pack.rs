@@ -47,7 +47,7 @@ impl From<LoadError> for PackError {
 }
 
 fn raw_group(scan_group: &crate::io::GroupEntry) -> Result<Vec<RawFrame>, LoadError> {
-    if scan_group.frames.is_empty() {
+    if scan_group.frame_names.is_empty() {
         let none = LoadError::TooFewFrames {
             found: 0,
             needed: crate::io::scan::MIN_FRAMES_PER_GROUP,
@@ -56,9 +56,9 @@ fn raw_group(scan_group: &crate::io::GroupEntry) -> Result<Vec<RawFrame>, LoadEr
         return Err(crate::io::frames::missing_or(scan_group, none));
     }
     scan_group
-        .frames
+        .frame_names
         .par_iter()
-        .map(|p| load_frame_raw(p))
+        .map(|name| load_frame_raw(&scan_group.dir.join(name)))
         .collect::<Result<_, _>>()
         .map_err(|e| crate::io::frames::missing_or(scan_group, e))
 }
@@ -139,8 +139,7 @@ pub fn pack_scan(
 /// Bytes of a group's frame files.
 fn frame_bytes(entry: &crate::io::GroupEntry) -> u64 {
     entry
-        .frames
-        .iter()
+        .frame_paths()
         .map(|p| std::fs::metadata(p).map_or(0, |m| m.len()))
         .sum()
 }
