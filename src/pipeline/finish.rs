@@ -137,16 +137,20 @@ fn extend_with_silence(signal: &mut StitchedSignal, ends_um: [f64; 2]) {
     signal.gaps = gaps;
 }
 
-/// Groove speed (mm/s) at each sample of `grid` from the groups' speeds at their middles,
-/// linearly between them and constant beyond the ends.
-fn groove_speed_along<S: GroupSignals + ?Sized>(groups: &S, grid: &StitchedSignal) -> Vec<f64> {
-    let mids: Vec<(f64, f64)> = groups
+/// Each group's middle (µm) and groove speed (mm/s), in group order.
+fn group_speeds<S: GroupSignals + ?Sized>(groups: &S) -> Vec<(f64, f64)> {
+    groups
         .views()
         .filter_map(|g| {
             let (a, b) = (g.positions_um.first()?, g.positions_um.last()?);
             Some((0.5 * (a + b), g.groove_speed_mm_s))
         })
-        .collect();
+        .collect()
+}
+
+/// Groove speed (mm/s) at each sample of `grid` from the groups' speeds at their middles
+/// ([`group_speeds`]), linearly between them and constant beyond the ends.
+fn groove_speed_along(mids: &[(f64, f64)], grid: &StitchedSignal) -> Vec<f64> {
     let n = grid.channels.first().map_or(0, Vec::len);
     (0..n)
         .map(|i| {
@@ -220,15 +224,18 @@ impl EdgeRepairs {
 /// differentiated, and scaled by the groove speed at each sample. With it, `with_noise`, each
 /// channel's displacement noise on the same grid ([`edge_noise`]; only the fused decoder reads
 /// it), and what was mended in the displacement tracks.
-fn edge_velocity<S: GroupSignals + ?Sized>(
-    borders: &S,
+fn edge_velocity(
+    borders: SignalPack,
     spacing_um: f64,
     meta: &ScanMeta,
     params: &PipelineParams,
     with_noise: bool,
 ) -> Result<(StitchedSignal, Option<EdgeNoise>, EdgeRepairs), StageError> {
-    let stitched = stitch(borders, spacing_um)?;
-    let decoded = decode_border_signal(&stitched, meta.record.cut, 1.0, &params.edges)?;
+    let stitched = stitch(&borders, spacing_um)?;
+    let mids = group_speeds(&borders);
+    // The groups' tracks are stitched: a side's merge needs their memory for the decode.
+    drop(borders);
+    let decoded = decode_border_signal(stitched, meta.record.cut, 1.0, &params.edges)?;
     let repairs = EdgeRepairs {
         despiked: decoded.despiked_samples(),
         bursts: decoded.burst_samples(),
@@ -240,7 +247,7 @@ fn edge_velocity<S: GroupSignals + ?Sized>(
             .sum(),
     };
     let mut velocity = decoded.velocity;
-    let speed = groove_speed_along(borders, &velocity);
+    let speed = groove_speed_along(&mids, &velocity);
     for ch in &mut velocity.channels {
         for (v, vt) in ch.iter_mut().zip(&speed) {
             #[allow(clippy::cast_possible_truncation)] // velocities are stored as f32
@@ -334,15 +341,13 @@ pub fn finish_method_clip(
             EdgeRepairs::default(),
         ),
         Method::Edges => {
-            let (velocity, _, n) =
-                edge_velocity(&signals.borders, spacing_um, meta, params, false)?;
+            let (velocity, _, n) = edge_velocity(signals.borders, spacing_um, meta, params, false)?;
             (velocity, None, n)
         }
         Method::Fused => {
             let ClipSignals { flow, borders, .. } = signals;
             let (velocity, noise, repairs) =
-                edge_velocity(&borders, spacing_um, meta, params, true)?;
-            drop(borders);
+                edge_velocity(borders, spacing_um, meta, params, true)?;
             let flow_velocity = stitch(&flow, spacing_um)?;
             drop(flow);
             let fused = fuse(

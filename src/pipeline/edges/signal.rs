@@ -179,7 +179,7 @@ impl DecodedEdges {
 /// # Errors
 /// [`StageError::BadInput`] when the signal does not have eight channels of one length.
 pub fn decode_border_signal(
-    stitched: &StitchedSignal,
+    mut stitched: StitchedSignal,
     cut: Cut,
     groove_speed_mm_s: f64,
     params: &EdgeParams,
@@ -197,11 +197,15 @@ pub fn decode_border_signal(
             ),
         });
     }
-    let mut ys: [Vec<f64>; 4] = Default::default();
-    let mut ses: [Vec<f64>; 4] = Default::default();
+    // Sized up front: a side's merge holds millions of samples, and growing by doubling
+    // would keep up to twice each track.
+    let mut ys: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::with_capacity(n));
+    let mut ses: [Vec<f64>; 4] = std::array::from_fn(|_| Vec::with_capacity(n));
     for b in 0..4 {
-        let (y, se) = (&stitched.channels[2 * b], &stitched.channels[2 * b + 1]);
-        for (&yv, &sv) in y.iter().zip(se) {
+        // Each pair of channels is freed once read: a side's merge holds millions of samples.
+        let y = std::mem::take(&mut stitched.channels[2 * b]);
+        let se = std::mem::take(&mut stitched.channels[2 * b + 1]);
+        for (&yv, &sv) in y.iter().zip(&se) {
             let seen = yv.is_finite() && sv.is_finite() && sv > 0.0;
             ys[b].push(if seen { f64::from(yv) } else { f64::NAN });
             ses[b].push(if seen { f64::from(sv) } else { f64::NAN });

@@ -378,7 +378,7 @@ fn a_sample_all_four_borders_misplace_is_no_click_in_the_decoded_velocity() {
             burst_sigmas: 0.0,
             ..EdgeParams::default()
         };
-        let decoded = decode_border_signal(&stitched, Cut::Lateral, 1.0, &params).unwrap();
+        let decoded = decode_border_signal(stitched.clone(), Cut::Lateral, 1.0, &params).unwrap();
         let v = &decoded.velocity.channels[0];
         // The velocity's deviation from its neighbours' mean around the spike, against the
         // same far from it.
@@ -411,7 +411,7 @@ fn a_five_sample_bump_all_four_borders_read_is_no_click_in_the_decoded_velocity(
             burst_sigmas,
             ..EdgeParams::default()
         };
-        decode_border_signal(&stitched, Cut::Lateral, 1.0, &params).unwrap()
+        decode_border_signal(stitched, Cut::Lateral, 1.0, &params).unwrap()
     };
     let on = EdgeParams::default().burst_sigmas;
     let truth = decode(false, on);
