@@ -86,27 +86,27 @@ impl CombineParams {
     }
 }
 
-/// Each border's weight `1/se²` per sample (None where the border is not seen), `se` floored
+/// Each border's weight `1/se²` per sample (NaN where the border is not seen: a weight is never
+/// NaN, and a side's samples are millions, so not an `Option`'s 16 bytes), `se` floored
 /// at `floor` and, with `window` > 1, `se²` the geometric mean of the floored `se²` of the
 /// seen samples within `window/2` on each side.
-fn border_weights(y: &[f64], se: &[f64], n: usize, floor: f64, window: usize) -> Vec<Option<f64>> {
+fn border_weights(y: &[f64], se: &[f64], n: usize, floor: f64, window: usize) -> Vec<f64> {
     let var = |j: usize| -> Option<f64> {
         let (yv, sv) = (*y.get(j)?, *se.get(j)?);
         (yv.is_finite() && sv.is_finite()).then(|| sv.max(floor).powi(2))
     };
     if window <= 1 {
-        return (0..n).map(|j| var(j).map(|v| 1.0 / v)).collect();
+        return (0..n)
+            .map(|j| var(j).map_or(f64::NAN, |v| 1.0 / v))
+            .collect();
     }
     let logs: Vec<f64> = (0..n).map(|j| var(j).map_or(f64::NAN, f64::ln)).collect();
     let means = crate::pipeline::finite_window_means(&logs, window / 2);
     logs.iter()
         .zip(means)
-        .map(|(l, mean)| {
-            if l.is_finite() {
-                mean.map(|m| (-m).exp())
-            } else {
-                None
-            }
+        .map(|(l, mean)| match mean {
+            Some(m) if l.is_finite() => (-m).exp(),
+            _ => f64::NAN,
         })
         .collect()
 }
@@ -335,9 +335,10 @@ fn median_start(obs: &[(usize, f64, f64)], lateral: bool) -> Option<(f64, f64)> 
 pub fn combine_borders(y: &[Vec<f64>; 4], se: &[Vec<f64>; 4], p: &CombineParams) -> Combined {
     let n = y.iter().map(Vec::len).min().unwrap_or(0);
     let lateral = p.cut == Cut::Lateral;
-    let weights: [Vec<Option<f64>>; 4] =
+    let weights: [Vec<f64>; 4] =
         std::array::from_fn(|b| border_weights(&y[b], &se[b], n, p.floor_um, p.weight_window));
-    let weight = |b: usize, j: usize| -> Option<f64> { weights[b].get(j).copied().flatten() };
+    let weight =
+        |b: usize, j: usize| -> Option<f64> { weights[b].get(j).copied().filter(|w| !w.is_nan()) };
     let mut c: [f64; 4] =
         std::array::from_fn(|b| finite_median(y[b][..n].to_vec()).unwrap_or(f64::NAN));
     let mut s = Solves::new(n, lateral);
