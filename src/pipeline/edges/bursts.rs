@@ -98,17 +98,40 @@ impl Measure {
     }
 
     /// The mean distance from the cubic of the burst at `j` of `s` (NaN where it, its nodes
-    /// or two more samples on each side are missing or past an end).
-    fn mean_distance(&self, s: &[f64], j: usize) -> f64 {
+    /// or two more samples on each side are missing or past an end; `unseen` is `s`'s).
+    fn mean_distance(&self, s: &[f64], unseen: &Unseen, j: usize) -> f64 {
         let (Some(lo), hi) = (j.checked_sub(4), j + self.len + 4) else {
             return f64::NAN;
         };
-        if hi > s.len() || s[lo..hi].iter().any(|v| !v.is_finite()) {
+        if hi > s.len() || unseen.any(lo..hi) {
             return f64::NAN;
         }
         let y = self.nodes(s, j);
         let cubic: f64 = self.mean_weights.iter().zip(&y).map(|(w, v)| w * v).sum();
         s[j..j + self.len].iter().sum::<f64>() / self.len as f64 - cubic
+    }
+}
+
+/// Where a track is not finite, as counts before each sample, so that every measure at every
+/// start asks in one step whether its stretch holds a gap (counted modulo 2³², which a
+/// stretch's difference survives).
+struct Unseen(Vec<u32>);
+
+impl Unseen {
+    fn new(s: &[f64]) -> Self {
+        let mut before = Vec::with_capacity(s.len() + 1);
+        let mut count = 0u32;
+        before.push(0);
+        for v in s {
+            count = count.wrapping_add(u32::from(!v.is_finite()));
+            before.push(count);
+        }
+        Self(before)
+    }
+
+    /// Whether `range` (within the track) holds a sample that is not finite.
+    fn any(&self, range: Range<usize>) -> bool {
+        self.0[range.end].wrapping_sub(self.0[range.start]) != 0
     }
 }
 
@@ -191,10 +214,13 @@ pub fn despike_bursts(x: &mut [f64], sigmas: f64) -> Vec<Range<usize>> {
     for _ in 0..ROUNDS {
         let s = smoothed(x);
         let r1 = residuals(&s);
+        let unseen = Unseen::new(&s);
         // (score, start, index into `measures`, local noise)
         let mut candidates: Vec<(f64, usize, usize, f64)> = Vec::new();
         for (m, measure) in measures.iter().enumerate() {
-            let means: Vec<f64> = (0..s.len()).map(|j| measure.mean_distance(&s, j)).collect();
+            let means: Vec<f64> = (0..s.len())
+                .map(|j| measure.mean_distance(&s, &unseen, j))
+                .collect();
             let scales = block_scales(&means);
             for (j, &mean) in means.iter().enumerate() {
                 // The block's scale alone is cheap and rules out nearly every sample; the
@@ -263,7 +289,10 @@ mod tests {
         let x: Vec<f64> = (0..40).map(|j| cubic(j as f64)).collect();
         for len in 2..=MAX_BURST {
             let m = Measure::new(len);
-            assert!(m.mean_distance(&x, 10).abs() < 1e-9, "len {len}");
+            assert!(
+                m.mean_distance(&x, &Unseen::new(&x), 10).abs() < 1e-9,
+                "len {len}"
+            );
             // The mean distance is linear in the samples: its variance for white noise of
             // σ 1 is the sum of its coefficients' squares.
             let mut coefs = vec![0.0; len + 4];
