@@ -19,6 +19,7 @@ use egui_kittest::kittest::Queryable;
 use groovescope::app::View;
 use groovescope::io::wav::WavBits;
 use groovescope::pipeline::Stage;
+use groovescope::pipeline::dsp::EqCurve;
 use groovescope::playback::{AudioStatus, DeviceChoice};
 use groovescope::synth::SynthConfig;
 use gui_common::*;
@@ -694,6 +695,42 @@ fn the_previous_clip_stays_for_ab_and_a_range_around_the_group_reconstructs() {
         "{sidecar}"
     );
     assert!(sidecar.contains("\"modified\": true"), "{sidecar}");
+}
+
+/// The custom 78 EQ curve: its numbers are rows of the filter / EQ section, editing one sets
+/// its knob, and the exported sidecar names the curve the clip went through.
+#[test]
+fn the_custom_eq_curve_is_set_in_the_panel_and_recorded_in_the_export() {
+    let (tmp, mut h) = settled_on(&demo_scan());
+    // The section lies below the panel's fold.
+    h.get_by_label("filter / EQ (clip)").click_accesskit();
+    h.run_ok();
+    let mut p = wb(&h).params().clone();
+    p.dsp.eq = EqCurve::Custom;
+    wb_mut(&mut h).set_params(p);
+    h.run_ok();
+    h.get_by_label("custom: turnover (Hz)")
+        .set_value_accesskit(300.0);
+    h.step();
+    h.get_by_label("custom: roll-off at 10 kHz (dB)")
+        .set_value_accesskit(16.0);
+    h.step();
+    let dsp = wb(&h).params().dsp.clone();
+    assert_eq!(
+        (dsp.eq, dsp.eq_turnover_hz, dsp.eq_rolloff_db),
+        (EqCurve::Custom, 300.0, 16.0)
+    );
+    wb_mut(&mut h).reconstruct(None);
+    settle(&mut h);
+    assert_eq!(wb(&h).clip().unwrap().params.dsp, dsp);
+    let wav = tmp.path().join("custom-eq.wav");
+    wb_mut(&mut h).request_export_wav(wav.clone(), false);
+    h.run_ok();
+    let sidecar = std::fs::read_to_string(wav.with_extension("json")).unwrap();
+    assert!(
+        sidecar.contains("playback EQ 300 Hz turnover, bass shelf 50 Hz, −16 dB at 10 kHz"),
+        "{sidecar}"
+    );
 }
 
 /// Issue 20: the arrow keys step through the group's frames.

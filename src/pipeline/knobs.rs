@@ -106,7 +106,13 @@ knob_docs! {
     "dsp.lowpass_hz"
         => "its −3 dB cutoff, Hz",
     "dsp.eq"
-        => "playback EQ: flat, riaa, turnover500",
+        => "playback EQ: flat, riaa, turnover500, or custom (a 78 chart's turnover and roll-off, the three keys below)",
+    "dsp.eq_turnover_hz"
+        => "custom EQ: bass turnover, the +3 dB point of the bass boost, Hz (78 charts: 250 to 800, often 300, 400 or 500)",
+    "dsp.eq_rolloff_db"
+        => "custom EQ: treble roll-off, the cut at 10 kHz, dB (0 = none; the charts' 5, 8.5, 10.5, 12, 13.7 (75 µs, as RIAA) or 16)",
+    "dsp.eq_shelf_hz"
+        => "custom EQ: where the bass boost levels off, Hz (below the turnover; RIAA 50, some charts 40 or 100)",
     "flow.groove_weight"
         => "weight γ of the groove-orientation penalty, as a multiple of λ",
     "flow.sor_omega"

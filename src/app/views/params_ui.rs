@@ -376,7 +376,11 @@ pub fn params_ui(ui: &mut Ui, p: &mut PipelineParams, status: &[StageStatus; Sta
                 (EqCurve::Flat, "flat (velocity)"),
                 (EqCurve::Riaa, "RIAA"),
                 (EqCurve::Turnover500, "78: 500 Hz turnover"),
+                (EqCurve::Custom, "78: a chart's numbers (below)"),
             ]);
+            num "custom: turnover (Hz)" eq_turnover_hz (5.0, 1.0..=20_000.0);
+            num "custom: roll-off at 10 kHz (dB)" eq_rolloff_db (0.1, 0.0..=60.0);
+            num "custom: bass shelf (Hz)" eq_shelf_hz (1.0, 0.1..=20_000.0);
         );
     });
 }

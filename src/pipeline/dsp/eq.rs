@@ -1,4 +1,4 @@
-//! Playback equalisation curves (RIAA, 500 Hz turnover) as analog curves and as biquad sections.
+//! Playback equalisation curves (RIAA, 500 Hz turnover, and a 78's curve set by its turnover, treble roll-off and bass shelf) as analog curves and as biquad sections.
 
 use super::*;
 
@@ -15,12 +15,46 @@ pub(super) const TURNOVER500_HZ: f64 = 500.0;
 pub(super) const TURNOVER500_SHELF_HZ: f64 = 50.0;
 /// Frequency at which every EQ curve has 0 dB gain.
 pub(super) const EQ_REFERENCE_HZ: f64 = 1000.0;
+/// Where a treble roll-off is stated: a 78 chart's "roll-off" is the cut at 10 kHz (Hz).
+pub(super) const ROLLOFF_REFERENCE_HZ: f64 = 10_000.0;
+
 /// Corner frequency (Hz) of a time constant (s).
 pub(super) fn corner_hz(tau_s: f64) -> f64 {
     1.0 / (2.0 * PI * tau_s)
 }
 
-impl EqCurve {
+/// The corner (Hz) of the first-order treble roll-off that cuts `rolloff_db` at 10 kHz
+/// (`10·log10(1 + (10 kHz/f)²) = rolloff_db`); None for no roll-off (0 dB or less). 13.7 dB
+/// gives 2.11 kHz, about RIAA's 75 µs (2.12 kHz, 13.66 dB).
+#[must_use]
+pub fn rolloff_corner_hz(rolloff_db: f64) -> Option<f64> {
+    (rolloff_db > 0.0).then(|| ROLLOFF_REFERENCE_HZ / (10f64.powf(rolloff_db / 10.0) - 1.0).sqrt())
+}
+
+/// A playback curve with its corners: what [`DspParams::playback_eq`] makes of `dsp.eq` (and,
+/// for [`EqCurve::Custom`], of the curve's own knobs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PlaybackEq {
+    /// No EQ.
+    Flat,
+    /// RIAA (3180/318/75 µs).
+    Riaa,
+    /// 500 Hz turnover, 50 Hz shelf, no roll-off.
+    Turnover500,
+    /// A 78's curve: the bass boost rises 6 dB an octave from `turnover_hz` down to
+    /// `shelf_hz`, and a first-order treble roll-off has its corner at `rolloff_hz` (None:
+    /// no roll-off).
+    Custom {
+        /// Where the bass boost levels off (Hz).
+        shelf_hz: f64,
+        /// The bass turnover, the boost's +3 dB point (Hz).
+        turnover_hz: f64,
+        /// The treble roll-off's corner (Hz).
+        rolloff_hz: Option<f64>,
+    },
+}
+
+impl PlaybackEq {
     /// Analog magnitude (linear, not normalised) of the curve at `freq_hz`.
     pub(super) fn analog_raw(self, freq_hz: f64) -> f64 {
         let w = 2.0 * PI * freq_hz;
@@ -32,6 +66,14 @@ impl EqCurve {
                 mag(1.0 / (2.0 * PI * TURNOVER500_HZ))
                     / mag(1.0 / (2.0 * PI * TURNOVER500_SHELF_HZ))
             }
+            Self::Custom {
+                shelf_hz,
+                turnover_hz,
+                rolloff_hz,
+            } => {
+                let pole = |hz: f64| (1.0 + (freq_hz / hz).powi(2)).sqrt();
+                pole(turnover_hz) / (pole(shelf_hz) * rolloff_hz.map_or(1.0, pole))
+            }
         }
     }
 
@@ -42,12 +84,21 @@ impl EqCurve {
         20.0 * (self.analog_raw(freq_hz) / self.analog_raw(EQ_REFERENCE_HZ)).log10()
     }
 
-    /// Highest corner of the curve (Hz); the sample rate must exceed twice it.
-    pub(super) fn highest_corner_hz(self) -> f64 {
+    /// Highest corner of the curve (Hz), which the sample rate must exceed twice, and the
+    /// knob that sets it.
+    pub(super) fn highest_corner(self) -> (&'static str, f64) {
         match self {
-            Self::Flat => 0.0,
-            Self::Riaa => corner_hz(RIAA_T3_S),
-            Self::Turnover500 => TURNOVER500_HZ,
+            Self::Flat => ("dsp.eq", 0.0),
+            Self::Riaa => ("dsp.eq", corner_hz(RIAA_T3_S)),
+            Self::Turnover500 => ("dsp.eq", TURNOVER500_HZ),
+            Self::Custom {
+                turnover_hz,
+                rolloff_hz,
+                ..
+            } => match rolloff_hz {
+                Some(r) if r > turnover_hz => ("dsp.eq_rolloff_db", r),
+                _ => ("dsp.eq_turnover_hz", turnover_hz),
+            },
         }
     }
 
@@ -62,6 +113,13 @@ impl EqCurve {
                 first_order_lowpass(corner_hz(RIAA_T3_S), sample_rate_hz),
             ],
             Self::Turnover500 => vec![shelf(TURNOVER500_HZ, TURNOVER500_SHELF_HZ, sample_rate_hz)],
+            Self::Custom {
+                shelf_hz,
+                turnover_hz,
+                rolloff_hz,
+            } => std::iter::once(shelf(turnover_hz, shelf_hz, sample_rate_hz))
+                .chain(rolloff_hz.map(|r| first_order_lowpass(r, sample_rate_hz)))
+                .collect(),
         };
         // Normalise with the analog gain at the reference so that the digital curve follows
         // the analog one (equal at low frequencies where warping vanishes).

@@ -30,6 +30,7 @@ mod tests;
 
 use biquad::*;
 pub use biquad::{Biquad, butterworth_lowpass, dc_blocker, zero_phase_lowpass};
+pub use eq::{PlaybackEq, rolloff_corner_hz};
 pub(crate) use spectrum::lag_cross_correlation;
 pub use spectrum::{ComplexFft, fft_in_place, magnitude_spectrum};
 
@@ -45,6 +46,9 @@ pub enum EqCurve {
     /// A common 78 rpm curve: 500 Hz turnover, no treble roll-off, 0 dB at 1 kHz. The bass
     /// boost (+6 dB/octave below 500 Hz) levels off at 50 Hz so DC gain stays finite.
     Turnover500,
+    /// A 78's curve set by the numbers of an equalisation chart: `eq_turnover_hz`,
+    /// `eq_rolloff_db` (the treble cut at 10 kHz) and `eq_shelf_hz`, 0 dB at 1 kHz.
+    Custom,
 }
 
 /// Knobs of [`apply_dsp`].
@@ -57,6 +61,12 @@ pub struct DspParams {
     pub lowpass_hz: f64,
     #[doc = knob!("dsp.eq")]
     pub eq: EqCurve,
+    #[doc = knob!("dsp.eq_turnover_hz")]
+    pub eq_turnover_hz: f64,
+    #[doc = knob!("dsp.eq_rolloff_db")]
+    pub eq_rolloff_db: f64,
+    #[doc = knob!("dsp.eq_shelf_hz")]
+    pub eq_shelf_hz: f64,
     #[doc = knob!("dsp.dc_block")]
     pub dc_block: bool,
     #[doc = knob!("dsp.dc_block_hz")]
@@ -69,6 +79,9 @@ impl Default for DspParams {
             lowpass: true,
             lowpass_hz: 3000.0,
             eq: EqCurve::Flat,
+            eq_turnover_hz: 500.0,
+            eq_rolloff_db: 0.0,
+            eq_shelf_hz: 50.0,
             dc_block: true,
             dc_block_hz: 10.0,
         }
@@ -83,9 +96,41 @@ impl DspParams {
     /// [`StageError::InvalidParam`] naming the bad key.
     pub fn validate(&self) -> Result<(), StageError> {
         check_range("dsp.lowpass_hz", self.lowpass_hz, 1.0, 1e6)?;
-        check_range("dsp.dc_block_hz", self.dc_block_hz, 1e-6, 1e6)
+        check_range("dsp.dc_block_hz", self.dc_block_hz, 1e-6, 1e6)?;
+        check_range("dsp.eq_turnover_hz", self.eq_turnover_hz, 1.0, 1e6)?;
+        check_range("dsp.eq_rolloff_db", self.eq_rolloff_db, 0.0, MAX_ROLLOFF_DB)?;
+        check_range("dsp.eq_shelf_hz", self.eq_shelf_hz, 0.1, 1e6)?;
+        if self.eq == EqCurve::Custom && self.eq_shelf_hz >= self.eq_turnover_hz {
+            return Err(StageError::invalid(
+                "dsp.eq_shelf_hz",
+                format!(
+                    "{} Hz must be below dsp.eq_turnover_hz = {} Hz (the bass boost levels off \
+                     below the turnover)",
+                    self.eq_shelf_hz, self.eq_turnover_hz
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The playback curve `eq` names, with its corners.
+    #[must_use]
+    pub fn playback_eq(&self) -> PlaybackEq {
+        match self.eq {
+            EqCurve::Flat => PlaybackEq::Flat,
+            EqCurve::Riaa => PlaybackEq::Riaa,
+            EqCurve::Turnover500 => PlaybackEq::Turnover500,
+            EqCurve::Custom => PlaybackEq::Custom {
+                shelf_hz: self.eq_shelf_hz,
+                turnover_hz: self.eq_turnover_hz,
+                rolloff_hz: rolloff_corner_hz(self.eq_rolloff_db),
+            },
+        }
     }
 }
+
+/// Largest accepted `eq_rolloff_db` (dB at 10 kHz); the charts go to 16 dB.
+const MAX_ROLLOFF_DB: f64 = 60.0;
 
 /// The filters of [`apply_dsp_with`], each in its place: the DC block first, the EQ's
 /// sections, the low-pass last.
@@ -121,19 +166,27 @@ impl Chain {
             None
         };
         let mut eq = Vec::new();
-        if params.eq != EqCurve::Flat {
-            let corner = params.eq.highest_corner_hz();
+        let curve = params.playback_eq();
+        if curve != PlaybackEq::Flat {
+            let (key, corner) = curve.highest_corner();
             if corner >= nyquist_hz {
                 let needs = 2.0 * corner;
-                return Err(StageError::invalid(
-                    "dsp.eq",
+                let problem = if key == "dsp.eq_rolloff_db" {
+                    format!(
+                        "{} dB at 10 kHz puts the treble roll-off's corner at {corner:.0} Hz, \
+                         which needs a sample rate above {needs:.0} Hz, got {sample_rate_hz} Hz \
+                         (0 is no roll-off)",
+                        params.eq_rolloff_db
+                    )
+                } else {
                     format!(
                         "{:?} needs a sample rate above {needs} Hz, got {sample_rate_hz} Hz",
                         params.eq
-                    ),
-                ));
+                    )
+                };
+                return Err(StageError::invalid(key, problem));
             }
-            eq = params.eq.sections(sample_rate_hz);
+            eq = curve.sections(sample_rate_hz);
         }
         let lowpass = if params.lowpass {
             below_nyquist("dsp.lowpass_hz", params.lowpass_hz)?;
@@ -218,8 +271,18 @@ pub fn describe_chain(params: &DspParams, phase: FilterPhase) -> String {
     }
     let eq = match params.eq {
         EqCurve::Flat => None,
-        EqCurve::Riaa => Some("RIAA"),
-        EqCurve::Turnover500 => Some("500 Hz turnover"),
+        EqCurve::Riaa => Some("RIAA".to_string()),
+        EqCurve::Turnover500 => Some("500 Hz turnover".to_string()),
+        EqCurve::Custom => Some(format!(
+            "{} Hz turnover, bass shelf {} Hz, {}",
+            params.eq_turnover_hz,
+            params.eq_shelf_hz,
+            if params.eq_rolloff_db > 0.0 {
+                format!("−{} dB at 10 kHz", params.eq_rolloff_db)
+            } else {
+                "no treble roll-off".to_string()
+            }
+        )),
     };
     if let Some(eq) = eq {
         parts.push(format!("playback EQ {eq} (causal)"));

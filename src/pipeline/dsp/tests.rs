@@ -1,5 +1,6 @@
 //! Tests of the DSP: Butterworth and EQ responses against their analog curves, the DC blocker, bad params, the FFT, cross-correlation and spectrum against direct sums.
 
+use super::eq::{RIAA_T1_S, RIAA_T2_S, RIAA_T3_S, corner_hz};
 use super::*;
 
 const FS: f64 = 44_100.0;
@@ -84,7 +85,7 @@ fn riaa_follows_the_analog_curve() {
         (1000.0, 0.0),
         (10_000.0, -13.73),
     ] {
-        let a = EqCurve::Riaa.analog_gain_db(f);
+        let a = PlaybackEq::Riaa.analog_gain_db(f);
         assert!((a - db).abs() < 0.02, "analog {f}: {a} vs {db}");
     }
     let chain = dsp_chain(FS, &only(false, EqCurve::Riaa, false)).unwrap();
@@ -98,7 +99,7 @@ fn riaa_follows_the_analog_curve() {
         (5000.0, 0.6),
     ] {
         let d = chain_gain_db(&chain, f, FS);
-        let a = EqCurve::Riaa.analog_gain_db(f);
+        let a = PlaybackEq::Riaa.analog_gain_db(f);
         assert!((d - a).abs() < tol, "{f} Hz: digital {d} analog {a}");
     }
     // Corners sit where they should: the treble pole is −3 dB below the shelf's asymptote
@@ -110,17 +111,127 @@ fn riaa_follows_the_analog_curve() {
 fn turnover500_follows_the_analog_curve() {
     let chain = dsp_chain(FS, &only(false, EqCurve::Turnover500, false)).unwrap();
     // Analog: +3 dB point relative to the HF asymptote at 500 Hz, no treble roll-off.
-    let a500 = EqCurve::Turnover500.analog_gain_db(500.0);
-    let a_hf = EqCurve::Turnover500.analog_gain_db(20_000.0);
+    let a500 = PlaybackEq::Turnover500.analog_gain_db(500.0);
+    let a_hf = PlaybackEq::Turnover500.analog_gain_db(20_000.0);
     assert!((a500 - a_hf - 3.0).abs() < 0.1, "{a500} {a_hf}");
     for f in [30.0, 100.0, 250.0, 500.0, 1000.0, 5000.0, 15_000.0] {
         let d = chain_gain_db(&chain, f, FS);
-        let a = EqCurve::Turnover500.analog_gain_db(f);
+        let a = PlaybackEq::Turnover500.analog_gain_db(f);
         assert!((d - a).abs() < 0.05, "{f} Hz: digital {d} analog {a}");
     }
     // +6 dB/octave slope between shelf and turnover: 100 → 200 Hz gains ≈ −5 dB or so.
     let slope = chain_gain_db(&chain, 100.0, FS) - chain_gain_db(&chain, 200.0, FS);
     assert!(slope > 4.0 && slope < 6.1, "{slope}");
+}
+
+/// The custom 78 curve with a chart's numbers.
+fn custom(turnover_hz: f64, rolloff_db: f64, shelf_hz: f64) -> DspParams {
+    DspParams {
+        eq_turnover_hz: turnover_hz,
+        eq_rolloff_db: rolloff_db,
+        eq_shelf_hz: shelf_hz,
+        ..only(false, EqCurve::Custom, false)
+    }
+}
+
+#[test]
+fn custom_curve_with_riaas_numbers_is_riaa() {
+    // RIAA as a chart states it: 318 µs turnover, 3180 µs shelf, 75 µs roll-off (13.66 dB).
+    let t3 = 2.0 * PI * 10_000.0 * RIAA_T3_S;
+    let rolloff_db = 10.0 * (1.0 + t3 * t3).log10();
+    assert!((rolloff_db - 13.66).abs() < 0.01, "{rolloff_db}");
+    let p = custom(corner_hz(RIAA_T2_S), rolloff_db, corner_hz(RIAA_T1_S));
+    p.validate().unwrap();
+    let curve = p.playback_eq();
+    let chain = dsp_chain(FS, &p).unwrap();
+    let riaa = dsp_chain(FS, &only(false, EqCurve::Riaa, false)).unwrap();
+    for f in [
+        20.0, 100.0, 500.0, 1000.0, 2122.0, 5000.0, 10_000.0, 20_000.0,
+    ] {
+        let (a, b) = (curve.analog_gain_db(f), PlaybackEq::Riaa.analog_gain_db(f));
+        assert!((a - b).abs() < 1e-9, "analog {f} Hz: {a} vs {b}");
+        let (a, b) = (chain_gain_db(&chain, f, FS), chain_gain_db(&riaa, f, FS));
+        assert!((a - b).abs() < 1e-6, "digital {f} Hz: {a} vs {b}");
+    }
+}
+
+#[test]
+fn custom_curve_meets_its_chart_numbers() {
+    // 300 Hz turnover, −16 dB at 10 kHz, the boost levelling off at 30 Hz.
+    let p = custom(300.0, 16.0, 30.0);
+    let curve = p.playback_eq();
+    let flat_top = custom(300.0, 0.0, 30.0).playback_eq();
+    // The roll-off alone cuts exactly its figure at 10 kHz.
+    let cut = 20.0 * (curve.analog_raw(10_000.0) / flat_top.analog_raw(10_000.0)).log10();
+    assert!((cut - -16.0).abs() < 1e-9, "{cut}");
+    // The bass boost is 3 dB over the curve's middle at the turnover (0.1 dB of that is the
+    // shelf a decade below), and 6 dB an octave between shelf and turnover where they lie far
+    // apart.
+    let middle = flat_top.analog_gain_db(3000.0);
+    let boost = flat_top.analog_gain_db(300.0) - middle;
+    assert!((boost - 3.0).abs() < 0.1, "{boost}");
+    let wide = custom(800.0, 0.0, 10.0).playback_eq();
+    let octave = wide.analog_gain_db(50.0) - wide.analog_gain_db(100.0);
+    assert!((octave - 6.0).abs() < 0.2, "{octave}");
+    // The digital chain follows the analog curve (the bilinear transform compresses towards
+    // Nyquist, as for RIAA), is 0 dB at 1 kHz, and running it matches its response.
+    let chain = dsp_chain(FS, &p).unwrap();
+    assert_eq!(chain.len(), 2, "shelf and roll-off");
+    for &(f, tol) in &[(20.0, 0.01), (300.0, 0.01), (1000.0, 0.05), (5000.0, 0.6)] {
+        let (d, a) = (chain_gain_db(&chain, f, FS), curve.analog_gain_db(f));
+        assert!((d - a).abs() < tol, "{f} Hz: digital {d} analog {a}");
+        let m = measured_gain_db(&p, f.max(100.0), FS);
+        let want = chain_gain_db(&chain, f.max(100.0), FS);
+        assert!((m - want).abs() < 0.1, "{f} Hz: ran {m}, response {want}");
+    }
+    assert!(chain_gain_db(&chain, 1000.0, FS).abs() < 0.05);
+    // No roll-off: one section.
+    assert_eq!(dsp_chain(FS, &custom(500.0, 0.0, 50.0)).unwrap().len(), 1);
+    assert_eq!(
+        describe_chain(&p, FilterPhase::Causal),
+        "playback EQ 300 Hz turnover, bass shelf 30 Hz, −16 dB at 10 kHz (causal)"
+    );
+}
+
+#[test]
+fn custom_curve_numbers_that_cannot_work_are_named() {
+    let key = |r: Result<(), StageError>| match r {
+        Err(StageError::InvalidParam { name, problem }) => format!("{name}: {problem}"),
+        other => panic!("{other:?}"),
+    };
+    // The shelf must lie below the turnover.
+    let e = key(custom(300.0, 0.0, 300.0).validate());
+    assert!(
+        e.starts_with("dsp.eq_shelf_hz: 300 Hz must be below"),
+        "{e}"
+    );
+    // Numbers the curve does not read do not matter while another curve is chosen.
+    DspParams {
+        eq: EqCurve::Riaa,
+        ..custom(300.0, 0.0, 300.0)
+    }
+    .validate()
+    .unwrap();
+    for (p, name) in [
+        (custom(f64::NAN, 0.0, 50.0), "dsp.eq_turnover_hz"),
+        (custom(500.0, -1.0, 50.0), "dsp.eq_rolloff_db"),
+        (custom(500.0, f64::INFINITY, 50.0), "dsp.eq_rolloff_db"),
+        (custom(500.0, 0.0, 0.0), "dsp.eq_shelf_hz"),
+    ] {
+        let e = key(p.validate());
+        assert!(e.starts_with(name), "{e}");
+    }
+    // Half a dB at 10 kHz puts the roll-off's corner at 28.6 kHz, past 22.05 kHz.
+    let e = key(check_chain(FS, &custom(500.0, 0.5, 50.0)));
+    assert!(
+        e.starts_with(
+            "dsp.eq_rolloff_db: 0.5 dB at 10 kHz puts the treble roll-off's corner at 28"
+        ),
+        "{e}"
+    );
+    check_chain(96_000.0, &custom(500.0, 0.5, 50.0)).unwrap();
+    let e = key(check_chain(800.0, &custom(500.0, 0.0, 50.0)));
+    assert!(e.starts_with("dsp.eq_turnover_hz: "), "{e}");
 }
 
 #[test]
