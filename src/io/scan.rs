@@ -227,9 +227,40 @@ fn refuse_twin_frames(dir: &Path, files: &[PathBuf]) -> Result<(), LoadError> {
     }
 }
 
-/// The entries of `dir` that pass `keep`, sorted by name; more than `limit` of them is refused.
+/// What a folder entry is, as `Path::is_dir` and `Path::is_file` say (a link followed).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum EntryKind {
+    Folder,
+    File,
+    Other,
+}
+
+impl EntryKind {
+    /// The kind of `entry`: from the listing itself where it says (no call to the file
+    /// system: a side's scan folder holds 367,000 group folders of about 12 frames), else
+    /// from the file's metadata, a link followed.
+    fn of(entry: &std::fs::DirEntry) -> Self {
+        let kind = |t: std::fs::FileType| {
+            if t.is_dir() {
+                Self::Folder
+            } else if t.is_file() {
+                Self::File
+            } else {
+                Self::Other
+            }
+        };
+        match entry.file_type() {
+            Ok(t) if !t.is_symlink() => kind(t),
+            _ => std::fs::metadata(entry.path()).map_or(Self::Other, |m| kind(m.file_type())),
+        }
+    }
+}
+
+/// The entries of `dir` of `kind` whose paths pass `keep`, sorted by name; more than `limit`
+/// of them is refused.
 fn sorted_entries(
     dir: &Path,
+    kind: EntryKind,
     keep: impl Fn(&Path) -> bool,
     limit: usize,
     what: &str,
@@ -241,8 +272,9 @@ fn sorted_entries(
     let rd = std::fs::read_dir(dir).map_err(list_err)?;
     let mut out = Vec::new();
     for entry in rd {
-        let path = entry.map_err(list_err)?.path();
-        if !keep(&path) {
+        let entry = entry.map_err(list_err)?;
+        let path = entry.path();
+        if !keep(&path) || EntryKind::of(&entry) != kind {
             continue;
         }
         if out.len() == limit {
@@ -331,7 +363,8 @@ impl Scan {
         let meta = ScanMeta::load(&meta_path)?;
         let folders = sorted_entries(
             dir,
-            |p| !hidden(p) && p.is_dir(),
+            EntryKind::Folder,
+            |p| !hidden(p),
             MAX_GROUPS,
             "group folders",
         )?;
@@ -340,7 +373,8 @@ impl Scan {
         for path in &folders {
             let files = sorted_entries(
                 path,
-                |p| !hidden(p) && is_frame_file(p) && p.is_file(),
+                EntryKind::File,
+                |p| !hidden(p) && is_frame_file(p),
                 MAX_FRAMES_PER_GROUP,
                 "frames",
             )?;
@@ -567,6 +601,42 @@ mod tests {
             msg.contains("numbered_names") && msg.contains("`order`"),
             "{msg}"
         );
+    }
+
+    /// The kind read from a folder listing is what `Path::is_dir` / `Path::is_file` say, links
+    /// followed (a linked group folder or frame counts; a dangling link is neither).
+    #[test]
+    fn a_listings_kinds_are_what_the_paths_are_links_followed() {
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path();
+        std::fs::create_dir(d.join("g0")).unwrap();
+        std::fs::create_dir(d.join("f9.png")).unwrap();
+        std::fs::write(d.join("f0.png"), b"x").unwrap();
+        std::fs::write(d.join("g2"), b"x").unwrap();
+        std::os::unix::fs::symlink(d.join("g0"), d.join("g1")).unwrap();
+        std::os::unix::fs::symlink(d.join("f0.png"), d.join("f1.png")).unwrap();
+        std::os::unix::fs::symlink(d.join("gone"), d.join("f2.png")).unwrap();
+        for entry in std::fs::read_dir(d).unwrap() {
+            let entry = entry.unwrap();
+            let p = entry.path();
+            let want = if p.is_dir() {
+                EntryKind::Folder
+            } else if p.is_file() {
+                EntryKind::File
+            } else {
+                EntryKind::Other
+            };
+            assert_eq!(EntryKind::of(&entry), want, "{}", p.display());
+        }
+        let names = |kind, keep: fn(&Path) -> bool| -> Vec<String> {
+            sorted_entries(d, kind, keep, 10, "entries")
+                .unwrap()
+                .iter()
+                .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+                .collect()
+        };
+        assert_eq!(names(EntryKind::Folder, |_| true), ["f9.png", "g0", "g1"]);
+        assert_eq!(names(EntryKind::File, is_frame_file), ["f0.png", "f1.png"]);
     }
 
     #[test]
