@@ -181,16 +181,17 @@ struct EdgeRepairs {
 impl EdgeRepairs {
     /// A warning line for each repair made.
     fn warnings(self, params: &PipelineParams) -> Vec<String> {
+        // The plural ending, possessive, verb and pronoun for `n` of something.
         let plural = |n: usize| {
             if n == 1 {
-                ("", "its", "was")
+                ("", "its", "was", "it")
             } else {
-                ("s", "their", "were")
+                ("s", "their", "were", "them")
             }
         };
         let mut out = Vec::new();
         if self.despiked > 0 {
-            let (s, its, _) = plural(self.despiked);
+            let (s, its, _, _) = plural(self.despiked);
             out.push(format!(
                 "{} isolated displacement sample{s} put back on the curve through {its} \
                  neighbours (edges.despike_sigmas = {})",
@@ -199,9 +200,8 @@ impl EdgeRepairs {
         }
         let (bursts, burst_samples) = self.bursts;
         if bursts > 0 {
-            let (s, _, _) = plural(burst_samples);
-            let (bs, _, _) = plural(bursts);
-            let them = if bursts == 1 { "it" } else { "them" };
+            let (s, _, _, _) = plural(burst_samples);
+            let (bs, _, _, them) = plural(bursts);
             out.push(format!(
                 "{burst_samples} displacement sample{s} in {bursts} short burst{bs} put back on \
                  the curve through the samples around {them} (edges.burst_sigmas = {})",
@@ -209,10 +209,10 @@ impl EdgeRepairs {
             ));
         }
         if self.excursion_samples > 0 {
-            let (s, _, was) = plural(self.excursion_samples);
+            let (s, _, was, them) = plural(self.excursion_samples);
             out.push(format!(
                 "{} displacement sample{s} moved faster than a groove can and {was} solved again \
-                 from the track around them, or left as gaps (edges.max_slope = {})",
+                 from the track around {them}, or left as gap{s} (edges.max_slope = {})",
                 self.excursion_samples, params.edges.max_slope
             ));
         }
@@ -500,6 +500,40 @@ mod tests {
             channels: vec![values],
             gaps,
         }
+    }
+
+    #[test]
+    fn repair_warnings_agree_with_their_counts() {
+        let p = PipelineParams::default();
+        let one = EdgeRepairs {
+            despiked: 1,
+            bursts: (1, 3),
+            excursion_samples: 1,
+        };
+        let w = one.warnings(&p);
+        assert!(
+            w[0].starts_with("1 isolated displacement sample put back"),
+            "{w:?}"
+        );
+        assert!(
+            w[1].contains("in 1 short burst put back on the curve through the samples around it ("),
+            "{w:?}"
+        );
+        assert!(w[2].contains("sample moved faster than a groove can and was solved again from the track around it, or left as gap ("), "{w:?}");
+        let many = EdgeRepairs {
+            despiked: 2,
+            bursts: (2, 6),
+            excursion_samples: 5,
+        };
+        let w = many.warnings(&p);
+        assert!(
+            w[1].contains(
+                "in 2 short bursts put back on the curve through the samples around them ("
+            ),
+            "{w:?}"
+        );
+        assert!(w[2].contains("5 displacement samples moved faster than a groove can and were solved again from the track around them, or left as gaps ("), "{w:?}");
+        assert!(EdgeRepairs::default().warnings(&p).is_empty());
     }
 
     #[test]
