@@ -200,9 +200,6 @@ pub(super) fn smooth_measured(values: &[f64], half: usize) -> Vec<f64> {
     values
         .iter()
         .zip(crate::pipeline::finite_window_means(values, half))
-        .map(|(&v, mean)| match mean {
-            Some(m) if v.is_finite() => m,
-            _ => f64::NAN,
-        })
+        .map(|(&v, mean)| if v.is_finite() { mean } else { f64::NAN })
         .collect()
 }

@@ -104,9 +104,12 @@ fn border_weights(y: &[f64], se: &[f64], n: usize, floor: f64, window: usize) ->
     let means = crate::pipeline::finite_window_means(&logs, window / 2);
     logs.iter()
         .zip(means)
-        .map(|(l, mean)| match mean {
-            Some(m) if l.is_finite() => (-m).exp(),
-            _ => f64::NAN,
+        .map(|(l, mean)| {
+            if l.is_finite() {
+                (-mean).exp()
+            } else {
+                f64::NAN
+            }
         })
         .collect()
 }

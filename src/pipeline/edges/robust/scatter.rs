@@ -54,10 +54,12 @@ pub fn scatter_factors(
             (prev, here) = (here, next);
         }
     }
-    crate::pipeline::finite_window_means(&chi, HALF_WINDOW)
-        .into_iter()
-        .map(|mean| mean.map_or(1.0, |m| m.max(1.0)))
-        .collect()
+    // At least 1; where no sample nearby has a χ² (a NaN mean), 1.
+    let mut factors = crate::pipeline::finite_window_means(&chi, HALF_WINDOW);
+    for f in &mut factors {
+        *f = f.max(1.0);
+    }
+    factors
 }
 
 #[cfg(test)]
