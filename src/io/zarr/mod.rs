@@ -100,8 +100,8 @@ pub struct StoreAttributes {
 /// Where one group's frames are in a store.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ZarrGroup {
-    /// The store folder.
-    pub store: PathBuf,
+    /// The store folder, one allocation shared by every group of the store.
+    pub store: Arc<Path>,
     /// The group's chunk index.
     pub group: usize,
     /// The store's frames.
@@ -205,6 +205,7 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
     }
     let names_say = meta.motion.numbered_names;
     let places = in_numbered_order(dir, stored.clone(), MAX_GROUPS, "groups", names_say)?;
+    let store: Arc<Path> = Arc::from(dir);
     let entries: Vec<GroupEntry> = places
         .into_iter()
         .enumerate()
@@ -214,7 +215,7 @@ pub fn open_scan(dir: &Path) -> Result<Scan, LoadError> {
             missing: (!chunk_of.contains_key(&path))
                 .then_some("group (the store was packed without it)"),
             zarr: chunk_of.get(&path).map(|&group| ZarrGroup {
-                store: dir.to_path_buf(),
+                store: Arc::clone(&store),
                 group,
                 layout: ChunkLayout {
                     frames,
@@ -518,7 +519,7 @@ impl ZarrWriter {
     /// As [`load_group_raw`].
     pub fn read_back(&self, g: usize) -> Result<Vec<RawFrame>, LoadError> {
         let z = ZarrGroup {
-            store: self.dir.clone(),
+            store: Arc::from(self.dir.as_path()),
             group: g,
             layout: self.layout,
         };

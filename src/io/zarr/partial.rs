@@ -149,7 +149,7 @@ fn first_layout(frames: &[RawFrame], source: &Path) -> Result<ChunkLayout, LoadE
 /// The chunk file of group `g` of the store `store`.
 fn chunk_path(store: &Path, g: usize, layout: ChunkLayout) -> PathBuf {
     ZarrGroup {
-        store: store.to_path_buf(),
+        store: std::sync::Arc::from(store),
         group: g,
         layout,
     }
