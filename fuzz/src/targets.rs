@@ -594,7 +594,7 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
     // The chunk file of group `g`, as the reader names it.
     let chunk = |g: usize| {
         ZarrGroup {
-            store: dir.to_path_buf(),
+            store: std::sync::Arc::from(dir),
             group: g,
             layout,
         }
