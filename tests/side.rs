@@ -158,6 +158,65 @@ fn merged_shards_are_byte_identical_to_one_process_for_1_2_3_and_7_shards() {
     }
 }
 
+/// `merge --dsp` finishes the same parts with another `[dsp]` table (a playback curve for an
+/// access copy): byte-identical to a one-process run with those params, and different from
+/// the plain merge; a file with any other table is refused in one line naming it, writing
+/// nothing.
+#[test]
+fn merge_with_another_dsp_table_is_the_one_process_run_with_it() {
+    let (_keep, scan, one, _) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let p = tmp.path().join("plan.json");
+    plan(scan, 2, &p, &[]);
+    let parts: Vec<PathBuf> = (0..2)
+        .map(|k| {
+            let dir = tmp.path().join(format!("part-{k}"));
+            run_shard(scan, &p, k, &dir);
+            dir
+        })
+        .collect();
+    let eq = tmp.path().join("eq.toml");
+    std::fs::write(
+        &eq,
+        "[dsp]\neq = \"custom\"\neq_turnover_hz = 300.0\neq_rolloff_db = 16.0\n",
+    )
+    .unwrap();
+    let want = tmp.path().join("one-eq.wav");
+    let o = groovescope(&[
+        "reconstruct",
+        s(scan),
+        "--params",
+        s(&eq),
+        "--out",
+        s(&want),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let merge_dsp = |file: &Path, out: &Path| {
+        let mut args: Vec<&str> = vec!["merge"];
+        args.extend(parts.iter().map(|p| s(p)));
+        args.extend(["--dsp", s(file), "--out", s(out), "--quiet"]);
+        groovescope(&args)
+    };
+    let got = tmp.path().join("merged-eq.wav");
+    let o = merge_dsp(&eq, &got);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let got = std::fs::read(&got).unwrap();
+    assert!(
+        got == std::fs::read(&want).unwrap(),
+        "merge --dsp differs from one process"
+    );
+    assert!(got != *one, "the EQ changed nothing");
+    let bad = tmp.path().join("bad.toml");
+    std::fs::write(&bad, "[dsp]\neq = \"riaa\"\n[flow]\nlambda = 2.0\n").unwrap();
+    let out = tmp.path().join("bad.wav");
+    let o = merge_dsp(&bad, &out);
+    let e = stderr(&o);
+    assert!(!o.status.success() && !out.exists(), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(e.contains("`flow`") && e.contains("bad.toml"), "{e}");
+}
+
 /// The default method is `fused` (both signals per group, fused over the merged clip); `flow`
 /// (whose shards rebuild the slope history) and `edges` merge to the one-process bytes too.
 #[test]
@@ -647,7 +706,7 @@ fn ctrl_c_stops_plan_inspect_and_merge_and_they_write_nothing() {
     let part = tmp.path().join("part-0");
     run_shard(scan, &p, 0, &part);
     let raised = std::sync::atomic::AtomicBool::new(true);
-    let err = groovescope::side::merge::merge_parts(&[part], &raised).unwrap_err();
+    let err = groovescope::side::merge::merge_parts(&[part], None, &raised).unwrap_err();
     assert!(err.to_string().contains("cancelled"), "{err}");
 }
 

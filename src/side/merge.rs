@@ -141,19 +141,40 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
 /// Merges parts whose headers agree ([`read_parts`]) into the side's reconstruction: each
 /// part read and checked whole in shard order, its groups through [`finish_reconstruction`],
 /// scored against the scan's `reference.wav` when the scan named in the parts is still there.
+/// `finish` replaces the parts' params for the finish; it may differ from them only in
+/// `[dsp]`, which the groups do not read (the merged identity then carries it and its
+/// fingerprint).
 ///
 /// Stops between parts once `cancel` is raised.
 ///
 /// # Errors
 /// [`SideError`] from the checks (a truncated part, one whose header changed since it was
 /// read), when no group produced sound, or [`EngineError::Cancelled`].
-pub fn merge_parts(paths: &[PathBuf], cancel: &AtomicBool) -> Result<Merged, SideError> {
+pub fn merge_parts(
+    paths: &[PathBuf],
+    finish: Option<&PipelineParams>,
+    cancel: &AtomicBool,
+) -> Result<Merged, SideError> {
     let parts = read_parts(paths)?;
     let Some(first) = parts.first() else {
         return Err(SideError::refused("no parts given", "."));
     };
     let mut identity = first.identity.clone();
     identity.groups = (0, identity.scan_groups);
+    if let Some(p) = finish {
+        let groups_read = |q: &PipelineParams| PipelineParams {
+            dsp: Default::default(),
+            ..q.clone()
+        };
+        if groups_read(p) != groups_read(&identity.params) {
+            return Err(SideError::refused(
+                "the finish's params differ from the parts' beyond [dsp]",
+                &first.path,
+            ));
+        }
+        identity.params = p.clone();
+        identity.params_fingerprint = super::params_fingerprint(p);
+    }
     let meta = ScanMeta::from_toml_str(&identity.meta_toml, &first.path)?;
     let params: PipelineParams = identity.params.clone();
     let scan_dir = PathBuf::from(&identity.scan);

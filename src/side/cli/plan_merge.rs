@@ -66,12 +66,47 @@ pub struct MergeArgs {
     /// WAV sample format: 16, 24 or 32f.
     #[arg(long, default_value = "24")]
     pub bits: WavBits,
+    /// Finish with the keys of this TOML's `[dsp]` table (EQ, low-pass, DC block) in place of
+    /// the parts': an access copy with a playback curve from the same parts, no group run
+    /// again. Only `[dsp]`: the other tables set how the groups were made.
+    #[arg(long)]
+    pub dsp: Option<PathBuf>,
     /// Replace existing output files.
     #[arg(long)]
     pub force: bool,
     /// No summary line (warnings still go to stderr).
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// The parts' params with the `[dsp]` keys of `file` in place of theirs (see
+/// [`MergeArgs::dsp`]), checked against the output rate.
+///
+/// # Errors
+/// One line naming `file`: unreadable, a table other than `[dsp]`, a bad key or value.
+fn finish_params(parts: &PipelineParams, file: &Path) -> Result<PipelineParams> {
+    let what = "DSP settings";
+    let text = crate::io::limits::read_toml_text(file, what)?;
+    if let Ok(table) = toml::from_str::<toml::Table>(&text)
+        && table.contains_key("dsp")
+        && let Some(other) = table.keys().find(|k| *k != "dsp")
+    {
+        anyhow::bail!(
+            "invalid {what}: merge --dsp takes only a [dsp] table (the finish's filters), not \
+             `{other}`, which sets how the groups were made (run the plan again to change it): \
+             {}",
+            file.display()
+        );
+    }
+    let dsp = crate::cli::overlay_toml(&parts.dsp, file, "dsp", what, |d| d.validate())?;
+    let params = PipelineParams {
+        dsp,
+        ..parts.clone()
+    };
+    params
+        .validate_for_clip()
+        .map_err(|e| anyhow::anyhow!("{e}: {}", file.display()))?;
+    Ok(params)
 }
 
 /// Runs `merge`.
@@ -91,7 +126,21 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     check_outputs(&outputs, &inputs, args.force)?;
     let _locks = lock_outputs(&outputs)?;
     let started = Instant::now();
-    let merged = unless_interrupted("merge", merge_parts(&args.parts, interrupted()))?;
+    let finish = match &args.dsp {
+        Some(file) => {
+            let parts = crate::side::merge::read_parts(&args.parts)?;
+            let first = parts.first().map(|p| &p.identity.params);
+            Some(finish_params(
+                first.unwrap_or(&PipelineParams::default()),
+                file,
+            )?)
+        }
+        None => None,
+    };
+    let merged = unless_interrupted(
+        "merge",
+        merge_parts(&args.parts, finish.as_ref(), interrupted()),
+    )?;
     let mut rec = merged.reconstruction;
     rec.timings.total_secs = started.elapsed().as_secs_f64();
     let identity = &merged.identity;
