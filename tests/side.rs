@@ -117,6 +117,26 @@ fn run_shard(scan: &Path, plan: &Path, k: usize, out: &Path) {
     assert!(o.status.success(), "shard {k}: {}", stderr(&o));
 }
 
+/// A plan of `shards` shards (`extra`: more `plan` arguments) written into `dir` as
+/// `NAME-plan.json`, and every shard run into `NAME-part-K`: the parts, in shard order.
+fn planned_parts(
+    scan: &Path,
+    dir: &Path,
+    name: &str,
+    shards: usize,
+    extra: &[&str],
+) -> Vec<PathBuf> {
+    let p = dir.join(format!("{name}-plan.json"));
+    plan(scan, shards, &p, extra);
+    (0..shards)
+        .map(|k| {
+            let part = dir.join(format!("{name}-part-{k}"));
+            run_shard(scan, &p, k, &part);
+            part
+        })
+        .collect()
+}
+
 fn merge(parts: &[PathBuf], out: &Path) -> std::process::Output {
     let mut args = vec!["merge".to_string()];
     args.extend(parts.iter().map(|p| s(p).to_string()));
@@ -166,15 +186,7 @@ fn merged_shards_are_byte_identical_to_one_process_for_1_2_3_and_7_shards() {
 fn merge_with_another_dsp_table_is_the_one_process_run_with_it() {
     let (_keep, scan, one, _) = shared();
     let tmp = tempfile::tempdir().unwrap();
-    let p = tmp.path().join("plan.json");
-    plan(scan, 2, &p, &[]);
-    let parts: Vec<PathBuf> = (0..2)
-        .map(|k| {
-            let dir = tmp.path().join(format!("part-{k}"));
-            run_shard(scan, &p, k, &dir);
-            dir
-        })
-        .collect();
+    let parts = planned_parts(scan, tmp.path(), "fused", 2, &[]);
     let eq = tmp.path().join("eq.toml");
     std::fs::write(
         &eq,
@@ -237,15 +249,7 @@ fn merged_shards_are_byte_identical_to_one_process_for_flow_and_edges() {
             "--quiet",
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
-        let p = tmp.path().join(format!("{method}-plan.json"));
-        plan(scan, 3, &p, &["--params", s(&params)]);
-        let parts: Vec<PathBuf> = (0..3)
-            .map(|k| {
-                let dir = tmp.path().join(format!("{method}-part-{k}"));
-                run_shard(scan, &p, k, &dir);
-                dir
-            })
-            .collect();
+        let parts = planned_parts(scan, tmp.path(), method, 3, &["--params", s(&params)]);
         let out = tmp.path().join(format!("{method}-merged.wav"));
         assert_merges_to(&parts, &out, &std::fs::read(&one).unwrap(), method);
     }

@@ -603,42 +603,6 @@ mod tests {
         );
     }
 
-    /// The kind read from a folder listing is what `Path::is_dir` / `Path::is_file` say, links
-    /// followed (a linked group folder or frame counts; a dangling link is neither).
-    #[test]
-    fn a_listings_kinds_are_what_the_paths_are_links_followed() {
-        let tmp = tempfile::tempdir().unwrap();
-        let d = tmp.path();
-        std::fs::create_dir(d.join("g0")).unwrap();
-        std::fs::create_dir(d.join("f9.png")).unwrap();
-        std::fs::write(d.join("f0.png"), b"x").unwrap();
-        std::fs::write(d.join("g2"), b"x").unwrap();
-        std::os::unix::fs::symlink(d.join("g0"), d.join("g1")).unwrap();
-        std::os::unix::fs::symlink(d.join("f0.png"), d.join("f1.png")).unwrap();
-        std::os::unix::fs::symlink(d.join("gone"), d.join("f2.png")).unwrap();
-        for entry in std::fs::read_dir(d).unwrap() {
-            let entry = entry.unwrap();
-            let p = entry.path();
-            let want = if p.is_dir() {
-                EntryKind::Folder
-            } else if p.is_file() {
-                EntryKind::File
-            } else {
-                EntryKind::Other
-            };
-            assert_eq!(EntryKind::of(&entry), want, "{}", p.display());
-        }
-        let names = |kind, keep: fn(&Path) -> bool| -> Vec<String> {
-            sorted_entries(d, kind, keep, 10, "entries")
-                .unwrap()
-                .iter()
-                .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
-                .collect()
-        };
-        assert_eq!(names(EntryKind::Folder, |_| true), ["f9.png", "g0", "g1"]);
-        assert_eq!(names(EntryKind::File, is_frame_file), ["f0.png", "f1.png"]);
-    }
-
     #[test]
     fn groups_that_name_their_frames_alike_share_one_list() {
         let files = |dir: &str, names: &[&str]| -> Vec<PathBuf> {
@@ -664,5 +628,43 @@ mod tests {
         assert_eq!(entry.frame_path(2), None);
         let paths: Vec<PathBuf> = entry.frame_paths().collect();
         assert_eq!(paths, files("s/g2", &["f0.png", "f2.png"]));
+    }
+
+    /// The kind read from a folder listing is what `Path::is_dir` / `Path::is_file` say, links
+    /// followed (a linked group folder or frame counts; a dangling link is neither).
+    #[test]
+    fn a_listings_kinds_are_what_the_paths_are_links_followed() {
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path();
+        for folder in ["g0", "f9.png"] {
+            std::fs::create_dir(d.join(folder)).unwrap();
+        }
+        for file in ["f0.png", "g2"] {
+            std::fs::write(d.join(file), b"x").unwrap();
+        }
+        for (link, to) in [("g1", "g0"), ("f1.png", "f0.png"), ("f2.png", "gone")] {
+            std::os::unix::fs::symlink(d.join(to), d.join(link)).unwrap();
+        }
+        for entry in std::fs::read_dir(d).unwrap() {
+            let entry = entry.unwrap();
+            let p = entry.path();
+            let want = if p.is_dir() {
+                EntryKind::Folder
+            } else if p.is_file() {
+                EntryKind::File
+            } else {
+                EntryKind::Other
+            };
+            assert_eq!(EntryKind::of(&entry), want, "{}", p.display());
+        }
+        let names = |kind, keep: fn(&Path) -> bool| -> Vec<String> {
+            sorted_entries(d, kind, keep, 10, "entries")
+                .unwrap()
+                .iter()
+                .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+                .collect()
+        };
+        assert_eq!(names(EntryKind::Folder, |_| true), ["f9.png", "g0", "g1"]);
+        assert_eq!(names(EntryKind::File, is_frame_file), ["f0.png", "f1.png"]);
     }
 }

@@ -504,13 +504,15 @@ mod tests {
 
     #[test]
     fn repair_warnings_agree_with_their_counts() {
-        let p = PipelineParams::default();
-        let one = EdgeRepairs {
-            despiked: 1,
-            bursts: (1, 3),
-            excursion_samples: 1,
+        let warnings = |despiked, bursts, excursion_samples| {
+            EdgeRepairs {
+                despiked,
+                bursts,
+                excursion_samples,
+            }
+            .warnings(&PipelineParams::default())
         };
-        let w = one.warnings(&p);
+        let w = warnings(1, (1, 3), 1);
         assert!(
             w[0].starts_with("1 isolated displacement sample put back"),
             "{w:?}"
@@ -520,12 +522,7 @@ mod tests {
             "{w:?}"
         );
         assert!(w[2].contains("sample moved faster than a groove can and was solved again from the track around it, or left as gap ("), "{w:?}");
-        let many = EdgeRepairs {
-            despiked: 2,
-            bursts: (2, 6),
-            excursion_samples: 5,
-        };
-        let w = many.warnings(&p);
+        let w = warnings(2, (2, 6), 5);
         assert!(
             w[1].contains(
                 "in 2 short bursts put back on the curve through the samples around them ("
@@ -533,7 +530,7 @@ mod tests {
             "{w:?}"
         );
         assert!(w[2].contains("5 displacement samples moved faster than a groove can and were solved again from the track around them, or left as gaps ("), "{w:?}");
-        assert!(EdgeRepairs::default().warnings(&p).is_empty());
+        assert!(warnings(0, (0, 0), 0).is_empty());
     }
 
     #[test]
