@@ -558,6 +558,43 @@ fn random_group(lo: usize, hi: usize) -> usize {
     lo + nanos % (hi - lo)
 }
 
+/// A run resumed with another `[dsp]` table (a playback curve chosen after it started) keeps
+/// the journal's groups, which no `[dsp]` key changes, says so, and finishes with the new
+/// table: the bytes of a one-process run with it.
+#[test]
+fn a_run_resumed_with_another_dsp_table_finishes_with_it() {
+    let (_keep, scan, _, _) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let eq = tmp.path().join("eq.toml");
+    std::fs::write(&eq, "[dsp]\neq = \"riaa\"\nlowpass_hz = 4000.0\n").unwrap();
+    let want = tmp.path().join("want.wav");
+    let o = common::reconstruct(scan, &want, &["--params", s(&eq)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = tmp.path().join("side.wav");
+    let k = random_group(2, GROUPS / 2);
+    eprintln!("killing the whole run at group {k}");
+    assert!(kill_at(&["reconstruct", s(scan), "--out", s(&out)], k));
+    let o = groovescope(&[
+        "reconstruct",
+        s(scan),
+        "--out",
+        s(&out),
+        "--resume",
+        "--params",
+        s(&eq),
+    ]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains("resuming after") && e.contains("another [dsp] table"),
+        "{e}"
+    );
+    assert!(
+        std::fs::read(&out).unwrap() == std::fs::read(&want).unwrap(),
+        "resumed with another [dsp] table: differs from one process with it"
+    );
+}
+
 #[test]
 fn a_run_killed_at_a_random_group_resumes_to_the_same_bytes() {
     let (_keep, scan, one, _) = shared();

@@ -96,16 +96,24 @@ impl Journal {
     }
 
     /// Opens the journal at `path` to continue `identity`'s run: its records (a torn last one
-    /// is cut off the file), positioned to append after them.
+    /// is cut off the file), positioned to append after them, and whether the journal's run
+    /// had another `[dsp]` table (which only the finish reads: its groups are this run's).
     ///
     /// # Errors
     /// [`SideError::Refused`] naming the journal when it belongs to another run (another scan,
-    /// other params, another plan, shard or range) or is not a journal.
-    pub fn resume(path: &Path, identity: &RunIdentity) -> Result<(Self, Vec<Record>), SideError> {
+    /// other params beyond `[dsp]` or another version, another plan, shard or range) or is not
+    /// a journal.
+    pub fn resume(
+        path: &Path,
+        identity: &RunIdentity,
+    ) -> Result<(Self, Vec<Record>, bool), SideError> {
         let bytes =
             std::fs::read(path).map_err(|e| SideError::io("cannot read the journal", &e, path))?;
         let (found, records, valid) = read_record_file(&bytes, JOURNAL_MAGIC, "journal", path)?;
-        if let Some(diff) = identity.difference(&found) {
+        let other_finish = identity.difference(&found).is_some();
+        if let Some(diff) = identity.difference(&found)
+            && !identity.same_groups_as(&found)
+        {
             return Err(SideError::refused(
                 format!(
                     "the journal of the interrupted run was {diff}; \
@@ -127,7 +135,8 @@ impl Journal {
             last_sync: Instant::now(),
         };
         journal.seek_end()?;
-        Ok((journal, records.into_iter().map(|(r, _)| r).collect()))
+        let records = records.into_iter().map(|(r, _)| r).collect();
+        Ok((journal, records, other_finish))
     }
 
     fn seek_end(&mut self) -> Result<(), SideError> {

@@ -130,6 +130,25 @@ impl RunIdentity {
         }
     }
 
+    /// True when `other` is this run but for the params' `[dsp]` table, written by this
+    /// version: only the finish reads `[dsp]`, so `other`'s groups are this run's groups.
+    #[must_use]
+    pub fn same_groups_as(&self, other: &RunIdentity) -> bool {
+        let groups_read = |id: &RunIdentity| {
+            let params = PipelineParams {
+                dsp: crate::pipeline::dsp::DspParams::default(),
+                ..id.params.clone()
+            };
+            RunIdentity {
+                params_fingerprint: params_fingerprint(&params),
+                params,
+                ..id.clone()
+            }
+        };
+        other.groovescope == self.groovescope
+            && groups_read(self).difference(&groups_read(other)).is_none()
+    }
+
     /// How `other` differs from this identity, in words (None when it is the same run).
     #[must_use]
     pub fn difference(&self, other: &RunIdentity) -> Option<String> {

@@ -115,8 +115,9 @@ pub struct RangeResult {
 /// Events a journaled run reports.
 #[derive(Clone, Debug)]
 pub enum RunEvent<'a> {
-    /// The journal held this many finished groups; the run continues after them.
-    Resumed(usize),
+    /// The journal held this many finished groups; the run continues after them. True when
+    /// the journal's run had another `[dsp]` table: this run finishes with its own.
+    Resumed(usize, bool),
     /// Running groups before the range for the slope history.
     Context(Range<usize>),
     /// A group of the range finished (`done` of `total`, counting resumed ones).
@@ -145,7 +146,7 @@ pub fn run_range(
 ) -> Result<RangeResult, SideError> {
     run.params.validate_for_clip().map_err(EngineError::from)?;
     let exists = run.journal.exists();
-    let (mut journal, records) = if exists && run.resume {
+    let (mut journal, records, other_finish) = if exists && run.resume {
         Journal::resume(run.journal, &run.identity)?
     } else if exists && !run.force {
         return Err(SideError::refused(
@@ -154,7 +155,11 @@ pub fn run_range(
             run.journal,
         ));
     } else {
-        (Journal::create(run.journal, &run.identity)?, Vec::new())
+        (
+            Journal::create(run.journal, &run.identity)?,
+            Vec::new(),
+            false,
+        )
     };
     let mut seed = None;
     let mut resumed_groups: Vec<GroupOutcome> = Vec::new();
@@ -169,7 +174,7 @@ pub fn run_range(
     }
     let resumed = resumed_groups.len();
     if resumed > 0 || seed.is_some() {
-        on_event(RunEvent::Resumed(resumed));
+        on_event(RunEvent::Resumed(resumed, other_finish));
     }
     let mut context_groups = 0;
     let mut slopes = if run.shard {

@@ -190,15 +190,25 @@ impl ProgressOut {
 
     fn event(&mut self, event: RunEvent<'_>) {
         match event {
-            RunEvent::Resumed(n) => {
+            RunEvent::Resumed(n, other_finish) => {
                 self.resumed = n;
                 self.bar.set_position(n as u64);
                 self.bar.reset_eta();
+                let finish = if other_finish {
+                    " (its run had another [dsp] table, which only the finish reads: this run \
+                     finishes with its own)"
+                } else {
+                    ""
+                };
                 self.note(&format!(
-                    "resuming after {n} groups read back from the journal"
+                    "resuming after {n} groups read back from the journal{finish}"
                 ));
                 if self.json {
-                    self.line(&serde_json::json!({"event": "resumed", "groups": n}));
+                    self.line(&serde_json::json!({
+                        "event": "resumed",
+                        "groups": n,
+                        "other_finish": other_finish
+                    }));
                 }
             }
             RunEvent::Context(r) => {
