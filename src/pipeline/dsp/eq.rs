@@ -31,50 +31,47 @@ pub fn rolloff_corner_hz(rolloff_db: f64) -> Option<f64> {
     (rolloff_db > 0.0).then(|| ROLLOFF_REFERENCE_HZ / (10f64.powf(rolloff_db / 10.0) - 1.0).sqrt())
 }
 
-/// A playback curve with its corners: what [`DspParams::playback_eq`] makes of `dsp.eq` (and,
-/// for [`EqCurve::Custom`], of the curve's own knobs).
+/// A playback curve by its corners (Hz): the bass boost rises 6 dB an octave from
+/// `turnover_hz` down to `shelf_hz`, where it levels off, and a first-order treble roll-off
+/// has its corner at `rolloff_hz`. What [`DspParams::playback_eq`] makes of `dsp.eq`: RIAA and
+/// the 500 Hz turnover curve are such curves with fixed corners, `custom` takes them from its
+/// knobs.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum PlaybackEq {
-    /// No EQ.
-    Flat,
-    /// RIAA (3180/318/75 µs).
-    Riaa,
-    /// 500 Hz turnover, 50 Hz shelf, no roll-off.
-    Turnover500,
-    /// A 78's curve: the bass boost rises 6 dB an octave from `turnover_hz` down to
-    /// `shelf_hz`, and a first-order treble roll-off has its corner at `rolloff_hz` (None:
-    /// no roll-off).
-    Custom {
-        /// Where the bass boost levels off (Hz).
-        shelf_hz: f64,
-        /// The bass turnover, the boost's +3 dB point (Hz).
-        turnover_hz: f64,
-        /// The treble roll-off's corner (Hz).
-        rolloff_hz: Option<f64>,
-    },
+pub struct PlaybackEq {
+    /// Where the bass boost levels off (Hz).
+    pub shelf_hz: f64,
+    /// The bass turnover, the boost's +3 dB point (Hz).
+    pub turnover_hz: f64,
+    /// The treble roll-off's corner (Hz; None: no roll-off).
+    pub rolloff_hz: Option<f64>,
 }
 
 impl PlaybackEq {
-    /// Analog magnitude (linear, not normalised) of the curve at `freq_hz`.
-    pub(super) fn analog_raw(self, freq_hz: f64) -> f64 {
-        let w = 2.0 * PI * freq_hz;
-        let mag = |tau: f64| (1.0 + (w * tau).powi(2)).sqrt();
-        match self {
-            Self::Flat => 1.0,
-            Self::Riaa => mag(RIAA_T2_S) / (mag(RIAA_T1_S) * mag(RIAA_T3_S)),
-            Self::Turnover500 => {
-                mag(1.0 / (2.0 * PI * TURNOVER500_HZ))
-                    / mag(1.0 / (2.0 * PI * TURNOVER500_SHELF_HZ))
-            }
-            Self::Custom {
-                shelf_hz,
-                turnover_hz,
-                rolloff_hz,
-            } => {
-                let pole = |hz: f64| (1.0 + (freq_hz / hz).powi(2)).sqrt();
-                pole(turnover_hz) / (pole(shelf_hz) * rolloff_hz.map_or(1.0, pole))
-            }
+    /// RIAA: 3180 µs shelf, 318 µs turnover, 75 µs roll-off.
+    #[must_use]
+    pub fn riaa() -> Self {
+        Self {
+            shelf_hz: corner_hz(RIAA_T1_S),
+            turnover_hz: corner_hz(RIAA_T2_S),
+            rolloff_hz: Some(corner_hz(RIAA_T3_S)),
         }
+    }
+
+    /// The common 78 curve: 500 Hz turnover, 50 Hz shelf, no roll-off.
+    #[must_use]
+    pub fn turnover500() -> Self {
+        Self {
+            shelf_hz: TURNOVER500_SHELF_HZ,
+            turnover_hz: TURNOVER500_HZ,
+            rolloff_hz: None,
+        }
+    }
+
+    /// Analog magnitude (linear, not normalised) of the curve at `freq_hz`:
+    /// `|1 + jf/f_turnover| / (|1 + jf/f_shelf|·|1 + jf/f_rolloff|)`.
+    pub(super) fn analog_raw(self, freq_hz: f64) -> f64 {
+        let pole = |hz: f64| (1.0 + (freq_hz / hz).powi(2)).sqrt();
+        pole(self.turnover_hz) / (pole(self.shelf_hz) * self.rolloff_hz.map_or(1.0, pole))
     }
 
     /// The analog curve's gain (dB, 0 dB at 1 kHz) at `freq_hz`: the reference the digital
@@ -84,47 +81,27 @@ impl PlaybackEq {
         20.0 * (self.analog_raw(freq_hz) / self.analog_raw(EQ_REFERENCE_HZ)).log10()
     }
 
-    /// Highest corner of the curve (Hz), which the sample rate must exceed twice, and the
-    /// knob that sets it.
-    pub(super) fn highest_corner(self) -> (&'static str, f64) {
-        match self {
-            Self::Flat => ("dsp.eq", 0.0),
-            Self::Riaa => ("dsp.eq", corner_hz(RIAA_T3_S)),
-            Self::Turnover500 => ("dsp.eq", TURNOVER500_HZ),
-            Self::Custom {
-                turnover_hz,
-                rolloff_hz,
-                ..
-            } => match rolloff_hz {
-                Some(r) if r > turnover_hz => ("dsp.eq_rolloff_db", r),
-                _ => ("dsp.eq_turnover_hz", turnover_hz),
-            },
-        }
+    /// Highest corner of the curve (Hz); the sample rate must exceed twice it.
+    pub(super) fn highest_corner_hz(self) -> f64 {
+        self.rolloff_hz
+            .map_or(self.turnover_hz, |r| r.max(self.turnover_hz))
     }
 
-    /// The digital sections of the curve at `sample_rate_hz`, scaled to 0 dB at 1 kHz
-    /// (1 kHz must be below Nyquist for the scaling; otherwise the analog scale is used).
+    /// The digital sections of the curve at `sample_rate_hz` (the shelf, then the roll-off),
+    /// scaled to 0 dB at 1 kHz (1 kHz must be below Nyquist for the scaling; otherwise the
+    /// analog scale is used).
     #[must_use]
     pub fn sections(self, sample_rate_hz: f64) -> Vec<Biquad> {
-        let raw = match self {
-            Self::Flat => return Vec::new(),
-            Self::Riaa => vec![
-                shelf(corner_hz(RIAA_T2_S), corner_hz(RIAA_T1_S), sample_rate_hz),
-                first_order_lowpass(corner_hz(RIAA_T3_S), sample_rate_hz),
-            ],
-            Self::Turnover500 => vec![shelf(TURNOVER500_HZ, TURNOVER500_SHELF_HZ, sample_rate_hz)],
-            Self::Custom {
-                shelf_hz,
-                turnover_hz,
-                rolloff_hz,
-            } => std::iter::once(shelf(turnover_hz, shelf_hz, sample_rate_hz))
-                .chain(rolloff_hz.map(|r| first_order_lowpass(r, sample_rate_hz)))
-                .collect(),
-        };
+        let mut sections: Vec<Biquad> =
+            std::iter::once(shelf(self.turnover_hz, self.shelf_hz, sample_rate_hz))
+                .chain(
+                    self.rolloff_hz
+                        .map(|r| first_order_lowpass(r, sample_rate_hz)),
+                )
+                .collect();
         // Normalise with the analog gain at the reference so that the digital curve follows
         // the analog one (equal at low frequencies where warping vanishes).
         let scale = 1.0 / self.analog_raw(EQ_REFERENCE_HZ);
-        let mut sections = raw;
         if let Some(first) = sections.first_mut() {
             *first = first.scaled(scale);
         }

@@ -113,18 +113,18 @@ impl DspParams {
         Ok(())
     }
 
-    /// The playback curve `eq` names, with its corners.
+    /// The playback curve `eq` names, with its corners (None: flat).
     #[must_use]
-    pub fn playback_eq(&self) -> PlaybackEq {
+    pub fn playback_eq(&self) -> Option<PlaybackEq> {
         match self.eq {
-            EqCurve::Flat => PlaybackEq::Flat,
-            EqCurve::Riaa => PlaybackEq::Riaa,
-            EqCurve::Turnover500 => PlaybackEq::Turnover500,
-            EqCurve::Custom => PlaybackEq::Custom {
+            EqCurve::Flat => None,
+            EqCurve::Riaa => Some(PlaybackEq::riaa()),
+            EqCurve::Turnover500 => Some(PlaybackEq::turnover500()),
+            EqCurve::Custom => Some(PlaybackEq {
                 shelf_hz: self.eq_shelf_hz,
                 turnover_hz: self.eq_turnover_hz,
                 rolloff_hz: rolloff_corner_hz(self.eq_rolloff_db),
-            },
+            }),
         }
     }
 }
@@ -166,11 +166,17 @@ impl Chain {
             None
         };
         let mut eq = Vec::new();
-        let curve = params.playback_eq();
-        if curve != PlaybackEq::Flat {
-            let (key, corner) = curve.highest_corner();
+        if let Some(curve) = params.playback_eq() {
+            let corner = curve.highest_corner_hz();
             if corner >= nyquist_hz {
                 let needs = 2.0 * corner;
+                // The knob that sets the corner: a custom curve's own, else the curve's name.
+                let rolloff = curve.rolloff_hz.is_some_and(|r| r > curve.turnover_hz);
+                let key = match params.eq {
+                    EqCurve::Custom if rolloff => "dsp.eq_rolloff_db",
+                    EqCurve::Custom => "dsp.eq_turnover_hz",
+                    _ => "dsp.eq",
+                };
                 let problem = if key == "dsp.eq_rolloff_db" {
                     format!(
                         "{} dB at 10 kHz puts the treble roll-off's corner at {corner:.0} Hz, \

@@ -85,7 +85,7 @@ fn riaa_follows_the_analog_curve() {
         (1000.0, 0.0),
         (10_000.0, -13.73),
     ] {
-        let a = PlaybackEq::Riaa.analog_gain_db(f);
+        let a = PlaybackEq::riaa().analog_gain_db(f);
         assert!((a - db).abs() < 0.02, "analog {f}: {a} vs {db}");
     }
     let chain = dsp_chain(FS, &only(false, EqCurve::Riaa, false)).unwrap();
@@ -99,7 +99,7 @@ fn riaa_follows_the_analog_curve() {
         (5000.0, 0.6),
     ] {
         let d = chain_gain_db(&chain, f, FS);
-        let a = PlaybackEq::Riaa.analog_gain_db(f);
+        let a = PlaybackEq::riaa().analog_gain_db(f);
         assert!((d - a).abs() < tol, "{f} Hz: digital {d} analog {a}");
     }
     // Corners sit where they should: the treble pole is −3 dB below the shelf's asymptote
@@ -111,12 +111,12 @@ fn riaa_follows_the_analog_curve() {
 fn turnover500_follows_the_analog_curve() {
     let chain = dsp_chain(FS, &only(false, EqCurve::Turnover500, false)).unwrap();
     // Analog: +3 dB point relative to the HF asymptote at 500 Hz, no treble roll-off.
-    let a500 = PlaybackEq::Turnover500.analog_gain_db(500.0);
-    let a_hf = PlaybackEq::Turnover500.analog_gain_db(20_000.0);
+    let a500 = PlaybackEq::turnover500().analog_gain_db(500.0);
+    let a_hf = PlaybackEq::turnover500().analog_gain_db(20_000.0);
     assert!((a500 - a_hf - 3.0).abs() < 0.1, "{a500} {a_hf}");
     for f in [30.0, 100.0, 250.0, 500.0, 1000.0, 5000.0, 15_000.0] {
         let d = chain_gain_db(&chain, f, FS);
-        let a = PlaybackEq::Turnover500.analog_gain_db(f);
+        let a = PlaybackEq::turnover500().analog_gain_db(f);
         assert!((d - a).abs() < 0.05, "{f} Hz: digital {d} analog {a}");
     }
     // +6 dB/octave slope between shelf and turnover: 100 → 200 Hz gains ≈ −5 dB or so.
@@ -142,13 +142,16 @@ fn custom_curve_with_riaas_numbers_is_riaa() {
     assert!((rolloff_db - 13.66).abs() < 0.01, "{rolloff_db}");
     let p = custom(corner_hz(RIAA_T2_S), rolloff_db, corner_hz(RIAA_T1_S));
     p.validate().unwrap();
-    let curve = p.playback_eq();
+    let curve = p.playback_eq().unwrap();
     let chain = dsp_chain(FS, &p).unwrap();
     let riaa = dsp_chain(FS, &only(false, EqCurve::Riaa, false)).unwrap();
     for f in [
         20.0, 100.0, 500.0, 1000.0, 2122.0, 5000.0, 10_000.0, 20_000.0,
     ] {
-        let (a, b) = (curve.analog_gain_db(f), PlaybackEq::Riaa.analog_gain_db(f));
+        let (a, b) = (
+            curve.analog_gain_db(f),
+            PlaybackEq::riaa().analog_gain_db(f),
+        );
         assert!((a - b).abs() < 1e-9, "analog {f} Hz: {a} vs {b}");
         let (a, b) = (chain_gain_db(&chain, f, FS), chain_gain_db(&riaa, f, FS));
         assert!((a - b).abs() < 1e-6, "digital {f} Hz: {a} vs {b}");
@@ -159,8 +162,8 @@ fn custom_curve_with_riaas_numbers_is_riaa() {
 fn custom_curve_meets_its_chart_numbers() {
     // 300 Hz turnover, −16 dB at 10 kHz, the boost levelling off at 30 Hz.
     let p = custom(300.0, 16.0, 30.0);
-    let curve = p.playback_eq();
-    let flat_top = custom(300.0, 0.0, 30.0).playback_eq();
+    let curve = p.playback_eq().unwrap();
+    let flat_top = custom(300.0, 0.0, 30.0).playback_eq().unwrap();
     // The roll-off alone cuts exactly its figure at 10 kHz.
     let cut = 20.0 * (curve.analog_raw(10_000.0) / flat_top.analog_raw(10_000.0)).log10();
     assert!((cut - -16.0).abs() < 1e-9, "{cut}");
@@ -170,7 +173,7 @@ fn custom_curve_meets_its_chart_numbers() {
     let middle = flat_top.analog_gain_db(3000.0);
     let boost = flat_top.analog_gain_db(300.0) - middle;
     assert!((boost - 3.0).abs() < 0.1, "{boost}");
-    let wide = custom(800.0, 0.0, 10.0).playback_eq();
+    let wide = custom(800.0, 0.0, 10.0).playback_eq().unwrap();
     let octave = wide.analog_gain_db(50.0) - wide.analog_gain_db(100.0);
     assert!((octave - 6.0).abs() < 0.2, "{octave}");
     // The digital chain follows the analog curve (the bilinear transform compresses towards
