@@ -747,7 +747,7 @@ fn ctrl_c_stops_plan_inspect_and_merge_and_they_write_nothing() {
     let part = tmp.path().join("part-0");
     run_shard(scan, &p, 0, &part);
     let raised = std::sync::atomic::AtomicBool::new(true);
-    let err = groovescope::side::merge::merge_parts(&[part], None, &raised).unwrap_err();
+    let err = groovescope::side::merge::merge_parts(&[part], &raised).unwrap_err();
     assert!(err.to_string().contains("cancelled"), "{err}");
 }
 

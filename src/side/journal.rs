@@ -110,8 +110,8 @@ impl Journal {
         let bytes =
             std::fs::read(path).map_err(|e| SideError::io("cannot read the journal", &e, path))?;
         let (found, records, valid) = read_record_file(&bytes, JOURNAL_MAGIC, "journal", path)?;
-        let other_finish = identity.difference(&found).is_some();
-        if let Some(diff) = identity.difference(&found)
+        let difference = identity.difference(&found);
+        if let Some(diff) = &difference
             && !identity.same_groups_as(&found)
         {
             return Err(SideError::refused(
@@ -136,7 +136,7 @@ impl Journal {
         };
         journal.seek_end()?;
         let records = records.into_iter().map(|(r, _)| r).collect();
-        Ok((journal, records, other_finish))
+        Ok((journal, records, difference.is_some()))
     }
 
     fn seek_end(&mut self) -> Result<(), SideError> {

@@ -8,6 +8,7 @@ use super::{RunIdentity, SideError};
 use crate::engine::{ClipGroups, EngineError, Reconstruction, finish_reconstruction};
 use crate::io::ScanMeta;
 use crate::pipeline::PipelineParams;
+use crate::pipeline::dsp::DspParams;
 
 /// A merged side.
 #[derive(Debug)]
@@ -141,39 +142,35 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
 /// Merges parts whose headers agree ([`read_parts`]) into the side's reconstruction: each
 /// part read and checked whole in shard order, its groups through [`finish_reconstruction`],
 /// scored against the scan's `reference.wav` when the scan named in the parts is still there.
-/// `finish` replaces the parts' params for the finish; it may differ from them only in
-/// `[dsp]`, which the groups do not read (the merged identity then carries it and its
-/// fingerprint).
 ///
 /// Stops between parts once `cancel` is raised.
 ///
 /// # Errors
 /// [`SideError`] from the checks (a truncated part, one whose header changed since it was
 /// read), when no group produced sound, or [`EngineError::Cancelled`].
-pub fn merge_parts(
-    paths: &[PathBuf],
-    finish: Option<&PipelineParams>,
+pub fn merge_parts(paths: &[PathBuf], cancel: &AtomicBool) -> Result<Merged, SideError> {
+    merge_checked(read_parts(paths)?, None, cancel)
+}
+
+/// [`merge_parts`] of parts [`read_parts`] has checked, finished with `dsp` in place of the
+/// parts' `[dsp]` table when given (only the finish reads it; the merged identity then
+/// carries it and its fingerprint).
+///
+/// # Errors
+/// As [`merge_parts`].
+pub fn merge_checked(
+    parts: Vec<CheckedPart>,
+    dsp: Option<DspParams>,
     cancel: &AtomicBool,
 ) -> Result<Merged, SideError> {
-    let parts = read_parts(paths)?;
     let Some(first) = parts.first() else {
         return Err(SideError::refused("no parts given", "."));
     };
     let mut identity = first.identity.clone();
     identity.groups = (0, identity.scan_groups);
-    if let Some(p) = finish {
-        let groups_read = |q: &PipelineParams| PipelineParams {
-            dsp: Default::default(),
-            ..q.clone()
-        };
-        if groups_read(p) != groups_read(&identity.params) {
-            return Err(SideError::refused(
-                "the finish's params differ from the parts' beyond [dsp]",
-                &first.path,
-            ));
-        }
-        identity.params = p.clone();
-        identity.params_fingerprint = super::params_fingerprint(p);
+    if let Some(dsp) = dsp {
+        identity.params.dsp = dsp;
+        identity.params_fingerprint = super::params_fingerprint(&identity.params);
     }
     let meta = ScanMeta::from_toml_str(&identity.meta_toml, &first.path)?;
     let params: PipelineParams = identity.params.clone();

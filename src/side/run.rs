@@ -115,9 +115,13 @@ pub struct RangeResult {
 /// Events a journaled run reports.
 #[derive(Clone, Debug)]
 pub enum RunEvent<'a> {
-    /// The journal held this many finished groups; the run continues after them. True when
-    /// the journal's run had another `[dsp]` table: this run finishes with its own.
-    Resumed(usize, bool),
+    /// The journal held finished groups; the run continues after them.
+    Resumed {
+        /// Groups read back.
+        groups: usize,
+        /// The journal's run had another `[dsp]` table: this run finishes with its own.
+        other_finish: bool,
+    },
     /// Running groups before the range for the slope history.
     Context(Range<usize>),
     /// A group of the range finished (`done` of `total`, counting resumed ones).
@@ -174,7 +178,10 @@ pub fn run_range(
     }
     let resumed = resumed_groups.len();
     if resumed > 0 || seed.is_some() {
-        on_event(RunEvent::Resumed(resumed, other_finish));
+        on_event(RunEvent::Resumed {
+            groups: resumed,
+            other_finish,
+        });
     }
     let mut context_groups = 0;
     let mut slopes = if run.shard {

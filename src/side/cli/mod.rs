@@ -190,7 +190,10 @@ impl ProgressOut {
 
     fn event(&mut self, event: RunEvent<'_>) {
         match event {
-            RunEvent::Resumed(n, other_finish) => {
+            RunEvent::Resumed {
+                groups: n,
+                other_finish,
+            } => {
                 self.resumed = n;
                 self.bar.set_position(n as u64);
                 self.bar.reset_eta();

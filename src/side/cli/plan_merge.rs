@@ -13,8 +13,9 @@ use crate::io::wav::{WavBits, write_transfer_wav};
 use crate::io::{Scan, ScanMeta, write_json_atomic};
 use crate::job::interrupted;
 use crate::pipeline::PipelineParams;
+use crate::pipeline::dsp::DspParams;
 use crate::pipeline::slope_reference::SlopeHistory;
-use crate::side::merge::merge_parts;
+use crate::side::merge::{merge_checked, read_parts};
 use crate::side::plan::Plan;
 
 /// Arguments of `plan`.
@@ -79,12 +80,12 @@ pub struct MergeArgs {
     pub quiet: bool,
 }
 
-/// The parts' params with the `[dsp]` keys of `file` in place of theirs (see
-/// [`MergeArgs::dsp`]), checked against the output rate.
+/// The parts' `[dsp]` table with the keys of `file`'s in place of theirs (see
+/// [`MergeArgs::dsp`]), checked against the parts' output rate.
 ///
 /// # Errors
 /// One line naming `file`: unreadable, a table other than `[dsp]`, a bad key or value.
-fn finish_params(parts: &PipelineParams, file: &Path) -> Result<PipelineParams> {
+fn finish_dsp(parts: &PipelineParams, file: &Path) -> Result<DspParams> {
     let what = "DSP settings";
     let text = crate::io::limits::read_toml_text(file, what)?;
     if let Ok(table) = toml::from_str::<toml::Table>(&text)
@@ -99,14 +100,9 @@ fn finish_params(parts: &PipelineParams, file: &Path) -> Result<PipelineParams> 
         );
     }
     let dsp = crate::cli::overlay_toml(&parts.dsp, file, "dsp", what, |d| d.validate())?;
-    let params = PipelineParams {
-        dsp,
-        ..parts.clone()
-    };
-    params
-        .validate_for_clip()
+    crate::pipeline::dsp::check_chain(f64::from(parts.sound.output_rate_hz), &dsp)
         .map_err(|e| anyhow::anyhow!("{e}: {}", file.display()))?;
-    Ok(params)
+    Ok(dsp)
 }
 
 /// Runs `merge`.
@@ -126,21 +122,12 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     check_outputs(&outputs, &inputs, args.force)?;
     let _locks = lock_outputs(&outputs)?;
     let started = Instant::now();
-    let finish = match &args.dsp {
-        Some(file) => {
-            let parts = crate::side::merge::read_parts(&args.parts)?;
-            let first = parts.first().map(|p| &p.identity.params);
-            Some(finish_params(
-                first.unwrap_or(&PipelineParams::default()),
-                file,
-            )?)
-        }
-        None => None,
+    let parts = read_parts(&args.parts)?;
+    let dsp = match (&args.dsp, parts.first()) {
+        (Some(file), Some(first)) => Some(finish_dsp(&first.identity.params, file)?),
+        _ => None,
     };
-    let merged = unless_interrupted(
-        "merge",
-        merge_parts(&args.parts, finish.as_ref(), interrupted()),
-    )?;
+    let merged = unless_interrupted("merge", merge_checked(parts, dsp, interrupted()))?;
     let mut rec = merged.reconstruction;
     rec.timings.total_secs = started.elapsed().as_secs_f64();
     let identity = &merged.identity;
