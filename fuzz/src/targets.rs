@@ -15,7 +15,7 @@ use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::frames::{RawFrame, RawSamples, grey_from_raw};
 use groovescope::io::frames::{check_frame_bytes, decode_frame};
 use groovescope::io::still::save_grey_image;
-use groovescope::io::zarr::{ChunkLayout, SampleType, ZarrGroup, ZarrWriter};
+use groovescope::io::zarr::{ChunkLayout, SampleType, ZarrWriter, chunk_file};
 use groovescope::io::{Scan, ScanMeta, flo, load_group, wav};
 use groovescope::meta::Cut;
 use groovescope::pipeline::PipelineParams;
@@ -592,14 +592,7 @@ fn write_zarr(u: &mut Unstructured, dir: &Path) -> arbitrary::Result<(Vec<Vec<Ra
         [motion]\nframe_step_um = 0.78\ngroup_step_um = 2.0\n";
     writer.finish(scan_toml).map_err(fail)?;
     // The chunk file of group `g`, as the reader names it.
-    let chunk = |g: usize| {
-        ZarrGroup {
-            store: std::sync::Arc::from(dir),
-            group: g,
-            layout,
-        }
-        .chunk_path()
-    };
+    let chunk = |g: usize| chunk_file(dir, g);
     let damaged = match u.int_in_range(0u8..=7)? {
         0..=2 => false,
         3 => {

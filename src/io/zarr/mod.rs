@@ -112,14 +112,20 @@ impl ZarrGroup {
     /// The file of the group's chunk (it names the group in errors).
     #[must_use]
     pub fn chunk_path(&self) -> PathBuf {
-        self.store
-            .join("frames")
-            .join("c")
-            .join(self.group.to_string())
-            .join("0")
-            .join("0")
-            .join("0")
+        chunk_file(&self.store, self.group)
     }
+}
+
+/// The file of chunk `group` of the store folder `store`.
+#[must_use]
+pub fn chunk_file(store: &Path, group: usize) -> PathBuf {
+    store
+        .join("frames")
+        .join("c")
+        .join(group.to_string())
+        .join("0")
+        .join("0")
+        .join("0")
 }
 
 fn not_a_store(problem: String, path: &Path) -> LoadError {

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{ChunkLayout, ZarrGroup, ZarrWriter};
+use super::{ChunkLayout, ZarrWriter, chunk_file};
 use crate::io::LoadError;
 use crate::io::atomic::{beside, dir_is_missing_or_empty, remove_stale_temps, write_json_atomic};
 use crate::io::frames::RawFrame;
@@ -146,16 +146,6 @@ fn first_layout(frames: &[RawFrame], source: &Path) -> Result<ChunkLayout, LoadE
     })
 }
 
-/// The chunk file of group `g` of the store `store`.
-fn chunk_path(store: &Path, g: usize, layout: ChunkLayout) -> PathBuf {
-    ZarrGroup {
-        store: std::sync::Arc::from(store),
-        group: g,
-        layout,
-    }
-    .chunk_path()
-}
-
 /// What a finished store holds.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FinishedStore {
@@ -262,13 +252,10 @@ impl PartialStore {
             })?;
         }
         // A counted chunk that a power cut took from the file system is written again.
-        if let Some(p) = progress.as_mut() {
-            let layout = p.layout;
-            if let Some(lost) =
-                (0..p.groups_checked).find(|&g| !chunk_path(&path, g, layout).is_file())
-            {
-                p.groups_checked = lost;
-            }
+        if let Some(p) = progress.as_mut()
+            && let Some(lost) = (0..p.groups_checked).find(|&g| !chunk_file(&path, g).is_file())
+        {
+            p.groups_checked = lost;
         }
         let resumed = progress.as_ref().map_or(0, |p| p.groups_checked);
         let started = match progress {
@@ -345,14 +332,14 @@ impl PartialStore {
         let g = started.progress.groups_checked;
         started.writer.write_group(name, frames, source)?;
         if started.writer.read_back(g)? != frames {
-            let chunk = chunk_path(&self.path, g, started.progress.layout);
+            let chunk = chunk_file(&self.path, g);
             return Err(LoadError::io(
                 "the chunk read back differs from the frames written",
                 &chunk,
             ));
         }
         // On disk before the record counts it, so a counted chunk survives a crash.
-        let chunk = chunk_path(&self.path, g, started.progress.layout);
+        let chunk = chunk_file(&self.path, g);
         std::fs::File::open(&chunk)
             .and_then(|f| f.sync_all())
             .map_err(|e| LoadError::io(format!("cannot sync the chunk: {e}"), &chunk))?;
@@ -497,8 +484,7 @@ mod tests {
     fn a_counted_chunk_the_disk_lost_is_written_again() {
         let (_dir, out) = path_in_temp_dir("s.zarr");
         killed_after(&out, 3);
-        let layout = read_progress(&partial_path(&out)).unwrap().layout;
-        std::fs::remove_file(chunk_path(&partial_path(&out), 1, layout)).unwrap();
+        std::fs::remove_file(chunk_file(&partial_path(&out), 1)).unwrap();
         let mut store = PartialStore::open(&out, "f".into(), resume(), "", names).unwrap();
         assert_eq!(store.groups(), 1);
         for g in 1..3 {
