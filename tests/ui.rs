@@ -733,6 +733,50 @@ fn the_custom_eq_curve_is_set_in_the_panel_and_recorded_in_the_export() {
     );
 }
 
+/// A change of the `[dsp]` table alone refinishes the clip from the groups it kept: no group
+/// runs again, and the sound is the one a whole reconstruction with the new params makes. A
+/// change of any other knob runs the groups again.
+#[test]
+fn a_filter_change_refinishes_the_clip_without_running_its_groups() {
+    use groovescope::engine::{ReconstructOptions, reconstruct};
+    let (_tmp, mut h) = settled_on(&demo_scan());
+    wb_mut(&mut h).reconstruct(None);
+    settle(&mut h);
+    let first = wb(&h).clip().unwrap();
+    assert!(!first.refinished && first.groups_before_finish.is_some());
+    let mut p = wb(&h).params().clone();
+    p.dsp.eq = EqCurve::Riaa;
+    p.dsp.lowpass_hz = 5000.0;
+    wb_mut(&mut h).set_params(p.clone());
+    h.run_ok();
+    h.get_by_label_contains("only the finish runs again");
+    wb_mut(&mut h).reconstruct(None);
+    settle(&mut h);
+    assert_last_message(&h, "no group ran again");
+    let clip = wb(&h).clip().unwrap();
+    assert!(clip.refinished);
+    assert_eq!(clip.params, p);
+    let scan = groovescope::io::Scan::open(&demo_scan()).unwrap();
+    let opts = ReconstructOptions {
+        params: p.clone(),
+        groups: None,
+        keep_going: true,
+    };
+    let whole = reconstruct(&scan, &opts, &mut |_| {}, &Default::default()).unwrap();
+    assert_eq!(clip.recon.audio.channels, whole.audio.channels);
+    assert_eq!(clip.recon.gain_per_mm_s, whole.gain_per_mm_s);
+    assert_eq!(
+        clip.recon.scores.as_ref().map(|s| s.snr_db),
+        whole.scores.as_ref().map(|s| s.snr_db)
+    );
+    p.orientation.neighbourhood_px += 20;
+    wb_mut(&mut h).set_params(p);
+    h.run_ok();
+    wb_mut(&mut h).reconstruct(None);
+    settle(&mut h);
+    assert!(!wb(&h).clip().unwrap().refinished);
+}
+
 /// Issue 20: the arrow keys step through the group's frames.
 #[test]
 fn arrow_keys_step_frames() {

@@ -101,12 +101,41 @@ impl Workbench {
 
     // ----- the clip -----
 
-    /// Reconstructs `groups` (None: all) in the background.
+    /// Reconstructs `groups` (None: all) in the background. When the clip on screen covers
+    /// those groups of this scan and the params differ from its own only in `[dsp]`, its kept
+    /// groups are finished again with them instead ([`ReconRun::refinish`]).
     pub fn reconstruct(&mut self, groups: Option<std::ops::Range<usize>>) {
         let Some(scan) = &self.nav.scan else {
             self.error("open a scan first");
             return;
         };
+        let wanted = groups.clone().unwrap_or(0..scan.groups.len());
+        if let Some(clip) = self.clip.clip.clone().filter(|c| {
+            c.groups == wanted
+                && c.scan_dir == scan.dir
+                && *c.scan_meta == scan.meta
+                && c.scan_fingerprint == crate::io::fingerprint::scan_fingerprint(scan)
+                && c.params.same_groups_as(self.tuning.params())
+        }) {
+            match ReconRun::refinish(
+                scan.clone(),
+                &clip,
+                self.tuning.params().clone(),
+                self.tuning.state(),
+                repaint_fn(&self.ctx),
+            ) {
+                Ok(Some(run)) => {
+                    self.clip.run = Some(run);
+                    self.clip.refresh_health();
+                    return;
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    self.error(format!("cannot start the reconstruction: {e}"));
+                    return;
+                }
+            }
+        }
         let opts = ReconstructOptions {
             params: self.tuning.params().clone(),
             groups,
@@ -135,9 +164,14 @@ impl Workbench {
     /// A/B listening.
     pub fn set_clip(&mut self, clip: Clip) {
         self.info(format!(
-            "clip ready: {:.1} ms from {} groups",
+            "clip ready: {:.1} ms from {} groups{}",
             clip.recon.audio.duration_secs() * 1000.0,
-            clip.groups.len()
+            clip.groups.len(),
+            if clip.refinished {
+                " (their sound finished again with the new filters: no group ran again)"
+            } else {
+                ""
+            }
         ));
         self.clip.finish(clip);
         self.player.load(self.clip.play_buffers());

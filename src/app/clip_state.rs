@@ -109,9 +109,10 @@ impl ClipState {
     /// reconstruction's tracks so far.
     pub fn refresh_health(&mut self) {
         self.health = match (&self.run, &self.clip) {
-            (Some(run), _) => ClipHealth::new(self.groups, &run.tracks, &[]),
-            (None, Some(c)) => ClipHealth::new(self.groups, &c.tracks, &c.recon.groups),
-            (None, None) => ClipHealth::new(self.groups, &[], &[]),
+            // A refinish runs no group: the clip's health stands until it is done.
+            (Some(run), _) if !run.refinishing => ClipHealth::new(self.groups, &run.tracks, &[]),
+            (_, Some(c)) => ClipHealth::new(self.groups, &c.tracks, &c.recon.groups),
+            (_, None) => ClipHealth::new(self.groups, &[], &[]),
         };
     }
 

@@ -171,16 +171,19 @@ impl Workbench {
             };
             ui.add(egui::Label::new(text).truncate())
                 .on_hover_text(state.line());
-            let clip_differs = self
-                .clip
-                .clip
-                .as_ref()
-                .is_some_and(|c| c.params != *self.tuning.params());
-            let note = if clip_differs {
-                egui::RichText::new("the clip was made with other params: reconstruct to hear them")
-                    .color(WARN_COLOUR)
-            } else {
-                egui::RichText::new(" ")
+            let note = match self.clip.clip.as_ref() {
+                Some(c) if c.params != *self.tuning.params() => {
+                    let text = if c.groups_before_finish.is_some()
+                        && c.params.same_groups_as(self.tuning.params())
+                    {
+                        "the clip was made with other filters: reconstruct to hear them (its \
+                         groups are kept: only the finish runs again)"
+                    } else {
+                        "the clip was made with other params: reconstruct to hear them"
+                    };
+                    egui::RichText::new(text).color(WARN_COLOUR)
+                }
+                _ => egui::RichText::new(" "),
             };
             ui.add(egui::Label::new(note).truncate());
             self.symptom_buttons(ui);
@@ -246,7 +249,11 @@ impl Workbench {
                     ui.add(
                         egui::ProgressBar::new(r.fraction())
                             .desired_width(160.0)
-                            .text(format!("reconstructing {}/{}", r.done, r.total)),
+                            .text(if r.refinishing {
+                                "refinishing the clip".to_string()
+                            } else {
+                                format!("reconstructing {}/{}", r.done, r.total)
+                            }),
                     );
                 }
                 if !self.is_idle() {

@@ -12,7 +12,10 @@ use std::time::{Duration, Instant};
 use super::health::GroupTrack;
 use super::partial::partial_sound;
 use super::tuning::ParamState;
-use crate::engine::{Progress, ReconstructOptions, Reconstruction, aligned_reference, reconstruct};
+use crate::engine::{
+    ClipGroups, EngineError, Progress, ReconstructOptions, Reconstruction, aligned_reference,
+    finish_reconstruction, run_clip_groups,
+};
 use crate::io::Scan;
 use crate::pipeline::PipelineParams;
 use crate::pipeline::audio_signal::GroupSignal;
@@ -25,6 +28,11 @@ pub const ENVELOPE_BLOCK_SECS: f64 = 0.005;
 pub const ENVELOPE_MIN_BLOCKS: usize = 100;
 /// Most points of a displayed spectrum.
 pub const SPECTRUM_POINTS: usize = 4096;
+/// Most bytes of group signals a clip keeps for a refinish ([`ReconRun::refinish`]). The
+/// fused method's hold about 3 MB a second of sound (the accuracy suite's small dual-focus
+/// camera: 1.49 MB for its 0.50 s of speech), so a preview clip of up to about 85 s keeps
+/// them, and a whole side run in the workbench does not hold its signals twice.
+pub const KEEP_GROUPS_MAX_BYTES: usize = 256 << 20;
 
 /// An averaged magnitude spectrum.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -70,6 +78,13 @@ pub struct Clip {
     pub scan_fingerprint: String,
     /// Why the reference is missing, when `scan.reference` exists but could not be read.
     pub reference_problem: Option<String>,
+    /// The clip's groups before the finish, kept so that another `[dsp]` table (which only
+    /// the finish reads) refinishes the clip without running them again; None where they
+    /// passed [`KEEP_GROUPS_MAX_BYTES`], and for a method comparison's clips.
+    pub groups_before_finish: Option<Arc<ClipGroups>>,
+    /// True when the clip is an earlier clip's groups finished again with another `[dsp]`
+    /// table ([`ReconRun::refinish`]).
+    pub refinished: bool,
 }
 
 impl Clip {
@@ -208,6 +223,32 @@ pub fn make_clip(
         scan_meta: Arc::new(scan.meta.clone()),
         scan_fingerprint: crate::io::fingerprint::scan_fingerprint(scan),
         reference_problem,
+        groups_before_finish: None,
+        refinished: false,
+    }
+}
+
+/// `gathered` finished into the scan's clip with `params`, scored against its reference.
+fn finish(
+    scan: &Scan,
+    gathered: ClipGroups,
+    params: &PipelineParams,
+) -> Result<Reconstruction, EngineError> {
+    finish_reconstruction(
+        gathered,
+        &scan.meta,
+        scan.reference.as_deref(),
+        params,
+        &scan.dir,
+    )
+}
+
+/// A reconstruction thread's outcome in the words the workbench shows.
+fn result_text<T>(result: std::thread::Result<Result<T, EngineError>>) -> Result<T, String> {
+    match result {
+        Ok(Ok(done)) => Ok(done),
+        Ok(Err(e)) => Err(e.to_string()),
+        Err(_) => Err("the reconstruction panicked (see the log)".into()),
     }
 }
 
@@ -248,6 +289,8 @@ pub struct ReconRun {
     pub tracks: Vec<GroupTrack>,
     /// First group of the run.
     pub first_group: usize,
+    /// True when it refinishes a clip's kept groups ([`ReconRun::refinish`]): no group runs.
+    pub refinishing: bool,
     /// The latest partial sound that arrived (taken by [`ReconRun::take_partial`]).
     partial_sound: Option<Result<PartialClip, String>>,
 }
@@ -269,61 +312,122 @@ impl ReconRun {
         param_state: ParamState,
         repaint: Box<dyn Fn() + Send + Sync>,
     ) -> std::io::Result<Self> {
-        let cancel = Arc::new(AtomicBool::new(false));
-        let partial_wanted = Arc::new(AtomicBool::new(false));
-        let (tx, rx) = mpsc::channel();
-        let flag = cancel.clone();
-        let wanted = partial_wanted.clone();
         let groups = opts.groups.clone().unwrap_or(0..scan.groups.len());
         let total = groups
             .end
             .min(scan.groups.len())
             .saturating_sub(groups.start);
         let first_group = groups.start;
-        let thread = std::thread::Builder::new()
-            .name("groovescope-reconstruct".into())
-            .spawn(move || {
-                let ptx = tx.clone();
-                let mut tracks = Vec::new();
-                let mut signals = Vec::new();
-                let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    reconstruct(
-                        &scan,
-                        &opts,
-                        &mut |p| {
-                            let g = reported_group(first_group, p);
-                            tracks.push(GroupTrack::new(g, p.signal.as_deref()));
-                            signals.extend(p.signal.clone());
-                            let _ = ptx.send(ReconEvent::Progress(p.clone()));
-                            if wanted.swap(false, Ordering::AcqRel) {
-                                let sound = partial_sound(&signals, &scan.meta, &opts.params).map(
-                                    |audio| PartialClip {
+        Self::launch(total, first_group, false, move |tx, flag, wanted| {
+            let started = Instant::now();
+            let ptx = tx.clone();
+            let mut tracks = Vec::new();
+            let mut signals = Vec::new();
+            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                let gathered = run_clip_groups(
+                    &scan,
+                    &opts,
+                    &mut |p| {
+                        let g = reported_group(first_group, p);
+                        tracks.push(GroupTrack::new(g, p.signal.as_deref()));
+                        signals.extend(p.signal.clone());
+                        let _ = ptx.send(ReconEvent::Progress(p.clone()));
+                        if wanted.swap(false, Ordering::AcqRel) {
+                            let sound =
+                                partial_sound(&signals, &scan.meta, &opts.params).map(|audio| {
+                                    PartialClip {
                                         groups: signals.len(),
                                         audio,
-                                    },
-                                );
-                                let _ = ptx.send(ReconEvent::Partial(sound));
-                            }
-                            repaint();
-                        },
-                        &flag,
-                    )
-                }));
-                let outcome = match result {
-                    Ok(Ok(recon)) => Ok(Box::new(make_clip(
-                        &scan,
-                        recon,
-                        opts.params.clone(),
-                        param_state,
-                        groups,
-                        tracks,
-                    ))),
-                    Ok(Err(e)) => Err(e.to_string()),
-                    Err(_) => Err("the reconstruction panicked (see the log)".into()),
-                };
-                let _ = tx.send(ReconEvent::Finished(outcome));
-                repaint();
-            })?;
+                                    }
+                                });
+                            let _ = ptx.send(ReconEvent::Partial(sound));
+                        }
+                        repaint();
+                    },
+                    &flag,
+                )?;
+                let kept = (gathered.signal_bytes() <= KEEP_GROUPS_MAX_BYTES)
+                    .then(|| Arc::new(gathered.clone()));
+                let mut recon = finish(&scan, gathered, &opts.params)?;
+                recon.timings.total_secs = started.elapsed().as_secs_f64();
+                Ok::<_, EngineError>((recon, kept))
+            }));
+            let outcome = result_text(result).map(|(recon, kept)| {
+                let mut clip = make_clip(
+                    &scan,
+                    recon,
+                    opts.params.clone(),
+                    param_state,
+                    groups,
+                    tracks,
+                );
+                clip.groups_before_finish = kept;
+                Box::new(clip)
+            });
+            let _ = tx.send(ReconEvent::Finished(outcome));
+            repaint();
+        })
+    }
+
+    /// Finishes `source`'s kept groups again with `params`, whose groups are `source`'s (the
+    /// params differ only in `[dsp]`: the caller checks), on a named thread: the clip with
+    /// other filters in the time the finish takes, no group run again. None when `source`
+    /// kept no groups.
+    ///
+    /// # Errors
+    /// When the thread cannot be started.
+    pub fn refinish(
+        scan: Scan,
+        source: &Clip,
+        params: PipelineParams,
+        param_state: ParamState,
+        repaint: Box<dyn Fn() + Send + Sync>,
+    ) -> std::io::Result<Option<Self>> {
+        let Some(kept) = source.groups_before_finish.clone() else {
+            return Ok(None);
+        };
+        let groups = source.groups.clone();
+        let tracks = source.tracks.clone();
+        // The groups' own seconds are the earlier run's; only the finish is new.
+        let before = &source.recon.timings;
+        let groups_secs = before.total_secs - before.finish_secs;
+        let run = Self::launch(groups.len(), groups.start, true, move |tx, flag, _| {
+            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                params.validate_for_clip()?;
+                let mut recon = finish(&scan, (*kept).clone(), &params)?;
+                if flag.load(Ordering::Relaxed) {
+                    return Err(EngineError::Cancelled);
+                }
+                recon.timings.total_secs = groups_secs + recon.timings.finish_secs;
+                Ok(recon)
+            }));
+            let outcome = result_text(result).map(|recon| {
+                let mut clip = make_clip(&scan, recon, params, param_state, groups, tracks);
+                clip.groups_before_finish = Some(kept);
+                clip.refinished = true;
+                Box::new(clip)
+            });
+            let _ = tx.send(ReconEvent::Finished(outcome));
+            repaint();
+        })?;
+        Ok(Some(run))
+    }
+
+    /// Starts `body` on the reconstruction thread with the run's channel, cancel flag and
+    /// partial-sound request flag.
+    fn launch(
+        total: usize,
+        first_group: usize,
+        refinishing: bool,
+        body: impl FnOnce(mpsc::Sender<ReconEvent>, Arc<AtomicBool>, Arc<AtomicBool>) + Send + 'static,
+    ) -> std::io::Result<Self> {
+        let cancel = Arc::new(AtomicBool::new(false));
+        let partial_wanted = Arc::new(AtomicBool::new(false));
+        let (tx, rx) = mpsc::channel();
+        let (flag, wanted) = (cancel.clone(), partial_wanted.clone());
+        let thread = std::thread::Builder::new()
+            .name("groovescope-reconstruct".into())
+            .spawn(move || body(tx, flag, wanted))?;
         Ok(Self {
             cancel,
             partial_wanted,
@@ -335,6 +439,7 @@ impl ReconRun {
             partial: Vec::new(),
             tracks: Vec::new(),
             first_group,
+            refinishing,
             partial_sound: None,
         })
     }

@@ -182,6 +182,30 @@ pub fn reconstruct(
     cancel: &AtomicBool,
 ) -> Result<Reconstruction, EngineError> {
     let started = Instant::now();
+    let clip = run_clip_groups(scan, opts, progress, cancel)?;
+    let mut rec = finish_reconstruction(
+        clip,
+        &scan.meta,
+        scan.reference.as_deref(),
+        &opts.params,
+        &scan.dir,
+    )?;
+    rec.timings.total_secs = started.elapsed().as_secs_f64();
+    Ok(rec)
+}
+
+/// Runs the groups of [`reconstruct`] and gathers them, without the finish: what
+/// [`finish_reconstruction`] makes the clip of, with these params or with another `[dsp]`
+/// table (only the finish reads it).
+///
+/// # Errors
+/// As [`reconstruct`], but for [`EngineError::NoSound`], which only the finish says.
+pub fn run_clip_groups(
+    scan: &Scan,
+    opts: &ReconstructOptions,
+    progress: &mut dyn FnMut(&Progress),
+    cancel: &AtomicBool,
+) -> Result<ClipGroups, EngineError> {
     let params = &opts.params;
     params.validate_for_clip()?;
     let range = opts.groups.clone().unwrap_or(0..scan.groups.len());
@@ -211,15 +235,7 @@ pub fn reconstruct(
             Ok(())
         },
     )?;
-    let mut rec = finish_reconstruction(
-        clip,
-        &scan.meta,
-        scan.reference.as_deref(),
-        params,
-        &scan.dir,
-    )?;
-    rec.timings.total_secs = started.elapsed().as_secs_f64();
-    Ok(rec)
+    Ok(clip)
 }
 
 /// The groups of a clip gathered in order: signals, report rows, warnings and timings.
@@ -254,6 +270,12 @@ impl ClipGroups {
             stage_secs: vec![0.0; Stage::ALL.len()],
             ..Self::default()
         }
+    }
+
+    /// Bytes its signals and border tracks hold on the heap.
+    #[must_use]
+    pub fn signal_bytes(&self) -> usize {
+        self.signals.heap_bytes() + self.borders.heap_bytes()
     }
 
     /// Adds the next group's outcome.

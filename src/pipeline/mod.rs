@@ -191,6 +191,17 @@ pub struct PipelineParams {
 }
 
 impl PipelineParams {
+    /// True when `other` runs the same groups as these params: they differ at most in the
+    /// `[dsp]` table, which only the finish reads.
+    #[must_use]
+    pub fn same_groups_as(&self, other: &Self) -> bool {
+        *other
+            == Self {
+                dsp: other.dsp.clone(),
+                ..self.clone()
+            }
+    }
+
     /// Parses params TOML (missing tables and keys take defaults).
     ///
     /// # Errors

@@ -170,6 +170,17 @@ pub fn transport_ui(
     });
 }
 
+/// What a running reconstruction is at, in words for its progress bar.
+fn run_progress_text(r: &crate::app::recon::ReconRun) -> String {
+    if r.refinishing {
+        return format!("{} groups: finishing with the new filters…", r.total);
+    }
+    let eta = r
+        .eta()
+        .map_or("…".into(), |d| format!("{:.0} s left", d.as_secs_f64()));
+    format!("group {} / {} · {eta}", r.done, r.total)
+}
+
 /// Reconstruct (all, a range, around the current group) or its progress and cancel; the
 /// export format and buttons.
 pub fn clip_controls_ui(
@@ -182,13 +193,10 @@ pub fn clip_controls_ui(
 ) {
     ui.horizontal_wrapped(|ui| {
         if let Some(r) = &clips.run {
-            let eta = r
-                .eta()
-                .map_or("…".into(), |d| format!("{:.0} s left", d.as_secs_f64()));
             ui.add(
                 egui::ProgressBar::new(r.fraction())
                     .desired_width(240.0)
-                    .text(format!("group {} / {} · {eta}", r.done, r.total)),
+                    .text(run_progress_text(r)),
             );
             if cancel_button(ui, r.cancelling(), "Cancel") {
                 actions.push(WaveAction::Cancel);

@@ -150,6 +150,22 @@ impl SignalPack {
         self.entries.is_empty()
     }
 
+    /// Bytes it holds on the heap (its blocks' and entries' capacity).
+    #[must_use]
+    pub fn heap_bytes(&self) -> usize {
+        let blocks: usize = self
+            .blocks
+            .iter()
+            .map(|b| {
+                b.positions_um.capacity() * std::mem::size_of::<f64>()
+                    + b.samples.capacity() * std::mem::size_of::<f32>()
+            })
+            .sum();
+        blocks
+            + self.blocks.capacity() * std::mem::size_of::<Block>()
+            + self.entries.capacity() * std::mem::size_of::<Entry>()
+    }
+
     /// Appends a copy of `signal`'s samples. A channel whose length differs from the
     /// positions' is cut or padded with NaN and the group marked (its view's
     /// [`SignalView::lengths_agree`] is false), so the stitcher refuses it as it would the
