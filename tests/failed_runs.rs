@@ -81,6 +81,7 @@ fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
             "4 finished groups are kept in",
             "a.wav.journal",
             "--resume",
+            "add --keep-going to make the unreadable group a gap",
         ],
     );
     assert_eq!(names(&work), ["a.wav.journal"]);
@@ -102,6 +103,41 @@ fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
     assert!(!o.status.success());
     assert!(!stderr(&o).contains("kept in"), "{}", stderr(&o));
     assert_eq!(names(&work), ["a.wav"]);
+}
+
+/// A run stopped by a damaged frame goes on past it with `--resume --keep-going` (its journal
+/// holds only groups that read, as a run with --keep-going makes them), to the sound a run with
+/// --keep-going from the start makes.
+#[test]
+fn a_run_stopped_by_a_damaged_frame_goes_on_past_it_with_keep_going() {
+    use groovescope::io::wav::read_wav;
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    std::fs::write(demo.join("g00006/f002.png"), b"not a png").unwrap();
+    let out = work.join("a.wav");
+    refused(&demo, &out, &[], &["6 finished groups are kept in"]);
+    let resumed = groovescope(&[
+        "reconstruct",
+        s(&demo),
+        "--out",
+        s(&out),
+        "--resume",
+        "--keep-going",
+    ]);
+    assert!(resumed.status.success(), "{}", stderr(&resumed));
+    let said = String::from_utf8_lossy(&resumed.stdout);
+    assert!(said.contains("6 read back from the journal"), "{said}");
+    let whole = work.join("b.wav");
+    let o = reconstruct(&demo, &whole, &["--keep-going"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        read_wav(&out).unwrap().channels,
+        read_wav(&whole).unwrap().channels
+    );
+    // A journal made with --keep-going refused by a run without it: src/side/journal.rs.
+    assert_eq!(names(&work), ["a.wav", "b.wav"]);
 }
 
 #[test]

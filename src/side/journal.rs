@@ -101,15 +101,21 @@ impl Journal {
     ///
     /// # Errors
     /// [`SideError::Refused`] naming the journal when it belongs to another run (another scan,
-    /// other params beyond `[dsp]` or another version, another plan, shard or range) or is not
-    /// a journal.
+    /// other params beyond `[dsp]` or another version, another plan, shard or range, or
+    /// `--keep-going` where `identity` lacks it) or is not a journal.
     pub fn resume(
         path: &Path,
         identity: &RunIdentity,
     ) -> Result<(Self, Vec<Record>, bool), SideError> {
         let bytes =
             std::fs::read(path).map_err(|e| SideError::io("cannot read the journal", &e, path))?;
-        let (found, records, valid) = read_record_file(&bytes, JOURNAL_MAGIC, "journal", path)?;
+        let (mut found, records, valid) = read_record_file(&bytes, JOURNAL_MAGIC, "journal", path)?;
+        // A run without --keep-going stops at the first unreadable group, so its journal holds
+        // only groups that read, each as a run with --keep-going makes it: such a run goes on
+        // from them (past a damaged frame that stopped it), never the other way round.
+        if identity.keep_going && found.shard.is_none() {
+            found.keep_going = true;
+        }
         let difference = identity.difference(&found);
         if let Some(diff) = &difference
             && !identity.same_groups_as(&found)
@@ -189,5 +195,49 @@ impl Journal {
         drop(self.file);
         std::fs::remove_file(&self.path)
             .map_err(|e| SideError::io("cannot remove the finished journal", &e, &self.path))
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::*;
+    use crate::pipeline::PipelineParams;
+
+    fn identity(keep_going: bool) -> RunIdentity {
+        RunIdentity {
+            groovescope: env!("CARGO_PKG_VERSION").into(),
+            scan: "scan".into(),
+            scan_fingerprint: "0123456789abcdef".into(),
+            scan_groups: 10,
+            params_fingerprint: "fedcba9876543210".into(),
+            keep_going,
+            groups: (0, 10),
+            shard: None,
+            params: PipelineParams::default(),
+            meta_toml: String::new(),
+        }
+    }
+
+    /// A journal made without --keep-going holds only groups that read: a run with it goes on
+    /// from them. One made with --keep-going may hold gaps, which a run without it would not
+    /// have made: refused, in words (the params' fingerprints are the same).
+    #[test]
+    fn keep_going_may_be_added_on_resume_never_dropped() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("o.wav.journal");
+        Journal::create(&path, &identity(false)).unwrap();
+        let (_, records, other_finish) = Journal::resume(&path, &identity(true)).unwrap();
+        assert!(records.is_empty() && !other_finish);
+        Journal::create(&path, &identity(true)).unwrap();
+        let e = Journal::resume(&path, &identity(false))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(
+                "made with --keep-going (unreadable groups became gaps), which this run lacks"
+            ) && e.contains("o.wav.journal"),
+            "{e}"
+        );
     }
 }

@@ -158,24 +158,21 @@ impl RunIdentity {
                 other.scan_fingerprint, self.scan_fingerprint
             ));
         }
-        if other.params_fingerprint != self.params_fingerprint
-            || other.keep_going != self.keep_going
-        {
+        if other.params_fingerprint != self.params_fingerprint {
             return Some(format!(
-                "made with other params (fingerprint {}{}, expected {}{})",
-                other.params_fingerprint,
-                if other.keep_going {
-                    " with --keep-going"
-                } else {
-                    ""
-                },
-                self.params_fingerprint,
-                if self.keep_going {
-                    " with --keep-going"
-                } else {
-                    ""
-                },
+                "made with other params (fingerprint {}, expected {})",
+                other.params_fingerprint, self.params_fingerprint
             ));
+        }
+        if other.keep_going != self.keep_going {
+            return Some(
+                if other.keep_going {
+                    "made with --keep-going (unreadable groups became gaps), which this run lacks"
+                } else {
+                    "made without --keep-going, which this run has"
+                }
+                .to_string(),
+            );
         }
         let plan = |s: &Option<ShardId>| s.as_ref().map(|s| s.plan_fingerprint.clone());
         if plan(&other.shard) != plan(&self.shard) {

@@ -15,7 +15,7 @@ use crate::engine::{
 };
 use crate::io::bwf::{BroadcastInfo, disc_words};
 use crate::io::wav::write_transfer_wav;
-use crate::io::{Scan, ScanMeta, write_json_atomic};
+use crate::io::{LoadError, Scan, ScanMeta, write_json_atomic};
 use crate::pipeline::PipelineParams;
 use crate::side::part::{PART_FILE, read_part, write_part};
 use crate::side::plan::Plan;
@@ -399,6 +399,14 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
             scan.dir.display()
         );
     }
+    if let Some(n) = args.groups.filter(|&n| first.saturating_add(n) > end) {
+        eprintln!(
+            "warning: --groups {n} from group {first} runs past the scan's last group ({} \
+             groups): running the {} there are",
+            scan.groups.len(),
+            end - first
+        );
+    }
     check_missing_groups(&scan, first..end, args.keep_going)?;
     let journal = journal_path(&args.out);
     let run = RangeRun {
@@ -458,7 +466,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
     // The journal is this run's own when it was not there, or when --force (without
     // --resume) started it over; a refused or failed --resume never loses the one it was given.
     let created = !had_journal || (args.force && !args.side.resume);
-    outcome.map_err(|e| after_failure(e, &journal, created, finished))
+    outcome.map_err(|e| after_failure(e, &journal, created, finished, args.keep_going))
 }
 
 /// A failed run's error, and what becomes of its journal: one this run `created` is removed
@@ -470,6 +478,7 @@ fn after_failure(
     journal: &Path,
     created: bool,
     finished: usize,
+    keep_going: bool,
 ) -> anyhow::Error {
     if !journal.exists() {
         return e;
@@ -485,9 +494,36 @@ fn after_failure(
     if finished == 0 {
         return e;
     }
+    // An unreadable frame stops the run again at the same group unless it becomes a gap.
+    let unreadable_frame = |l: &LoadError| {
+        matches!(
+            l,
+            LoadError::BadFrame { .. } | LoadError::TooFewFrames { .. }
+        )
+    };
+    let unreadable = e.chain().any(|c| {
+        use crate::engine::EngineError;
+        use crate::side::SideError;
+        c.downcast_ref::<LoadError>().is_some_and(unreadable_frame)
+            || match c.downcast_ref::<EngineError>() {
+                Some(EngineError::Load(l)) => unreadable_frame(l),
+                _ => false,
+            }
+            || match c.downcast_ref::<SideError>() {
+                Some(SideError::Load(l) | SideError::Engine(EngineError::Load(l))) => {
+                    unreadable_frame(l)
+                }
+                _ => false,
+            }
+    });
+    let how = if unreadable && !keep_going {
+        "the same command with --resume goes on from them; add --keep-going to make the \
+         unreadable group a gap, or mend its frames first"
+    } else {
+        "the same command with --resume goes on from them"
+    };
     anyhow::anyhow!(
-        "{e:#} ({finished} finished groups are kept in {}: the same command with --resume goes on \
-         from them)",
+        "{e:#} ({finished} finished groups are kept in {}: {how})",
         journal.display()
     )
 }
