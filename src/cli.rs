@@ -9,7 +9,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::io::wav::{Audio, WavBits};
 use crate::job::Job;
 pub(crate) use crate::output_checks::{
-    check_outputs, check_outside_scan, check_parent_exists, undo_first_on_error,
+    check_folder_outside_scan, check_outputs, check_outside_scan, check_parent_exists,
+    undo_first_on_error,
 };
 use crate::pipeline::PipelineParams;
 use crate::pipeline::{Method, PathChoice};
@@ -596,6 +597,7 @@ pub fn run(command: Command) -> Result<()> {
             force,
         } => {
             check_parent_exists(&out)?;
+            check_folder_outside_scan(&out, &scan)?;
             let mut p = load_params(params.as_deref())?;
             p.path = path_choice(&path, p.path);
             crate::inspect::run_inspect(&scan, group, &out, &p, force)
@@ -610,6 +612,9 @@ pub fn run(command: Command) -> Result<()> {
             if let Some(keep) = &keep {
                 check_parent_exists(keep)?;
             }
+            // The shared checks first: a folder named as the report is refused before the
+            // suite's minutes, not when the report is written.
+            check_outputs(&[out.as_path()], &[], force)?;
             let opts = crate::accuracy::AccuracyOptions { quick, keep };
             crate::accuracy::write_report(&out, force, &opts, &mut |line| {
                 if !quiet {

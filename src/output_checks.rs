@@ -31,6 +31,18 @@ pub(crate) fn check_outputs(paths: &[&Path], inputs: &[&Path], force: bool) -> R
         if out.is_dir() {
             bail!("the output is a folder, not a file name: {}", out.display());
         }
+        // `x.wav/` names a folder: its write would fail only after the work.
+        if out
+            .as_os_str()
+            .as_encoded_bytes()
+            .last()
+            .is_some_and(|&b| std::path::is_separator(char::from(b)))
+        {
+            bail!(
+                "the output ends in a path separator, which names a folder, not a file: {}",
+                out.display()
+            );
+        }
         check_parent_exists(out)?;
         let id = identity(out);
         if seen.contains(&id) {
@@ -105,6 +117,31 @@ pub(crate) fn check_outside_scan(paths: &[&Path], scan: &Path) -> Result<()> {
                 out.display()
             );
         }
+    }
+    Ok(())
+}
+
+/// Refuses an output folder (one a command makes and fills) inside a scan folder or store, or
+/// the scan itself, `--force` or not: a folder there is read as a group, or alters one.
+///
+/// # Errors
+/// One line naming the output and the scan.
+pub(crate) fn check_folder_outside_scan(out: &Path, scan: &Path) -> Result<()> {
+    let Ok(scan_id) = std::fs::canonicalize(scan) else {
+        return Ok(());
+    };
+    // The folder as it will be: itself where it exists, else its parent's place joined.
+    let id = std::fs::canonicalize(out).ok().or_else(|| {
+        let parent = out.parent().filter(|p| !p.as_os_str().is_empty());
+        let parent = std::fs::canonicalize(parent.unwrap_or(Path::new("."))).ok()?;
+        Some(parent.join(out.file_name()?))
+    });
+    if id.is_some_and(|id| id.starts_with(&scan_id)) {
+        bail!(
+            "the output folder lies inside the scan it reads ({}), where it would be read as a group or alter one: {}",
+            scan.display(),
+            out.display()
+        );
     }
     Ok(())
 }

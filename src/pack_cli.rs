@@ -72,6 +72,7 @@ pub(crate) fn stopped(e: impl std::fmt::Display, kept: bool) -> anyhow::Error {
 /// An unreadable or irregular scan, an output folder that is not empty, a failed check.
 pub fn run_pack(args: &PackArgs) -> Result<()> {
     crate::cli::check_parent_exists(&args.out)?;
+    crate::cli::check_folder_outside_scan(&args.out, &args.scan)?;
     if !(1..=22).contains(&args.zstd_level) {
         bail!("--zstd-level must be 1 to 22, got {}", args.zstd_level);
     }

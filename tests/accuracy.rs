@@ -111,6 +111,21 @@ fn accuracy_refuses_to_overwrite_a_report() {
         "{err}"
     );
     assert_eq!(std::fs::read_to_string(&out).unwrap(), "mine");
+    // A folder is refused before the suite runs, --force or not (it used to run the whole
+    // suite, then fail to write).
+    let o = groovescope(&[
+        "accuracy",
+        "--quick",
+        "--force",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("is a folder") && !err.contains("tone"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -42,6 +42,17 @@ fn outputs_are_checked_before_any_group_runs() {
         &[],
         &["folder does not exist", "nodir"],
     );
+    // A name ending in a separator names a folder: it used to run every group, then fail to
+    // write, leaving a journal whose --resume failed the same way.
+    for name in ["newdir/", "new.wav/"] {
+        let out = format!("{}/{name}", s(&work));
+        refused(
+            &scan,
+            Path::new(&out),
+            &["--force"],
+            &["names a folder, not a file", name],
+        );
+    }
     let same = work.join("same.wav");
     refused(
         &scan,
@@ -271,8 +282,17 @@ fn nothing_is_written_among_a_scans_frames_or_over_a_part() {
         &["--report", s(&report)],
         &["g00002"],
     );
+    // Nor does a command that makes a folder put it among the groups (a new folder is read as
+    // a group, an old one altered), nor in the scan's own place.
+    for out in [demo.join("g00005"), demo.join("inspected"), demo.clone()] {
+        let o = groovescope(&["inspect", s(&demo), "--group", "3", "--out", s(&out)]);
+        common::failed_with(&o, &["output folder lies inside the scan it reads"]);
+    }
+    let o = groovescope(&["pack", s(&demo), "--out", s(&demo.join("demo.zarr"))]);
+    common::failed_with(&o, &["output folder lies inside the scan it reads"]);
     assert_eq!(std::fs::read(&frame).unwrap(), before);
     assert!(!demo.join("g00000/f999.png").exists() && !report.exists());
+    assert!(!demo.join("inspected").exists() && !demo.join("demo.zarr").exists());
     // Beside the groups is the archivist's choice, and the scan still reads after it.
     let beside = demo.join("transfer.wav");
     assert!(reconstruct(&demo, &beside, &[]).status.success());
