@@ -294,7 +294,7 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
             summary.frames_per_group,
             &details,
         );
-        println!("{line}");
+        crate::say!("{line}")?;
     }
     Ok(())
 }
@@ -318,11 +318,11 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
         None => SceneConfig::default(),
     };
     let meta = render_scene(kind, &cfg, out, Job::reporting(&|_, _| {}))?;
-    println!(
+    crate::say!(
         "wrote {} ({} frames with true depth)",
         out.display(),
         meta.frames
-    );
+    )?;
     Ok(())
 }
 
@@ -509,7 +509,7 @@ fn run_flow(args: &FlowArgs) -> Result<()> {
     };
     let flow = compute_flow(mid, args.focal_px, None, &params.flow)?;
     crate::io::flo::write_flo(&args.out, &flow.u, &flow.v, args.force)?;
-    println!(
+    crate::say!(
         "wrote {} ({}x{}, frame {}, {} iterations{})",
         args.out.display(),
         flow.u.width,
@@ -517,7 +517,7 @@ fn run_flow(args: &FlowArgs) -> Result<()> {
         flow.frame_index,
         flow.iterations,
         if flow.converged { ", converged" } else { "" }
-    );
+    )?;
     Ok(())
 }
 
@@ -581,7 +581,7 @@ pub fn run(command: Command) -> Result<()> {
         } => crate::eval_cli::run_eval(&recovered, &reference, json, max_lag_ms),
         Command::Flow(args) => run_flow(&args),
         Command::Params => {
-            print!("{}", params_toml_documented()?);
+            crate::stdout::write_text(&params_toml_documented()?)?;
             Ok(())
         }
         Command::Synth(args) => run_synth(&args),
@@ -622,7 +622,7 @@ pub fn run(command: Command) -> Result<()> {
                 }
             })?;
             if !quiet {
-                println!("wrote {}", out.display());
+                crate::say!("wrote {}", out.display())?;
             }
             Ok(())
         }

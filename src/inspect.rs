@@ -213,12 +213,12 @@ pub fn run_inspect(
         .copied()
         .filter(|name| !written.iter().any(|w| w == name) && out_dir.join(name).is_file())
         .collect();
-    println!(
+    crate::say!(
         "wrote {} files into {}: {}",
         written.len(),
         out_dir.display(),
         written.join(", ")
-    );
+    )?;
     if !stale.is_empty() {
         eprintln!(
             "warning: {} in {} are not from this run (an earlier inspect left them)",

@@ -21,6 +21,7 @@ pub mod pipeline;
 #[cfg(feature = "gui")]
 pub mod playback;
 pub mod side;
+pub mod stdout;
 pub mod still;
 pub mod synth;
 #[cfg(test)]

@@ -58,14 +58,14 @@ fn default_action() -> anyhow::Result<()> {
     let out = PathBuf::from(format!("{stem}.wav"));
     let report = PathBuf::from(format!("{stem}.report.json"));
     let demo = read_generated_still(&demo_still_dir())?;
-    println!(
+    groovescope::say!(
         "no display: decoding groove {} of the demo still {} to {}",
         demo.groove,
         demo.image.display(),
         out.display()
-    );
+    )?;
     run_still(&demo.still_args(out, Some(report.clone())))?;
-    println!("report: {}", report.display());
+    groovescope::say!("report: {}", report.display())?;
     Ok(())
 }
 

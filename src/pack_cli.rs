@@ -92,10 +92,11 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
         stopped(e, kept)
     })?;
     if summary.resumed > 0 && !args.quiet {
-        println!(
+        crate::say!(
             "resumed: {} of {} groups were packed and checked before",
-            summary.resumed, summary.groups
-        );
+            summary.resumed,
+            summary.groups
+        )?;
     }
     let packed = Scan::open(&summary.out)?;
     if scan_fingerprint(&packed) != scan_fingerprint(&scan) {
@@ -120,7 +121,7 @@ pub fn run_pack(args: &PackArgs) -> Result<()> {
             summary.frames_per_group,
             &details,
         );
-        println!("{line}; every chunk read back and checked");
+        crate::say!("{line}; every chunk read back and checked")?;
     }
     Ok(())
 }

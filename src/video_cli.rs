@@ -138,10 +138,11 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
     };
     pb.finish_and_clear();
     if summary.resumed_groups > 0 && !args.quiet {
-        println!(
+        crate::say!(
             "resumed: {} of {} groups were written and checked before",
-            summary.resumed_groups, summary.groups
-        );
+            summary.resumed_groups,
+            summary.groups
+        )?;
     }
     if !args.quiet {
         let details = format!(
@@ -153,7 +154,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
             summary.frames_decoded,
             summary.codec
         );
-        println!(
+        crate::say!(
             "{}",
             crate::cli::wrote_scan(
                 &summary.out_dir,
@@ -161,7 +162,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
                 summary.frames_per_group,
                 &details
             )
-        );
+        )?;
     }
     for path in &summary.removed_stale {
         eprintln!(

@@ -19,6 +19,40 @@ fn params_prints_toml_that_parses_back() {
     assert!(text.contains("lambda"));
 }
 
+/// Standard output that cannot be written is one line, never a panic: a full disk under `>`
+/// is an error naming standard output; a reader that went away (`| head`) is none, and the
+/// transfer is written all the same.
+#[test]
+fn standard_output_full_or_closed_is_no_panic() {
+    use std::process::{Command, Stdio};
+    let run = |args: &[&str], stdout: Stdio| {
+        Command::new(env!("CARGO_BIN_EXE_groovescope"))
+            .args(args)
+            .stdout(stdout)
+            .output()
+            .unwrap()
+    };
+    let full = || Stdio::from(std::fs::File::create("/dev/full").unwrap());
+    let o = run(&["params"], full());
+    assert!(!o.status.success());
+    assert_eq!(
+        stderr(&o).trim(),
+        "error: cannot write to standard output: No space left on device (os error 28)"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let demo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo");
+    let wav = dir.path().join("o.wav");
+    // The pipe's reader is gone before the command starts, so every write meets EPIPE.
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let o = run(
+        &["reconstruct", s(&demo), "--out", s(&wav)],
+        Stdio::from(writer),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked") && wav.is_file());
+}
+
 #[test]
 fn missing_scan_folder_is_named() {
     let dir = tempfile::tempdir().unwrap();

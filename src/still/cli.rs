@@ -94,7 +94,7 @@ pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
     let summary = write_still(&scene, &args.out)?;
     if !args.quiet {
         let t = &summary.truth;
-        println!(
+        crate::say!(
             "wrote {} ({} × {} px, {} grooves, {:?} axis); decode groove N with: groovescope still {} \
              --um-per-px {} --rpm {:.4} --radius-mm <grooves[N].radius_mm in truth.toml> --axis {} --groove N",
             summary.image.display(),
@@ -109,7 +109,7 @@ pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
                 Axis::Vertical => "vertical",
                 Axis::Horizontal => "horizontal",
             }
-        );
+        )?;
     }
     Ok(())
 }
@@ -320,10 +320,10 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
             a.grooves.grooves.len(),
             run.timings.total_secs
         );
-        println!(
+        crate::say!(
             "{}",
             crate::cli::wrote_sound(&args.out, &run.audio, &details)
-        );
+        )?;
         for (c, s) in scores.iter().flatten().enumerate() {
             if let Some(s) = s {
                 let channel = if run.audio.channels.len() > 1 {
@@ -331,7 +331,7 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
                 } else {
                     String::new()
                 };
-                println!("vs reference{channel}: {}", s.line());
+                crate::say!("vs reference{channel}: {}", s.line())?;
             }
         }
     }

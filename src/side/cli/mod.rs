@@ -460,7 +460,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
             )?;
         }
         result.journal.remove()?;
-        finish_message(args, &rec, &run_progress);
+        finish_message(args, &rec, &run_progress)?;
         Ok(rec)
     })();
     // The journal is this run's own when it was not there, or when --force (without
@@ -528,7 +528,7 @@ fn after_failure(
     )
 }
 
-fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress) {
+fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress) -> Result<()> {
     if args.side.progress_json {
         let line = serde_json::json!({
             "event": "done", "output": args.out.display().to_string(),
@@ -540,7 +540,7 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
     // Warnings are printed even with --quiet: a gap filled with silence must not pass unseen.
     crate::cli::print_warnings(&rec.warnings);
     if args.quiet {
-        return;
+        return Ok(());
     }
     // After a resume the time and the rate are this run's, so its groups are counted apart.
     let mut groups = format!("{} groups", rec.groups.len());
@@ -561,9 +561,10 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
         if args.side.progress_json {
             eprintln!("{line}");
         } else {
-            println!("{line}");
+            crate::say!("{line}")?;
         }
     }
+    Ok(())
 }
 
 /// The shard's report beside its part.
@@ -683,7 +684,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
         json_line(&serde_json::json!({"event": "done", "output": written.display().to_string()}));
         eprintln!("{text}");
     } else if !args.quiet {
-        println!("{text}");
+        crate::say!("{text}")?;
     }
     Ok(())
 }

@@ -165,10 +165,10 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
             merged.parts.len(),
             rec.groups.len()
         );
-        println!(
+        crate::say!(
             "{}",
             crate::cli::wrote_sound(&args.out, &rec.audio, &details)
-        );
+        )?;
     }
     Ok(())
 }
@@ -269,36 +269,39 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
     )?;
     let plan = Plan::new(&scan, &params, args.keep_going, args.shards, probe)?;
     write_json_atomic(&args.out, &plan, args.force)?;
-    println!(
+    crate::say!(
         "wrote {} ({} groups in {} shards; each also runs up to {} groups before its range)",
         args.out.display(),
         plan.groups,
         plan.shards.len(),
         plan.context_groups
-    );
+    )?;
     if let Some(s) = plan.secs_per_group {
-        println!("{s:.4} s a group ({})", plan.secs_per_group_basis);
+        crate::say!("{s:.4} s a group ({})", plan.secs_per_group_basis)?;
     }
     for s in &plan.shards {
         let eta = s.expected_secs.map_or_else(
             || "not estimated".to_string(),
             |t| format!("about {}", human_secs(t)),
         );
-        println!(
+        crate::say!(
             "  shard {:>3}: groups {}..{} (from {} with context), {eta}",
-            s.index, s.first_group, s.end_group, s.context_first_group
-        );
+            s.index,
+            s.first_group,
+            s.end_group,
+            s.context_first_group
+        )?;
     }
     if args.slurm {
         let last = plan.shards.len() - 1;
         let parts = shell_quoted(&args.parts);
-        println!(
+        crate::say!(
             "# submit the shards as a job array, then the merge once every shard has finished:\n\
              jid=$(sbatch --parsable --array=0-{last} scripts/slurm/reconstruct-side.sbatch {} {} {parts})\n\
              sbatch --dependency=afterok:$jid scripts/slurm/merge-side.sbatch {parts} side.wav",
             shell_quoted(&scan.dir),
             shell_quoted(&args.out),
-        );
+        )?;
     }
     Ok(())
 }
