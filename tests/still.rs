@@ -452,6 +452,15 @@ fn bad_stills_get_one_clear_line() {
 
     let err = still_error(&dir.path().join("missing.png"), "100", &[]);
     assert!(err.contains("missing.png"), "{err}");
+    // A reference that does not read is said before the decode (it used to be read after it,
+    // the decode thrown away): here before the image, which does not read either.
+    let missing_ref = dir.path().join("no-such-reference.wav");
+    let err = still_error(
+        &dir.path().join("missing.png"),
+        "100",
+        &["--reference", s(&missing_ref)],
+    );
+    assert!(err.contains("no-such-reference.wav"), "{err}");
 
     // A groove too narrow to hold two walls is a setting to mend, not "no groove found".
     let narrow = dir.path().join("narrow.toml");

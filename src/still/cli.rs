@@ -230,6 +230,21 @@ struct StillReport<'a> {
     warnings: &'a [String],
 }
 
+/// The still decode's progress bar: its phase and the share of it done (hidden with `quiet`,
+/// and where standard error is not a terminal).
+fn still_progress(quiet: bool) -> indicatif::ProgressBar {
+    if quiet {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new(1000);
+    if let Ok(style) =
+        indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:40} {msg}")
+    {
+        pb.set_style(style);
+    }
+    pb
+}
+
 /// Runs `still`.
 ///
 /// # Errors
@@ -243,7 +258,15 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
         .chain(args.params.as_deref())
         .collect();
     crate::cli::check_outputs(&outputs, &inputs, args.force)?;
+    // One writer an output, taken before the decode: a folder it cannot write in is said now.
+    let _locks = crate::side::cli::lock_outputs(&outputs)?;
     let params = crate::cli::load_params(args.params.as_deref())?;
+    // The reference is read first, so that a bad one is said before the decode, not after.
+    let reference = args
+        .reference
+        .as_deref()
+        .map(|r| crate::io::wav::read_reference_wav(r).map(|a| (a, r)))
+        .transpose()?;
     let axis = if args.axis == "horizontal" {
         Axis::Horizontal
     } else {
@@ -279,11 +302,22 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
             args.image.display()
         );
     }
-    let run = super::decode_still_file(&args.image, &setup, args.groove, &params)?;
-    let scores = args
-        .reference
-        .as_deref()
-        .map(|r| super::score_still(&run.audio, r))
+    let pb = still_progress(args.quiet);
+    let run = super::decode_still_file_reporting(
+        &args.image,
+        &setup,
+        args.groove,
+        &params,
+        &mut |phase, done| {
+            pb.set_message(phase.describe());
+            pb.set_position((done.clamp(0.0, 1.0) * 1000.0) as u64);
+        },
+    );
+    pb.finish_and_clear();
+    let run = run?;
+    let scores = reference
+        .as_ref()
+        .map(|(refa, path)| super::score_still_against(&run.audio, refa, path))
         .transpose()?;
     let info = still_transfer_info(&args.image, &run, &setup, &params, args.bits);
     crate::io::wav::write_transfer_wav(&args.out, &run.audio, args.bits, args.force, &info)?;

@@ -168,10 +168,27 @@ pub fn decode_still_file(
     groove: Option<usize>,
     params: &PipelineParams,
 ) -> Result<StillRun, StillRunError> {
+    decode_still_file_reporting(path, setup, groove, params, &mut |_, _| {})
+}
+
+/// [`decode_still_file`], telling `report` each phase and the share of it done.
+///
+/// # Errors
+/// As [`decode_still_file`].
+pub fn decode_still_file_reporting(
+    path: &Path,
+    setup: &StillSetup,
+    groove: Option<usize>,
+    params: &PipelineParams,
+    report: &mut dyn FnMut(StillPhase, f64),
+) -> Result<StillRun, StillRunError> {
     let started = Instant::now();
     let mut open = || StillReader::open(path);
     let interrupted = crate::job::interrupted();
-    let mut go_on = |_: StillPhase, _: f64| !interrupted.load(std::sync::atomic::Ordering::Relaxed);
+    let mut go_on = |phase: StillPhase, done: f64| {
+        report(phase, done);
+        !interrupted.load(std::sync::atomic::Ordering::Relaxed)
+    };
     let found = find_grooves(&mut open, setup, &params.still, &mut go_on)?;
     let chosen = choose_groove(&found.grooves, groove).map_err(|problem| StillRunError::Still {
         problem,
@@ -336,7 +353,18 @@ pub fn decode_groove(
 /// # Errors
 /// [`LoadError`] when the reference cannot be read or resampled.
 pub fn score_still(audio: &Audio, reference: &Path) -> Result<Vec<Option<Scores>>, LoadError> {
-    let refa = read_reference_wav(reference)?;
+    score_still_against(audio, &read_reference_wav(reference)?, reference)
+}
+
+/// [`score_still`] against a reference already read from `reference`.
+///
+/// # Errors
+/// [`LoadError`] when the reference cannot be resampled.
+pub fn score_still_against(
+    audio: &Audio,
+    refa: &Audio,
+    reference: &Path,
+) -> Result<Vec<Option<Scores>>, LoadError> {
     let rate = audio.sample_rate_hz;
     let to_rate = |c: &[f32]| -> Result<Vec<f32>, LoadError> {
         if refa.sample_rate_hz == rate {
