@@ -9,6 +9,7 @@ pub mod limits;
 pub mod lock;
 mod numbering;
 pub mod scan;
+pub mod staged;
 pub mod still;
 #[cfg(feature = "video")]
 pub mod video;

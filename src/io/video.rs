@@ -25,9 +25,13 @@ use serde::Serialize;
 
 use super::LoadError;
 use super::atomic::{dir_is_missing_or_empty, write_atomic};
+use super::staged::{StagedDir, remove_stale};
 use crate::image::Image;
 use crate::job::Job;
 use grey::{GreyConverter, Splitter, component_depth_bits, estimated_frames};
+
+/// The kind in the names of an import's temporary folders (`.NAME.import-PID.tmp`).
+const IMPORT: &str = "import";
 
 mod encode;
 mod grey;
@@ -166,109 +170,11 @@ pub struct ImportSummary {
     pub resumed_groups: usize,
 }
 
-/// Removes the temporary folder unless the import finished.
-struct TempDir {
-    path: PathBuf,
-    keep: bool,
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        if !self.keep {
-            let _ = std::fs::remove_dir_all(&self.path);
-        }
-    }
-}
-
 fn io_err(problem: String, path: &Path) -> VideoError {
     VideoError::Load(LoadError::Io {
         problem,
         path: path.to_path_buf(),
     })
-}
-
-/// The folder holding `out_dir` and the start of its temporary folders' names: an import run
-/// by process PID writes into `{prefix}{PID}{TEMP_SUFFIX}` there.
-fn temp_parent_and_prefix(out_dir: &Path) -> (PathBuf, String) {
-    let name = out_dir
-        .file_name()
-        .map_or_else(|| "scan".into(), |n| n.to_string_lossy().into_owned());
-    let parent = match out_dir.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    (parent, format!(".{name}.import-"))
-}
-
-/// See [`temp_parent_and_prefix`].
-const TEMP_SUFFIX: &str = ".tmp";
-
-/// Creates the hidden sibling folder the scan is written into.
-fn make_temp_dir(out_dir: &Path) -> Result<TempDir, VideoError> {
-    let (parent, prefix) = temp_parent_and_prefix(out_dir);
-    std::fs::create_dir_all(&parent)
-        .map_err(|e| io_err(format!("cannot create output folder: {e}"), &parent))?;
-    let path = parent.join(format!("{prefix}{}{TEMP_SUFFIX}", std::process::id()));
-    std::fs::create_dir(&path)
-        .map_err(|e| io_err(format!("cannot create temporary folder: {e}"), &path))?;
-    Ok(TempDir { path, keep: false })
-}
-
-/// A temporary folder touched this recently is kept even when its process id is not running
-/// here: it may belong to an import on another machine writing to the same shared folder.
-const STALE_AFTER: std::time::Duration = std::time::Duration::from_secs(3600);
-
-/// Whether `dir` or any entry directly in it was modified within [`STALE_AFTER`] (or its
-/// times cannot be read).
-fn recently_touched(dir: &Path) -> bool {
-    let recent = |m: std::io::Result<std::fs::Metadata>| {
-        m.and_then(|m| m.modified())
-            .ok()
-            .and_then(|t| t.elapsed().ok())
-            .is_none_or(|age| age < STALE_AFTER)
-    };
-    recent(std::fs::metadata(dir))
-        || std::fs::read_dir(dir).map_or(true, |entries| {
-            entries.flatten().any(|e| recent(e.metadata()))
-        })
-}
-
-/// Removes the temporary folders of earlier imports to `out_dir` whose process no longer runs
-/// (`.NAME.import-PID.tmp` beside it, PID not in `/proc`) and that nothing has touched for
-/// [`STALE_AFTER`]; returns them. Without `/proc` nothing is removed: a live import's folder
-/// must never go.
-fn remove_stale_imports(out_dir: &Path) -> Vec<PathBuf> {
-    let proc_fs = Path::new("/proc/self");
-    if !proc_fs.exists() {
-        return Vec::new();
-    }
-    let (parent, prefix) = temp_parent_and_prefix(out_dir);
-    let Ok(entries) = std::fs::read_dir(&parent) else {
-        return Vec::new();
-    };
-    let mut removed = Vec::new();
-    for entry in entries.flatten() {
-        let file_name = entry.file_name();
-        let Some(pid) = file_name
-            .to_str()
-            .and_then(|n| n.strip_prefix(&prefix))
-            .and_then(|n| n.strip_suffix(TEMP_SUFFIX))
-            .and_then(|n| n.parse::<u32>().ok())
-        else {
-            continue;
-        };
-        let path = entry.path();
-        let alive = pid == std::process::id() || Path::new("/proc").join(pid.to_string()).exists();
-        if !alive
-            && path.is_dir()
-            && !recently_touched(&path)
-            && std::fs::remove_dir_all(&path).is_ok()
-        {
-            removed.push(path);
-        }
-    }
-    removed.sort();
-    removed
 }
 
 /// Fails unless `out_dir` is missing or an empty folder.
@@ -560,18 +466,18 @@ pub fn import_video(
     let scan_meta = checked_settings(layout, meta)?;
     let mut src = open_source(clip, layout)?;
     check_out_dir(out_dir)?;
-    let removed_stale = remove_stale_imports(out_dir);
-    let tmp = make_temp_dir(out_dir)?;
+    let removed_stale = remove_stale(out_dir, IMPORT);
+    let tmp = StagedDir::create(out_dir, IMPORT)?;
     let mut splitter = Splitter {
         layout,
-        dir: &tmp.path,
+        dir: tmp.path(),
         group_digits: crate::synth::digits(src.est_groups, 5),
         frame_digits: crate::synth::digits(layout.frames_per_group, 3),
     };
     let decoded = decode_into(&mut src, clip, layout, job, &mut splitter)?;
     let groups = splitter.finish(decoded.taken)?;
     let meta_text = imported_scan_toml(scan_meta, clip, &src.codec, layout)?;
-    write_atomic(&tmp.path.join("scan.toml"), meta_text.as_bytes(), false)?;
+    write_atomic(&tmp.path().join("scan.toml"), meta_text.as_bytes(), false)?;
     if job.is_cancelled() {
         return Err(VideoError::Cancelled);
     }
@@ -593,25 +499,9 @@ pub fn import_video(
 }
 
 /// Renames the finished temporary folder to `out_dir` (replacing it only when it is empty).
-fn finish_into(mut tmp: TempDir, out_dir: &Path) -> Result<(), VideoError> {
+fn finish_into(tmp: StagedDir, out_dir: &Path) -> Result<(), VideoError> {
     check_out_dir(out_dir)?;
-    if out_dir.exists() {
-        // An empty folder: `remove_dir` refuses anything else, so nothing can be lost.
-        std::fs::remove_dir(out_dir).map_err(|e| {
-            io_err(
-                format!("cannot replace the empty output folder: {e}"),
-                out_dir,
-            )
-        })?;
-    }
-    std::fs::rename(&tmp.path, out_dir).map_err(|e| {
-        io_err(
-            format!("cannot move the imported scan into place: {e}"),
-            out_dir,
-        )
-    })?;
-    tmp.keep = true;
-    Ok(())
+    Ok(tmp.finish(out_dir)?)
 }
 
 #[cfg(test)]

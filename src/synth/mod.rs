@@ -146,13 +146,14 @@ fn io_err(problem: String, path: &Path) -> SynthError {
     })
 }
 
-/// Writes a new output folder through `fill`: `dir` is created, or accepted when it is an
-/// empty folder (anything else is an error and nothing is touched). When `fill` fails (a
-/// cancel, a full disk), the folder is left as it was found (a new one removed, an empty one
-/// emptied): everything in it was this run's, and a half-written scan is no use to anyone.
+/// Writes a new output folder through `fill`, which writes into the folder it is given: a
+/// hidden temporary one beside `dir` ([`crate::io::staged`]), renamed to `dir` once `fill`
+/// succeeds. `dir` must be missing or an empty folder (anything else is an error and nothing
+/// is touched). When `fill` fails (a cancel, a full disk) the temporary folder is removed, and
+/// one a killed run left is removed by the next run: `dir` never holds a half-written scan.
 pub(crate) fn fill_out_dir<T>(
     dir: &Path,
-    fill: impl FnOnce() -> Result<T, SynthError>,
+    fill: impl FnOnce(&Path) -> Result<T, SynthError>,
 ) -> Result<T, SynthError> {
     if dir.exists() && !dir.is_dir() {
         return Err(io_err(
@@ -165,27 +166,15 @@ pub(crate) fn fill_out_dir<T>(
             path: dir.to_path_buf(),
         });
     }
-    let created = !dir.exists();
-    if created {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| io_err(format!("cannot create output folder: {e}"), dir))?;
-    }
-    let filled = fill();
-    if filled.is_err() {
-        if created {
-            let _ = std::fs::remove_dir_all(dir);
-        } else if let Ok(entries) = std::fs::read_dir(dir) {
-            for path in entries.flatten().map(|e| e.path()) {
-                let _ = if path.is_dir() {
-                    std::fs::remove_dir_all(&path)
-                } else {
-                    std::fs::remove_file(&path)
-                };
-            }
-        }
-    }
-    filled
+    let _ = crate::io::staged::remove_stale(dir, SYNTH_KIND);
+    let staged = crate::io::staged::StagedDir::create(dir, SYNTH_KIND)?;
+    let filled = fill(staged.path())?;
+    staged.finish(dir)?;
+    Ok(filled)
 }
+
+/// The kind in the names of the generators' temporary folders (`.NAME.synth-PID.tmp`).
+const SYNTH_KIND: &str = "synth";
 
 /// The folder name of group `g` in a scan whose group numbers are padded to `digits`
 /// (`g00012`): the generator, the video import's folders and its stores name groups alike.
@@ -202,8 +191,9 @@ pub(crate) fn digits(count: usize, min: usize) -> usize {
 /// Renders `sound` as a scan into `out_dir` (created, or empty) and returns what was written.
 ///
 /// `job` is told 0 first and then each finished group; cancelling it stops before the next
-/// frame with [`SynthError::Cancelled`]. A run that fails or is cancelled leaves the folder as it
-/// found it (a new one removed, an empty one emptied). Frames of a group
+/// frame with [`SynthError::Cancelled`]. The scan is written in a hidden folder beside `out_dir`
+/// and renamed into place when done ([`fill_out_dir`]), so a run that fails, is cancelled or is
+/// killed leaves no half scan there. Frames of a group
 /// render in parallel, rows in parallel within a frame. A WAV file's sound renders with
 /// [`Groove::from_wav`] and [`write_scan`].
 ///
@@ -348,8 +338,8 @@ pub fn write_scan(
         key: "synth".into(),
         problem: format!("cannot be written as TOML: {e}"),
     })?;
-    let groups = fill_out_dir(out_dir, || {
-        write_scan_files(groove, out_dir, &meta_text, job)
+    let groups = fill_out_dir(out_dir, |dir| {
+        write_scan_files(groove, dir, &meta_text, job)
     })?;
     let reference = groove.reference();
     Ok(SynthSummary {

@@ -465,8 +465,8 @@ pub fn load_true_depth(path: &Path) -> Result<Image, SynthError> {
 }
 
 /// Renders a scene into `out_dir` (created, or empty): frames, true depths and `scene.toml`.
-/// Cancelling `job` stops before the next frame; a run that fails or is cancelled leaves the
-/// folder as it found it (a new one removed, an empty one emptied).
+/// Cancelling `job` stops before the next frame; the folder is written as [`fill_out_dir`] writes
+/// one, so a run that fails, is cancelled or is killed leaves no half folder there.
 ///
 /// # Errors
 /// [`SynthError::Config`] for invalid settings, [`SynthError::OutputExists`] for a non-empty
@@ -493,7 +493,7 @@ pub fn render_scene(
         problem: format!("cannot be written as TOML: {e}"),
     })?;
     let fw = super::digits(cfg.frames, 3);
-    fill_out_dir(out_dir, || {
+    fill_out_dir(out_dir, |dir| {
         (0..cfg.frames)
             .into_par_iter()
             .try_for_each(|k| -> Result<(), SynthError> {
@@ -501,12 +501,12 @@ pub fn render_scene(
                     return Err(SynthError::Cancelled);
                 }
                 let (img, depth) = render_scene_frame(kind, cfg, k)?;
-                save_grey_png(&img, &out_dir.join(format!("f{k:0fw$}.png")), true, false)?;
-                save_true_depth(&depth, &out_dir.join(format!("depth_{k:0fw$}.f32")))?;
+                save_grey_png(&img, &dir.join(format!("f{k:0fw$}.png")), true, false)?;
+                save_true_depth(&depth, &dir.join(format!("depth_{k:0fw$}.f32")))?;
                 job.report(k + 1, cfg.frames);
                 Ok(())
             })?;
-        write_atomic(&out_dir.join("scene.toml"), text.as_bytes(), false)?;
+        write_atomic(&dir.join("scene.toml"), text.as_bytes(), false)?;
         Ok(meta)
     })
 }

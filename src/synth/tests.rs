@@ -443,6 +443,11 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
         Job::new(
             &|done, _| {
                 if done == 1 {
+                    // Mid-run the output folder holds nothing (a run killed now would leave
+                    // no half scan there): the groups go into a hidden folder beside it.
+                    assert_eq!(std::fs::read_dir(&c).unwrap().count(), 0);
+                    let staged = format!(".cancelled.synth-{}.tmp", std::process::id());
+                    assert!(dir.path().join(staged).join("g00000").is_dir());
                     cancel_later.store(true, std::sync::atomic::Ordering::Relaxed);
                 }
             },
@@ -451,7 +456,13 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
     )
     .unwrap_err();
     assert!(matches!(e, SynthError::Cancelled));
-    assert_eq!(std::fs::read_dir(&c).unwrap().count(), 0, "emptied");
+    assert_eq!(std::fs::read_dir(&c).unwrap().count(), 0, "untouched");
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
 }
 
 #[test]

@@ -192,18 +192,19 @@ pub struct StillSummary {
 }
 
 /// Renders `scene` and writes the folder `out_dir` (created, or empty): the image, one WAV per
-/// groove and `truth.toml` last. A write that fails leaves the folder as it found it.
+/// groove and `truth.toml` last, in a hidden folder renamed into place when done (a failed or
+/// killed run leaves no half folder).
 ///
 /// # Errors
 /// [`SynthError::OutputExists`] for a folder that is not empty, [`SynthError::Load`] for a
 /// failed write (naming the file), [`SynthError::Config`] when the sidecar cannot be written.
 pub fn write_still(scene: &StillScene, out_dir: &Path) -> Result<StillSummary, SynthError> {
     let c = &scene.cfg;
-    fill_out_dir(out_dir, || {
+    fill_out_dir(out_dir, |dir| {
         let rendered = render_still(scene);
         let ext = if c.format == "tiff" { "tif" } else { "png" };
         let name = format!("still.{ext}");
-        let image_path = out_dir.join(&name);
+        let image_path = dir.join(&name);
         save_grey_image(&rendered.image, &image_path, c.bit_depth == 16, false)?;
         let truth = still_truth(scene, &rendered, &name);
         for (k, g) in scene.grooves.iter().enumerate() {
@@ -213,7 +214,7 @@ pub fn write_still(scene: &StillScene, out_dir: &Path) -> Result<StillSummary, S
             };
             let audio = groove_reference(scene, k, rate);
             write_wav(
-                &out_dir.join(format!("groove{}.wav", k + 1)),
+                &dir.join(format!("groove{}.wav", k + 1)),
                 &audio,
                 WavBits::Float32,
                 false,
@@ -229,12 +230,12 @@ pub fn write_still(scene: &StillScene, out_dir: &Path) -> Result<StillSummary, S
         })?;
         let header = "# A generated still (groovescope synth-still) and its ground truth.\n";
         crate::io::write_atomic(
-            &out_dir.join("truth.toml"),
+            &dir.join("truth.toml"),
             format!("{header}{text}").as_bytes(),
             false,
         )?;
         Ok(StillSummary {
-            image: image_path,
+            image: out_dir.join(&name),
             truth,
         })
     })
