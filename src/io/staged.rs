@@ -118,7 +118,7 @@ fn recently_touched(dir: &Path) -> bool {
 
 /// Removes the temporary folders of earlier writers of `kind` to `out_dir` whose process no
 /// longer runs (`.NAME.KIND-PID.tmp` beside it, PID not in `/proc`) and that nothing has
-/// touched for [`STALE_AFTER`]; returns them. Without `/proc` nothing is removed: a live
+/// touched for an hour (`STALE_AFTER`); returns them. Without `/proc` nothing is removed: a live
 /// writer's folder must never go.
 #[must_use]
 pub fn remove_stale(out_dir: &Path, kind: &str) -> Vec<PathBuf> {

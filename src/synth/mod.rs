@@ -192,7 +192,7 @@ pub(crate) fn digits(count: usize, min: usize) -> usize {
 ///
 /// `job` is told 0 first and then each finished group; cancelling it stops before the next
 /// frame with [`SynthError::Cancelled`]. The scan is written in a hidden folder beside `out_dir`
-/// and renamed into place when done ([`fill_out_dir`]), so a run that fails, is cancelled or is
+/// and renamed into place when done (`fill_out_dir`), so a run that fails, is cancelled or is
 /// killed leaves no half scan there. Frames of a group
 /// render in parallel, rows in parallel within a frame. A WAV file's sound renders with
 /// [`Groove::from_wav`] and [`write_scan`].

@@ -465,7 +465,7 @@ pub fn load_true_depth(path: &Path) -> Result<Image, SynthError> {
 }
 
 /// Renders a scene into `out_dir` (created, or empty): frames, true depths and `scene.toml`.
-/// Cancelling `job` stops before the next frame; the folder is written as [`fill_out_dir`] writes
+/// Cancelling `job` stops before the next frame; the folder is written as `fill_out_dir` writes
 /// one, so a run that fails, is cancelled or is killed leaves no half folder there.
 ///
 /// # Errors
