@@ -175,6 +175,17 @@ fn merged_shards_are_byte_identical_to_one_process_for_1_2_3_and_7_shards() {
             .collect();
         let out = tmp.path().join(format!("merged{n}.wav"));
         assert_merges_to(&parts, &out, one, &format!("{n} shards"));
+        if n == 2 {
+            // Without --quiet it says its score against the scan's reference, as a
+            // one-process run does.
+            let mut args = vec!["merge"];
+            args.extend(parts.iter().map(|p| s(p)));
+            let said_out = tmp.path().join("said.wav");
+            args.extend(["--out", s(&said_out)]);
+            let o = groovescope(&args);
+            let said = String::from_utf8_lossy(&o.stdout);
+            assert!(said.contains("\nvs reference: r = "), "{said}");
+        }
     }
 }
 

@@ -288,6 +288,7 @@ fn the_still_command_writes_sound_and_a_report() {
     ]);
     let out = groovescope(&args);
     assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("faster than any disc"));
     let r = hound::WavReader::open(&wav).unwrap();
     assert_eq!(r.spec().channels, 2);
     assert_eq!(r.spec().sample_rate, 44_100);
@@ -314,6 +315,18 @@ fn the_still_command_writes_sound_and_a_report() {
         "{err}"
     );
     assert!(short_wav.is_file());
+    // A speed typed 300 times too high gives a few samples: written, and said.
+    let fast_wav = dir.path().join("fast.wav");
+    let mut fast_args = still_args(s(&image), s(&fast_wav), &radius);
+    fast_args.extend(["--axis", "horizontal"]);
+    fast_args[5] = "9999";
+    let out = groovescope(&fast_args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("faster than any disc") && err.contains("check them and the pixel size"),
+        "{err}"
+    );
     // Without --force the outputs are not replaced.
     let again = groovescope(&args);
     assert!(!again.status.success());

@@ -28,6 +28,9 @@ const BAND_VALUES: usize = 1 << 22;
 const MAX_EVAL_LAG_SECS: f64 = 0.002;
 /// Share of a channel's lines in gaps above which a warning is given.
 const GAP_WARNING_SHARE: f64 = 0.05;
+/// A groove speed above this (m/s) is said: no disc turns that fast (a 16-inch transcription
+/// disc at 78 rpm, 200 mm out, passes at 1.6 m/s), so the rpm or radius was typed wrong.
+const MAX_GROOVE_SPEED_M_S: f64 = 3.0;
 
 /// Why a still could not be decoded (every message ends with the file).
 #[derive(Debug, thiserror::Error)]
@@ -305,6 +308,16 @@ pub fn decode_groove(
     let (audio, gain_per_mm_s) =
         finish_sound(&signal, params).map_err(|e| wrap(StillError::Param(e)))?;
     let mut warnings = Vec::new();
+    let vt_m_s = setup.groove_speed_um_s() / 1e6;
+    if vt_m_s > MAX_GROOVE_SPEED_M_S {
+        warnings.push(format!(
+            "the rpm and radius give a groove speed of {vt_m_s:.2} m/s, faster than any disc \
+             turns (a 16-inch transcription at 78 rpm: 1.6 m/s), so the {:.2} ms of sound \
+             ({} samples) are likely far too short; check them and the pixel size",
+            audio.duration_secs() * 1000.0,
+            audio.len(),
+        ));
+    }
     for c in 0..signal.channels.len() {
         let lost: usize = signal
             .gaps

@@ -451,8 +451,16 @@ impl SynthConfig {
         }
         self.validate_damage()?;
         SYNTH.within("start_secs", self.start_secs, 0.0, 1e6)?;
-        if self.max_groups == Some(0) {
-            return Err(SYNTH.bad("max_groups", "must be at least 1 when given"));
+        match self.max_groups {
+            Some(0) => return Err(SYNTH.bad("max_groups", "must be at least 1 when given")),
+            // The scan's own scan.toml records it, and TOML integers are 64-bit signed.
+            Some(n) if i64::try_from(n).is_err() => {
+                return Err(SYNTH.bad(
+                    "max_groups",
+                    format!("{n} is more than a scan.toml can record ({})", i64::MAX),
+                ));
+            }
+            _ => {}
         }
         Ok(())
     }
@@ -565,7 +573,10 @@ mod tests {
         /// One bad value set on the defaults.
         type Edit = fn(&mut SynthConfig);
         // (the edit, the key its error names)
-        let cases: [(Edit, &str); 5] = [
+        let cases: [(Edit, &str); 7] = [
+            (|c| c.max_groups = Some(0), "synth.max_groups"),
+            // More than its scan.toml could record.
+            (|c| c.max_groups = Some(usize::MAX), "synth.max_groups"),
             (|c| c.groove_depth_um = -3.0, "synth.groove_depth_um"),
             (|c| c.wall_angle_deg = 90.0, "synth.wall_angle_deg"),
             (|c| c.bit_depth = 12, "synth.bit_depth"),

@@ -169,6 +169,9 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
             "{}",
             crate::cli::wrote_sound(&args.out, &rec.audio, &details)
         )?;
+        if let Some(s) = &rec.scores {
+            crate::say!("vs reference: {}", s.line())?;
+        }
     }
     Ok(())
 }
