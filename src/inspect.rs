@@ -44,7 +44,7 @@ fn save(
 }
 
 /// Every file [`run_inspect`] can write.
-const OUTPUT_NAMES: [&str; 10] = [
+const OUTPUT_NAMES: [&str; 12] = [
     "frame.png",
     "flow.png",
     "flow_u.png",
@@ -55,9 +55,46 @@ const OUTPUT_NAMES: [&str; 10] = [
     "hough.png",
     "weights.png",
     "samples.csv",
+    "edges.png",
+    "edges.csv",
 ];
 
-/// Runs group `group` of `scan_dir` and writes PNGs and `samples.csv` into `out_dir`.
+/// The edge stage's samples as CSV: each sample's groove position, every border's record `y`
+/// and its standard error, every wall's displacement and velocity (NaN where none).
+fn edges_csv(e: &crate::pipeline::edges::Edges) -> String {
+    let mut csv = String::from("sample,s_um");
+    for b in &e.borders {
+        let name = b.id.name().replace(' ', "_");
+        let _ = write!(csv, ",{name}_y_um,{name}_std_error_um");
+    }
+    for w in &e.walls {
+        let side = format!("{:?}", w.side).to_lowercase();
+        let _ = write!(
+            csv,
+            ",{side}_wall_displacement_um,{side}_wall_velocity_mm_s"
+        );
+    }
+    csv.push('\n');
+    let at = |v: &[f64], i: usize| v.get(i).copied().unwrap_or(f64::NAN);
+    for (i, s) in e.positions_um.iter().enumerate() {
+        let _ = write!(csv, "{i},{s}");
+        for b in &e.borders {
+            let _ = write!(csv, ",{},{}", at(&b.y_um, i), at(&b.std_error_um, i));
+        }
+        for w in &e.walls {
+            let _ = write!(
+                csv,
+                ",{},{}",
+                at(&w.displacement_um, i),
+                at(&w.velocity_mm_s, i)
+            );
+        }
+        csv.push('\n');
+    }
+    csv
+}
+
+/// Runs group `group` of `scan_dir` and writes PNGs and CSV files into `out_dir`.
 ///
 /// Stages that fail are reported, and the outputs of the stages before them are still written,
 /// so an operator can see where a disc fails. Ctrl-C stops it at the next stage, before
@@ -205,6 +242,14 @@ pub fn run_inspect(
         }
         write_atomic(&out_dir.join("samples.csv"), csv.as_bytes(), force)?;
         written.push("samples.csv".into());
+    }
+    if let Some(e) = cache.edges() {
+        if let Some(frame) = input.frames.get(e.reference_frame) {
+            let img = crate::viz::edges_overlay(frame, e);
+            save(out_dir, "edges.png", &img, force, &mut written)?;
+        }
+        write_atomic(&out_dir.join("edges.csv"), edges_csv(e).as_bytes(), force)?;
+        written.push("edges.csv".into());
     }
     // What an earlier inspect left here and this one did not write (a stage that failed or
     // did not run on this path) would pass for this group's; it is named, never removed.

@@ -14,6 +14,7 @@ use image::ImageEncoder;
 use crate::image::Image;
 use crate::io::LoadError;
 use crate::io::atomic::write_atomic_with;
+use crate::pipeline::edges::{BorderTrack, Edges};
 use crate::pipeline::hough::{Accumulator, Peak, Stripes, label};
 use crate::pipeline::optical_flow::FlowField;
 
@@ -403,6 +404,55 @@ pub fn stripes_overlay(frame: &Image, stripes: &Stripes) -> Rgba8Image {
             });
             img.draw_vspan(x as isize, from, r, colour);
             prev = Some(r);
+        }
+    }
+    img
+}
+
+/// The borders' colours, in [`crate::pipeline::edges::BorderId`] order: each land border warm,
+/// each bottom border cool.
+pub const BORDER_RGBA: [[u8; 4]; 4] = [
+    [255, 170, 40, 255],
+    [0, 200, 80, 255],
+    [60, 140, 255, 255],
+    [235, 90, 235, 255],
+];
+
+/// Where a border's fine fit lies on the reference frame, per sample: the column (the mean of
+/// the sample's columns by their weights) and the row, pixel centres at `+ 0.5`; None where
+/// the sample has no fit.
+#[must_use]
+pub fn border_fit_points(track: &BorderTrack) -> Vec<Option<[f64; 2]>> {
+    track
+        .fits
+        .iter()
+        .map(|f| {
+            let f = f.as_ref()?;
+            let (sum, weight) = f
+                .column_weights
+                .iter()
+                .fold((0.0, 0.0), |(s, w), &(x, cw)| {
+                    (s + x as f64 * f64::from(cw), w + f64::from(cw))
+                });
+            (weight > 0.0 && f.row_px.is_finite()).then(|| [sum / weight + 0.5, f.row_px + 0.5])
+        })
+        .collect()
+}
+
+/// The frame the borders were read on (auto-ranged grey) with a 3 × 3 dot at each sample's
+/// fitted border, one colour a border ([`BORDER_RGBA`]).
+#[must_use]
+pub fn edges_overlay(frame: &Image, edges: &Edges) -> Rgba8Image {
+    let mut img = grey_image(frame);
+    for track in &edges.borders {
+        let colour = BORDER_RGBA[track.id as usize % BORDER_RGBA.len()];
+        for [x, y] in border_fit_points(track).into_iter().flatten() {
+            let (cx, cy) = (x.floor() as isize, y.floor() as isize);
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    img.set(cx + dx, cy + dy, colour);
+                }
+            }
         }
     }
     img

@@ -78,9 +78,29 @@ fn inspect_dumps_every_stage_and_the_accumulator_when_segmentation_fails() {
         "hough.png",
         "stripes.png",
         "samples.csv",
+        "edges.png",
+        "edges.csv",
     ] {
         assert!(ok.join(f).is_file(), "{f} missing");
     }
+    // The edge stage's samples: a header, then one row a sample with a border found.
+    let csv = std::fs::read_to_string(ok.join("edges.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap();
+    assert!(
+        header.starts_with("sample,s_um,left_land_border_y_um,"),
+        "{header}"
+    );
+    let columns = header.split(',').count();
+    let rows: Vec<&str> = lines.collect();
+    assert!(rows.len() > 10 && rows.iter().all(|r| r.split(',').count() == columns));
+    assert!(
+        rows.iter().any(|r| r
+            .split(',')
+            .nth(2)
+            .is_some_and(|y| y.parse::<f64>().unwrap().is_finite())),
+        "no border found: {csv}"
+    );
     // Windows so wide that the stripes cannot be told apart: the group fails, and the
     // accumulator with its peaks is still written, so the operator can see why.
     let params = dir.path().join("wide.toml");

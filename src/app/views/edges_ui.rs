@@ -7,42 +7,26 @@ use super::frame_ui::StageData;
 use super::{finite_runs, hovered_pixel, image_item, image_plot, wall_curves};
 use crate::app::textures::Textures;
 use crate::io::Cut;
-use crate::pipeline::edges::{BorderTrack, Edges};
+use crate::pipeline::edges::Edges;
 use crate::pipeline::{Stage, StageCache};
+use crate::viz::border_fit_points;
 
-/// The borders' colours, in [`crate::pipeline::edges::BorderId`] order: each land border warm, each bottom border cool.
-const BORDER_COLOURS: [Color32; 4] = [
-    Color32::from_rgb(255, 170, 40),
-    Color32::from_rgb(0, 200, 80),
-    Color32::from_rgb(60, 140, 255),
-    Color32::from_rgb(235, 90, 235),
-];
+/// The borders' colours ([`crate::viz::BORDER_RGBA`], as the inspect command's PNG draws them).
+const BORDER_COLOURS: [Color32; 4] = {
+    let c = crate::viz::BORDER_RGBA;
+    [
+        Color32::from_rgb(c[0][0], c[0][1], c[0][2]),
+        Color32::from_rgb(c[1][0], c[1][1], c[1][2]),
+        Color32::from_rgb(c[2][0], c[2][1], c[2][2]),
+        Color32::from_rgb(c[3][0], c[3][1], c[3][2]),
+    ]
+};
 
 /// State of the edges view.
 #[derive(Clone, Debug, Default)]
 pub struct EdgesViewState {
     /// Last read-out.
     pub readout: Option<String>,
-}
-
-/// Where a border's fine fit lies on the reference frame, per sample: the column (the mean of
-/// the sample's columns by their weights) and the row; None where the sample has no fit.
-#[must_use]
-pub fn fit_points(track: &BorderTrack) -> Vec<Option<[f64; 2]>> {
-    track
-        .fits
-        .iter()
-        .map(|f| {
-            let f = f.as_ref()?;
-            let (sum, weight) = f
-                .column_weights
-                .iter()
-                .fold((0.0, 0.0), |(s, w), &(x, cw)| {
-                    (s + x as f64 * f64::from(cw), w + f64::from(cw))
-                });
-            (weight > 0.0 && f.row_px.is_finite()).then(|| [sum / weight + 0.5, f.row_px + 0.5])
-        })
-        .collect()
 }
 
 /// One line on the group: what was read where, and how much of each border was seen.
@@ -114,7 +98,7 @@ impl EdgesViewState {
             return;
         };
         ui.weak("the frame the borders were read on; dots: each sample's fitted border row");
-        let points: Vec<Vec<Option<[f64; 2]>>> = e.borders.iter().map(fit_points).collect();
+        let points: Vec<Vec<Option<[f64; 2]>>> = e.borders.iter().map(border_fit_points).collect();
         let dim = status.dim();
         let resp = image_plot("edges_frame", (data.height - plot_h - 90.0).max(100.0))
             .legend(Legend::default())
