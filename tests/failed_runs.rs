@@ -76,10 +76,7 @@ fn outputs_are_checked_before_any_group_runs() {
 
 #[test]
 fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
-    let dir = tempfile::tempdir().unwrap();
-    let demo = demo_copy(dir.path());
-    let work = dir.path().join("work");
-    std::fs::create_dir(&work).unwrap();
+    let (_dir, demo, work) = common::demo_and_out_folder("work");
     // Group 4 unreadable without --keep-going: groups 0..4 are done and journaled first.
     std::fs::write(demo.join("g00004/f003.png"), b"not a png").unwrap();
     let out = work.join("a.wav");
@@ -122,10 +119,7 @@ fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
 #[test]
 fn a_run_stopped_by_a_damaged_frame_goes_on_past_it_with_keep_going() {
     use groovescope::io::wav::read_wav;
-    let dir = tempfile::tempdir().unwrap();
-    let demo = demo_copy(dir.path());
-    let work = dir.path().join("work");
-    std::fs::create_dir(&work).unwrap();
+    let (_dir, demo, work) = common::demo_and_out_folder("work");
     std::fs::write(demo.join("g00006/f002.png"), b"not a png").unwrap();
     let out = work.join("a.wav");
     refused(&demo, &out, &[], &["6 finished groups are kept in"]);

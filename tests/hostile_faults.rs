@@ -57,10 +57,7 @@ fn a_frame_deleted_or_truncated_after_the_scan_opened_is_named_and_keep_going_fi
 
 #[test]
 fn an_output_folder_removed_mid_run_ends_with_one_line_and_leaves_nothing() {
-    let dir = tempfile::tempdir().unwrap();
-    let demo = demo_copy(dir.path());
-    let out_dir = dir.path().join("out");
-    std::fs::create_dir(&out_dir).unwrap();
+    let (dir, demo, out_dir) = common::demo_and_out_folder("out");
     let wav = out_dir.join("clip.wav");
     let child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
         .args(["reconstruct", s(&demo), "--out", s(&wav), "--quiet"])

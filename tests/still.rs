@@ -265,6 +265,13 @@ fn still_args<'a>(image: &'a str, wav: &'a str, radius: &'a str) -> Vec<&'a str>
     ]
 }
 
+/// Runs the command, which must succeed; returns what it said on standard error.
+fn succeeded(args: &[&str]) -> String {
+    let out = groovescope(args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    stderr(&out)
+}
+
 #[test]
 fn the_still_command_writes_sound_and_a_report() {
     let dir = tempfile::tempdir().unwrap();
@@ -307,9 +314,7 @@ fn the_still_command_writes_sound_and_a_report() {
     let short_wav = dir.path().join("short-ref.wav");
     let mut short_args = still_args(s(&image), s(&short_wav), &radius);
     short_args.extend(["--axis", "horizontal", "--reference", s(&short)]);
-    let out = groovescope(&short_args);
-    assert!(out.status.success(), "{}", stderr(&out));
-    let err = stderr(&out);
+    let err = succeeded(&short_args);
     assert!(
         err.contains("too few samples overlap") && err.contains("short.wav"),
         "{err}"
@@ -320,9 +325,7 @@ fn the_still_command_writes_sound_and_a_report() {
     let mut fast_args = still_args(s(&image), s(&fast_wav), &radius);
     fast_args.extend(["--axis", "horizontal"]);
     fast_args[5] = "9999";
-    let out = groovescope(&fast_args);
-    assert!(out.status.success(), "{}", stderr(&out));
-    let err = stderr(&out);
+    let err = succeeded(&fast_args);
     assert!(
         err.contains("faster than any disc") && err.contains("check them and the pixel size"),
         "{err}"

@@ -247,6 +247,15 @@ pub fn demo_in_tempdir() -> (tempfile::TempDir, PathBuf) {
     (dir, demo)
 }
 
+/// A temporary folder holding a copy of the demo scan ([`demo_copy`]) and an empty folder
+/// `out` beside it for a run's outputs: (the folder, the scan, `out`).
+pub fn demo_and_out_folder(out: &str) -> (tempfile::TempDir, PathBuf, PathBuf) {
+    let (dir, demo) = demo_in_tempdir();
+    let out = dir.path().join(out);
+    std::fs::create_dir(&out).unwrap();
+    (dir, demo, out)
+}
+
 /// A copy of the bundled demo scan (13 dual-focus groups of 7 frames, with `reference.wav`)
 /// in `dir/demo`, for tests that damage or lock it.
 pub fn demo_copy(dir: &Path) -> PathBuf {
