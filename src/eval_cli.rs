@@ -10,6 +10,9 @@ use crate::io::wav::read_finite_wav;
 /// A recovered channel and the reference channel it is scored against.
 type ChannelPair<'a> = (Cow<'a, [f32]>, Cow<'a, [f32]>);
 
+/// Below this |r| the scores say the sounds are hardly alike (see [`run_eval`]'s warning).
+const LOW_R: f64 = 0.3;
+
 /// Runs `eval`: prints the scores as text or JSON (an array for a stereo pair).
 ///
 /// # Errors
@@ -64,6 +67,18 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
                 reference.display()
             );
         };
+        // Two sounds further apart than the search reaches score as noise: a best lag at the
+        // search's edge, or hardly any likeness, is said with the way to look further.
+        let at_edge = max_lag > 0 && scores.lag_samples.unsigned_abs() as usize >= max_lag;
+        if at_edge || scores.r.abs() < LOW_R {
+            eprintln!(
+                "warning: r {:.3} at lag {} samples: if the sounds are further apart than the \
+                 ±{max_lag_ms} ms searched, --max-lag-ms looks further: {}",
+                scores.r,
+                scores.lag_samples,
+                recovered.display()
+            );
+        }
         all.push(scores);
     }
     let mut text = String::new();

@@ -207,6 +207,32 @@ fn eval_rejects_non_wav() {
     assert!(stderr(&out).contains("a.wav"), "{}", stderr(&out));
 }
 
+/// Sounds further apart than the ±5 ms searched score as noise: `eval` says so and names
+/// `--max-lag-ms`, with which they score as the same sound.
+#[test]
+fn eval_says_when_the_sounds_may_lie_further_apart_than_it_searched() {
+    let dir = tempfile::tempdir().unwrap();
+    // A chirp-like signal with no period the search could mistake for a lag.
+    let x: Vec<f32> = (0..44_100)
+        .map(|i| (i as f32 * i as f32 * 1e-6).sin() * 0.4)
+        .collect();
+    let late: Vec<f32> = std::iter::repeat_n(0.0, 5000).chain(x.clone()).collect();
+    let (a, b) = (dir.path().join("ref.wav"), dir.path().join("late.wav"));
+    common::write_raw_wav(&a, 44_100, &x);
+    common::write_raw_wav(&b, 44_100, &late[..44_100]);
+    let o = groovescope(&["eval", s(&b), s(&a)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("--max-lag-ms looks further"),
+        "{}",
+        stderr(&o)
+    );
+    let o = groovescope(&["eval", s(&b), s(&a), "--max-lag-ms", "200"]);
+    assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("r            1.0000"), "{said}");
+}
+
 #[test]
 fn eval_scores_stereo_per_channel_and_refuses_nan_samples() {
     use groovescope::io::wav::{Audio, WavBits, write_wav};

@@ -143,6 +143,19 @@ fn a_run_stopped_by_a_damaged_frame_goes_on_past_it_with_keep_going() {
     );
     // A journal made with --keep-going refused by a run without it: src/side/journal.rs.
     assert_eq!(names(&work), ["a.wav", "b.wav"]);
+    // A frame gone from a group is said the same way.
+    std::fs::copy(demo.join("g00005/f002.png"), demo.join("g00006/f002.png")).unwrap();
+    std::fs::remove_file(demo.join("g00009/f003.png")).unwrap();
+    refused(
+        &demo,
+        &work.join("c.wav"),
+        &[],
+        &[
+            "f003.png",
+            "9 finished groups are kept in",
+            "add --keep-going",
+        ],
+    );
 }
 
 #[test]

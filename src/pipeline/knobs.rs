@@ -66,7 +66,7 @@ knob_docs! {
     "hough.rho_step_px"
         => "ρ bin width, px (ρ runs from 0 to the image height)",
     "hough.peak_count"
-        => "peaks searched for (paper: 3)",
+        => "peaks searched for: 3, the stripes the dual-focus geometry shows (any other value is refused)",
     "hough.window_theta_deg"
         => "half-width of a peak's window in θ, degrees",
     "hough.window_rho_px"
@@ -94,7 +94,7 @@ knob_docs! {
     "orientation.max_wall_slope_change"
         => "reject a fit whose cross-groove wall slope strays from the group's median by more than this fraction (0 = off)",
     "sound.output_rate_hz"
-        => "output sample rate, Hz (44100 or 48000)",
+        => "output sample rate, Hz (8000 to 192000; 44100 or 48000 usual)",
     "sound.native_spacing_um"
         => "spacing of the native samples along the groove, µm (0: one output sample)",
     "sound.normalize_peak"
@@ -122,7 +122,7 @@ knob_docs! {
     "walls.smooth_px"
         => "half-side of the box smoothing the depth map before differencing, px",
     "walls.column_window_px"
-        => "columns over which the median wall band is taken (odd, px)",
+        => "columns over which the median wall band is taken, px (centred: an even count takes one more)",
     "hough.min_votes_per_column"
         => "a peak needs this many votes per image column",
     "hough.min_peak_ratio"

@@ -494,11 +494,17 @@ fn after_failure(
     if finished == 0 {
         return e;
     }
-    // An unreadable frame stops the run again at the same group unless it becomes a gap.
+    // A group that does not read (frames missing, damaged, too few or of another size) stops
+    // the run again at the same group unless it becomes a gap.
     let unreadable_frame = |l: &LoadError| {
+        use LoadError::{BadFrame, GroupSize, Missing, MixedSizes, TooFewFrames};
         matches!(
             l,
-            LoadError::BadFrame { .. } | LoadError::TooFewFrames { .. }
+            BadFrame { .. }
+                | TooFewFrames { .. }
+                | Missing { .. }
+                | GroupSize { .. }
+                | MixedSizes { .. }
         )
     };
     let unreadable = e.chain().any(|c| {
