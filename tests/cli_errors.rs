@@ -9,6 +9,14 @@ fn s(p: &std::path::Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// Runs the command, which must succeed and say `part` on standard error.
+fn succeeded_saying(args: &[&str], part: &str) -> std::process::Output {
+    let out = groovescope(args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains(part), "{}", stderr(&out));
+    out
+}
+
 #[test]
 fn params_prints_toml_that_parses_back() {
     let out = groovescope(&["params"]);
@@ -220,13 +228,7 @@ fn eval_says_when_the_sounds_may_lie_further_apart_than_it_searched() {
     let (a, b) = (dir.path().join("ref.wav"), dir.path().join("late.wav"));
     common::write_raw_wav(&a, 44_100, &x);
     common::write_raw_wav(&b, 44_100, &late[..44_100]);
-    let o = groovescope(&["eval", s(&b), s(&a)]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(
-        stderr(&o).contains("--max-lag-ms looks further"),
-        "{}",
-        stderr(&o)
-    );
+    succeeded_saying(&["eval", s(&b), s(&a)], "--max-lag-ms looks further");
     let o = groovescope(&["eval", s(&b), s(&a), "--max-lag-ms", "200"]);
     assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
     let said = String::from_utf8_lossy(&o.stdout);
@@ -260,12 +262,9 @@ fn eval_scores_stereo_per_channel_and_refuses_nan_samples() {
     // Channels that do not pair up are mixed, and it says so.
     let mono = dir.path().join("mono.wav");
     common::write_raw_wav(&mono, 44_100, &sine);
-    let out = groovescope(&["eval", s(&pair), s(&mono)]);
-    assert!(out.status.success(), "{}", stderr(&out));
-    assert!(
-        stderr(&out).contains("2 channels and the reference 1: scored as their mono mixes"),
-        "{}",
-        stderr(&out)
+    succeeded_saying(
+        &["eval", s(&pair), s(&mono)],
+        "2 channels and the reference 1: scored as their mono mixes",
     );
     let mut bad = sine;
     bad[100] = f32::NAN;

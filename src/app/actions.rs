@@ -110,13 +110,11 @@ impl Workbench {
             return;
         };
         let wanted = groups.clone().unwrap_or(0..scan.groups.len());
-        if let Some(clip) = self.clip.clip.clone().filter(|c| {
-            c.groups == wanted
-                && c.scan_dir == scan.dir
-                && *c.scan_meta == scan.meta
-                && c.scan_fingerprint == crate::io::fingerprint::scan_fingerprint(scan)
-                && c.params.same_groups_as(self.tuning.params())
-        }) {
+        if let Some(clip) =
+            self.clip.clip.clone().filter(|c| {
+                c.groups == wanted && c.refinishes_with(&scan.meta, self.tuning.params())
+            })
+        {
             match ReconRun::refinish(
                 scan.clone(),
                 &clip,

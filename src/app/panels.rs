@@ -173,8 +173,11 @@ impl Workbench {
                 .on_hover_text(state.line());
             let note = match self.clip.clip.as_ref() {
                 Some(c) if c.params != *self.tuning.params() => {
-                    let text = if c.groups_before_finish.is_some()
-                        && c.params.same_groups_as(self.tuning.params())
+                    let text = if self
+                        .nav
+                        .scan
+                        .as_ref()
+                        .is_some_and(|s| c.refinishes_with(&s.meta, self.tuning.params()))
                     {
                         "the clip was made with other filters: reconstruct to hear them (its \
                          groups are kept: only the finish runs again)"

@@ -14,7 +14,7 @@ use super::partial::partial_sound;
 use super::tuning::ParamState;
 use crate::engine::{
     ClipGroups, EngineError, Progress, ReconstructOptions, Reconstruction, aligned_reference,
-    finish_reconstruction, run_clip_groups,
+    finish_scan_clip, run_clip_groups,
 };
 use crate::io::Scan;
 use crate::pipeline::PipelineParams;
@@ -88,6 +88,17 @@ pub struct Clip {
 }
 
 impl Clip {
+    /// True when `params` (for a scan of metadata `meta`) would finish this clip's kept groups
+    /// again instead of running them: the metadata is the clip's and the params differ from its
+    /// own at most in `[dsp]`. A clip belongs to the scan open, so only its metadata, which the
+    /// form saves in place, can have changed under it.
+    #[must_use]
+    pub fn refinishes_with(&self, meta: &crate::io::ScanMeta, params: &PipelineParams) -> bool {
+        self.groups_before_finish.is_some()
+            && *self.scan_meta == *meta
+            && self.params.same_groups_as(params)
+    }
+
     /// Sample rate of the recovered audio (Hz).
     #[must_use]
     pub fn rate_hz(&self) -> u32 {
@@ -228,21 +239,6 @@ pub fn make_clip(
     }
 }
 
-/// `gathered` finished into the scan's clip with `params`, scored against its reference.
-fn finish(
-    scan: &Scan,
-    gathered: ClipGroups,
-    params: &PipelineParams,
-) -> Result<Reconstruction, EngineError> {
-    finish_reconstruction(
-        gathered,
-        &scan.meta,
-        scan.reference.as_deref(),
-        params,
-        &scan.dir,
-    )
-}
-
 /// A reconstruction thread's outcome in the words the workbench shows.
 fn result_text<T>(result: std::thread::Result<Result<T, EngineError>>) -> Result<T, String> {
     match result {
@@ -348,7 +344,7 @@ impl ReconRun {
                 )?;
                 let kept = (gathered.signal_bytes() <= KEEP_GROUPS_MAX_BYTES)
                     .then(|| Arc::new(gathered.clone()));
-                let mut recon = finish(&scan, gathered, &opts.params)?;
+                let mut recon = finish_scan_clip(&scan, gathered, &opts.params)?;
                 recon.timings.total_secs = started.elapsed().as_secs_f64();
                 Ok::<_, EngineError>((recon, kept))
             }));
@@ -394,7 +390,7 @@ impl ReconRun {
         let run = Self::launch(groups.len(), groups.start, true, move |tx, flag, _| {
             let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                 params.validate_for_clip()?;
-                let mut recon = finish(&scan, (*kept).clone(), &params)?;
+                let mut recon = finish_scan_clip(&scan, (*kept).clone(), &params)?;
                 if flag.load(Ordering::Relaxed) {
                     return Err(EngineError::Cancelled);
                 }

@@ -183,15 +183,28 @@ pub fn reconstruct(
 ) -> Result<Reconstruction, EngineError> {
     let started = Instant::now();
     let clip = run_clip_groups(scan, opts, progress, cancel)?;
-    let mut rec = finish_reconstruction(
+    let mut rec = finish_scan_clip(scan, clip, &opts.params)?;
+    rec.timings.total_secs = started.elapsed().as_secs_f64();
+    Ok(rec)
+}
+
+/// [`finish_reconstruction`] of `scan`'s gathered groups: its metadata, its reference and its
+/// folder for the errors.
+///
+/// # Errors
+/// As [`finish_reconstruction`].
+pub fn finish_scan_clip(
+    scan: &Scan,
+    clip: ClipGroups,
+    params: &PipelineParams,
+) -> Result<Reconstruction, EngineError> {
+    finish_reconstruction(
         clip,
         &scan.meta,
         scan.reference.as_deref(),
-        &opts.params,
+        params,
         &scan.dir,
-    )?;
-    rec.timings.total_secs = started.elapsed().as_secs_f64();
-    Ok(rec)
+    )
 }
 
 /// Runs the groups of [`reconstruct`] and gathers them, without the finish: what

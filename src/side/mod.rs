@@ -134,19 +134,15 @@ impl RunIdentity {
     /// version: only the finish reads `[dsp]`, so `other`'s groups are this run's groups.
     #[must_use]
     pub fn same_groups_as(&self, other: &RunIdentity) -> bool {
-        let groups_read = |id: &RunIdentity| {
-            let params = PipelineParams {
-                dsp: crate::pipeline::dsp::DspParams::default(),
-                ..id.params.clone()
-            };
-            RunIdentity {
-                params_fingerprint: params_fingerprint(&params),
-                params,
-                ..id.clone()
-            }
+        // `other` with these params: any difference left is beyond the params.
+        let rest = RunIdentity {
+            params: self.params.clone(),
+            params_fingerprint: self.params_fingerprint.clone(),
+            ..other.clone()
         };
         other.groovescope == self.groovescope
-            && groups_read(self).difference(&groups_read(other)).is_none()
+            && self.params.same_groups_as(&other.params)
+            && self.difference(&rest).is_none()
     }
 
     /// How `other` differs from this identity, in words (None when it is the same run).

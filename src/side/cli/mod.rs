@@ -10,12 +10,10 @@ use indicatif::ProgressBar;
 use serde::Serialize;
 
 use crate::cli::{ReconstructArgs, load_params, method_choice, path_choice, progress_bar};
-use crate::engine::{
-    ClipGroups, GroupOutcome, Reconstruction, StageTimings, finish_reconstruction,
-};
+use crate::engine::{ClipGroups, GroupOutcome, Reconstruction, StageTimings, finish_scan_clip};
 use crate::io::bwf::{BroadcastInfo, disc_words};
 use crate::io::wav::write_transfer_wav;
-use crate::io::{LoadError, Scan, ScanMeta, write_json_atomic};
+use crate::io::{Scan, ScanMeta, write_json_atomic};
 use crate::pipeline::PipelineParams;
 use crate::side::part::{PART_FILE, read_part, write_part};
 use crate::side::plan::Plan;
@@ -431,13 +429,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
             finished += 1;
             clip.add(g);
         })?;
-        let mut rec = finish_reconstruction(
-            clip,
-            &scan.meta,
-            scan.reference.as_deref(),
-            &params,
-            &scan.dir,
-        )?;
+        let mut rec = finish_scan_clip(&scan, clip, &params)?;
         rec.timings.total_secs = started.elapsed().as_secs_f64();
         let id = &run.identity;
         let bits = args.bits.unwrap_or_default();
@@ -494,34 +486,18 @@ fn after_failure(
     if finished == 0 {
         return e;
     }
-    // A group that does not read (frames missing, damaged, too few or of another size) stops
-    // the run again at the same group unless it becomes a gap.
-    let unreadable_frame = |l: &LoadError| {
-        use LoadError::{BadFrame, GroupSize, Missing, MixedSizes, TooFewFrames};
-        matches!(
-            l,
-            BadFrame { .. }
-                | TooFewFrames { .. }
-                | Missing { .. }
-                | GroupSize { .. }
-                | MixedSizes { .. }
-        )
-    };
-    let unreadable = e.chain().any(|c| {
+    // A group whose frames do not load stops the run (the engine's `EngineError::Load`), and
+    // stops it again at the same group unless --keep-going makes it a gap, as it makes any such
+    // group.
+    let unreadable = {
         use crate::engine::EngineError;
         use crate::side::SideError;
-        c.downcast_ref::<LoadError>().is_some_and(unreadable_frame)
-            || match c.downcast_ref::<EngineError>() {
-                Some(EngineError::Load(l)) => unreadable_frame(l),
-                _ => false,
-            }
-            || match c.downcast_ref::<SideError>() {
-                Some(SideError::Load(l) | SideError::Engine(EngineError::Load(l))) => {
-                    unreadable_frame(l)
-                }
-                _ => false,
-            }
-    });
+        matches!(e.downcast_ref::<EngineError>(), Some(EngineError::Load(_)))
+            || matches!(
+                e.downcast_ref::<SideError>(),
+                Some(SideError::Engine(EngineError::Load(_)))
+            )
+    };
     let how = if unreadable && !keep_going {
         "the same command with --resume goes on from them; add --keep-going to make the \
          unreadable group a gap, or mend its frames first"
