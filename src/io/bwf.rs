@@ -9,6 +9,7 @@
 //! one-process run, and a scan's folder its store. Readers that do not know the chunk skip it,
 //! as RIFF says.
 
+use super::wav::read::{SUBFORMAT_TAIL, TAG_EXTENSIBLE, TAG_FLOAT, TAG_PCM, le_u16};
 use super::wav::{Audio, WavBits};
 use crate::meta::{Cut, ScanMeta};
 
@@ -159,22 +160,6 @@ fn chunks(wav: &[u8]) -> impl Iterator<Item = (usize, [u8; 4], usize)> + '_ {
     })
 }
 
-/// The tail of a `WAVE_FORMAT_EXTENSIBLE` sub-format GUID that stands for a plain format: its
-/// first two bytes are then that format's tag (KSDATAFORMAT_SUBTYPE_PCM is tag 1,
-/// KSDATAFORMAT_SUBTYPE_IEEE_FLOAT tag 3).
-const SUBFORMAT_TAIL: [u8; 14] = [
-    0x00, 0x00, 0x00, 0x00, 0x10, 0x00, 0x80, 0x00, 0x00, 0xaa, 0x00, 0x38, 0x9b, 0x71,
-];
-/// `WAVE_FORMAT_PCM`: the one format tag RIFF asks no `fact` chunk of.
-const TAG_PCM: u16 = 1;
-/// `WAVE_FORMAT_IEEE_FLOAT`.
-const TAG_FLOAT: u16 = 3;
-
-/// A little-endian `u16` of `bytes` at `at`.
-fn le_u16(bytes: &[u8], at: usize) -> u16 {
-    u16::from_le_bytes([bytes[at], bytes[at + 1]])
-}
-
 /// The plain format chunk body for a `WAVE_FORMAT_EXTENSIBLE` body `fmt` of integer PCM or
 /// IEEE float, at most two channels, every bit of each sample valid; `None` for any other.
 ///
@@ -188,7 +173,7 @@ fn le_u16(bytes: &[u8], at: usize) -> u16 {
 ///
 /// A transfer carries the plain form where it means the same.
 fn plain_format(fmt: &[u8]) -> Option<Vec<u8>> {
-    let extensible = fmt.len() >= 40 && le_u16(fmt, 0) == 0xfffe;
+    let extensible = fmt.len() >= 40 && le_u16(fmt, 0) == TAG_EXTENSIBLE;
     if !extensible
         || le_u16(fmt, 2) > 2
         || le_u16(fmt, 18) != le_u16(fmt, 14)

@@ -1,4 +1,4 @@
-//! WAV reading and atomic WAV writing (16/24-bit integer or 32-bit float, mono or stereo) via hound.
+//! WAV files: reading (any integer PCM or float WAV: [`read`]) and atomic writing (16/24-bit integer or 32-bit float, mono or stereo, via hound).
 
 use std::path::Path;
 
@@ -6,6 +6,8 @@ use serde::{Deserialize, Serialize};
 
 use super::limits::MAX_WAV_SAMPLES;
 use super::{LoadError, atomic::write_atomic_with};
+
+pub mod read;
 
 /// Sample encoding of an exported WAV file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -104,7 +106,8 @@ impl Audio {
     }
 }
 
-/// Reads a WAV file (any integer depth or 32-bit float) into `[-1, 1]` floats.
+/// Reads a WAV file (integer PCM of any depth and container, or 32/64-bit float; see [`read`])
+/// into `[-1, 1]` floats.
 ///
 /// # Errors
 /// [`LoadError::Sound`] naming the file when it is missing, not WAV, unsupported, empty or
@@ -162,58 +165,27 @@ pub fn read_reference_wav(path: &Path) -> Result<Audio, LoadError> {
 ///
 /// # Errors
 /// As [`read_wav`].
-pub fn read_wav_from(source: impl std::io::Read, path: &Path) -> Result<Audio, LoadError> {
+pub fn read_wav_from(mut source: impl std::io::Read, path: &Path) -> Result<Audio, LoadError> {
     let err = |problem: String| LoadError::Sound {
         problem,
         path: path.to_path_buf(),
     };
-    let mut reader =
-        hound::WavReader::new(source).map_err(|e| err(format!("cannot read WAV: {e}")))?;
-    let samples = u64::from(reader.len());
+    let (format, data_bytes) = read::read_header(&mut source).map_err(err)?;
+    let nch = u64::from(format.channels);
+    // A partial frame at the end is no sound.
+    let frames = data_bytes / (nch * u64::from(format.container_bytes));
+    let samples = frames * nch;
     if samples > MAX_WAV_SAMPLES {
         return Err(err(format!(
             "the WAV header announces {samples} samples, past the limit of {MAX_WAV_SAMPLES}"
         )));
     }
-    let spec = reader.spec();
-    if spec.channels == 0 || spec.sample_rate == 0 {
-        return Err(err(
-            "WAV header has no channels or a zero sample rate".into()
-        ));
-    }
-    let interleaved: Vec<f32> = match spec.sample_format {
-        hound::SampleFormat::Float => reader
-            .samples::<f32>()
-            .collect::<Result<_, _>>()
-            .map_err(|e| err(format!("cannot read WAV samples: {e}")))?,
-        hound::SampleFormat::Int => {
-            if spec.bits_per_sample == 0 || spec.bits_per_sample > 32 {
-                return Err(err(format!(
-                    "unsupported bit depth {}",
-                    spec.bits_per_sample
-                )));
-            }
-            let scale = 1.0 / (1u64 << (spec.bits_per_sample - 1)) as f32;
-            reader
-                .samples::<i32>()
-                .map(|s| s.map(|v| v as f32 * scale))
-                .collect::<Result<_, _>>()
-                .map_err(|e| err(format!("cannot read WAV samples: {e}")))?
-        }
-    };
-    let nch = usize::from(spec.channels);
-    let frames = interleaved.len() / nch;
     if frames == 0 {
         return Err(err("the WAV file holds no samples".into()));
     }
-    let mut channels = vec![Vec::with_capacity(frames); nch];
-    for frame in interleaved.chunks_exact(nch) {
-        for (c, v) in channels.iter_mut().zip(frame) {
-            c.push(*v);
-        }
-    }
+    let channels = read::read_samples(&mut source, format, frames as usize).map_err(err)?;
     Ok(Audio {
-        sample_rate_hz: spec.sample_rate,
+        sample_rate_hz: format.rate_hz,
         channels,
     })
 }
