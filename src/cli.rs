@@ -430,7 +430,7 @@ pub(crate) fn check_duration(secs: f64) -> Result<()> {
 /// Prints each of a run's warnings to stderr, one `warning: …` line each.
 pub(crate) fn print_warnings(warnings: &[String]) {
     for w in warnings {
-        eprintln!("warning: {w}");
+        crate::tell!("warning: {w}");
     }
 }
 
@@ -618,7 +618,7 @@ pub fn run(command: Command) -> Result<()> {
             let opts = crate::accuracy::AccuracyOptions { quick, keep };
             crate::accuracy::write_report(&out, force, &opts, &mut |line| {
                 if !quiet {
-                    eprintln!("{line}");
+                    crate::tell!("{line}");
                 }
             })?;
             if !quiet {

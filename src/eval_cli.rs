@@ -34,7 +34,7 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
             .map(|(a, b)| (Cow::Borrowed(a.as_slice()), Cow::Borrowed(b.as_slice())))
             .collect()
     } else if n_rec == 1 || n_ref == 1 {
-        eprintln!(
+        crate::tell!(
             "warning: the recovered sound has {n_rec} channels and the reference {n_ref}: scored as their mono mixes"
         );
         vec![(Cow::Owned(rec.mono()), Cow::Owned(refa.mono()))]
@@ -71,7 +71,7 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
         // search's edge, or hardly any likeness, is said with the way to look further.
         let at_edge = max_lag > 0 && scores.lag_samples.unsigned_abs() as usize >= max_lag;
         if at_edge || scores.r.abs() < LOW_R {
-            eprintln!(
+            crate::tell!(
                 "warning: r {:.3} at lag {} samples: if the sounds are further apart than the \
                  ±{max_lag_ms} ms searched, --max-lag-ms looks further: {}",
                 scores.r,

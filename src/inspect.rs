@@ -265,7 +265,7 @@ pub fn run_inspect(
         written.join(", ")
     )?;
     if !stale.is_empty() {
-        eprintln!(
+        crate::tell!(
             "warning: {} in {} are not from this run (an earlier inspect left them)",
             stale.join(", "),
             out_dir.display()

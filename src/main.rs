@@ -48,7 +48,7 @@ fn default_action() -> anyhow::Result<()> {
         match run_gui(Some(demo.image)) {
             Err(e) if no_window(&e) => {
                 // A display variable with nothing behind it (ssh): decode as with no display.
-                eprintln!("{e}; decoding the demo still instead");
+                groovescope::tell!("{e}; decoding the demo still instead");
             }
             other => return other,
         }
@@ -79,7 +79,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            groovescope::tell!("error: {e:#}");
             ExitCode::FAILURE
         }
     }

@@ -165,7 +165,7 @@ pub fn run_import_video(args: &ImportVideoArgs) -> Result<()> {
         )?;
     }
     for path in &summary.removed_stale {
-        eprintln!(
+        crate::tell!(
             "removed an unfinished import left by an earlier, killed run: {}",
             path.display()
         );

@@ -29,7 +29,7 @@ fn params_prints_toml_that_parses_back() {
 
 /// Standard output that cannot be written is one line, never a panic: a full disk under `>`
 /// is an error naming standard output; a reader that went away (`| head`) is none, and the
-/// transfer is written all the same.
+/// transfer is written all the same. A full standard error loses its lines, never a panic.
 #[test]
 fn standard_output_full_or_closed_is_no_panic() {
     use std::process::{Command, Stdio};
@@ -59,6 +59,14 @@ fn standard_output_full_or_closed_is_no_panic() {
     );
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!stderr(&o).contains("panicked") && wav.is_file());
+    // Standard error full: the error line is lost, the exit status still says it (101 was a
+    // panic on the write).
+    let o = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+        .args(["eval", s(&dir.path().join("none.wav")), s(&wav)])
+        .stderr(full())
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
 }
 
 #[test]

@@ -1,4 +1,4 @@
-//! Repository hygiene: every source file starts with a `//!` line, the pipeline imports no disk, clock, GUI or audio code, `unsafe` stays in the SIMD module, files stay short.
+//! Repository hygiene: every source file starts with a `//!` line, the pipeline imports no disk, clock, GUI or audio code, `unsafe` stays in the SIMD module, printing cannot panic, files stay short.
 #![allow(clippy::unwrap_used)] // tests may panic
 
 use std::path::Path;
@@ -216,4 +216,45 @@ fn source_files_stay_under_700_lines() {
         .filter(|&(_, n)| n > 700)
         .collect();
     assert!(long.is_empty(), "split these along their seams: {long:?}");
+}
+
+/// Printing macros that panic when their stream cannot be written (`2>/dev/full`, a closed
+/// pipe) in `code`.
+fn panicking_prints(code: &str) -> usize {
+    ["println!(", "print!(", "eprintln!(", "eprint!("]
+        .iter()
+        .map(|m| {
+            code.match_indices(m)
+                .filter(|&(i, _)| !code[..i].ends_with(|c: char| c.is_alphanumeric() || c == '_'))
+                .count()
+        })
+        .sum()
+}
+
+#[test]
+fn the_program_prints_only_through_the_macros_that_cannot_panic() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    rust_files(&root.join("src"), &mut files);
+    let stray: Vec<_> = files
+        .iter()
+        .filter(|p| {
+            let rel = p
+                .strip_prefix(root)
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/");
+            !(rel.contains("/tests/") || rel.ends_with("tests.rs") || rel == "src/stdout.rs")
+        })
+        .filter(|p| panicking_prints(&non_test_code(&std::fs::read_to_string(p).unwrap())) > 0)
+        .collect();
+    assert!(
+        stray.is_empty(),
+        "use crate::say! or crate::tell!: {stray:?}"
+    );
+    assert_eq!(
+        panicking_prints("eprintln!(\"x\"); crate::tell!(\"y\"); println!(\"z\")"),
+        2
+    );
+    assert_eq!(panicking_prints("my_println!(a); say!(b)"), 0);
 }

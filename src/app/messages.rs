@@ -31,7 +31,7 @@ impl Messages {
     /// Adds an error (and logs it to stderr).
     pub fn error(&mut self, text: impl Into<String>) {
         let text = text.into();
-        eprintln!("groovescope: {text}");
+        crate::tell!("groovescope: {text}");
         self.push(Message { text, error: true });
     }
 

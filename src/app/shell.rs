@@ -189,7 +189,7 @@ impl Workbench {
         };
         if let Some(result) = plan.outcome() {
             if let Err(e) = result {
-                eprintln!("groovescope: screenshot failed: {e}");
+                crate::tell!("groovescope: screenshot failed: {e}");
             }
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             return;
@@ -202,7 +202,7 @@ impl Workbench {
         plan.settled = if ready { plan.settled + 1 } else { 0 };
         if plan.settled >= SCREENSHOT_SETTLE_FRAMES || timed_out {
             if timed_out {
-                eprintln!("groovescope: the app did not settle; taking the screenshot anyway");
+                crate::tell!("groovescope: the app did not settle; taking the screenshot anyway");
             }
             plan.requested = true;
             let path = plan.path.clone();

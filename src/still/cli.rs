@@ -341,7 +341,7 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
     if let (Some(path), Some(all)) = (&args.reference, &scores)
         && all.iter().any(Option::is_none)
     {
-        eprintln!(
+        crate::tell!(
             "warning: too few samples overlap the sound to score against the reference: {}",
             path.display()
         );

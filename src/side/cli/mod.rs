@@ -182,7 +182,7 @@ impl ProgressOut {
 
     fn note(&self, text: &str) {
         if self.json || !self.quiet {
-            self.bar.suspend(|| eprintln!("{text}"));
+            self.bar.suspend(|| crate::tell!("{text}"));
         }
     }
 
@@ -356,7 +356,7 @@ pub fn check_missing_groups(scan: &Scan, range: Range<usize>, keep_going: bool) 
             "{what}: run with --keep-going to read each as a gap of silence, in its place{rename}"
         );
     }
-    eprintln!("warning: {what}: each becomes a gap of silence, in its place");
+    crate::tell!("warning: {what}: each becomes a gap of silence, in its place");
     Ok(())
 }
 
@@ -398,7 +398,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         );
     }
     if let Some(n) = args.groups.filter(|&n| first.saturating_add(n) > end) {
-        eprintln!(
+        crate::tell!(
             "warning: --groups {n} from group {first} runs past the scan's last group ({} \
              groups): running the {} there are",
             scan.groups.len(),
@@ -541,7 +541,7 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
     let scores = rec.scores.map(|s| format!("vs reference: {}", s.line()));
     for line in std::iter::once(text).chain(scores) {
         if args.side.progress_json {
-            eprintln!("{line}");
+            crate::tell!("{line}");
         } else {
             crate::say!("{line}")?;
         }
@@ -611,7 +611,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
             && read_part(&args.out).is_ok_and(|p| identity.difference(&p.identity).is_none())
         {
             if !args.quiet {
-                eprintln!("shard {index} is already complete: {}", part_path.display());
+                crate::tell!("shard {index} is already complete: {}", part_path.display());
             }
             return Ok(());
         }
@@ -664,7 +664,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
     );
     if args.side.progress_json {
         json_line(&serde_json::json!({"event": "done", "output": written.display().to_string()}));
-        eprintln!("{text}");
+        crate::tell!("{text}");
     } else if !args.quiet {
         crate::say!("{text}")?;
     }

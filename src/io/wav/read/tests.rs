@@ -1,3 +1,5 @@
+//! The WAV reader against hound on the files hound writes, and on layouts hound misreads or refuses, built byte by byte.
+
 use std::io::Cursor;
 use std::path::Path;
 
