@@ -120,6 +120,12 @@ fn nan_parameter_names_key_and_file() {
             &["orientation.sigma_start_um"],
         ),
         ("u.toml", "[flow]\nlamda = 1.0\n", &["lamda"]),
+        // Valid alone, too fine for this scan's pixels: checked once the scan is open.
+        (
+            "fine.toml",
+            "[sound]\nnative_spacing_um = 0.00001\n",
+            &["sound.native_spacing_um", "fine.toml"],
+        ),
     ] {
         let params = dir.path().join(name);
         std::fs::write(&params, text).unwrap();

@@ -288,13 +288,22 @@ pub(crate) fn lock_outputs(paths: &[&Path]) -> Result<Vec<crate::io::lock::Outpu
         .collect::<Result<Vec<_>, _>>()?)
 }
 
-/// Refuses params whose Hough accumulator would be too large for `scan`, naming the params file.
-fn check_hough(params: &PipelineParams, scan: &Scan, file: Option<&Path>) -> Result<()> {
+/// Refuses params that `scan`'s frames cannot carry, naming the params file (`file`; `None`:
+/// the defaults): a Hough accumulator too large for them, or a native sample grid finer than
+/// they resolve (the grid `scan.toml` fixes is named there instead).
+pub(super) fn check_params_fit_scan(
+    params: &PipelineParams,
+    scan: &Scan,
+    file: Option<&Path>,
+) -> Result<()> {
+    let file = || file.map_or("the default params".into(), |p| p.display().to_string());
     if let Err(e) = crate::io::limits::check_hough_accumulator(params, scan) {
-        let file = file.map_or("the default params".into(), |p| p.display().to_string());
-        bail!("{e}: {file}");
+        bail!("{e}: {}", file());
     }
-    Ok(())
+    match crate::engine::check_sample_density(scan, params) {
+        Err(crate::engine::EngineError::Stage(e)) => bail!("{e}: {}", file()),
+        other => Ok(other?),
+    }
 }
 
 /// Runs `run` with the terminal progress `args` ask for, each finished group to `sink`;
@@ -384,7 +393,7 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
     params.path = path_choice(&args.path, params.path);
     params.method = method_choice(args.method.as_deref(), params.method);
     let scan = Scan::open(&args.scan)?;
-    check_hough(&params, &scan, args.params.as_deref())?;
+    check_params_fit_scan(&params, &scan, args.params.as_deref())?;
     let first = args.first_group.unwrap_or(0);
     let end = args
         .groups
@@ -596,7 +605,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
         );
     }
     let scan = Scan::open(&args.scan)?;
-    check_hough(&params, &scan, Some(plan_path))?;
+    check_params_fit_scan(&params, &scan, Some(plan_path))?;
     let (shard, id) = plan.shard(index, &scan, plan_path)?;
     let range = shard.first_group..shard.end_group;
     check_missing_groups(&scan, range.clone(), plan.keep_going)?;

@@ -264,7 +264,7 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
     let scan = Scan::open(&args.scan)?;
     super::check_missing_groups(&scan, 0..scan.groups.len(), args.keep_going)?;
     // Checked here too: with --probe-groups 0 no group runs before the shards would fail.
-    crate::engine::check_sample_density(&scan, &params)?;
+    super::check_params_fit_scan(&params, &scan, args.params.as_deref())?;
     // Also what stops a plan that Ctrl-C reached while its scan was opened (or with no probe).
     let probe = unless_interrupted(
         "plan",
