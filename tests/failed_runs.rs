@@ -158,6 +158,43 @@ fn a_run_stopped_by_a_damaged_frame_goes_on_past_it_with_keep_going() {
     );
 }
 
+/// A shard of a plan made without --keep-going, stopped by a damaged frame, goes on past it with
+/// `--resume --keep-going` as a whole run does; the merge takes its part beside one made without
+/// it, to the sound of a whole run with --keep-going.
+#[test]
+fn a_shard_stopped_by_a_damaged_frame_goes_on_past_it_with_keep_going() {
+    use groovescope::io::wav::read_wav;
+    let (_dir, demo, work) = common::demo_and_out_folder("work");
+    // Shard 1 of 2 runs groups 6..13 of the demo's 13.
+    std::fs::write(demo.join("g00009/f002.png"), b"not a png").unwrap();
+    let whole = work.join("whole.wav");
+    let o = reconstruct(&demo, &whole, &["--keep-going"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let plan = work.join("plan.json");
+    let o = groovescope(&["plan", s(&demo), "--shards", "2", "--out", s(&plan)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let parts = [work.join("part-0"), work.join("part-1")];
+    let shard = ["--plan", s(&plan), "--shard", "1"];
+    refused(
+        &demo,
+        &parts[1],
+        &shard,
+        &["3 finished groups are kept in", "add --keep-going"],
+    );
+    let resume = [&shard[..], &["--resume", "--keep-going"]].concat();
+    let o = reconstruct(&demo, &parts[1], &resume);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = reconstruct(&demo, &parts[0], &["--plan", s(&plan), "--shard", "0"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let merged = work.join("merged.wav");
+    let o = groovescope(&["merge", s(&parts[0]), s(&parts[1]), "--out", s(&merged)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        read_wav(&merged).unwrap().channels,
+        read_wav(&whole).unwrap().channels
+    );
+}
+
 #[test]
 fn a_group_of_another_frame_size_is_named_or_with_keep_going_a_gap_that_quiet_still_shows() {
     // Group 3 of another size, then group 0: group 0's size used to be the scan's, and all

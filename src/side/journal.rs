@@ -113,7 +113,7 @@ impl Journal {
         // A run without --keep-going stops at the first unreadable group, so its journal holds
         // only groups that read, each as a run with --keep-going makes it: such a run goes on
         // from them (past a damaged frame that stopped it), never the other way round.
-        if identity.keep_going && found.shard.is_none() {
+        if identity.keep_going {
             found.keep_going = true;
         }
         let difference = identity.difference(&found);

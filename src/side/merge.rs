@@ -62,6 +62,9 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
                 ..first.identity.shard.clone().unwrap_or(shard.clone())
             });
             expected.groups = part.identity.groups;
+            // A shard may have gone on past an unreadable group (--keep-going) where the plan
+            // did not: its part holds the gap, the others hold none.
+            expected.keep_going = part.identity.keep_going;
             if let Some(diff) = expected.difference(&part.identity) {
                 return Err(SideError::refused(
                     format!("part {diff} (against {})", first.path.display()),
@@ -168,6 +171,7 @@ pub fn merge_checked(
     };
     let mut identity = first.identity.clone();
     identity.groups = (0, identity.scan_groups);
+    identity.keep_going = parts.iter().any(|p| p.identity.keep_going);
     if let Some(dsp) = dsp {
         identity.params.dsp = dsp;
         identity.params_fingerprint = super::params_fingerprint(&identity.params);

@@ -590,12 +590,9 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
         }
         p
     };
-    if args.keep_going && !plan.keep_going {
-        bail!(
-            "--keep-going was not planned (make the plan with --keep-going): {}",
-            plan_path.display()
-        );
-    }
+    // A shard stopped by an unreadable group goes on past it with --keep-going, as a whole run
+    // does: the merge takes parts with and without it (those without hold no such gap).
+    let keep_going = plan.keep_going || args.keep_going;
     if args.first_group.is_some() || args.groups.is_some() {
         bail!("--first-group/--groups do not go with --plan: the plan gives the shard's groups");
     }
@@ -608,8 +605,8 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
     check_params_fit_scan(&params, &scan, Some(plan_path))?;
     let (shard, id) = plan.shard(index, &scan, plan_path)?;
     let range = shard.first_group..shard.end_group;
-    check_missing_groups(&scan, range.clone(), plan.keep_going)?;
-    let identity = RunIdentity::new(&scan, &params, plan.keep_going, range.clone(), Some(id));
+    check_missing_groups(&scan, range.clone(), keep_going)?;
+    let identity = RunIdentity::new(&scan, &params, keep_going, range.clone(), Some(id));
     std::fs::create_dir_all(&args.out).map_err(|e| {
         anyhow::anyhow!("cannot create the part folder: {e}: {}", args.out.display())
     })?;
@@ -633,7 +630,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
     let run = RangeRun {
         scan: &scan,
         params: &params,
-        keep_going: plan.keep_going,
+        keep_going,
         range: range.clone(),
         shard: true,
         journal: &journal,
@@ -641,8 +638,13 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
         resume: args.side.resume,
         force: args.force,
     };
+    let had_journal = journal.exists();
     let mut groups = Vec::with_capacity(range.len());
-    let (result, mut run_progress) = run_with_progress(&run, args, &mut |g| groups.push(g))?;
+    let (result, mut run_progress) = run_with_progress(&run, args, &mut |g| groups.push(g))
+        .map_err(|e| {
+            let created = !had_journal || (args.force && !args.side.resume);
+            after_failure(e, &journal, created, groups.len(), keep_going)
+        })?;
     run_progress.context_groups = result.context_groups;
     let written = write_part(&args.out, &identity, &groups, args.force)?;
     let report = ShardReport {
