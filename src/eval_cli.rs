@@ -19,7 +19,6 @@ const LOW_R: f64 = 0.3;
 /// An unreadable or non-finite sound, channels that do not pair up, too few overlapping
 /// samples, or a bad `--max-lag-ms`; each names its file.
 pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64) -> Result<()> {
-    use std::io::Write as _;
     if !(max_lag_ms.is_finite() && max_lag_ms >= 0.0) {
         bail!("--max-lag-ms must be a non-negative number, got {max_lag_ms}");
     }
@@ -27,6 +26,7 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
     // Channel by channel: a stereo pair mixed to mono can cancel (left = −right scores 0).
     let (n_rec, n_ref) = (rec.channels.len(), refa.channels.len());
     // Borrowed where they pair up as they are: a side's channels are not copied.
+    let mixed = n_rec != n_ref;
     let channels: Vec<ChannelPair> = if n_rec == n_ref {
         rec.channels
             .iter()
@@ -70,7 +70,21 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
         // Two sounds further apart than the search reaches score as noise: a best lag at the
         // search's edge, or hardly any likeness, is said with the way to look further.
         let at_edge = max_lag > 0 && scores.lag_samples.unsigned_abs() as usize >= max_lag;
-        if at_edge || scores.r.abs() < LOW_R {
+        // A silent sound (or a mix whose channels cancel) scores 0 at any lag: said as such.
+        let silent = [
+            (rec_ch.as_ref(), recovered, n_rec),
+            (ref_ch.as_ref(), reference, n_ref),
+        ]
+        .into_iter()
+        .find(|(x, _, _)| x.iter().all(|v| *v == x[0]));
+        if let Some((_, path, n)) = silent {
+            let what = if mixed && n > 1 {
+                "the mono mix of its channels is silent (they cancel)"
+            } else {
+                "it is silent"
+            };
+            crate::tell!("warning: nothing to score: {what}: {}", path.display());
+        } else if at_edge || scores.r.abs() < LOW_R {
             crate::tell!(
                 "warning: r {:.3} at lag {} samples: if the sounds are further apart than the \
                  ±{max_lag_ms} ms searched, --max-lag-ms looks further: {}",
@@ -106,9 +120,5 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
             }
         }
     }
-    // A reader that went away (`| head`) is not an error of the scoring.
-    match std::io::stdout().lock().write_all(text.as_bytes()) {
-        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
-        _ => Ok(()),
-    }
+    crate::stdout::write_text(&text)
 }

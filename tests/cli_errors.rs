@@ -276,9 +276,23 @@ fn eval_scores_stereo_per_channel_and_refuses_nan_samples() {
     // Channels that do not pair up are mixed, and it says so.
     let mono = dir.path().join("mono.wav");
     common::write_raw_wav(&mono, 44_100, &sine);
-    succeeded_saying(
+    let o = succeeded_saying(
         &["eval", s(&pair), s(&mono)],
         "2 channels and the reference 1: scored as their mono mixes",
+    );
+    // ... which cancel: that is said, not a lag to look further for.
+    let err = stderr(&o);
+    assert!(
+        err.contains("the mono mix of its channels is silent (they cancel): ")
+            && err.contains("pair.wav")
+            && !err.contains("--max-lag-ms"),
+        "{err}"
+    );
+    let silent = dir.path().join("silent.wav");
+    common::write_raw_wav(&silent, 44_100, &vec![0.0; 22_050]);
+    succeeded_saying(
+        &["eval", s(&silent), s(&mono)],
+        "nothing to score: it is silent: ",
     );
     let mut bad = sine;
     bad[100] = f32::NAN;

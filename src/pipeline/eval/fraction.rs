@@ -103,9 +103,15 @@ fn read_into(y: &[f32], range: std::ops::Range<usize>, shift: f64, out: &mut Vec
 }
 
 /// Refines the whole-sample `lag` of [`super::evaluate`] to the fraction that correlates best
-/// (see the module docs). `None` when the signals do not overlap at `lag` or the reference is
-/// shorter than the interpolator.
-pub(super) fn refine(reference: &[f32], recovered: &[f32], lag: i64) -> Option<Aligned> {
+/// (see the module docs), within one sample of it and within ±`max_lag` (the lags searched).
+/// `None` when the signals do not overlap at `lag` or the reference is shorter than the
+/// interpolator.
+pub(super) fn refine(
+    reference: &[f32],
+    recovered: &[f32],
+    lag: i64,
+    max_lag: i64,
+) -> Option<Aligned> {
     if reference.len() < TAPS {
         return None;
     }
@@ -119,16 +125,21 @@ pub(super) fn refine(reference: &[f32], recovered: &[f32], lag: i64) -> Option<A
         read_into(reference, span.clone(), -(lag_f + d), &mut buffer);
         pearson(compared, &buffer)
     };
+    #[allow(clippy::cast_precision_loss)] // lags ≤ 2^52
+    let (d_lo, d_hi) = ((-max_lag - lag) as f64, (max_lag - lag) as f64);
+    let (d_lo, d_hi) = (d_lo.max(-1.0), d_hi.min(1.0));
     let best = |a: (f64, f64), b: (f64, f64)| if b.1 > a.1 { b } else { a };
     let whole = (0.0, r_at(0.0));
     let coarse = (1..=3)
         .flat_map(|k| [-f64::from(k), f64::from(k)])
-        .map(|k| (k * COARSE_STEP, r_at(k * COARSE_STEP)))
+        .map(|k| k * COARSE_STEP)
+        .filter(|d| (d_lo..=d_hi).contains(d))
+        .map(|d| (d, r_at(d)))
         .fold(whole, best);
     let around = golden(
         &mut r_at,
-        (coarse.0 - COARSE_STEP).max(-1.0),
-        (coarse.0 + COARSE_STEP).min(1.0),
+        (coarse.0 - COARSE_STEP).max(d_lo),
+        (coarse.0 + COARSE_STEP).min(d_hi),
     );
     let (d, r) = best(coarse, around);
     // The search's buffer holds its last fraction: read the best one into it.

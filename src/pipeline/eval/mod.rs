@@ -30,6 +30,12 @@ const STEADY_ENVELOPE_SPREAD: f32 = 0.01;
 /// How much more strongly (in r) the recovered signal must correlate inverted than upright for
 /// [`Scores::inverted`].
 const INVERTED_MARGIN: f64 = 0.2;
+/// Or how much less of the reference (as unexplained variance, 1 − r²) the recovered signal
+/// must leave unexplained inverted than upright, both at their refined lags.
+const INVERTED_RESIDUAL_SHARE: f64 = 0.5;
+/// ... and by at least this share of the reference's variance (two near-perfect fits, as of a
+/// pure tone either way, differ by nothing that matters).
+const INVERTED_RESIDUAL_GAIN: f64 = 0.01;
 /// SNR reported when the residual is exactly zero (keeps the score finite for JSON).
 const MAX_SNR_DB: f64 = 300.0;
 
@@ -332,15 +338,20 @@ pub fn evaluate(
         }
     }
     let (best_r, lag) = best?;
-    // A steady tone correlates inverted at half a period about as well as upright at its lag:
-    // only a clear margin says anything about polarity.
-    let inverted = most_negative
-        .filter(|&(nr, _)| -nr > best_r.max(0.0) + INVERTED_MARGIN)
-        .map(|(r, lag_samples)| Inverted { r, lag_samples });
-
     // Exact scores at the lag refined to a fraction of a sample (direct sums, not differences
     // of running sums).
-    let aligned = fraction::refine(reference, recovered, lag)?;
+    let aligned = fraction::refine(reference, recovered, lag, m)?;
+    // A steady tone correlates inverted at half a period about as well as upright at its lag:
+    // only a clear margin in r, or inverted leaving a clearly smaller residual once both are
+    // refined (a chord or a few partials: upright matches only at some lag that nearly
+    // repeats them), says anything about polarity.
+    let inverted = most_negative
+        .filter(|&(nr, nlag)| {
+            -nr > best_r.max(0.0) + INVERTED_MARGIN
+                || inverted_fits_better(reference, recovered, aligned.r, nlag, m)
+        })
+        .map(|(r, lag_samples)| Inverted { r, lag_samples });
+
     let rec_part = recovered.get(aligned.lo..aligned.hi)?;
     let ref_part = aligned.reference.as_slice();
     let (len, r) = (rec_part.len(), aligned.r);
@@ -382,6 +393,25 @@ pub fn evaluate(
         lag_refined_samples: aligned.lag,
         samples: len,
         inverted,
+    })
+}
+
+/// True when `recovered` turned over and refined about `lag` leaves at most
+/// [`INVERTED_RESIDUAL_SHARE`] of the unexplained variance (1 − r²) that it leaves upright at
+/// its own refined r, `upright_r`, and [`INVERTED_RESIDUAL_GAIN`] less.
+fn inverted_fits_better(
+    reference: &[f32],
+    recovered: &[f32],
+    upright_r: f64,
+    lag: i64,
+    max_lag: i64,
+) -> bool {
+    let turned: Vec<f32> = recovered.iter().map(|v| -v).collect();
+    fraction::refine(reference, &turned, lag, max_lag).is_some_and(|inv| {
+        let (upright_left, inverted_left) = (1.0 - upright_r * upright_r, 1.0 - inv.r * inv.r);
+        inv.r > upright_r.max(0.0)
+            && inverted_left <= INVERTED_RESIDUAL_SHARE * upright_left
+            && upright_left - inverted_left >= INVERTED_RESIDUAL_GAIN
     })
 }
 

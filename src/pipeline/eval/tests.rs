@@ -177,6 +177,30 @@ fn inverted_and_scaled_signals() {
         let s = evaluate(&tone(0.37), &tone(0.0), 220, FS).unwrap();
         assert_eq!(s.inverted, None, "{f} Hz: {s:?}");
     }
+    // Two partials, turned over: upright they match only at a lag that nearly repeats both
+    // (r 0.97 within ±5 ms), inverted at lag 0 exactly; named. Upright (at a fractional lag)
+    // they are not.
+    let (w1, w2) = (
+        2.0 * PI * 440.0 / f64::from(FS),
+        2.0 * PI * 1234.0 / f64::from(FS),
+    );
+    let chord = |shift: f64, sign: f64| -> Vec<f32> {
+        (0..22_050)
+            .map(|i| {
+                let t = i as f64 + shift;
+                (sign * (0.5 * (w1 * t).sin() + 0.3 * (w2 * t + 0.3).sin())) as f32
+            })
+            .collect()
+    };
+    let s = evaluate(&chord(0.0, -1.0), &chord(0.0, 1.0), 220, FS).unwrap();
+    let inverted = s.inverted.expect("two partials turned over are named");
+    assert!(inverted.lag_samples == 0 && inverted.r < -0.999, "{s:?}");
+    assert_eq!(
+        evaluate(&chord(0.37, 1.0), &chord(0.0, 1.0), 220, FS)
+            .unwrap()
+            .inverted,
+        None
+    );
     assert!((pearson(&inv, &x) + 1.0).abs() < 1e-9);
     // The gain-only SNR does not remove a DC offset: it counts as noise.
     assert!(s.snr_db < 20.0, "{s:?}");
@@ -312,4 +336,25 @@ fn pearson_basics() {
     assert!((pearson(&[1.0, 2.0, 3.0], &[3.0, 2.0, 1.0]) + 1.0).abs() < 1e-12);
     assert_eq!(pearson(&[1.0], &[1.0]), 0.0);
     assert_eq!(pearson(&[1.0, 1.0, 1.0], &[1.0, 2.0, 3.0]), 0.0);
+}
+
+#[test]
+fn the_refined_lag_stays_within_the_lags_searched() {
+    let x = music(8_000);
+    // Late by 2.4 samples, searched only at lag 0 and then within one sample.
+    let late: Vec<f32> = (0..x.len())
+        .map(|i| {
+            if i >= 3 {
+                0.6 * x[i - 2] + 0.4 * x[i - 3]
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let s = evaluate(&x, &late, 0, FS).unwrap();
+    assert!(s.lag_samples == 0 && s.lag_refined_samples == 0.0, "{s:?}");
+    let s = evaluate(&x, &late, 1, FS).unwrap();
+    assert!(s.lag_refined_samples.abs() <= 1.0, "{s:?}");
+    let s = evaluate(&x, &late, 5, FS).unwrap();
+    assert!((s.lag_refined_samples.abs() - 2.4).abs() < 0.1, "{s:?}");
 }
