@@ -286,6 +286,21 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         (None, None) => bail!("give a sound file, --tone HZ, --sweep F0:F1 or --melody"),
     };
     pb.finish_and_clear();
+    // A limit on the groups cuts the sound short: said even with --quiet, naming the limit.
+    if let Some(n) = cfg.max_groups.filter(|&n| n == summary.groups) {
+        let limit = if args.max_groups.is_some() {
+            "--max-groups".to_string()
+        } else if args.config.is_some() {
+            "the config's max_groups".to_string()
+        } else {
+            format!("the {} preset's max_groups", args.preset)
+        };
+        crate::tell!(
+            "warning: stopped at {limit} = {n} groups: the scan holds {:.4} s of the sound \
+             (a larger --max-groups renders more of it)",
+            summary.reference_secs
+        );
+    }
     if !args.quiet {
         let details = format!("{:.4} s of sound", summary.reference_secs);
         let line = wrote_scan(

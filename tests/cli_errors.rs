@@ -365,3 +365,34 @@ fn a_config_key_of_the_wrong_name_type_or_range_is_named_with_its_file() {
         assert!(!out.exists());
     }
 }
+
+/// A limit on the groups that cuts the sound short is said, naming the limit (the quick
+/// preset's two groups hold 0.2 ms of a 0.2 s tone).
+#[test]
+fn synth_says_when_a_group_limit_cuts_the_sound_short() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let tone = [
+        "synth",
+        "--preset",
+        "quick",
+        "--tone",
+        "1000",
+        "--duration",
+        "0.2",
+    ];
+    let o = groovescope(&[&tone[..], &["--out", s(&out), "--quiet"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("stopped at the quick preset's max_groups = 2 groups"),
+        "{err}"
+    );
+    let more = dir.path().join("s4");
+    let o = groovescope(&[&tone[..], &["--out", s(&more), "--max-groups", "4"]].concat());
+    assert!(
+        stderr(&o).contains("stopped at --max-groups = 4 groups"),
+        "{}",
+        stderr(&o)
+    );
+}
