@@ -7,6 +7,7 @@ pub mod accuracy;
 pub mod alloc;
 #[cfg(feature = "gui")]
 pub mod app;
+pub mod assets;
 pub mod cli;
 pub mod engine;
 pub mod eval_cli;

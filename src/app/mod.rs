@@ -87,15 +87,11 @@ fn without_source_location(text: &str) -> String {
 /// Window size (points): also the size of screenshots.
 pub const WINDOW_SIZE: [f32; 2] = [1600.0, 1000.0];
 
-/// The demo scan bundled with the sources, when it exists (the working directory first).
+/// The bundled demo scan, when it exists ([`crate::assets::find`]: the working folder, beside
+/// the executable, the source tree).
 #[must_use]
 pub fn demo_scan() -> Option<PathBuf> {
-    [
-        PathBuf::from("assets/demo"),
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/demo"),
-    ]
-    .into_iter()
-    .find(|p| crate::io::Scan::is_scan_dir(p))
+    crate::assets::find("assets/demo", crate::io::Scan::is_scan_dir)
 }
 
 /// The scan to open when none is given: the last one used, else the demo scan.

@@ -15,15 +15,13 @@ use super::cli::StillArgs;
 /// The bundled still demo folder, relative to the crate root.
 pub const DEMO_STILL: &str = "assets/demo-still";
 
-/// The demo folder: `assets/demo-still` under the current folder when it holds one, otherwise
-/// the one in the source tree the binary was built from.
+/// The demo folder: the first `assets/demo-still` that holds one ([`crate::assets::find`]:
+/// the working folder, beside the executable, the source tree), else the source tree's, for
+/// the error that names it.
 #[must_use]
 pub fn demo_still_dir() -> PathBuf {
-    let here = Path::new(DEMO_STILL);
-    if here.join("truth.toml").is_file() {
-        return here.to_path_buf();
-    }
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(DEMO_STILL)
+    crate::assets::find(DEMO_STILL, |p| p.join("truth.toml").is_file())
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join(DEMO_STILL))
 }
 
 /// A generated still, ready to decode: the image, the groove that carries the sound, its
