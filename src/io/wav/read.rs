@@ -11,6 +11,8 @@
 //!   unused low bits are not all zero is read that way when every sample fits the valid bits,
 //!   and refused when one does not. A sample `v` of a `b`-bit container reads as `v / 2^(b−1)`.
 //! - **Floats** are read as they are; 64-bit ones are rounded to `f32`.
+//! - **A data length of 0xFFFFFFFF** (a recorder streaming its file never filled it in) reads
+//!   the samples up to the end of the file.
 
 use std::io::Read;
 
@@ -161,7 +163,9 @@ pub(crate) fn read_header(source: &mut impl Read) -> Result<(Format, u64), Strin
     match &riff[0..4] {
         b"RIFF" => {}
         b"RF64" | b"BW64" => {
-            return Err("it is an RF64 WAV (over 4 GiB), which is not supported".into());
+            return Err(
+                "it is an RF64 WAV (the 64-bit form of WAV), which is not supported".into(),
+            );
         }
         _ => return Err("cannot read WAV: not a RIFF WAVE file".into()),
     }
@@ -204,17 +208,73 @@ pub(crate) fn read_header(source: &mut impl Read) -> Result<(Format, u64), Strin
     }
 }
 
-/// Decodes the `frames × channels` samples of `format` from `source` into one buffer per
-/// channel (see the module docs).
+/// After the samples read from a `data` chunk, `rest` bytes short of its end (a partial frame
+/// and the pad byte of an odd length): true when the chunks that follow hold another `data`
+/// chunk (samples split over two, which WAV does not allow, and the second would be lost). What
+/// does not read as chunks (trailing bytes, a tag) ends the walk quietly.
+pub(crate) fn another_data_chunk_follows(source: &mut impl Read, rest: u64) -> bool {
+    if skip(source, rest, "data").is_err() {
+        return false;
+    }
+    loop {
+        let mut header = [0u8; 8];
+        if !read_or_end(source, &mut header).unwrap_or(false) {
+            return false;
+        }
+        if &header[0..4] == b"data" {
+            return true;
+        }
+        let len = u64::from(le_u32(&header, 4));
+        if skip(source, len + (len & 1), "").is_err() {
+            return false;
+        }
+    }
+}
+
+/// How many frames the data chunk holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Frames {
+    /// As many as its length says.
+    Exactly(usize),
+    /// Up to the end of the file, at most this many: its length is the 0xFFFFFFFF that a
+    /// writer which never came back to fill it in (a recorder streaming its file) leaves.
+    ToTheEnd(usize),
+}
+
+/// Data-chunk length that stands for "up to the end of the file" ([`Frames::ToTheEnd`]).
+pub(crate) const UNKNOWN_LENGTH: u64 = 0xffff_ffff;
+
+/// Fills `buf` from `source` up to its end: the bytes read.
+fn fill(source: &mut impl Read, buf: &mut [u8]) -> Result<usize, String> {
+    let mut got = 0;
+    while got < buf.len() {
+        match source.read(&mut buf[got..]) {
+            Ok(0) => break,
+            Ok(n) => got += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(format!("cannot read WAV samples: {e}")),
+        }
+    }
+    Ok(got)
+}
+
+/// Decodes the samples of `format` from `source` into one buffer per channel (see the module
+/// docs): `frames` of them, or up to the end of the file (a partial last frame dropped), which
+/// is refused past its limit.
 pub(crate) fn read_samples(
     source: &mut impl Read,
     format: Format,
-    frames: usize,
+    frames: Frames,
 ) -> Result<Vec<Vec<f32>>, String> {
     let nch = usize::from(format.channels);
     let bytes = usize::from(format.container_bytes);
-    let mut channels = vec![Vec::with_capacity(frames); nch];
-    let mut block = vec![0u8; BLOCK_FRAMES.min(frames.max(1)) * nch * bytes];
+    let (want, to_end) = match frames {
+        Frames::Exactly(n) => (n, false),
+        // One more than the limit: reading it says the file is past the limit.
+        Frames::ToTheEnd(limit) => (limit.saturating_add(1), true),
+    };
+    let mut channels = vec![Vec::with_capacity(want.min(BLOCK_FRAMES)); nch];
+    let mut block = vec![0u8; BLOCK_FRAMES.min(want.max(1)) * nch * bytes];
     // Integers: the container's value over its full scale; unused low bits seen set, and
     // whether every sample fits the valid bits counted from the bottom. (Floats use none of
     // this; their 64-bit container would overflow it.)
@@ -225,20 +285,23 @@ pub(crate) fn read_samples(
     let bottom_range = -(1i64 << (valid_bits - 1))..(1i64 << (valid_bits - 1));
     let mut low_bits_set = false;
     let mut fits_bottom = true;
-    let mut left = frames;
+    let mut left = want;
     while left > 0 {
         let n = left.min(BLOCK_FRAMES);
-        let buf = &mut block[..n * nch * bytes];
-        source.read_exact(buf).map_err(|e| {
-            if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                format!(
-                    "the file ends inside the {frames} frames its data chunk announces (cut short?)"
-                )
-            } else {
-                format!("cannot read WAV samples: {e}")
-            }
-        })?;
-        for (i, sample) in buf.chunks_exact(bytes).enumerate() {
+        let len = n * nch * bytes;
+        let got = fill(source, &mut block[..len])?;
+        let used = if got == len {
+            len
+        } else if to_end {
+            // The end of the file: the last whole frame, and nothing more to read.
+            left = n;
+            got - got % (nch * bytes)
+        } else {
+            return Err(format!(
+                "the file ends inside the {want} frames its data chunk announces (cut short?)"
+            ));
+        };
+        for (i, sample) in block[..used].chunks_exact(bytes).enumerate() {
             let v = match (format.float, bytes) {
                 (true, 4) => f32::from_le_bytes([sample[0], sample[1], sample[2], sample[3]]),
                 (true, _) => f64::from_le_bytes(sample.try_into().expect("8 bytes")) as f32,
@@ -256,6 +319,15 @@ pub(crate) fn read_samples(
             channels[i % nch].push(v);
         }
         left -= n;
+    }
+    if let Frames::ToTheEnd(limit) = frames
+        && channels[0].len() > limit
+    {
+        return Err(format!(
+            "its data chunk's length is not filled in, and the samples run past the limit of \
+             {} samples",
+            limit * nch
+        ));
     }
     if low_bits_set {
         if !fits_bottom {

@@ -237,6 +237,15 @@ fn what_cannot_be_read_is_said_naming_the_file() {
         ),
         (riff(&[(b"fmt ", &pcm), (b"data", &[])]), "holds no samples"),
         (b"RF64\0\0\0\0WAVE".to_vec(), "RF64"),
+        (
+            riff(&[
+                (b"fmt ", &pcm),
+                (b"data", &[1, 0, 2]),
+                (b"LIST", b"x"),
+                (b"data", &[3, 0]),
+            ]),
+            "second data chunk",
+        ),
         (b"hello".to_vec(), "not a RIFF WAVE file"),
     ];
     for (bytes, says) in cases {
@@ -257,7 +266,28 @@ fn what_cannot_be_read_is_said_naming_the_file() {
     // A header past the sample limit is refused before a sample is read.
     let mut huge = riff(&[(b"fmt ", &plain(TAG_PCM, 1, 8000, 1, 8)), (b"data", &[])]);
     let at = huge.len() - 4;
-    huge[at..].copy_from_slice(&u32::MAX.to_le_bytes());
+    huge[at..].copy_from_slice(&0xffff_fff0_u32.to_le_bytes());
     let e = read(huge).unwrap_err();
     assert!(e.contains("past the limit"), "{e}");
+}
+
+#[test]
+fn a_data_length_never_filled_in_reads_to_the_end_of_the_file() {
+    // 0xFFFFFFFF, as a recorder streaming its file leaves it: three whole frames and a byte.
+    let data: Vec<u8> = [8192_i16, -16_384, 4096]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let mut bytes = riff(&[(b"fmt ", &plain(TAG_PCM, 1, 8000, 2, 16)), (b"data", &data)]);
+    let at = bytes.len() - data.len() - 4;
+    bytes[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    bytes.push(7);
+    let audio = read(bytes).unwrap();
+    assert_eq!(audio.channels, vec![vec![0.25, -0.5, 0.125]]);
+    // Past the limit it is refused, having read one frame more than the limit.
+    let format = parse_format(&plain(TAG_PCM, 1, 8000, 2, 16)).unwrap();
+    let e = read_samples(&mut Cursor::new(&data), format, Frames::ToTheEnd(2)).unwrap_err();
+    assert!(e.contains("past the limit of 2 samples"), "{e}");
+    let ok = read_samples(&mut Cursor::new(&data), format, Frames::ToTheEnd(3)).unwrap();
+    assert_eq!(ok[0].len(), 3);
 }
