@@ -102,7 +102,7 @@ pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
             t.height_px,
             t.grooves.len(),
             t.axis,
-            summary.image.display(),
+            crate::stdout::shell_quoted(&summary.image),
             t.um_per_px,
             t.rpm,
             match t.axis {

@@ -297,28 +297,16 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
     }
     if args.slurm {
         let last = plan.shards.len() - 1;
-        let parts = shell_quoted(&args.parts);
+        let parts = crate::stdout::shell_quoted(&args.parts);
         crate::say!(
             "# submit the shards as a job array, then the merge once every shard has finished:\n\
              jid=$(sbatch --parsable --array=0-{last} scripts/slurm/reconstruct-side.sbatch {} {} {parts})\n\
              sbatch --dependency=afterok:$jid scripts/slurm/merge-side.sbatch {parts} side.wav",
-            shell_quoted(&scan.dir),
-            shell_quoted(&args.out),
+            crate::stdout::shell_quoted(&scan.dir),
+            crate::stdout::shell_quoted(&args.out),
         )?;
     }
     Ok(())
-}
-
-/// `path` as one word for a POSIX shell: bare when it holds only safe characters, else in
-/// single quotes (a quote inside written as `'\''`).
-fn shell_quoted(path: &Path) -> String {
-    let text = path.to_string_lossy();
-    let safe = |c: char| c.is_ascii_alphanumeric() || "/._-+:,=@%".contains(c);
-    if !text.is_empty() && text.chars().all(safe) {
-        text.into_owned()
-    } else {
-        format!("'{}'", text.replace('\'', r"'\''"))
-    }
 }
 
 /// `s` as "1 h 05 min", "3 min 20 s" or "4.2 s".
@@ -340,23 +328,6 @@ fn human_secs(s: f64) -> String {
 #[allow(clippy::unwrap_used)] // tests may panic
 mod tests {
     use super::*;
-
-    #[test]
-    fn quoted_paths_reach_the_shell_as_one_word() {
-        for p in [
-            "plain/path.zarr",
-            "ü dir/z ø.zarr",
-            "it's here",
-            "a$b`c\"d e",
-        ] {
-            let out = std::process::Command::new("sh")
-                .arg("-c")
-                .arg(format!("printf %s {}", shell_quoted(Path::new(p))))
-                .output()
-                .unwrap();
-            assert_eq!(String::from_utf8(out.stdout).unwrap(), p);
-        }
-    }
 
     #[test]
     fn the_probe_times_the_groups_after_the_first() {
