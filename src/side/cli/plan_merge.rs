@@ -88,9 +88,12 @@ pub struct MergeArgs {
 fn finish_dsp(parts: &PipelineParams, file: &Path) -> Result<DspParams> {
     let what = "DSP settings";
     let text = crate::io::limits::read_toml_text(file, what)?;
+    // Another params table ([flow], [edges], …), with or without a [dsp] beside it.
     if let Ok(table) = toml::from_str::<toml::Table>(&text)
-        && table.contains_key("dsp")
-        && let Some(other) = table.keys().find(|k| *k != "dsp")
+        && let Some(other) = table
+            .iter()
+            .find(|(k, v)| *k != "dsp" && v.is_table())
+            .map(|(k, _)| k)
     {
         anyhow::bail!(
             "invalid {what}: merge --dsp takes only a [dsp] table (the finish's filters), not \
