@@ -241,7 +241,10 @@ fn merge_with_another_dsp_table_is_the_one_process_run_with_it() {
     // Without a [dsp] table beside it, the same sentence (not "unknown field").
     std::fs::write(&bad, "[edges]\ndespike_sigmas = 0.0\n").unwrap();
     let e = stderr(&merge_dsp(&bad, &out));
-    assert!(e.contains("takes only a [dsp] table") && e.contains("`edges`"), "{e}");
+    assert!(
+        e.contains("takes only a [dsp] table") && e.contains("`edges`"),
+        "{e}"
+    );
 }
 
 /// The default method is `fused` (both signals per group, fused over the merged clip); `flow`

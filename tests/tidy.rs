@@ -148,11 +148,8 @@ fn the_purity_check_catches_each_kind_of_import() {
 
 #[test]
 fn pipeline_never_imports_io_app_disk_clock_gui_or_audio() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/pipeline");
-    let mut files = Vec::new();
-    rust_files(&root, &mut files);
     let mut stray = Vec::new();
-    for f in files {
+    for f in src_files_where(|rel| rel.starts_with("src/pipeline/")) {
         let name = f.file_name().unwrap().to_string_lossy();
         // Test modules (`tests.rs`, `test_support.rs`) may read scans from disk and time things.
         if name == "tests.rs" || name == "test_support.rs" {
@@ -182,22 +179,27 @@ fn unsafe_lines(text: &str) -> usize {
         .count()
 }
 
-#[test]
-fn unsafe_lives_only_in_the_simd_module_and_the_allocator_setup() {
+/// The files under `src/` whose path from the crate root (`src/…`, with `/`) `keep` accepts.
+fn src_files_where(keep: impl Fn(&str) -> bool) -> Vec<std::path::PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = Vec::new();
     rust_files(&root.join("src"), &mut files);
-    let allowed = ["src/pipeline/simd/", "src/alloc.rs"];
-    let stray: Vec<_> = files
-        .iter()
-        .filter(|p| {
-            let rel = p
-                .strip_prefix(root)
+    files.retain(|p| {
+        keep(
+            &p.strip_prefix(root)
                 .unwrap()
                 .to_string_lossy()
-                .replace('\\', "/");
-            !allowed.iter().any(|a| rel.starts_with(a))
-        })
+                .replace('\\', "/"),
+        )
+    });
+    files
+}
+
+#[test]
+fn unsafe_lives_only_in_the_simd_module_and_the_allocator_setup() {
+    let allowed = ["src/pipeline/simd/", "src/alloc.rs"];
+    let stray: Vec<_> = src_files_where(|rel| !allowed.iter().any(|a| rel.starts_with(a)))
+        .into_iter()
         .filter(|p| unsafe_lines(&std::fs::read_to_string(p).unwrap()) > 0)
         .collect();
     assert!(stray.is_empty(), "unsafe outside pipeline/simd: {stray:?}");
@@ -207,12 +209,12 @@ fn unsafe_lives_only_in_the_simd_module_and_the_allocator_setup() {
 
 #[test]
 fn source_files_stay_under_700_lines() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    rust_files(&root, &mut files);
-    let long: Vec<_> = files
-        .iter()
-        .map(|p| (p, std::fs::read_to_string(p).unwrap().lines().count()))
+    let long: Vec<_> = src_files_where(|_| true)
+        .into_iter()
+        .map(|p| {
+            let n = std::fs::read_to_string(&p).unwrap().lines().count();
+            (p, n)
+        })
         .filter(|&(_, n)| n > 700)
         .collect();
     assert!(long.is_empty(), "split these along their seams: {long:?}");
@@ -233,19 +235,11 @@ fn panicking_prints(code: &str) -> usize {
 
 #[test]
 fn the_program_prints_only_through_the_macros_that_cannot_panic() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut files = Vec::new();
-    rust_files(&root.join("src"), &mut files);
-    let stray: Vec<_> = files
-        .iter()
-        .filter(|p| {
-            let rel = p
-                .strip_prefix(root)
-                .unwrap()
-                .to_string_lossy()
-                .replace('\\', "/");
-            !(rel.contains("/tests/") || rel.ends_with("tests.rs") || rel == "src/stdout.rs")
-        })
+    let program = |rel: &str| {
+        !(rel.contains("/tests/") || rel.ends_with("tests.rs") || rel == "src/stdout.rs")
+    };
+    let stray: Vec<_> = src_files_where(program)
+        .into_iter()
         .filter(|p| panicking_prints(&non_test_code(&std::fs::read_to_string(p).unwrap())) > 0)
         .collect();
     assert!(

@@ -47,15 +47,15 @@ fn le_u32(bytes: &[u8], at: usize) -> u32 {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Format {
     /// Channels, interleaved.
-    pub(crate) channels: u16,
+    pub channels: u16,
     /// Frames per second.
-    pub(crate) rate_hz: u32,
+    pub rate_hz: u32,
     /// Bytes that hold one sample.
-    pub(crate) container_bytes: u16,
+    pub container_bytes: u16,
     /// Bits of each sample that carry sound (integers; at most the container's).
-    pub(crate) valid_bits: u16,
+    pub valid_bits: u16,
     /// IEEE float samples rather than integers.
-    pub(crate) float: bool,
+    pub float: bool,
 }
 
 /// The format chunk's body read as a [`Format`], or why it cannot be read.

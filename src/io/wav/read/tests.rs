@@ -57,6 +57,11 @@ fn read(bytes: Vec<u8>) -> Result<Audio, String> {
     read_wav_from(Cursor::new(bytes), Path::new("ref.wav")).map_err(|e| e.to_string())
 }
 
+/// [`read`] of a file of just the format chunk `fmt` and the samples `data`.
+fn read_pcm(fmt: &[u8], data: &[u8]) -> Result<Audio, String> {
+    read(riff(&[(b"fmt ", fmt), (b"data", data)]))
+}
+
 /// Little-endian 4-byte containers of `values`.
 fn i32_data(values: &[i32]) -> Vec<u8> {
     values.iter().flat_map(|v| v.to_le_bytes()).collect()
@@ -124,11 +129,7 @@ fn valid_bits_at_the_top_of_a_larger_container_read_at_their_full_scale() {
     // 24 valid bits in 32 (WAVEFORMATEXTENSIBLE: at the top, the low byte zero).
     let samples = [1 << 22, -(1 << 21), (1 << 23) - 1, -(1 << 23)];
     let data = i32_data(&samples.map(|v| v << 8));
-    let audio = read(riff(&[
-        (b"fmt ", &extensible(TAG_PCM, 1, 4, 24)),
-        (b"data", &data),
-    ]))
-    .unwrap();
+    let audio = read_pcm(&extensible(TAG_PCM, 1, 4, 24), &data).unwrap();
     let expected = samples.map(|v| v as f32 / (1 << 23) as f32);
     assert_eq!(audio.channels, vec![expected.to_vec()]);
     // 12 valid bits in 16, said by the plain format chunk.
@@ -136,11 +137,7 @@ fn valid_bits_at_the_top_of_a_larger_container_read_at_their_full_scale() {
         .iter()
         .flat_map(|v| v.to_le_bytes())
         .collect();
-    let audio = read(riff(&[
-        (b"fmt ", &plain(TAG_PCM, 1, 8000, 2, 12)),
-        (b"data", &data),
-    ]))
-    .unwrap();
+    let audio = read_pcm(&plain(TAG_PCM, 1, 8000, 2, 12), &data).unwrap();
     assert_eq!(audio.channels, vec![vec![0.5, -1.0]]);
 }
 
@@ -148,20 +145,12 @@ fn valid_bits_at_the_top_of_a_larger_container_read_at_their_full_scale() {
 fn valid_bits_at_the_bottom_are_read_when_every_sample_fits_them() {
     let samples = [1 << 22, -(1 << 21), 12_345, -(1 << 23)];
     let data = i32_data(&samples);
-    let audio = read(riff(&[
-        (b"fmt ", &extensible(TAG_PCM, 1, 4, 24)),
-        (b"data", &data),
-    ]))
-    .unwrap();
+    let audio = read_pcm(&extensible(TAG_PCM, 1, 4, 24), &data).unwrap();
     let expected = samples.map(|v| v as f32 / (1 << 23) as f32);
     assert_eq!(audio.channels, vec![expected.to_vec()]);
     // One sample past 24 bits, and low bits set: neither layout fits.
     let data = i32_data(&[12_345, 1 << 30]);
-    let e = read(riff(&[
-        (b"fmt ", &extensible(TAG_PCM, 1, 4, 24)),
-        (b"data", &data),
-    ]))
-    .unwrap_err();
+    let e = read_pcm(&extensible(TAG_PCM, 1, 4, 24), &data).unwrap_err();
     assert!(
         e.contains("ref.wav") && e.contains("more than the 24 valid bits"),
         "{e}"
@@ -196,7 +185,7 @@ fn float_samples_of_eight_bytes_are_read() {
         plain(TAG_FLOAT, 2, 96_000, 8, 64),
         extensible(TAG_FLOAT, 2, 8, 64),
     ] {
-        let audio = read(riff(&[(b"fmt ", &fmt), (b"data", &data)])).unwrap();
+        let audio = read_pcm(&fmt, &data).unwrap();
         assert_eq!(audio.channels, vec![vec![0.25, 0.5], vec![-0.75, 1.0]]);
     }
 }
