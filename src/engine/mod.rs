@@ -38,6 +38,10 @@ pub enum EngineError {
     /// A parameter is invalid, or the stitched signal could not be made.
     #[error(transparent)]
     Stage(#[from] StageError),
+    /// Writing what the run keeps as it goes (a journal) failed: a full or read-only disk, not
+    /// the scan.
+    #[error(transparent)]
+    Output(LoadError),
     /// The operator cancelled.
     #[error("reconstruction cancelled")]
     Cancelled,

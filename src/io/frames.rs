@@ -64,7 +64,7 @@ pub fn decode_frame_raw(bytes: &[u8], path: &Path) -> Result<RawFrame, LoadError
     };
     let (w, h) = reader()?
         .into_dimensions()
-        .map_err(|e| bad(e.to_string()))?;
+        .map_err(|e| bad(decoder_words(e)))?;
     check_frame_size(u64::from(w), u64::from(h)).map_err(bad)?;
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(w);
@@ -72,7 +72,7 @@ pub fn decode_frame_raw(bytes: &[u8], path: &Path) -> Result<RawFrame, LoadError
     limits.max_alloc = Some(MAX_FRAME_DECODED_BYTES);
     let mut reader = reader()?;
     reader.limits(limits);
-    let dynimg = reader.decode().map_err(|e| bad(e.to_string()))?;
+    let dynimg = reader.decode().map_err(|e| bad(decoder_words(e)))?;
     let (width, height) = (dynimg.width() as usize, dynimg.height() as usize);
     let samples = match dynimg {
         DynamicImage::ImageLuma8(b) => RawSamples::U8(b.into_raw()),
@@ -91,6 +91,17 @@ pub fn decode_frame_raw(bytes: &[u8], path: &Path) -> Result<RawFrame, LoadError
         height,
         samples,
     })
+}
+
+/// The image decoder's error as the problem with a frame: an unsupported kind of image (a
+/// float TIFF, say) names the kinds frames may be.
+fn decoder_words(e: image::ImageError) -> String {
+    match e {
+        image::ImageError::Unsupported(u) => {
+            format!("unsupported image: {u}; frames are 8- or 16-bit grey or RGB PNG or TIFF")
+        }
+        other => other.to_string(),
+    }
 }
 
 /// Grey `f32` in `[0, 1]` of a raw frame: 8-bit values / 255, 16-bit values / 65 535.
@@ -617,5 +628,18 @@ mod tests {
         std::fs::write(&p, b"not a png at all").unwrap();
         let msg = load_frame(&p).unwrap_err().to_string();
         assert!(msg.contains("broken.png"), "{msg}");
+        // A float TIFF: the kinds of frame it may be are named.
+        let mut tif = std::io::Cursor::new(Vec::new());
+        tiff::encoder::TiffEncoder::new(&mut tif)
+            .unwrap()
+            .write_image::<tiff::encoder::colortype::Gray32Float>(4, 2, &[0.5; 8])
+            .unwrap();
+        let msg = decode_frame(tif.get_ref(), Path::new("f.tif"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("frames are 8- or 16-bit grey or RGB") && msg.contains("f.tif"),
+            "{msg}"
+        );
     }
 }

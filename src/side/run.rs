@@ -219,12 +219,12 @@ pub fn run_range(
             journal
                 .append(&Record::Group(outcome.clone()))
                 .map_err(|e| match e {
-                    // The engine's callback speaks EngineError; the journal's load error
-                    // already names its file.
-                    SideError::Load(load) => EngineError::Load(load),
+                    // The engine's callback speaks EngineError; the journal's error already
+                    // names its file, and is the output's, not the scan's.
+                    SideError::Load(load) => EngineError::Output(load),
                     SideError::Engine(engine) => engine,
                     SideError::Refused { problem, path } => {
-                        EngineError::Load(crate::io::LoadError::Io { problem, path })
+                        EngineError::Output(crate::io::LoadError::Io { problem, path })
                     }
                 })?;
             done += 1;

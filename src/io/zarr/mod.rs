@@ -461,8 +461,10 @@ impl ZarrWriter {
         }
         let mut shape = self.array.shape().to_vec();
         shape[0] = g + 1;
+        // The write is the store's: named by the chunk's file, not the group it came from.
+        let chunk = chunk_file(&self.dir, usize::try_from(g).unwrap_or(usize::MAX));
         let err = |e: &dyn std::fmt::Display| {
-            LoadError::io(format!("cannot write the group's chunk: {e}"), source)
+            LoadError::io(format!("cannot write the group's chunk: {e}"), &chunk)
         };
         // In memory only: the metadata on disk is written by `store_metadata` (and by
         // `reopen`), and [`Self::read_back`] reads through this array.
