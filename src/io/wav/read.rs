@@ -30,8 +30,8 @@ pub(crate) const SUBFORMAT_TAIL: [u8; 14] = [
 ];
 /// Longest format chunk read (the extensible one is 40 bytes; vendors add a little).
 const MAX_FORMAT_BYTES: u32 = 1024;
-/// Frames decoded at a time.
-const BLOCK_FRAMES: usize = 16_384;
+/// Samples (all channels) decoded at a time: whole frames of them, at least one.
+const BLOCK_SAMPLES: usize = 32_768;
 
 /// A little-endian `u16` of `bytes` at `at`.
 pub(crate) fn le_u16(bytes: &[u8], at: usize) -> u16 {
@@ -93,10 +93,9 @@ pub(crate) fn parse_format(body: &[u8]) -> Result<Format, String> {
             valid_bits = extensible_bits;
         }
     }
-    let container_bits = container_bytes * 8;
     match tag {
         TAG_PCM if (1..=4).contains(&container_bytes) => {
-            if valid_bits == 0 || valid_bits > container_bits {
+            if valid_bits == 0 || valid_bits > container_bytes * 8 {
                 return Err(format!(
                     "its header gives {valid_bits} valid bits in {container_bytes}-byte samples"
                 ));
@@ -113,7 +112,7 @@ pub(crate) fn parse_format(body: &[u8]) -> Result<Format, String> {
             channels,
             rate_hz,
             container_bytes,
-            valid_bits: container_bits,
+            valid_bits: container_bytes * 8,
             float: true,
         }),
         TAG_PCM | TAG_FLOAT => Err(format!(
@@ -273,8 +272,10 @@ pub(crate) fn read_samples(
         // One more than the limit: reading it says the file is past the limit.
         Frames::ToTheEnd(limit) => (limit.saturating_add(1), true),
     };
-    let mut channels = vec![Vec::with_capacity(want.min(BLOCK_FRAMES)); nch];
-    let mut block = vec![0u8; BLOCK_FRAMES.min(want.max(1)) * nch * bytes];
+    // Bounded by samples, not frames: a header may claim thousands of channels.
+    let block_frames = (BLOCK_SAMPLES / nch).max(1);
+    let mut channels = vec![Vec::with_capacity(want.min(block_frames)); nch];
+    let mut block = vec![0u8; block_frames.min(want.max(1)) * nch * bytes];
     // Integers: the container's value over its full scale; unused low bits seen set, and
     // whether every sample fits the valid bits counted from the bottom. (Floats use none of
     // this; their 64-bit container would overflow it.)
@@ -287,7 +288,7 @@ pub(crate) fn read_samples(
     let mut fits_bottom = true;
     let mut left = want;
     while left > 0 {
-        let n = left.min(BLOCK_FRAMES);
+        let n = left.min(block_frames);
         let len = n * nch * bytes;
         let got = fill(source, &mut block[..len])?;
         let used = if got == len {

@@ -226,6 +226,14 @@ fn what_cannot_be_read_is_said_naming_the_file() {
         ),
         (riff(&[(b"fmt ", &pcm), (b"data", &[])]), "holds no samples"),
         (b"RF64\0\0\0\0WAVE".to_vec(), "RF64"),
+        // A block of 65,535 bytes for one channel (the fuzzed file that overflowed the bits).
+        (
+            riff(&[
+                (b"fmt ", &plain(TAG_PCM, 1, 8000, 65_535, 16)),
+                (b"data", &[0; 4]),
+            ]),
+            "65535-byte integer",
+        ),
         (
             riff(&[
                 (b"fmt ", &pcm),
