@@ -9,7 +9,7 @@
 //! one-process run, and a scan's folder its store. Readers that do not know the chunk skip it,
 //! as RIFF says.
 
-use super::wav::read::{SUBFORMAT_TAIL, TAG_EXTENSIBLE, TAG_FLOAT, TAG_PCM, le_u16};
+use super::wav::read::{SUBFORMAT_TAIL, TAG_EXTENSIBLE, TAG_FLOAT, TAG_PCM, le_u16, le_u32};
 use super::wav::{Audio, WavBits};
 use crate::meta::{Cut, ScanMeta};
 
@@ -153,7 +153,7 @@ fn chunks(wav: &[u8]) -> impl Iterator<Item = (usize, [u8; 4], usize)> + '_ {
     std::iter::from_fn(move || {
         let header = wav.get(at..at + 8)?;
         let id = [header[0], header[1], header[2], header[3]];
-        let len = u32::from_le_bytes([header[4], header[5], header[6], header[7]]) as usize;
+        let len = le_u32(header, 4) as usize;
         let here = at;
         at = at.saturating_add(8 + len + (len & 1));
         Some((here, id, len))

@@ -166,41 +166,13 @@ pub fn read_reference_wav(path: &Path) -> Result<Audio, LoadError> {
 /// # Errors
 /// As [`read_wav`].
 pub fn read_wav_from(mut source: impl std::io::Read, path: &Path) -> Result<Audio, LoadError> {
-    let err = |problem: String| LoadError::Sound {
-        problem,
-        path: path.to_path_buf(),
-    };
-    let (format, data_bytes) = read::read_header(&mut source).map_err(err)?;
-    let nch = u64::from(format.channels);
-    let frames = if data_bytes == read::UNKNOWN_LENGTH {
-        read::Frames::ToTheEnd((MAX_WAV_SAMPLES / nch) as usize)
-    } else {
-        // A partial frame at the end is no sound.
-        let frames = data_bytes / (nch * u64::from(format.container_bytes));
-        let samples = frames * nch;
-        if samples > MAX_WAV_SAMPLES {
-            return Err(err(format!(
-                "the WAV header announces {samples} samples, past the limit of {MAX_WAV_SAMPLES}"
-            )));
-        }
-        read::Frames::Exactly(frames as usize)
-    };
-    let channels = read::read_samples(&mut source, format, frames).map_err(err)?;
-    if let read::Frames::Exactly(n) = frames {
-        let rest = data_bytes - n as u64 * nch * u64::from(format.container_bytes);
-        if read::another_data_chunk_follows(&mut source, rest + (data_bytes & 1)) {
-            return Err(err(
-                "it holds a second data chunk (samples split over two chunks, which WAV does \
-                 not allow; only the first would be read)"
-                    .into(),
-            ));
-        }
-    }
-    if channels[0].is_empty() {
-        return Err(err("the WAV file holds no samples".into()));
-    }
+    let (sample_rate_hz, channels) =
+        read::read_audio(&mut source, MAX_WAV_SAMPLES).map_err(|problem| LoadError::Sound {
+            problem,
+            path: path.to_path_buf(),
+        })?;
     Ok(Audio {
-        sample_rate_hz: format.rate_hz,
+        sample_rate_hz,
         channels,
     })
 }

@@ -39,7 +39,7 @@ pub(crate) fn le_u16(bytes: &[u8], at: usize) -> u16 {
 }
 
 /// A little-endian `u32` of `bytes` at `at`.
-fn le_u32(bytes: &[u8], at: usize) -> u32 {
+pub(crate) fn le_u32(bytes: &[u8], at: usize) -> u32 {
     u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
 }
 
@@ -129,17 +129,11 @@ pub(crate) fn parse_format(body: &[u8]) -> Result<Format, String> {
 
 /// Reads exactly `buf.len()` bytes; false at a clean end of the file before the first byte.
 fn read_or_end(source: &mut impl Read, buf: &mut [u8]) -> Result<bool, String> {
-    let mut got = 0;
-    while got < buf.len() {
-        match source.read(&mut buf[got..]) {
-            Ok(0) if got == 0 => return Ok(false),
-            Ok(0) => return Err("the file ends inside a chunk header".into()),
-            Ok(n) => got += n,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(format!("cannot read WAV: {e}")),
-        }
+    match fill(source, buf)? {
+        0 if !buf.is_empty() => Ok(false),
+        got if got < buf.len() => Err("the file ends inside a chunk header".into()),
+        _ => Ok(true),
     }
-    Ok(true)
 }
 
 /// Skips `len` bytes of `source`, which must hold them.
@@ -153,7 +147,7 @@ fn skip(source: &mut impl Read, len: u64, what: &str) -> Result<(), String> {
 }
 
 /// Walks `source`'s chunks up to `data`: its format and the length of its samples in bytes.
-pub(crate) fn read_header(source: &mut impl Read) -> Result<(Format, u64), String> {
+fn read_header(source: &mut impl Read) -> Result<(Format, u64), String> {
     let mut riff = [0u8; 12];
     let whole = read_or_end(source, &mut riff).is_ok_and(|read| read);
     if !whole || &riff[8..12] != b"WAVE" {
@@ -211,7 +205,7 @@ pub(crate) fn read_header(source: &mut impl Read) -> Result<(Format, u64), Strin
 /// and the pad byte of an odd length): true when the chunks that follow hold another `data`
 /// chunk (samples split over two, which WAV does not allow, and the second would be lost). What
 /// does not read as chunks (trailing bytes, a tag) ends the walk quietly.
-pub(crate) fn another_data_chunk_follows(source: &mut impl Read, rest: u64) -> bool {
+fn another_data_chunk_follows(source: &mut impl Read, rest: u64) -> bool {
     if skip(source, rest, "data").is_err() {
         return false;
     }
@@ -241,7 +235,45 @@ pub(crate) enum Frames {
 }
 
 /// Data-chunk length that stands for "up to the end of the file" ([`Frames::ToTheEnd`]).
-pub(crate) const UNKNOWN_LENGTH: u64 = 0xffff_ffff;
+const UNKNOWN_LENGTH: u64 = 0xffff_ffff;
+
+/// Reads a whole WAV from `source`: its rate and one buffer per channel, at most
+/// `max_samples` samples (all channels), a count the header announces refused before any is
+/// read. A partial frame at the end is no sound; a second `data` chunk is refused.
+pub(crate) fn read_audio(
+    source: &mut impl Read,
+    max_samples: u64,
+) -> Result<(u32, Vec<Vec<f32>>), String> {
+    let (format, data_bytes) = read_header(source)?;
+    let nch = u64::from(format.channels);
+    let frame_bytes = nch * u64::from(format.container_bytes);
+    let frames = if data_bytes == UNKNOWN_LENGTH {
+        Frames::ToTheEnd((max_samples / nch) as usize)
+    } else {
+        let samples = data_bytes / frame_bytes * nch;
+        if samples > max_samples {
+            return Err(format!(
+                "the WAV header announces {samples} samples, past the limit of {max_samples}"
+            ));
+        }
+        Frames::Exactly((data_bytes / frame_bytes) as usize)
+    };
+    let channels = read_samples(source, format, frames)?;
+    // The partial frame and the pad byte of an odd length are what is left of the chunk.
+    if data_bytes != UNKNOWN_LENGTH
+        && another_data_chunk_follows(source, data_bytes % frame_bytes + (data_bytes & 1))
+    {
+        return Err(
+            "it holds a second data chunk (samples split over two chunks, which WAV \
+                    does not allow; only the first would be read)"
+                .into(),
+        );
+    }
+    if channels[0].is_empty() {
+        return Err("the WAV file holds no samples".into());
+    }
+    Ok((format.rate_hz, channels))
+}
 
 /// Fills `buf` from `source` up to its end: the bytes read.
 fn fill(source: &mut impl Read, buf: &mut [u8]) -> Result<usize, String> {
@@ -251,7 +283,7 @@ fn fill(source: &mut impl Read, buf: &mut [u8]) -> Result<usize, String> {
             Ok(0) => break,
             Ok(n) => got += n,
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(format!("cannot read WAV samples: {e}")),
+            Err(e) => return Err(format!("cannot read WAV: {e}")),
         }
     }
     Ok(got)

@@ -347,8 +347,10 @@ pub fn evaluate(
     // repeats them), says anything about polarity.
     let inverted = most_negative
         .filter(|&(nr, nlag)| {
+            // The refined comparison (a second refine) only where inverted already reads
+            // stronger at whole lags: upright wins almost every clip.
             -nr > best_r.max(0.0) + INVERTED_MARGIN
-                || inverted_fits_better(reference, recovered, aligned.r, nlag, m)
+                || (-nr > best_r && inverted_fits_better(reference, recovered, aligned.r, nlag, m))
         })
         .map(|(r, lag_samples)| Inverted { r, lag_samples });
 

@@ -464,26 +464,27 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
         finish_message(args, &rec, &run_progress)?;
         Ok(rec)
     })();
-    // The journal is this run's own when it was not there, or when --force (without
-    // --resume) started it over; a refused or failed --resume never loses the one it was given.
-    let created = !had_journal || (args.force && !args.side.resume);
-    outcome.map_err(|e| after_failure(e, &journal, created, finished, args.keep_going))
+    outcome.map_err(|e| after_failure(e, &journal, had_journal, args, finished, args.keep_going))
 }
 
-/// A failed run's error, and what becomes of its journal: one this run `created` is removed
-/// when it holds no finished group, or only groups that made no sound (nothing to go on
-/// from); a journal holding finished groups is kept and the line says how to go on; one the
-/// run was given (--resume) is never removed.
+/// A failed run's error, and what becomes of its journal: one this run created (`had_journal`
+/// false, or started over by `--force`) is removed when it holds no finished group, or only
+/// groups that made no sound (nothing to go on from); a journal holding finished groups is kept
+/// and the line says how to go on; one the run was given (--resume) is never removed.
 fn after_failure(
     e: anyhow::Error,
     journal: &Path,
-    created: bool,
+    had_journal: bool,
+    args: &ReconstructArgs,
     finished: usize,
     keep_going: bool,
 ) -> anyhow::Error {
     if !journal.exists() {
         return e;
     }
+    // The journal is this run's own when it was not there, or when --force (without
+    // --resume) started it over; a refused or failed --resume never loses the one it was given.
+    let created = !had_journal || (args.force && !args.side.resume);
     let no_sound = matches!(
         e.downcast_ref::<crate::engine::EngineError>(),
         Some(crate::engine::EngineError::NoSound { .. })
@@ -641,10 +642,7 @@ fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<(
     let had_journal = journal.exists();
     let mut groups = Vec::with_capacity(range.len());
     let (result, mut run_progress) = run_with_progress(&run, args, &mut |g| groups.push(g))
-        .map_err(|e| {
-            let created = !had_journal || (args.force && !args.side.resume);
-            after_failure(e, &journal, created, groups.len(), keep_going)
-        })?;
+        .map_err(|e| after_failure(e, &journal, had_journal, args, groups.len(), keep_going))?;
     run_progress.context_groups = result.context_groups;
     let written = write_part(&args.out, &identity, &groups, args.force)?;
     let report = ShardReport {
