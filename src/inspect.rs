@@ -244,7 +244,7 @@ pub fn run_inspect(
         written.push("samples.csv".into());
     }
     if let Some(e) = cache.edges() {
-        if let Some(frame) = input.frames.get(e.reference_frame) {
+        if let Some(frame) = input.frames.get(e.coarse.frame) {
             let img = crate::viz::edges_overlay(frame, e);
             save(out_dir, "edges.png", &img, force, &mut written)?;
         }

@@ -309,7 +309,7 @@ fn process_group(
         rejected_fits: orientation.map_or(0, |o| o.rejected_fits),
         samples,
         warning: (!notes.is_empty()).then(|| notes.join("; ")),
-        pixel_noise_grey_levels: edges.and_then(|e| e.pixel_noise_grey_levels),
+        pixel_noise_grey_levels: edges.and_then(|e| e.coarse.pixel_noise_grey_levels),
     });
     Ok(GroupOutcome {
         group: input.group,

@@ -51,15 +51,15 @@ pub fn summary(e: &Edges) -> String {
     } else {
         ""
     };
-    let noise = e.pixel_noise_grey_levels.map_or_else(
+    let noise = e.coarse.pixel_noise_grey_levels.map_or_else(
         || "pixel noise not measured".into(),
         |l| format!("pixel noise {l:.2} grey levels of 255"),
     );
     format!(
         "read on frame {} ({noise}: blurred borders read at most ±{:.0} px)  ·  {n} samples \
          {:.2} µm apart  ·  bottom {bottom} below the land  ·  seen: {}{one_track}",
-        e.reference_frame,
-        e.band_cap_px,
+        e.coarse.frame,
+        e.coarse.band_cap_px,
         e.spacing_um,
         seen.join(", ")
     )
@@ -94,7 +94,7 @@ impl EdgesViewState {
             "wall displacement (µm)",
         ];
         wall_curves(ui, "edges_displacement", plot_h, axes, curves);
-        let Some(tex) = data.frame_texture(ui, textures, e.reference_frame) else {
+        let Some(tex) = data.frame_texture(ui, textures, e.coarse.frame) else {
             return;
         };
         ui.weak("the frame the borders were read on; dots: each sample's fitted border row");

@@ -316,6 +316,21 @@ pub struct WallEdges {
     pub velocity_mm_s: Vec<f64>,
 }
 
+/// The coarse pass of one group: the frame it read, how noisy that frame is, and the border
+/// rows it found there, which the fine fit starts from.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoarseRead {
+    /// Index in the group of the frame the coarse borders were read on.
+    pub frame: usize,
+    /// That frame's pixel noise (σ, grey levels of 255; None where the frame is too small to say).
+    pub pixel_noise_grey_levels: Option<f64>,
+    /// The most rows a blurred border's band read on each side (px): the noisy cap on a noisy
+    /// frame (`edges::noise`).
+    pub band_cap_px: f64,
+    /// Coarse border rows on the reference frame per sample (NaN = not found).
+    pub rows: Vec<StripBorders>,
+}
+
 /// The edge stage's output for one group.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Edges {
@@ -335,15 +350,8 @@ pub struct Edges {
     pub wall_angle_rad: f64,
     /// Bottom depth below the land from the walls' widths (µm; NaN when not measured).
     pub bottom_depth_um: f64,
-    /// Index in the group of the frame the coarse borders were read on.
-    pub reference_frame: usize,
-    /// That frame's pixel noise (σ, grey levels of 255; None where the frame is too small to say).
-    pub pixel_noise_grey_levels: Option<f64>,
-    /// The most rows a blurred border's band read on each side (px): the noisy cap on a noisy
-    /// frame (`edges::noise`).
-    pub band_cap_px: f64,
-    /// Coarse border rows on the reference frame per sample (NaN = not found).
-    pub coarse_rows: Vec<StripBorders>,
+    /// What the coarse pass read on the group's reference frame.
+    pub coarse: CoarseRead,
     /// The four borders, in [`BorderId`] order.
     pub borders: Vec<BorderTrack>,
     /// Each border's constant place in the cross-section (µm).
@@ -652,10 +660,12 @@ pub fn detect_edges(
         groove_speed_mm_s: vt,
         wall_angle_rad: alpha,
         bottom_depth_um,
-        reference_frame: reference,
-        pixel_noise_grey_levels,
-        band_cap_px: params.max_band_half_height_px,
-        coarse_rows: coarse_rows.into_iter().map(|(_, r)| r).collect(),
+        coarse: CoarseRead {
+            frame: reference,
+            pixel_noise_grey_levels,
+            band_cap_px: params.max_band_half_height_px,
+            rows: coarse_rows.into_iter().map(|(_, r)| r).collect(),
+        },
         borders,
         constants_um: combined.constants_um,
         walls,
