@@ -318,6 +318,14 @@ pub fn decode_groove(
             audio.len(),
         ));
     }
+    if let Some(track) = track {
+        warnings.extend(outside_image_warning(
+            &track.outside_image(&found.grooves),
+            number,
+            borders.lines,
+            setup,
+        ));
+    }
     for c in 0..signal.channels.len() {
         let lost: usize = signal
             .gaps
@@ -358,6 +366,34 @@ pub fn decode_groove(
         },
         warnings,
     })
+}
+
+/// The warning for a groove that lies outside the image on the line runs `outside` (of
+/// `lines`): where, how much of it, and that it is silent there.
+fn outside_image_warning(
+    outside: &[std::ops::Range<usize>],
+    number: usize,
+    lines: usize,
+    setup: &StillSetup,
+) -> Option<String> {
+    let total: usize = outside.iter().map(ExactSizeIterator::len).sum();
+    if total == 0 {
+        return None;
+    }
+    let lines_name = match setup.axis {
+        crate::pipeline::still::Axis::Vertical => "rows",
+        crate::pipeline::still::Axis::Horizontal => "columns",
+    };
+    let runs: Vec<String> = outside
+        .iter()
+        .map(|r| format!("{}–{}", r.start, r.end - 1))
+        .collect();
+    Some(format!(
+        "groove {number} runs off the image on {lines_name} {} ({total} of {lines}, {:.3} s): \
+         its sound there is not in this still and is left silent",
+        runs.join(", "),
+        total as f64 / setup.native_rate_hz(),
+    ))
 }
 
 /// Scores each channel of `audio` against `reference` (per channel when both have as many,

@@ -13,6 +13,8 @@
 //! (greedy, nearest pairs first), tolerating gaps of `max_gap_blocks`; they are numbered by
 //! their position across the image with the common drift taken out.
 
+use std::ops::Range;
+
 use super::link::{absorb_pieces, centre, common_drift, interpolate, link, merge_fragments, width};
 use super::profile::Profiles;
 use super::{Axis, StillError, StillParams, StillSetup, WallTone};
@@ -70,7 +72,9 @@ pub struct GrooveTrack {
 
 impl GrooveTrack {
     /// The four borders at `line`, interpolated linearly between the centres of the blocks
-    /// it was found in (held at the ends); NaN when it was never found.
+    /// it was found in, and carried on along the image's common drift before the first and
+    /// after the last (a groove that drifts off the image is followed off it, not held at its
+    /// last place, where the next turn drifts in); NaN when it was never found.
     #[must_use]
     pub fn predict(&self, map: &GrooveMap, line: f64) -> [f64; 4] {
         let found: Vec<(f64, [f64; 4])> = self
@@ -79,7 +83,33 @@ impl GrooveTrack {
             .enumerate()
             .filter_map(|(b, v)| v.map(|v| (map.block_centres[b], v)))
             .collect();
-        interpolate(&found, line)
+        let drift_per_line = map.drift_px_per_block / map.block_lines.max(1) as f64;
+        let beyond = match (found.first(), found.last()) {
+            (Some(&(first, _)), _) if line < first => line - first,
+            (_, Some(&(last, _))) if line > last => line - last,
+            _ => 0.0,
+        };
+        interpolate(&found, line).map(|v| v + drift_per_line * beyond)
+    }
+
+    /// The runs of lines on which this groove, as [`Self::predict`] follows it, lies wholly
+    /// outside the image (both land borders past the same edge): lines with no sound in this
+    /// still.
+    #[must_use]
+    pub fn outside_image(&self, map: &GrooveMap) -> Vec<Range<usize>> {
+        let last = map.cross as f64 - 1.0;
+        let mut runs: Vec<Range<usize>> = Vec::new();
+        for n in 0..map.lines {
+            let g = self.predict(map, n as f64);
+            if !(g[3] < 0.0 || g[0] > last) {
+                continue;
+            }
+            match runs.last_mut() {
+                Some(r) if r.end == n => r.end = n + 1,
+                _ => runs.push(n..n + 1),
+            }
+        }
+        runs
     }
 }
 
@@ -98,6 +128,9 @@ pub struct GrooveMap {
     pub block_centres: Vec<f64>,
     /// The grooves, in `--groove` order.
     pub grooves: Vec<GrooveTrack>,
+    /// The grooves' common drift across the image (cross px a block, the median slope of the
+    /// tracks): how a groove is followed past the blocks it was found in.
+    pub drift_px_per_block: f64,
     /// Whether the bottoms are seen (two walls per groove) or each groove is one dark band.
     pub bottoms_visible: bool,
     /// Gradient energy along the lines over that across them.
@@ -425,6 +458,7 @@ pub fn detect_grooves(
             .map(|b| profiles.block_centre_line(b))
             .collect(),
         grooves,
+        drift_px_per_block: drift,
         bottoms_visible: bottom_limit.is_some(),
         energy_ratio,
     })

@@ -85,3 +85,66 @@ fn the_wrong_axis_an_empty_image_and_a_missing_groove_are_reported() {
         "{e}"
     );
 }
+
+/// `v` less its centred moving mean over `window` samples (slow trends out, such as the
+/// slow-path fit's residual where a groove is held), where the window fits.
+fn detrended(v: &[f64], window: usize) -> Vec<f64> {
+    let half = window / 2;
+    (half..v.len() - half)
+        .map(|i| v[i] - v[i - half..=i + half].iter().sum::<f64>() / (2 * half + 1) as f64)
+        .collect()
+}
+
+/// Root mean square.
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+#[test]
+fn a_groove_that_drifts_off_the_image_is_silent_there_not_its_neighbour() {
+    // The grooves drift 500 µm across a 400 µm strip: the outer grooves leave the image for
+    // about a quarter of it at opposite ends, and their neighbours drift into their places.
+    let cfg = StillConfig {
+        length_px: 6000,
+        across_px: 400,
+        grooves: 3,
+        axis: Axis::Horizontal,
+        drift_um: 500.0,
+        wander_um: 0.0,
+        ..StillConfig::default()
+    };
+    let (scene, img) = still_scene_and_image(&cfg);
+    for k in [0, 2] {
+        let setup = scene.setup(k).unwrap();
+        let a = analyse_still(&img, &setup, Some(k + 1), &StillParams::default()).unwrap();
+        let outside = a.grooves.grooves[a.chosen].outside_image(&a.grooves);
+        let lines: usize = outside.iter().map(ExactSizeIterator::len).sum();
+        // Wholly outside once its centre is 28 µm past the edge: it starts 100 µm in and
+        // drifts ±250 µm, so on (250 − 128)/500 = 24 % of the lines.
+        assert_eq!(outside.len(), 1, "groove {}: {outside:?}", k + 1);
+        let share = lines as f64 / 6000.0;
+        assert!((share - 0.244).abs() < 0.04, "groove {}: {share}", k + 1);
+        // There the displacement is held (silent); before, it was the next groove's sound.
+        let want = scene.grooves[k].tones_hz.unwrap().0;
+        // One period: its mean holds none of the tone but all of a ramp.
+        let window = 2 * (0.5 * a.signal.native_rate_hz / want).round() as usize + 1;
+        let d = &a.signal.displacement_px[0];
+        let run = &outside[0];
+        let inside = if run.start == 0 {
+            &d[run.end + 200..]
+        } else {
+            &d[..run.start - 200]
+        };
+        let off = rms(&detrended(&d[run.start + 50..run.end - 50], window));
+        let inside = detrended(inside, window);
+        let on = rms(&inside);
+        assert!(off < 0.1 * on, "groove {}: off {off} vs on {on}", k + 1);
+        let inside_f32: Vec<f32> = inside.iter().map(|&x| x as f32).collect();
+        let got = dominant_hz(&inside_f32, a.signal.native_rate_hz);
+        assert!(
+            (got / want - 1.0).abs() < 0.02,
+            "groove {}: {got} vs {want}",
+            k + 1
+        );
+    }
+}
