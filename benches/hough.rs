@@ -3,10 +3,9 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use groovescope::image::Image;
 use groovescope::io::scan::{DualFocusMeta, GlassSide};
 use groovescope::pipeline::derivatives::Derivatives;
-use groovescope::pipeline::hough::{HoughParams, segment_stripes};
+use groovescope::pipeline::hough::{HoughParams, segment_stripes, synthetic_input};
 use groovescope::pipeline::optical_flow::FlowField;
 
 const WIDTH: usize = 1280;
@@ -24,21 +23,14 @@ fn frame() -> (Derivatives, FlowField) {
         (state >> 40) as f32 / (1u64 << 24) as f32
     };
     let stripes = [(300.0_f32, 0.02_f32), (520.0, -0.01), (640.0, 0.015)];
-    let iy = Image::from_fn(WIDTH, HEIGHT, |x, y| {
+    synthetic_input(WIDTH, HEIGHT, 0.5, |x, y| {
         let xf = x as f32;
         let on = stripes.iter().any(|&(row, slope)| {
             let centre = row + slope * (xf - 640.0) + 6.0 * (xf * 0.01).sin();
             (y as f32 - centre).abs() <= 1.0
         });
-        if on || rand() < NOISE_FRACTION {
-            0.5
-        } else {
-            0.0
-        }
-    });
-    let d = Derivatives::from_iy(iy, 3, -2.0);
-    let f = FlowField::exact(Image::zeros(WIDTH, HEIGHT), 3);
-    (d, f)
+        on || rand() < NOISE_FRACTION
+    })
 }
 
 /// Process CPU time (user + system) in seconds, from /proc (Linux); `None` elsewhere.

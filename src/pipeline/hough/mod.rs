@@ -440,3 +440,20 @@ fn theta_count(p: &HoughParams) -> usize {
 fn rho_count(height: usize, p: &HoughParams) -> usize {
     ((height as f32 / p.rho_step_px).ceil() as usize).max(1)
 }
+
+/// A synthetic input for [`segment_stripes`] (its tests and benchmark): ∂I/∂y is `gradient` at
+/// the pixels where `in_focus(x, y)` holds and 0 elsewhere, with exact zero flow (full
+/// confidence) on frame 3. `in_focus` is called once a pixel, row by row.
+#[doc(hidden)]
+#[must_use]
+pub fn synthetic_input(
+    width: usize,
+    height: usize,
+    gradient: f32,
+    mut in_focus: impl FnMut(usize, usize) -> bool,
+) -> (Derivatives, FlowField) {
+    let value = |on: bool| if on { gradient } else { 0.0 };
+    let iy = Image::from_fn(width, height, |x, y| value(in_focus(x, y)));
+    let flow = FlowField::exact(Image::zeros(width, height), 3);
+    (Derivatives::from_iy(iy, 3, -2.0), flow)
+}

@@ -40,19 +40,12 @@ fn scene(
     void: std::ops::Range<usize>,
 ) -> (Derivatives, FlowField) {
     let mut rng = Lcg(7);
-    let iy = Image::from_fn(width, height, |x, y| {
+    synthetic_input(width, height, 1.0, |x, y| {
         let on_line = lines.iter().enumerate().any(|(i, l)| {
             (i == 0 || !void.contains(&x)) && (y as f32 - l.row_at(x, width)).abs() <= half
         });
-        if on_line || rng.next_f32() < noise {
-            1.0
-        } else {
-            0.0
-        }
-    });
-    let d = Derivatives::from_iy(iy, 3, -2.0);
-    let f = FlowField::exact(Image::zeros(width, height), 3);
-    (d, f)
+        on_line || rng.next_f32() < noise
+    })
 }
 
 fn dual(side: GlassSide) -> DualFocusMeta {
@@ -143,12 +136,10 @@ fn a_bent_stripe_gives_one_peak_not_two() {
     let (w, h) = (400, 200);
     let x0 = (w as f32 - 1.0) * 0.5;
     let bent = |x: usize| 40.0 + (x as f32 - x0).abs() * 8f32.to_radians().tan();
-    let (mut d, f) = scene(w, h, &[], 1.0, 0.0, 0..0);
-    d.iy = Image::from_fn(w, h, |x, y| {
+    let (d, f) = synthetic_input(w, h, 1.0, |x, y| {
         let y = y as f32;
         let short = (150..250).contains(&x);
-        let on = (y - bent(x)).abs() <= 1.0 || (short && (y == 110.0 || y == 160.0));
-        if on { 1.0 } else { 0.0 }
+        (y - bent(x)).abs() <= 1.0 || (short && (y == 110.0 || y == 160.0))
     });
     let s = segment_stripes(&d, &f, &dual(GlassSide::Top), &HoughParams::default()).unwrap();
     let rows: Vec<f32> = s.peaks.iter().map(|p| p.row_at_px(x0)).collect();
@@ -260,17 +251,11 @@ fn a_rho_band_finds_the_mean_line_of_wiggling_stripes() {
     let (w, h) = (1280, 800);
     let rows = [200.0_f32, 420.0, 540.0];
     let mut rng = Lcg(11);
-    let iy = Image::from_fn(w, h, |x, y| {
+    let (d, f) = synthetic_input(w, h, 1.0, |x, y| {
         let wave = 6.0 * (x as f32 * 0.01).sin();
         let on = rows.iter().any(|&r| (y as f32 - r - wave).abs() <= 1.0);
-        if on || rng.next_f32() < 0.04 {
-            1.0
-        } else {
-            0.0
-        }
+        on || rng.next_f32() < 0.04
     });
-    let (mut d, f) = scene(w, h, &[], 1.0, 0.0, 0..0);
-    d.iy = iy;
     let params = HoughParams {
         peak_rho_band_px: 8.0,
         min_votes_per_column: 1.0,
