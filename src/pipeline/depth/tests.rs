@@ -37,6 +37,31 @@ fn plane_flows(
         .collect()
 }
 
+/// The plane `p` (see [`plane_z`]) seen by the paper's optics in `w` × `h` px frames, and its
+/// flows ([`plane_flows`]).
+struct PlaneScene {
+    g: Geometry,
+    w: usize,
+    h: usize,
+    p: [f64; 3],
+    flows: Vec<FlowField>,
+}
+
+impl PlaneScene {
+    /// The plane `p` and its flows in `frames` frames (indices from 3), with Gaussian noise of
+    /// `noise_px` px seeded by `seed`.
+    fn new(w: usize, h: usize, frames: usize, p: [f64; 3], noise_px: f64, seed: u64) -> Self {
+        let g = paper_geometry();
+        let flows = plane_flows(w, h, frames, &g, p, noise_px, seed);
+        Self { g, w, h, p, flows }
+    }
+
+    /// Z seen at pixel (x, y) of frame k.
+    fn z(&self, x: usize, y: usize, k: usize) -> f64 {
+        plane_z(x, y, k, self.w, self.h, &self.g, self.p)
+    }
+}
+
 /// Least-squares slope of Z against Y = (y − cy)·Z/f over the map.
 fn tilt_dz_dy(map: &DepthMap, g: &Geometry) -> f64 {
     let (w, h) = (map.z_um.width, map.z_um.height);
@@ -72,15 +97,12 @@ fn rel_err(map: &DepthMap, truth: impl Fn(usize, usize) -> f64) -> (f64, f64) {
 
 #[test]
 fn exact_flows_of_a_plane_tilted_across_give_depth_and_tilt() {
-    let g = paper_geometry();
-    let (w, h) = (96, 64);
-    let p = [4000.0, 0.0, 0.8];
-    let flows = plane_flows(w, h, 6, &g, p, 0.0, 1);
+    let s = PlaneScene::new(96, 64, 6, [4000.0, 0.0, 0.8], 0.0, 1);
     // 11 px: wider than the direct window sums, so the f64 running sums are used.
     for (kalman, neighbourhood_px) in [(true, 5), (true, 11), (false, 5)] {
         let map = estimate_depth(
-            &flows,
-            &g,
+            &s.flows,
+            &s.g,
             &DepthParams {
                 kalman,
                 neighbourhood_px,
@@ -89,9 +111,9 @@ fn exact_flows_of_a_plane_tilted_across_give_depth_and_tilt() {
         )
         .unwrap();
         assert_eq!(map.frame_index, 8);
-        let (max, _) = rel_err(&map, |x, y| plane_z(x, y, 5, w, h, &g, p));
+        let (max, _) = rel_err(&map, |x, y| s.z(x, y, 5));
         assert!(max < 1e-3, "kalman {kalman}: max relative error {max}");
-        let tilt = tilt_dz_dy(&map, &g);
+        let tilt = tilt_dz_dy(&map, &s.g);
         assert!((tilt - 0.8).abs() < 0.008, "kalman {kalman}: tilt {tilt}");
         assert!(
             map.variance.data.iter().all(|v| v.is_finite() && *v >= 0.0),
@@ -102,16 +124,13 @@ fn exact_flows_of_a_plane_tilted_across_give_depth_and_tilt() {
 
 #[test]
 fn plane_tilted_along_the_motion_is_tracked_into_the_last_frame() {
-    let g = paper_geometry();
-    let (w, h) = (80, 40);
     // Z changes by 0.8·U = 0.62 µm per frame under each pixel: a wrong re-indexing or a
     // map left in an earlier frame's grid is off by ≥ 1.5e-4.
-    let p = [4000.0, 0.8, 0.3];
-    let flows = plane_flows(w, h, 6, &g, p, 0.0, 1);
-    let map = estimate_depth(&flows, &g, &DepthParams::default()).unwrap();
-    let (max, _) = rel_err(&map, |x, y| plane_z(x, y, 5, w, h, &g, p));
+    let s = PlaneScene::new(80, 40, 6, [4000.0, 0.8, 0.3], 0.0, 1);
+    let map = estimate_depth(&s.flows, &s.g, &DepthParams::default()).unwrap();
+    let (max, _) = rel_err(&map, |x, y| s.z(x, y, 5));
     assert!(max < 2e-5, "max relative error {max}");
-    let (max_first, _) = rel_err(&map, |x, y| plane_z(x, y, 0, w, h, &g, p));
+    let (max_first, _) = rel_err(&map, |x, y| s.z(x, y, 0));
     assert!(max_first > 5e-4, "{max_first}");
 }
 
@@ -120,9 +139,8 @@ fn avx2_bands_give_the_same_bits() {
     let Some(avx2) = Isa::avx2() else {
         return;
     };
-    let g = paper_geometry();
-    let (w, h) = (53, 40);
-    let flows = plane_flows(w, h, 3, &g, [4000.0, 0.3, -0.5], 0.05, 4);
+    let PlaneScene { g, w, h, flows, .. } =
+        PlaneScene::new(53, 40, 3, [4000.0, 0.3, -0.5], 0.05, 4);
     let land = g.focal_px * g.frame_step_um / g.working_distance_um;
     let filter = Filter {
         width: w,
@@ -168,9 +186,8 @@ fn avx2_bands_give_the_same_bits() {
 
 #[test]
 fn direct_and_prefix_window_sums_agree() {
-    let g = paper_geometry();
-    let (w, h) = (41, 23);
-    let flows = plane_flows(w, h, 1, &g, [4000.0, 0.3, -0.5], 0.05, 7);
+    let PlaneScene { g, w, h, flows, .. } =
+        PlaneScene::new(41, 23, 1, [4000.0, 0.3, -0.5], 0.05, 7);
     let land = g.focal_px * g.frame_step_um / g.working_distance_um;
     let mut meas = Measurements::default();
     meas.fill(&flows[0], -land, 1e-3);
@@ -217,24 +234,24 @@ fn direct_and_prefix_window_sums_agree() {
 
 #[test]
 fn kalman_over_six_noisy_frames_beats_one_frame() {
-    let g = paper_geometry();
-    let (w, h) = (120, 80);
-    let p = [4000.0, 0.2, 0.8];
-    let flows = plane_flows(w, h, 6, &g, p, 0.02, 9);
+    let s = PlaneScene::new(120, 80, 6, [4000.0, 0.2, 0.8], 0.02, 9);
     // The filter's noise model matches the flows; the plane does not change.
     let params = DepthParams {
         measurement_noise_px2: 0.02 * 0.02,
         process_noise: 1e-9,
         ..DepthParams::default()
     };
-    let truth = |x, y| plane_z(x, y, 5, w, h, &g, p);
-    let (_, rms6) = rel_err(&estimate_depth(&flows, &g, &params).unwrap(), truth);
-    let (_, rms1) = rel_err(&estimate_depth(&flows[5..], &g, &params).unwrap(), truth);
+    let truth = |x, y| s.z(x, y, 5);
+    let (_, rms6) = rel_err(&estimate_depth(&s.flows, &s.g, &params).unwrap(), truth);
+    let (_, rms1) = rel_err(
+        &estimate_depth(&s.flows[5..], &s.g, &params).unwrap(),
+        truth,
+    );
     let raw = DepthMap {
-        z_um: Image::from_fn(w, h, |x, y| {
-            depth_from_flow_um(flows[5].u.get(x, y).unwrap(), &g)
+        z_um: Image::from_fn(s.w, s.h, |x, y| {
+            depth_from_flow_um(s.flows[5].u.get(x, y).unwrap(), &s.g)
         }),
-        variance: Image::zeros(w, h),
+        variance: Image::zeros(s.w, s.h),
         frame_index: 8,
         warnings: Vec::new(),
     };
@@ -245,15 +262,15 @@ fn kalman_over_six_noisy_frames_beats_one_frame() {
         kalman: false,
         ..params
     };
-    let (_, rms_avg) = rel_err(&estimate_depth(&flows, &g, &avg).unwrap(), truth);
+    let (_, rms_avg) = rel_err(&estimate_depth(&s.flows, &s.g, &avg).unwrap(), truth);
     assert!(rms_avg < rms_raw, "average {rms_avg}, raw {rms_raw}");
 }
 
 #[test]
 fn dropped_frames_and_unmeasured_pixels_are_warnings() {
-    let g = paper_geometry();
-    let (w, h) = (40, 30);
-    let mut flows = plane_flows(w, h, 4, &g, [4000.0, 0.0, 0.0], 0.0, 1);
+    let PlaneScene {
+        g, w, h, mut flows, ..
+    } = PlaneScene::new(40, 30, 4, [4000.0, 0.0, 0.0], 0.0, 1);
     flows[1].confidence = Image::zeros(w, h);
     flows[3].frame_index += 2;
     for f in &mut flows {
@@ -279,8 +296,7 @@ fn dropped_frames_and_unmeasured_pixels_are_warnings() {
 
 #[test]
 fn bad_input_and_params_are_errors() {
-    let g = paper_geometry();
-    let flows = plane_flows(20, 10, 3, &g, [4000.0, 0.0, 0.0], 0.0, 1);
+    let PlaneScene { g, flows, .. } = PlaneScene::new(20, 10, 3, [4000.0, 0.0, 0.0], 0.0, 1);
     let p = DepthParams::default();
     assert!(matches!(
         estimate_depth(&[], &g, &p),

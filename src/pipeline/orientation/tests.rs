@@ -220,14 +220,19 @@ fn hand_lines(g: &Groove, width: usize, height: usize, margin_px: f32) -> Vec<Wa
         .collect()
 }
 
+/// The depth map of a `w` × `h` px view of a groove displaced by `s`·X under the paper's
+/// optics (walls of tan θ = ±s/√2), and its true wall lines 4 px inside their bands.
+fn sliding_groove(s: f64, w: usize, h: usize) -> (DepthMap, Vec<WallLine>) {
+    let g = Groove::new(paper_geometry(), move |x_um| s * x_um);
+    (g.depth_map(w, h), hand_lines(&g, w, h, 4.0))
+}
+
 #[test]
 fn depth_path_recovers_a_constant_wall_slope_on_both_walls() {
     let geom = paper_geometry();
     let s = 0.05;
-    let g = Groove::new(geom, move |x_um| s * x_um);
     let (w, h) = (360, 640);
-    let depth = g.depth_map(w, h);
-    let walls = hand_lines(&g, w, h, 4.0);
+    let (depth, walls) = sliding_groove(s, w, h);
     let columns = [60.0_f32, 180.0, 300.0];
     let out = orient_from_depth(&depth, &walls, &columns, &geom, &params()).unwrap();
     assert_eq!(out.walls.len(), 2);
@@ -248,15 +253,8 @@ fn depth_path_recovers_a_constant_wall_slope_on_both_walls() {
     assert!(used > 3 * 2 * 100 * 50, "{used}");
     assert!(out.outlier_fraction < 0.01);
     // Opposite displacement, opposite sign.
-    let g2 = Groove::new(geom, move |x_um| -s * x_um);
-    let out2 = orient_from_depth(
-        &g2.depth_map(w, h),
-        &hand_lines(&g2, w, h, 4.0),
-        &columns,
-        &geom,
-        &params(),
-    )
-    .unwrap();
+    let (depth2, walls2) = sliding_groove(-s, w, h);
+    let out2 = orient_from_depth(&depth2, &walls2, &columns, &geom, &params()).unwrap();
     for wall in &out2.walls {
         for smp in &wall.samples {
             assert!((smp.tan_theta + want).abs() < 2e-4, "{smp:?}");
@@ -267,10 +265,7 @@ fn depth_path_recovers_a_constant_wall_slope_on_both_walls() {
 #[test]
 fn depth_path_leaves_gaps_and_checks_sizes() {
     let geom = paper_geometry();
-    let g = Groove::new(geom, |_| 0.0);
-    let (w, h) = (200, 640);
-    let depth = g.depth_map(w, h);
-    let mut walls = hand_lines(&g, w, h, 4.0);
+    let (depth, mut walls) = sliding_groove(0.0, 200, 640);
     for r in &mut walls[0].rows[..120] {
         *r = f32::NAN;
     }
