@@ -1,7 +1,7 @@
 //! Tests of the rendered scans against known geometry: image motion, parallax, border rows,
 //! focus stripes, determinism, errors and the reference sound.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::AtomicBool;
 
@@ -11,6 +11,7 @@ use crate::io::Cut;
 use crate::io::scan::Scan;
 use crate::io::wav::read_wav;
 use crate::job::Job;
+use crate::test_support::path_in_temp_dir;
 
 mod probes;
 
@@ -303,6 +304,18 @@ fn files_of(dir: &Path) -> Vec<(String, Vec<u8>)> {
     out
 }
 
+/// `sound` rendered with `cfg` (reporting to `job`) as the scan `scan` of a fresh temporary
+/// folder, which lives as long as the returned guard: the guard, the scan and what was written.
+fn scan_in_temp_dir(
+    sound: &Audio,
+    cfg: &SynthConfig,
+    job: Job<'_>,
+) -> (tempfile::TempDir, PathBuf, SynthSummary) {
+    let (dir, out) = path_in_temp_dir("scan");
+    let sum = render_scan(sound, cfg, &out, job).unwrap();
+    (dir, out, sum)
+}
+
 fn tiny_damaged() -> SynthConfig {
     SynthConfig {
         width_px: 96,
@@ -345,8 +358,6 @@ fn scans_are_deterministic_and_seeds_matter() {
 
 #[test]
 fn scan_folder_loads_and_reference_matches_the_scanned_length() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("scan");
     let sound = tone(1000.0, 0.02, 44_100);
     let calls = Mutex::new(Vec::new());
     let progress = |d: usize, t: usize| calls.lock().unwrap().push((d, t));
@@ -355,7 +366,7 @@ fn scan_folder_loads_and_reference_matches_the_scanned_length() {
         frames_per_group: 7,
         ..SynthConfig::quick_test()
     };
-    let sum = render_scan(&sound, &cfg, &out, Job::reporting(&progress)).unwrap();
+    let (_dir, out, sum) = scan_in_temp_dir(&sound, &cfg, Job::reporting(&progress));
     assert_eq!(*calls.lock().unwrap(), vec![(0, 3), (1, 3), (2, 3), (3, 3)]);
     let scan = Scan::open(&out).unwrap();
     assert_eq!(scan.groups.len(), 3);
@@ -467,7 +478,6 @@ fn errors_name_the_problem_and_nothing_is_overwritten() {
 
 #[test]
 fn stereo_and_vertical_scans_write_their_channels() {
-    let dir = tempfile::tempdir().unwrap();
     let s = stereo(&tone(500.0, 0.01, 44_100), &tone(800.0, 0.01, 44_100));
     let cfg = SynthConfig {
         cut: Cut::Stereo,
@@ -475,8 +485,7 @@ fn stereo_and_vertical_scans_write_their_channels() {
         frames_per_group: 7,
         ..SynthConfig::quick_test()
     };
-    let out = dir.path().join("st");
-    render_scan(&s, &cfg, &out, Job::unwatched()).unwrap();
+    let (_dir, out, _) = scan_in_temp_dir(&s, &cfg, Job::unwatched());
     let r = read_wav(&out.join("reference.wav")).unwrap();
     assert_eq!(r.channels.len(), 2);
     let scan = Scan::open(&out).unwrap();
@@ -493,8 +502,6 @@ fn stereo_and_vertical_scans_write_their_channels() {
 
 #[test]
 fn dual_focus_scan_metadata_and_a_missing_chunk_render_dark() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("df");
     let cfg = SynthConfig {
         width_px: 64,
         height_px: 700,
@@ -503,7 +510,7 @@ fn dual_focus_scan_metadata_and_a_missing_chunk_render_dark() {
         max_groups: Some(1),
         ..SynthConfig::dual_focus_fig20()
     };
-    let sum = render_scan(&silence(0.01), &cfg, &out, Job::unwatched()).unwrap();
+    let (_dir, out, sum) = scan_in_temp_dir(&silence(0.01), &cfg, Job::unwatched());
     let text = std::fs::read_to_string(out.join("scan.toml")).unwrap();
     if std::env::var("SYNTH_DEBUG").is_ok() {
         eprintln!("{text}");

@@ -3,6 +3,7 @@
 use super::*;
 use crate::synth::noise::Rng;
 use crate::synth::test_support::still_scene_and_image;
+use crate::test_support::path_in_temp_dir;
 
 /// A small clean still: 3 grooves, no artefacts, levels 0 (walls) and 1 (land, bottom).
 fn clean(axis: Axis, cut: Cut) -> StillConfig {
@@ -146,26 +147,22 @@ fn a_positive_sound_moves_the_groove_to_the_left_hand_side() {
 
 #[test]
 fn same_seed_same_pixels_and_artefacts_change_them() {
-    let cfg = StillConfig {
-        length_px: 300,
-        across_px: 300,
-        grooves: 2,
-        ..StillConfig::default()
+    // A small still with the default artefacts, rendered with `seed`.
+    let render = |seed: u32| {
+        let cfg = StillConfig {
+            length_px: 300,
+            across_px: 300,
+            grooves: 2,
+            seed,
+            ..StillConfig::default()
+        };
+        render_still(&StillScene::new(&cfg, None).unwrap())
     };
-    let a = render_still(&StillScene::new(&cfg, None).unwrap());
-    let b = render_still(&StillScene::new(&cfg, None).unwrap());
+    let seed = StillConfig::default().seed;
+    let (a, b) = (render(seed), render(seed));
     assert_eq!(a.image.data, b.image.data);
     assert!(a.dust_particles > 0 && a.text_box.is_some());
-    let other = render_still(
-        &StillScene::new(
-            &StillConfig {
-                seed: cfg.seed + 1,
-                ..cfg.clone()
-            },
-            None,
-        )
-        .unwrap(),
-    );
+    let other = render(seed + 1);
     assert_ne!(a.image.data, other.image.data);
     // 8-bit levels only.
     assert!(
@@ -228,8 +225,7 @@ fn references_follow_the_wall_velocities() {
 
 #[test]
 fn write_still_writes_image_sounds_and_truth() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("s");
+    let (_dir, out) = path_in_temp_dir("s");
     let cfg = StillConfig {
         length_px: 200,
         across_px: 320,
