@@ -5,6 +5,7 @@ use std::sync::atomic::AtomicBool;
 use super::*;
 use crate::image::Image;
 use crate::io::{Scan, load_group};
+use crate::test_support::path_in_temp_dir;
 
 const W: usize = 48;
 const H: usize = 32;
@@ -71,9 +72,8 @@ fn assert_same(a: &Image, b: &Image, tol: f32) {
 
 #[test]
 fn eight_bit_clip_imports_into_exact_overlapping_groups() {
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, out) = path_in_temp_dir("scan");
     let (path, imgs) = clip(dir.path(), "clip.avi", 20, false);
-    let out = dir.path().join("scan");
     let calls = std::sync::Mutex::new(Vec::new());
     let progress = |d: usize, t: usize| calls.lock().unwrap().push((d, t));
     let started = std::time::Instant::now();
@@ -124,9 +124,8 @@ fn eight_bit_clip_imports_into_exact_overlapping_groups() {
 
 #[test]
 fn unfinished_imports_of_killed_runs_are_removed_and_live_ones_kept() {
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, out) = path_in_temp_dir("scan");
     let (path, _) = clip(dir.path(), "clip.avi", 10, false);
-    let out = dir.path().join("scan");
     // A process id above the kernel's maximum is never running; pid 1 always is.
     let pid_max: u32 = std::fs::read_to_string("/proc/sys/kernel/pid_max")
         .ok()
@@ -176,9 +175,8 @@ fn unfinished_imports_of_killed_runs_are_removed_and_live_ones_kept() {
 
 #[test]
 fn sixteen_bit_clip_keeps_sixteen_bits_and_groups_skip_frames() {
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, out) = path_in_temp_dir("scan16");
     let (path, imgs) = clip(dir.path(), "deep.mkv", 20, true);
-    let out = dir.path().join("scan16");
     let lay = GroupLayout {
         frames_per_group: 7,
         group_stride_frames: Some(9),
@@ -207,8 +205,7 @@ fn sixteen_bit_clip_keeps_sixteen_bits_and_groups_skip_frames() {
 
 #[test]
 fn missing_clip_is_named() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("scan");
+    let (dir, out) = path_in_temp_dir("scan");
     let e = import(&dir.path().join("nope.avi"), &out, &layout(7, None)).unwrap_err();
     assert!(matches!(e, VideoError::Missing { .. }), "{e}");
     assert!(e.to_string().contains("nope.avi"), "{e}");
@@ -217,10 +214,9 @@ fn missing_clip_is_named() {
 
 #[test]
 fn text_file_named_mp4_is_not_a_video() {
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, out) = path_in_temp_dir("scan");
     let fake = dir.path().join("notes.mp4");
     std::fs::write(&fake, "these are my notes, not a movie\n".repeat(20)).unwrap();
-    let out = dir.path().join("scan");
     let e = import(&fake, &out, &layout(7, None)).unwrap_err();
     let msg = e.to_string();
     assert!(msg.contains("notes.mp4"), "{msg}");
@@ -236,9 +232,8 @@ fn text_file_named_mp4_is_not_a_video() {
 
 #[test]
 fn non_empty_output_folder_is_refused_and_untouched() {
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, out) = path_in_temp_dir("busy");
     let (path, _) = clip(dir.path(), "clip.avi", 8, false);
-    let out = dir.path().join("busy");
     std::fs::create_dir(&out).unwrap();
     std::fs::write(out.join("keep.txt"), b"mine").unwrap();
     let e = import(&path, &out, &layout(7, None)).unwrap_err();
@@ -256,9 +251,8 @@ fn non_empty_output_folder_is_refused_and_untouched() {
 
 #[test]
 fn clip_shorter_than_one_group_leaves_nothing() {
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, out) = path_in_temp_dir("scan");
     let (path, _) = clip(dir.path(), "short.avi", 6, false);
-    let out = dir.path().join("scan");
     let e = import(&path, &out, &layout(7, None)).unwrap_err();
     assert!(
         matches!(
@@ -278,9 +272,8 @@ fn clip_shorter_than_one_group_leaves_nothing() {
 
 #[test]
 fn cancel_leaves_nothing_and_bad_settings_are_named() {
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, out) = path_in_temp_dir("scan");
     let (path, _) = clip(dir.path(), "clip.avi", 8, false);
-    let out = dir.path().join("scan");
     let e = import_with(&path, &out, &layout(7, None), &ClipMeta::default(), true).unwrap_err();
     assert!(matches!(e, VideoError::Cancelled), "{e}");
     assert_eq!(entries(dir.path()), 1);
