@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{SCAN_TOML, groovescope, stderr, write_scan};
+use common::{SCAN_TOML, groovescope, scan_in_tempdir, stderr, write_scan};
 
 fn s(p: &std::path::Path) -> &str {
     p.to_str().unwrap()
@@ -86,8 +86,7 @@ fn missing_scan_folder_is_named() {
 
 #[test]
 fn missing_metadata_key_names_key_and_file() {
-    let dir = tempfile::tempdir().unwrap();
-    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let (dir, scan) = scan_in_tempdir(1, 7, 32, 16);
     std::fs::write(
         scan.join("scan.toml"),
         SCAN_TOML.replace("rpm = 78.0\n", ""),
@@ -104,8 +103,7 @@ fn missing_metadata_key_names_key_and_file() {
 
 #[test]
 fn nan_parameter_names_key_and_file() {
-    let dir = tempfile::tempdir().unwrap();
-    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let (dir, scan) = scan_in_tempdir(1, 7, 32, 16);
     let wav = dir.path().join("o.wav");
     // (params file, its text, what the error must name)
     for (name, text, wanted) in [
@@ -147,8 +145,7 @@ fn nan_parameter_names_key_and_file() {
 
 #[test]
 fn corrupt_frame_is_named() {
-    let dir = tempfile::tempdir().unwrap();
-    let scan = write_scan(&dir.path().join("scan"), 2, 7, 32, 16);
+    let (dir, scan) = scan_in_tempdir(2, 7, 32, 16);
     let bad = scan.join("g00001").join("f003.png");
     std::fs::write(&bad, b"\x89PNG garbage").unwrap();
     let wav = dir.path().join("o.wav");
@@ -161,8 +158,7 @@ fn corrupt_frame_is_named() {
 
 #[test]
 fn mixed_sizes_and_too_few_frames_are_named() {
-    let dir = tempfile::tempdir().unwrap();
-    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let (dir, scan) = scan_in_tempdir(1, 7, 32, 16);
     let odd = groovescope::image::Image::filled(20, 16, 0.5);
     let p = scan.join("g00000").join("f006.png");
     std::fs::remove_file(&p).unwrap();
@@ -187,9 +183,8 @@ fn mixed_sizes_and_too_few_frames_are_named() {
 #[test]
 fn empty_scan_and_not_a_scan() {
     let dir = tempfile::tempdir().unwrap();
-    let empty = dir.path().join("empty");
-    std::fs::create_dir_all(&empty).unwrap();
-    std::fs::write(empty.join("scan.toml"), SCAN_TOML).unwrap();
+    // A scan.toml and no group folder.
+    let empty = write_scan(&dir.path().join("empty"), 0, 0, 0, 0);
     let wav = dir.path().join("o.wav");
     let out = groovescope(&["reconstruct", s(&empty), "--out", s(&wav), "--quiet"]);
     assert!(
@@ -209,8 +204,7 @@ fn empty_scan_and_not_a_scan() {
 
 #[test]
 fn existing_output_is_never_overwritten_without_force() {
-    let dir = tempfile::tempdir().unwrap();
-    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let (dir, scan) = scan_in_tempdir(1, 7, 32, 16);
     let wav = dir.path().join("keep.wav");
     std::fs::write(&wav, b"precious").unwrap();
     let out = groovescope(&["reconstruct", s(&scan), "--out", s(&wav), "--quiet"]);

@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use common::{SCAN_TOML, demo_copy, failed_with, groovescope, stderr, write_scan};
+use common::{SCAN_TOML, demo_copy, failed_with, groovescope, scan_in_tempdir, stderr, write_scan};
 use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::limits::{MAX_FRAMES_PER_GROUP, MAX_TOML_BYTES, MAX_WAV_SAMPLES};
 use groovescope::io::{Scan, load_frame, load_group_frames};
@@ -45,8 +45,7 @@ fn refused_open(dir: &Path, wanted: &[&str]) {
 
 #[test]
 fn a_per_group_radius_list_of_the_wrong_length_names_the_key_and_both_numbers() {
-    let dir = tempfile::tempdir().unwrap();
-    let scan = write_scan(&dir.path().join("scan"), 2, 7, 32, 16);
+    let (_dir, scan) = scan_in_tempdir(2, 7, 32, 16);
     let spiral = |radii: &str| {
         let text = SCAN_TOML.replace(
             "cut = \"lateral\"\n",
@@ -71,8 +70,7 @@ fn a_per_group_radius_list_of_the_wrong_length_names_the_key_and_both_numbers() 
 
 #[test]
 fn a_glass_edge_outside_the_frame_names_the_key_and_both_numbers() {
-    let dir = tempfile::tempdir().unwrap();
-    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let (_dir, scan) = scan_in_tempdir(1, 7, 32, 16);
     let dual = |row: &str| {
         let text = format!(
             "{SCAN_TOML}[dual_focus]\nfocus_distance_mm = 4.0\nglass_thickness_mm = 0.11\nglass_index = 1.515\nglass_edge_row = {row}\n"
@@ -94,9 +92,8 @@ fn a_glass_edge_outside_the_frame_names_the_key_and_both_numbers() {
 
 #[test]
 fn a_group_step_longer_than_a_group_sees_names_the_key_and_both_numbers() {
-    let dir = tempfile::tempdir().unwrap();
     // 32 px frames of 0.39 µm less 8 px margins each side: 15 px = 5.85 µm sampled per group.
-    let scan = write_scan(&dir.path().join("scan"), 2, 7, 32, 16);
+    let (dir, scan) = scan_in_tempdir(2, 7, 32, 16);
     let text = SCAN_TOML.replace("group_step_um = 4.0", "group_step_um = 460.2");
     std::fs::write(scan.join("scan.toml"), &text).unwrap();
     refused_open(&scan, &["motion.group_step_um = 460.2", "5.85"]);
@@ -108,9 +105,8 @@ fn a_group_step_longer_than_a_group_sees_names_the_key_and_both_numbers() {
 
 #[test]
 fn a_frame_step_past_the_frame_width_names_the_key_and_both_numbers() {
-    let dir = tempfile::tempdir().unwrap();
     // 32 px frames of 0.39 µm: a 12.48 µm step moves the land the whole 32 px.
-    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let (_dir, scan) = scan_in_tempdir(1, 7, 32, 16);
     for step in ["12.48", "1e30"] {
         let text = SCAN_TOML.replace("frame_step_um = 0.78", &format!("frame_step_um = {step}"));
         std::fs::write(scan.join("scan.toml"), &text).unwrap();
@@ -288,8 +284,7 @@ fn a_wav_header_announcing_more_samples_than_the_limit_is_refused() {
 
 #[test]
 fn a_params_file_past_the_toml_limit_is_refused_naming_it() {
-    let dir = tempfile::tempdir().unwrap();
-    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let (dir, scan) = scan_in_tempdir(1, 7, 32, 16);
     let params = dir.path().join("big.toml");
     let mut text = String::from("[flow]\nlambda = 0.5\n");
     while text.len() as u64 <= MAX_TOML_BYTES {
@@ -344,8 +339,7 @@ fn a_hough_accumulator_past_the_limit_is_refused_before_any_group_runs() {
 fn a_flow_iteration_cap_past_the_limit_is_refused_naming_the_key() {
     // Found by the monkey test: 10³⁰ typed into the iterations field became 4,294,967,295
     // iterations, and with τ = 0 the flow stage never finished.
-    let dir = tempfile::tempdir().unwrap();
-    let scan = write_scan(&dir.path().join("scan"), 1, 7, 32, 16);
+    let (dir, scan) = scan_in_tempdir(1, 7, 32, 16);
     let params = dir.path().join("slow.toml");
     refused_reconstruct(
         &scan,
@@ -445,8 +439,7 @@ fn a_groove_speed_off_by_a_unit_is_refused_naming_the_keys_before_any_group() {
 fn the_dual_focus_path_on_a_scan_without_a_cover_glass_is_refused_before_any_group() {
     // It used to run every group, each failing in the stripe stage, then say no group made
     // sound.
-    let dir = tempfile::tempdir().unwrap();
-    let scan = write_scan(&dir.path().join("scan"), 3, 7, 64, 48);
+    let (dir, scan) = scan_in_tempdir(3, 7, 64, 48);
     let out = dir.path().join("x.wav");
     let args = [
         "reconstruct",

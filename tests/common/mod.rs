@@ -256,6 +256,19 @@ pub fn demo_and_out_folder(out: &str) -> (tempfile::TempDir, PathBuf, PathBuf) {
     (dir, demo, out)
 }
 
+/// A scan of `groups` groups of `frames` textured frames (`w`×`h`, [`write_scan`]) in `scan` of a
+/// fresh temporary folder; the folder goes when the first value is dropped.
+pub fn scan_in_tempdir(
+    groups: usize,
+    frames: usize,
+    w: usize,
+    h: usize,
+) -> (tempfile::TempDir, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = write_scan(&dir.path().join("scan"), groups, frames, w, h);
+    (dir, scan)
+}
+
 /// A copy of the bundled demo scan (13 dual-focus groups of 7 frames, with `reference.wav`)
 /// in `dir/demo`, for tests that damage or lock it.
 pub fn demo_copy(dir: &Path) -> PathBuf {
