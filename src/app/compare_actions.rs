@@ -40,8 +40,10 @@ impl Workbench {
             self.error("open a scan first");
             return;
         };
-        if self.methods.run.is_some() {
-            self.error("a method comparison is already running");
+        if self.messages.refuse_if(
+            self.is_comparing(),
+            "a method comparison is already running",
+        ) {
             return;
         }
         let groups = self.clip.clip.as_ref().map(|c| c.groups.clone());

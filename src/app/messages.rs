@@ -35,6 +35,15 @@ impl Messages {
         self.push(Message { text, error: true });
     }
 
+    /// The guard of work that cannot start while other work runs: when `busy`, adds `why` as
+    /// an error. True when it refused (the caller then returns).
+    pub fn refuse_if(&mut self, busy: bool, why: &str) -> bool {
+        if busy {
+            self.error(why);
+        }
+        busy
+    }
+
     fn push(&mut self, m: Message) {
         if self.list.len() >= MAX_MESSAGES {
             self.list.remove(0);
@@ -52,5 +61,20 @@ impl Messages {
     #[must_use]
     pub fn last(&self) -> Option<&Message> {
         self.list.last()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_refusal_says_why_and_a_free_start_says_nothing() {
+        let mut m = Messages::default();
+        assert!(!m.refuse_if(false, "busy"));
+        assert!(m.all().is_empty());
+        assert!(m.refuse_if(true, "busy"));
+        let said = m.last().unwrap();
+        assert!(said.error && said.text == "busy", "{said:?}");
     }
 }

@@ -13,12 +13,17 @@ use crate::io::lock::OutputLock;
 use crate::io::wav::{WavBits, write_transfer_wav};
 use crate::pipeline::still::StillSetup;
 
+/// Why another still cannot start while one decodes.
+const STILL_BUSY: &str = "a still is being decoded: cancel it first";
+
 impl Workbench {
     /// Opens the still at `path`: reads it whole, finds its grooves and decodes one (the groove
     /// its `truth.toml` names, else the decoder's pick), all in the background.
     pub fn open_still(&mut self, path: &Path) {
-        if self.still.job.is_some() {
-            self.error("a still is being decoded: cancel it first");
+        if self
+            .messages
+            .refuse_if(self.is_decoding_still(), STILL_BUSY)
+        {
             return;
         }
         let (width, height) = match crate::io::still::StillReader::open(path) {
@@ -84,8 +89,10 @@ impl Workbench {
             self.error("open a still image first");
             return;
         };
-        if self.still.job.is_some() {
-            self.error("a still is being decoded: cancel it first");
+        if self
+            .messages
+            .refuse_if(self.is_decoding_still(), STILL_BUSY)
+        {
             return;
         }
         let found = doc
