@@ -6,7 +6,7 @@ use egui::{Color32, Ui};
 use egui_plot::{Bar, BarChart, Legend, Line, Plot, PlotPoints};
 
 use super::waveform_ui::{PREVIOUS_COLOUR, RECOVERED_COLOUR, decimate};
-use super::{AXIS_WIDTH_PT, cancel_button, level_plot, three_stop_colour, tool_window};
+use super::{AXIS_WIDTH_PT, COMPARE_WINDOW, cancel_button, level_plot, three_stop_colour};
 use crate::app::background::Polled;
 use crate::app::compare::{Agreement, CompareState, METHODS, default_partner};
 use crate::pipeline::Method;
@@ -71,14 +71,9 @@ pub fn compare_window(
     heard: bool,
 ) -> Vec<CompareAction> {
     let mut actions = Vec::new();
-    state.open = tool_window(
-        ctx,
-        "Compare methods",
-        state.open,
-        [1100.0, 620.0],
-        [300.0, 90.0],
-        |ui| body(ui, state, current, player, heard, &mut actions),
-    );
+    state.open = COMPARE_WINDOW.show(ctx, state.open, |ui| {
+        body(ui, state, current, player, heard, &mut actions);
+    });
     actions
 }
 

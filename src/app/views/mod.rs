@@ -357,23 +357,42 @@ where
     Color32::from_rgb(c(0), c(1), c(2))
 }
 
-/// The closable window `title` at its default size and place, drawing `body` while `open`;
-/// returns whether it is still open.
-pub fn tool_window(
-    ctx: &egui::Context,
-    title: &str,
-    open: bool,
-    size: [f32; 2],
-    pos: [f32; 2],
-    body: impl FnOnce(&mut Ui),
-) -> bool {
-    let mut open = open;
-    egui::Window::new(title)
-        .open(&mut open)
-        .default_size(size)
-        .default_pos(pos)
-        .show(ctx, body);
-    open
+/// A closable tool window: its title, and its size and place when first shown (points).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ToolWindow {
+    /// The title (also the window's id).
+    pub title: &'static str,
+    /// Default size.
+    pub size: [f32; 2],
+    /// Default place of its top left corner.
+    pub pos: [f32; 2],
+}
+
+/// The "Compare methods" window.
+pub const COMPARE_WINDOW: ToolWindow = ToolWindow {
+    title: "Compare methods",
+    size: [1100.0, 620.0],
+    pos: [300.0, 90.0],
+};
+
+/// The still window.
+pub const STILL_WINDOW: ToolWindow = ToolWindow {
+    title: "Still image",
+    size: [1240.0, 800.0],
+    pos: [300.0, 60.0],
+};
+
+impl ToolWindow {
+    /// Draws the window, `body` inside, while `open`; returns whether it is still open.
+    pub fn show(&self, ctx: &egui::Context, open: bool, body: impl FnOnce(&mut Ui)) -> bool {
+        let mut open = open;
+        egui::Window::new(self.title)
+            .open(&mut open)
+            .default_size(self.size)
+            .default_pos(self.pos)
+            .show(ctx, body);
+        open
+    }
 }
 
 /// The cancel button of running work: `label` while it runs, a greyed "cancelling…" once

@@ -6,7 +6,7 @@ use egui::{Color32, Pos2, Rect, Sense, Stroke, Ui, pos2};
 use egui_plot::{Line, Plot, PlotPoints, VLine};
 
 use super::waveform_ui::{RECOVERED_COLOUR, decimate};
-use super::{AXIS_WIDTH_PT, cancel_button, tool_window};
+use super::{AXIS_WIDTH_PT, STILL_WINDOW, cancel_button};
 use crate::app::background::Polled;
 use crate::app::render::region_colour;
 use crate::app::still::{
@@ -55,14 +55,9 @@ pub fn still_window(
     playing: bool,
 ) -> Vec<StillAction> {
     let mut actions = Vec::new();
-    state.open = tool_window(
-        ctx,
-        "Still image",
-        state.open,
-        [1240.0, 800.0],
-        [300.0, 60.0],
-        |ui| body(ui, state, position, playing, &mut actions),
-    );
+    state.open = STILL_WINDOW.show(ctx, state.open, |ui| {
+        body(ui, state, position, playing, &mut actions);
+    });
     actions
 }
 
