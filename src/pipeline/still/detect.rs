@@ -8,7 +8,8 @@
 //! neighbouring walls form a groove when the gap between them is a bottom: gaps between walls
 //! fall into two sizes (bottoms and lands) told apart by a two-means split of their logarithms
 //! over the whole image; when they do not split, a lone groove's narrow gap (under half a wall)
-//! is a bottom, and otherwise every run is a whole groove whose bottom is not seen. Grooves are
+//! is a bottom, and otherwise every run is a whole groove whose bottom is not seen (two runs a
+//! narrow gap apart that together are a groove's width are one groove that noise cut in two). Grooves are
 //! then linked from block to block to the nearest track within a share of their spacing
 //! (greedy, nearest pairs first), tolerating gaps of `max_gap_blocks`; they are numbered by
 //! their position across the image with the common drift taken out.
@@ -353,6 +354,15 @@ pub fn detect_grooves(
                         i += 2;
                     }
                     (Some(_), _) => i += 1,
+                    // One band cut in two by a bright speck of noise or the sliver of a
+                    // bottom: halves a narrow gap apart that together are a groove's width.
+                    (None, Some(next))
+                        if next.a - r[i].b < LONE_BOTTOM_SHARE * wall_median
+                            && next.b - r[i].a <= (1.0 + TRACK_WIDTH_TOLERANCE) * wall_median =>
+                    {
+                        grooves.push([r[i].a, f64::NAN, f64::NAN, next.b]);
+                        i += 2;
+                    }
                     (None, _) => {
                         grooves.push([r[i].a, f64::NAN, f64::NAN, r[i].b]);
                         i += 1;

@@ -148,3 +148,30 @@ fn a_groove_that_drifts_off_the_image_is_silent_there_not_its_neighbour() {
         );
     }
 }
+
+#[test]
+fn heavy_noise_does_not_cut_a_groove_in_two() {
+    // The demo strip's grooves are 10 px bands whose 1 px bottom is lighter than the walls:
+    // under 15 % noise a bright speck on it cut a band into two runs in some blocks, each taken
+    // for a groove, and the strip read as eight grooves with the first chosen.
+    let cfg = StillConfig {
+        length_px: 20_000,
+        noise_sigma: 0.15,
+        ..StillConfig::demo()
+    };
+    let (scene, img) = still_scene_and_image(&cfg);
+    let setup = scene.setup(1).unwrap();
+    let a = analyse_still(&img, &setup, None, &StillParams::default()).unwrap();
+    let found: Vec<(usize, f64)> = a
+        .grooves
+        .grooves
+        .iter()
+        .map(|g| (g.number, g.coverage))
+        .collect();
+    assert_eq!(found.len(), 3, "{found:?}");
+    assert!(found.iter().all(|(_, c)| *c > 0.9), "{found:?}");
+    assert_eq!(a.chosen, 1);
+    let want = scene.grooves[1].tones_hz.unwrap().0;
+    let got = dominant_hz(&a.signal.channels[0], a.signal.native_rate_hz);
+    assert!((got / want - 1.0).abs() < 0.01, "{got} vs {want}");
+}
