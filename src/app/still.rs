@@ -459,6 +459,7 @@ mod tests {
             block_centres: vec![16.0, 48.0, 80.0],
             grooves: vec![track(1, 10.0), track(2, 40.0), track(3, 70.0)],
             drift_px_per_block: 0.0,
+            brightness_gain: 1.0,
             bottoms_visible: true,
             energy_ratio: 0.1,
         }

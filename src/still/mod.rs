@@ -318,6 +318,14 @@ pub fn decode_groove(
             audio.len(),
         ));
     }
+    let gain = found.grooves.brightness_gain;
+    if gain > 1.0 {
+        warnings.push(format!(
+            "the still is dim (its bright level is {:.3} of full scale, such as 12 bits stored \
+             in 16, or under-exposed): its grey levels were scaled ×{gain:.1} for the border fits",
+            crate::pipeline::still::detect::BRIGHT_LEVEL / gain
+        ));
+    }
     if let Some(track) = track {
         warnings.extend(outside_image_warning(
             &track.outside_image(&found.grooves),

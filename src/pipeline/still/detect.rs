@@ -7,7 +7,7 @@
 //! it (above it for bright walls), their ends located at the sub-pixel threshold crossing. Two
 //! neighbouring walls form a groove when the gap between them is a bottom: gaps between walls
 //! fall into two sizes (bottoms and lands) told apart by a two-means split of their logarithms
-//! over the whole image; when they do not split, a lone groove's narrow gap (under half a wall)
+//! over the whole image, which must alternate across a block; when they do not split, a lone groove's narrow gap (under half a wall)
 //! is a bottom, and otherwise every run is a whole groove whose bottom is not seen (two runs a
 //! narrow gap apart that together are a groove's width are one groove that noise cut in two). Grooves are
 //! then linked from block to block to the nearest track within a share of their spacing
@@ -30,6 +30,10 @@ const TILES_PER_WINDOW: usize = 4;
 const GAP_CLUSTER_RATIO: f64 = 1.6;
 /// The smaller gap cluster must hold at least this share of the gaps.
 const GAP_CLUSTER_SHARE: f64 = 0.2;
+/// Two clusters are not bottoms and lands when more than this share of the pairs of gaps side
+/// by side in a block both fall in the small one (a wall with a "bottom" on either side): they
+/// are lands, and the wide gaps where a groove was not seen (text, an edge).
+const PAIRED_BOTTOMS_SHARE: f64 = 0.25;
 /// Without two clusters, gaps under this share of the median wall are bottoms.
 const LONE_BOTTOM_SHARE: f64 = 0.5;
 /// Linking tolerance as a share of the groove spacing (or of the width for a lone groove).
@@ -45,6 +49,12 @@ const WIDTH_TOLERANCE: f64 = 0.6;
 const TRACK_WIDTH_TOLERANCE: f64 = 0.4;
 /// Along-to-across gradient energy above which the axis contradicts the image.
 const AXIS_RATIO: f64 = 1.2;
+/// A still whose bright level (see [`GrooveMap::brightness_gain`]) is under this share of full
+/// scale is lifted to it for the border fits: the generator's stills and the demo sit at about
+/// 0.68, so a well-exposed still is read as it is.
+pub const BRIGHT_LEVEL: f64 = 0.5;
+/// Most profile values the bright level is measured on (evenly spaced).
+const BRIGHT_SAMPLES: usize = 1 << 20;
 /// Grooves within this share of the best coverage count as complete when choosing one.
 const COMPLETE_SHARE: f64 = 0.9;
 
@@ -132,6 +142,11 @@ pub struct GrooveMap {
     /// The grooves' common drift across the image (cross px a block, the median slope of the
     /// tracks): how a groove is followed past the blocks it was found in.
     pub drift_px_per_block: f64,
+    /// Gain on the grey values of the border fits: [`BRIGHT_LEVEL`] over the still's bright
+    /// level (the 90th percentile of its block profiles) where that is lower, else 1, so that a
+    /// dim still (12 bits stored in 16, an under-exposed micrograph) meets the fits' grey-level
+    /// thresholds as a well-exposed one does.
+    pub brightness_gain: f64,
     /// Whether the bottoms are seen (two walls per groove) or each groove is one dark band.
     pub bottoms_visible: bool,
     /// Gradient energy along the lines over that across them.
@@ -332,9 +347,22 @@ pub fn detect_grooves(
         .flat_map(|r| r.windows(2).map(|w| w[1].a - w[0].b))
         .collect();
     let wall_median = median(runs.iter().flatten().map(|r| r.b - r.a).collect()).unwrap_or(0.0);
+    // Bottoms and lands alternate across a block: a wall has a bottom on one side only.
+    let alternate = |limit: f64| {
+        let (mut both, mut pairs) = (0usize, 0usize);
+        for w in runs.iter().flat_map(|r| r.windows(3)) {
+            pairs += 1;
+            if w[1].a - w[0].b < limit && w[2].a - w[1].b < limit {
+                both += 1;
+            }
+        }
+        both as f64 <= PAIRED_BOTTOMS_SHARE * pairs as f64
+    };
     let bottom_limit = match two_means(&gaps) {
         Some((small, large, share))
-            if large >= GAP_CLUSTER_RATIO * small && share >= GAP_CLUSTER_SHARE =>
+            if large >= GAP_CLUSTER_RATIO * small
+                && share >= GAP_CLUSTER_SHARE
+                && alternate((small * large).sqrt()) =>
         {
             Some((small * large).sqrt())
         }
@@ -469,9 +497,27 @@ pub fn detect_grooves(
             .collect(),
         grooves,
         drift_px_per_block: drift,
+        brightness_gain: brightness_gain(&profiles.data),
         bottoms_visible: bottom_limit.is_some(),
         energy_ratio,
     })
+}
+
+/// [`GrooveMap::brightness_gain`] of a still whose block profiles are `profiles`.
+fn brightness_gain(profiles: &[f32]) -> f64 {
+    let step = profiles.len().div_ceil(BRIGHT_SAMPLES).max(1);
+    let mut sample: Vec<f32> = profiles
+        .iter()
+        .step_by(step)
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    match quantile(&mut sample, LEVEL_QUANTILES.1) {
+        Some(bright) if bright > 0.0 && f64::from(bright) < BRIGHT_LEVEL => {
+            BRIGHT_LEVEL / f64::from(bright)
+        }
+        _ => 1.0,
+    }
 }
 
 /// The index in `map.grooves` of groove number `asked`, or without one the most complete

@@ -22,7 +22,7 @@ pub struct Ribbon {
     pub width: usize,
     /// Cross position of each line's first kept sample (may lie outside the image).
     pub first_cross: Vec<i64>,
-    /// `lines × width` grey values; NaN outside the image.
+    /// `lines × width` grey values (times [`GrooveMap::brightness_gain`]); NaN outside the image.
     pub data: Vec<f32>,
     /// The groove's predicted borders on every line (cross px; inner NaN when not seen).
     pub predicted: Vec<[f64; 4]>,
@@ -46,6 +46,8 @@ pub struct RibbonBuilder {
     image_width: usize,
     image_height: usize,
     rows_seen: usize,
+    /// [`GrooveMap::brightness_gain`].
+    gain: f32,
     ribbon: Ribbon,
 }
 
@@ -109,6 +111,7 @@ impl RibbonBuilder {
             image_width: width,
             image_height: height,
             rows_seen: 0,
+            gain: map.brightness_gain as f32,
             ribbon: Ribbon {
                 axis: map.axis,
                 lines: map.lines,
@@ -139,7 +142,7 @@ impl RibbonBuilder {
                     for (j, d) in dst.iter_mut().enumerate() {
                         let x = lo + j as i64;
                         if let Some(v) = usize::try_from(x).ok().and_then(|x| row.get(x)) {
-                            *d = *v;
+                            *d = *v * self.gain;
                         }
                     }
                 }
@@ -148,7 +151,7 @@ impl RibbonBuilder {
                     for (n, (&lo, v)) in r.first_cross.iter().zip(row).enumerate() {
                         let j = y - lo;
                         if (0..w as i64).contains(&j) {
-                            r.data[n * w + j as usize] = *v;
+                            r.data[n * w + j as usize] = *v * self.gain;
                         }
                     }
                 }
