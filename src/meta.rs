@@ -4,6 +4,11 @@ use serde::{Deserialize, Serialize};
 
 /// The scan format version this build reads and writes.
 pub const FORMAT_VERSION: u32 = 1;
+/// Fastest turntable speed a scan or a still may give (rpm): far past any record, short of the
+/// numbers that overflow the geometry.
+pub const MAX_RPM: f64 = 1000.0;
+/// Largest groove radius a scan or a still may give (mm): likewise.
+pub const MAX_RADIUS_MM: f64 = 1000.0;
 
 /// How the sound was cut into the groove.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -180,11 +185,11 @@ impl ScanMeta {
                 Err(format!("{name} must be at most {most}, got {}", shown(v)))
             }
         }
-        at_most("record.rpm", self.record.rpm, 1000.0)?;
-        at_most("record.radius_mm", self.record.radius_mm, 1000.0)?;
+        at_most("record.rpm", self.record.rpm, MAX_RPM)?;
+        at_most("record.radius_mm", self.record.radius_mm, MAX_RADIUS_MM)?;
         if let Some(radii) = &self.record.group_radius_mm {
             for (i, r) in radii.iter().enumerate() {
-                at_most(&format!("record.group_radius_mm[{i}]"), *r, 1000.0)?;
+                at_most(&format!("record.group_radius_mm[{i}]"), *r, MAX_RADIUS_MM)?;
             }
         }
         at_most("camera.pixel_pitch_um", self.camera.pixel_pitch_um, 1000.0)?;

@@ -205,8 +205,13 @@ impl StillSetup {
     /// fewer than [`MIN_STILL_RATE_HZ`] samples a second, or a vertical cut.
     pub fn validate(&self) -> Result<(), StageError> {
         check_range("um_per_px", self.um_per_px, 1e-6, 1e6)?;
-        check_range("rpm", self.rpm, 1e-3, 1e4)?;
-        check_range("radius_mm", self.radius_mm, 1e-3, 1e4)?;
+        check_range("rpm", self.rpm, 1e-3, crate::meta::MAX_RPM)?;
+        check_range(
+            "radius_mm",
+            self.radius_mm,
+            1e-3,
+            crate::meta::MAX_RADIUS_MM,
+        )?;
         let rate_hz = self.native_rate_hz();
         if rate_hz < MIN_STILL_RATE_HZ {
             return Err(StageError::InvalidParam {
