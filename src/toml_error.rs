@@ -6,6 +6,13 @@
 #[must_use]
 pub fn located(text: &str, error: &toml::de::Error) -> String {
     let message = error.message().trim_end();
+    if let Some(field) = message
+        .strip_prefix("missing field `")
+        .and_then(|m| m.split_once('`'))
+        .map(|(f, _)| f)
+    {
+        return missing(text, error, field);
+    }
     let Some(start) = error.span().map(|s| s.start) else {
         return message.to_string();
     };
@@ -22,6 +29,33 @@ pub fn located(text: &str, error: &toml::de::Error) -> String {
         Some(k) => format!("{} (line {line_no}): {message}", qualified(table, k)),
         None => format!("line {line_no}: {message}"),
     }
+}
+
+/// A missing table or key `field`: the table it is missing from (the parser points at that
+/// table, or at the file's start for a top-level one, whose first line is no help), and the
+/// name the file spells otherwise where only the case differs (`[Motion]` for `[motion]`).
+fn missing(text: &str, error: &toml::de::Error, field: &str) -> String {
+    let table = error
+        .span()
+        .and_then(|s| text.get(s.start..))
+        .and_then(|rest| rest.lines().next())
+        .and_then(header);
+    let mut line = match table {
+        Some(t) => format!("[{t}] lacks the key `{field}`"),
+        None => format!("the table [{field}] (or top-level key `{field}`) is missing"),
+    };
+    let spelt = text.lines().find_map(|l| {
+        let name = header(l)
+            .map(|t| t.rsplit('.').next().unwrap_or(t).trim())
+            .or_else(|| key_of(l))?;
+        (name != field && name.eq_ignore_ascii_case(field)).then(|| l.trim().to_string())
+    });
+    if let Some(spelt) = spelt {
+        line.push_str(&format!(
+            " (the file has `{spelt}`: names are lower case and case counts)"
+        ));
+    }
+    line
 }
 
 /// The table a `[table]` or `[[table]]` header line names; a comment may follow it
@@ -102,6 +136,24 @@ mod tests {
             line.starts_with("flow.max_iterations (line 3): ") && line.contains("u32"),
             "{line}"
         );
+    }
+
+    #[test]
+    fn a_missing_table_or_key_is_named_with_a_wrongly_cased_spelling() {
+        let line = error_of("format = 1\n[Flow]\nmax_iterations = 3\n");
+        assert_eq!(
+            line,
+            "the table [flow] (or top-level key `flow`) is missing (the file has `[Flow]`: \
+             names are lower case and case counts)"
+        );
+        let line = error_of("[flow]\nMax_Iterations = 3\n");
+        assert_eq!(
+            line,
+            "[flow] lacks the key `max_iterations` (the file has `Max_Iterations = 3`: names \
+             are lower case and case counts)"
+        );
+        let line = error_of("[flow]\n");
+        assert_eq!(line, "[flow] lacks the key `max_iterations`");
     }
 
     #[test]
