@@ -320,11 +320,12 @@ fn the_still_command_writes_sound_and_a_report() {
         "{err}"
     );
     assert!(short_wav.is_file());
-    // A speed typed 300 times too high gives a few samples: written, and said.
+    // A speed typed 30 times too high (the most --rpm takes) gives a few samples: written,
+    // and said.
     let fast_wav = dir.path().join("fast.wav");
     let mut fast_args = still_args(s(&image), s(&fast_wav), &radius);
     fast_args.extend(["--axis", "horizontal"]);
-    fast_args[5] = "9999";
+    fast_args[5] = "1000";
     let err = succeeded(&fast_args);
     assert!(
         err.contains("faster than any disc") && err.contains("check them and the pixel size"),
@@ -399,6 +400,12 @@ fn bad_stills_get_one_clear_line() {
     assert!(err.contains("500 Hz") && err.contains("slow.wav"), "{err}");
     let err = still_error(&image, "0", &[]);
     assert!(err.contains("invalid --radius-mm: 0 is not in"), "{err}");
+    // The bounds scan.toml has: at most 1000 rpm and 1000 mm.
+    let err = still_error(&image, "1001", &[]);
+    assert!(
+        err.contains("invalid --radius-mm: 1001 is not in [0.001, 1000]"),
+        "{err}"
+    );
     // 33⅓ rpm at 0.01 mm over 1 µm pixels: 34.9 samples a second, refused (otherwise the
     // 1,200-px still would become 34 s of interpolated sound).
     let err = still_error(&image, "0.01", &[]);

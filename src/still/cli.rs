@@ -314,7 +314,9 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
         },
     );
     pb.finish_and_clear();
-    let run = run?;
+    // A Ctrl-C after the decode's last check (the border fits and the finish run without one)
+    // still stops it here, before anything is written, and the locks are let go.
+    let run = crate::cli::unless_interrupted("still", run)?;
     let scores = reference
         .as_ref()
         .map(|(refa, path)| super::score_still_against(&run.audio, refa, path))
