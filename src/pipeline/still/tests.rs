@@ -149,17 +149,23 @@ fn a_groove_that_drifts_off_the_image_is_silent_there_not_its_neighbour() {
     }
 }
 
+/// The demo still's strip (72 px across at 6 µm/px, three grooves), 20 000 px long.
+fn short_demo_strip() -> StillConfig {
+    StillConfig {
+        length_px: 20_000,
+        ..StillConfig::demo()
+    }
+}
+
 #[test]
 fn heavy_noise_does_not_cut_a_groove_in_two() {
     // The demo strip's grooves are 10 px bands whose 1 px bottom is lighter than the walls:
     // under 15 % noise a bright speck on it cut a band into two runs in some blocks, each taken
     // for a groove, and the strip read as eight grooves with the first chosen.
-    let cfg = StillConfig {
-        length_px: 20_000,
+    let (scene, img) = still_scene_and_image(&StillConfig {
         noise_sigma: 0.15,
-        ..StillConfig::demo()
-    };
-    let (scene, img) = still_scene_and_image(&cfg);
+        ..short_demo_strip()
+    });
     let setup = scene.setup(1).unwrap();
     let a = analyse_still(&img, &setup, None, &StillParams::default()).unwrap();
     let found: Vec<(usize, f64)> = a
@@ -194,11 +200,7 @@ fn correlation(a: &[f32], b: &[f32]) -> f64 {
 #[test]
 fn a_dim_still_decodes_as_the_same_still_well_exposed() {
     // 12 bits stored in 16: every grey level a sixteenth of full scale, in steps of 1/65535.
-    let cfg = StillConfig {
-        length_px: 20_000,
-        ..StillConfig::demo()
-    };
-    let (scene, img) = still_scene_and_image(&cfg);
+    let (scene, img) = still_scene_and_image(&short_demo_strip());
     let mut dim = img.clone();
     for v in &mut dim.data {
         *v = (f64::from(*v) * 4095.0 / 65535.0 * 65535.0).round() as f32 / 65535.0;
