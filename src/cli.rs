@@ -286,6 +286,11 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
         (None, None) => bail!("give a sound file, --tone HZ, --sweep F0:F1 or --melody"),
     };
     pb.finish_and_clear();
+    // The generator's own (a stereo sound mixed for a one-channel cut, focus stripes over the
+    // glass edge): to standard error, as every warning, --quiet or not.
+    for w in &summary.warnings {
+        crate::tell!("warning: {w}");
+    }
     // A limit on the groups cuts the sound short: said even with --quiet, naming the limit.
     if let Some(n) = cfg.max_groups.filter(|&n| n == summary.groups) {
         let limit = if args.max_groups.is_some() {

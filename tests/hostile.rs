@@ -150,6 +150,38 @@ fn an_unreadable_reference_is_a_warning_naming_it_and_the_reconstruction_goes_on
 }
 
 #[test]
+fn a_stereo_reference_is_scored_as_its_mono_mix_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = demo_copy(dir.path());
+    let reference = demo.join("reference.wav");
+    let mono = groovescope::io::wav::read_wav(&reference).unwrap();
+    let stereo = groovescope::io::wav::Audio {
+        channels: vec![mono.channels[0].clone(), mono.channels[0].clone()],
+        ..mono.clone()
+    };
+    groovescope::io::wav::write_wav(
+        &reference,
+        &stereo,
+        groovescope::io::wav::WavBits::Int24,
+        true,
+    )
+    .unwrap();
+    let opts = ReconstructOptions {
+        groups: Some(0..4),
+        ..ReconstructOptions::default()
+    };
+    let scan = Scan::open(&demo).unwrap();
+    let rec = reconstruct(&scan, &opts, &mut |_| {}, &AtomicBool::new(false)).unwrap();
+    // Both channels the same: the mix is the mono reference, and so are the scores.
+    assert!(rec.scores.is_some_and(|s| s.r > 0.9), "{:?}", rec.scores);
+    common::assert_warned(
+        &rec.warnings,
+        &["reference.wav has 2 channels", "mono mix"],
+        "stereo reference",
+    );
+}
+
+#[test]
 fn a_long_reference_is_scored_on_the_clip_and_a_tiny_rate_is_refused() {
     // A reference resampled whole to the clip's rate: 2^22 samples at 8 kHz is nine minutes,
     // and a few thousand samples "at 2 Hz" were hours of sound (a fuzzed scan folder hung on
@@ -181,7 +213,7 @@ fn a_long_reference_is_scored_on_the_clip_and_a_tiny_rate_is_refused() {
     assert!(!rec.audio.is_empty());
     // What is resampled ends 10 s after the clip (the clip starts near the reference's start),
     // not nine minutes later.
-    let aligned = groovescope::engine::aligned_reference(
+    let (aligned, _) = groovescope::engine::aligned_reference(
         &rec.audio,
         &rec.stitched,
         scan.meta.groove_speed_mm_s(0),

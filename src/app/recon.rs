@@ -209,7 +209,7 @@ pub fn make_clip(
             scan.meta.groove_speed_mm_s(groups.start),
             path,
         ) {
-            Ok(mut r) => {
+            Ok((mut r, _)) => {
                 r.truncate(recovered.len());
                 (Some(r), None)
             }

@@ -466,7 +466,8 @@ const REFERENCE_TAIL_SECS: f64 = 10.0;
 /// needs more, because the clip starts that far into it, is not scored.
 const MAX_RESAMPLED_REFERENCE: f64 = (1u64 << 26) as f64;
 
-/// Reference sound aligned to the stretch a reconstruction covers, at the recovered rate.
+/// Reference sound aligned to the stretch a reconstruction covers, at the recovered rate, and
+/// how many channels the file has (more than one are mixed to mono to give it).
 ///
 /// Only the reference up to 10 s (`REFERENCE_TAIL_SECS`) past the clip's end is resampled: a long
 /// reference at a low rate (a hostile or mislabelled `reference.wav`: a few thousand samples
@@ -480,7 +481,7 @@ pub fn aligned_reference(
     stitched: &StitchedSignal,
     groove_speed_mm_s: f64,
     path: &std::path::Path,
-) -> Result<Vec<f32>, LoadError> {
+) -> Result<(Vec<f32>, usize), LoadError> {
     let reference = read_reference_wav(path)?;
     let mono = reference.mono();
     let rate = f64::from(reference.sample_rate_hz);
@@ -515,9 +516,12 @@ pub fn aligned_reference(
         problem: format!("cannot resample the reference: {e}"),
         path: path.to_path_buf(),
     })?;
-    Ok(read_from(
-        &resampled,
-        (start_secs * f64::from(recovered.sample_rate_hz)).max(0.0),
+    Ok((
+        read_from(
+            &resampled,
+            (start_secs * f64::from(recovered.sample_rate_hz)).max(0.0),
+        ),
+        reference.channels.len(),
     ))
 }
 
@@ -529,7 +533,14 @@ fn score_against_reference(
     warnings: &mut Vec<String>,
 ) -> Option<Scores> {
     match aligned_reference(audio, stitched, groove_speed_mm_s, path) {
-        Ok(reference) => {
+        Ok((reference, channels)) => {
+            if channels > 1 {
+                warnings.push(format!(
+                    "{} has {channels} channels: scored as their mono mix against the clip's \
+                     (groovescope eval scores a stereo transfer channel by channel)",
+                    path.display()
+                ));
+            }
             let max_lag = (MAX_EVAL_LAG_SECS * f64::from(audio.sample_rate_hz)) as usize;
             let scores = evaluate(&audio.mono(), &reference, max_lag, audio.sample_rate_hz);
             if scores.is_none() {

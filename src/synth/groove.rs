@@ -400,6 +400,18 @@ impl Groove {
         }
 
         let mut warnings = Vec::new();
+        if sound.channels.len() > 1 && cfg.cut != Cut::Stereo {
+            warnings.push(format!(
+                "the sound has {} channels and a {} cut carries one: their mono mix is cut \
+                 (and written as reference.wav); a stereo cut carries two",
+                sound.channels.len(),
+                if cfg.cut == Cut::Lateral {
+                    "lateral"
+                } else {
+                    "vertical"
+                },
+            ));
+        }
         let optics = Self::place_optics(cfg, &profile, wd_um, cy, lat_swing, &mut warnings);
         let reference = src.reference(
             sound.sample_rate_hz,

@@ -546,3 +546,26 @@ fn dual_focus_scan_metadata_and_a_missing_chunk_render_dark() {
     );
     assert!(mean_out > 0.7 && mean_in < 0.2, "{mean_in} {mean_out}");
 }
+
+#[test]
+fn a_stereo_sound_for_a_one_channel_cut_is_mixed_and_said() {
+    let mono = tone(1000.0, 0.01, 48_000);
+    let stereo = Audio {
+        channels: vec![mono.channels[0].clone(), mono.channels[0].clone()],
+        ..mono.clone()
+    };
+    let lateral = SynthConfig {
+        cut: Cut::Lateral,
+        ..SynthConfig::quick_test()
+    };
+    let said = |g: &Groove| g.warnings().iter().any(|w| w.contains("2 channels"));
+    let g = Groove::new(&stereo, &lateral).unwrap();
+    assert!(said(&g), "{:?}", g.warnings());
+    assert_eq!(g.reference().channels.len(), 1);
+    assert!(!said(&Groove::new(&mono, &lateral).unwrap()));
+    let stereo_cut = SynthConfig {
+        cut: Cut::Stereo,
+        ..lateral
+    };
+    assert!(!said(&Groove::new(&stereo, &stereo_cut).unwrap()));
+}
