@@ -419,7 +419,11 @@ fn merge_refuses_mixed_missing_duplicated_and_truncated_parts_naming_the_part() 
         assert!(e.contains(s(named)), "{e}");
         assert_eq!(e.trim().lines().count(), 1, "{e}");
     };
-    expect_refusal(std::slice::from_ref(&a0), "shard 1 of 2 is missing", &a0);
+    expect_refusal(
+        std::slice::from_ref(&a0),
+        "the plan has 2 shards and shard 1 (groups 75..150) is missing",
+        &a0,
+    );
     expect_refusal(
         &[a0.clone(), a1.clone(), a1.clone()],
         "duplicates shard 1",

@@ -40,9 +40,9 @@ pub struct CheckedPart {
 /// [`SideError::Refused`] naming the part: not a part, a damaged header, from another scan,
 /// another plan, other params, a duplicated shard; or naming the shard that is missing.
 pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
-    let Some(first_path) = paths.first() else {
+    if paths.is_empty() {
         return Err(SideError::refused("no parts given", "."));
-    };
+    }
     let mut parts: Vec<CheckedPart> = Vec::with_capacity(paths.len());
     for path in paths {
         let part = CheckedPart {
@@ -99,20 +99,54 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
         .first()
         .and_then(|p| p.identity.shard.as_ref())
         .map_or(0, |s| s.count);
-    for k in 0..count {
-        if !parts
-            .iter()
-            .any(|p| p.identity.shard.as_ref().is_some_and(|s| s.index == k))
-        {
-            let given: Vec<String> = parts.iter().map(|p| p.path.display().to_string()).collect();
-            return Err(SideError::refused(
-                format!(
-                    "shard {k} of {count} is missing from the parts given ({})",
-                    given.join(", ")
-                ),
-                first_path,
-            ));
+    let index = |p: &CheckedPart| p.identity.shard.as_ref().map(|s| s.index);
+    let held: Vec<usize> = parts.iter().filter_map(index).collect();
+    // Each run of missing shards, with the groups it leaves uncovered: the plan tiles the scan
+    // in shard order, so they lie between the parts on either side of the run.
+    let mut gaps: Vec<String> = Vec::new();
+    let mut k = 0;
+    while k < count {
+        if held.contains(&k) {
+            k += 1;
+            continue;
         }
+        let first = k;
+        while k < count && !held.contains(&k) {
+            k += 1;
+        }
+        let start = parts
+            .iter()
+            .filter(|p| index(p).is_some_and(|i| i < first))
+            .map(|p| p.identity.groups.1)
+            .max()
+            .unwrap_or(0);
+        let end = parts
+            .iter()
+            .filter(|p| index(p).is_some_and(|i| i >= k))
+            .map(|p| p.identity.groups.0)
+            .min()
+            .unwrap_or_else(|| parts.last().map_or(0, |p| p.identity.scan_groups));
+        let shards = if k - first == 1 {
+            format!("shard {first}")
+        } else {
+            format!("shards {first}–{}", k - 1)
+        };
+        let verb = if k - first == 1 { "is" } else { "are" };
+        gaps.push(format!("{shards} (groups {start}..{end}) {verb}"));
+    }
+    if !gaps.is_empty() {
+        let given: Vec<String> = parts.iter().map(|p| p.path.display().to_string()).collect();
+        let held: Vec<String> = held.iter().map(ToString::to_string).collect();
+        return Err(SideError::refused(
+            format!(
+                "the plan has {count} shards and {} missing: merge needs every shard's part, \
+                 and the parts given hold shard{} {}",
+                gaps.join(" and "),
+                if held.len() == 1 { "" } else { "s" },
+                held.join(", ")
+            ),
+            given.join(", "),
+        ));
     }
     // The plan tiles the scan, so shards of one plan cover every group once, in order.
     let mut next = 0;
