@@ -23,6 +23,18 @@ pub enum Cut {
     Vertical,
 }
 
+impl Cut {
+    /// Its name as scan.toml and the command line spell it.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Cut::Lateral => "lateral",
+            Cut::Stereo => "stereo",
+            Cut::Vertical => "vertical",
+        }
+    }
+}
+
 /// The `[record]` table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

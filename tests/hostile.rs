@@ -149,6 +149,12 @@ fn an_unreadable_reference_is_a_warning_naming_it_and_the_reconstruction_goes_on
     }
 }
 
+/// Writes `audio` over the WAV at `path` (16-bit).
+fn replace_wav(path: &Path, audio: &groovescope::io::wav::Audio) {
+    groovescope::io::wav::write_wav(path, audio, groovescope::io::wav::WavBits::Int16, true)
+        .unwrap();
+}
+
 #[test]
 fn a_stereo_reference_is_scored_as_its_mono_mix_and_says_so() {
     let dir = tempfile::tempdir().unwrap();
@@ -159,13 +165,7 @@ fn a_stereo_reference_is_scored_as_its_mono_mix_and_says_so() {
         channels: vec![mono.channels[0].clone(), mono.channels[0].clone()],
         ..mono.clone()
     };
-    groovescope::io::wav::write_wav(
-        &reference,
-        &stereo,
-        groovescope::io::wav::WavBits::Int24,
-        true,
-    )
-    .unwrap();
+    replace_wav(&reference, &stereo);
     let opts = ReconstructOptions {
         groups: Some(0..4),
         ..ReconstructOptions::default()
@@ -194,14 +194,7 @@ fn a_long_reference_is_scored_on_the_clip_and_a_tiny_rate_is_refused() {
             sample_rate_hz: rate,
             channels: vec![(0..n).map(|i| ((i % 7) as f32 - 3.0) / 4.0).collect()],
         };
-        std::fs::remove_file(&reference).unwrap();
-        groovescope::io::wav::write_wav(
-            &reference,
-            &audio,
-            groovescope::io::wav::WavBits::Int16,
-            false,
-        )
-        .unwrap();
+        replace_wav(&reference, &audio);
     };
     let opts = ReconstructOptions {
         groups: Some(0..2),

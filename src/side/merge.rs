@@ -126,12 +126,11 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<CheckedPart>, SideError> {
             .map(|p| p.identity.groups.0)
             .min()
             .unwrap_or_else(|| parts.last().map_or(0, |p| p.identity.scan_groups));
-        let shards = if k - first == 1 {
-            format!("shard {first}")
+        let (shards, verb) = if k - first == 1 {
+            (format!("shard {first}"), "is")
         } else {
-            format!("shards {first}–{}", k - 1)
+            (format!("shards {first}–{}", k - 1), "are")
         };
-        let verb = if k - first == 1 { "is" } else { "are" };
         gaps.push(format!("{shards} (groups {start}..{end}) {verb}"));
     }
     if !gaps.is_empty() {

@@ -460,11 +460,7 @@ pub fn write_still_report(
             Axis::Vertical => "vertical",
             Axis::Horizontal => "horizontal",
         },
-        cut: if setup.cut == Cut::Stereo {
-            "stereo"
-        } else {
-            "lateral"
-        },
+        cut: setup.cut.name(),
         reverse: setup.reverse,
         um_per_px: setup.um_per_px,
         rpm: setup.rpm,

@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Result, anyhow};
 
-use crate::io::Cut;
 use crate::io::wav::WavBits;
 use crate::pipeline::still::{Axis, StillSetup};
 use crate::synth::still::StillSidecar;
@@ -91,12 +90,7 @@ impl DemoStill {
                 Axis::Horizontal => "horizontal",
             }
             .into(),
-            cut: if s.cut == Cut::Stereo {
-                "stereo"
-            } else {
-                "lateral"
-            }
-            .into(),
+            cut: s.cut.name().into(),
             groove: Some(self.groove),
             reverse: s.reverse,
             out,

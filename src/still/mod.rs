@@ -18,7 +18,7 @@ use crate::pipeline::eval::{Scores, evaluate};
 use crate::pipeline::finish::channels_to_output;
 use crate::pipeline::still::{
     GrooveMap, ProfileBuilder, RibbonBuilder, StillAnalysis, StillError, StillParams, StillSetup,
-    StillSignal, choose_groove, decode_borders, detect_grooves, track_borders,
+    StillSignal, choose_groove, decode_borders, detect_grooves, outside_image, track_borders,
 };
 use crate::pipeline::{PipelineParams, StageError};
 
@@ -326,14 +326,12 @@ pub fn decode_groove(
             crate::pipeline::still::detect::BRIGHT_LEVEL / gain
         ));
     }
-    if let Some(track) = track {
-        warnings.extend(outside_image_warning(
-            &track.outside_image(&found.grooves),
-            number,
-            borders.lines,
-            setup,
-        ));
-    }
+    warnings.extend(outside_image_warning(
+        &outside_image(&borders.predicted, found.grooves.cross),
+        number,
+        borders.lines,
+        setup,
+    ));
     for c in 0..signal.channels.len() {
         let lost: usize = signal
             .gaps
@@ -388,10 +386,7 @@ fn outside_image_warning(
     if total == 0 {
         return None;
     }
-    let lines_name = match setup.axis {
-        crate::pipeline::still::Axis::Vertical => "rows",
-        crate::pipeline::still::Axis::Horizontal => "columns",
-    };
+    let (lines_name, _) = setup.axis.names();
     let runs: Vec<String> = outside
         .iter()
         .map(|r| format!("{}–{}", r.start, r.end - 1))

@@ -405,11 +405,7 @@ impl Groove {
                 "the sound has {} channels and a {} cut carries one: their mono mix is cut \
                  (and written as reference.wav); a stereo cut carries two",
                 sound.channels.len(),
-                if cfg.cut == Cut::Lateral {
-                    "lateral"
-                } else {
-                    "vertical"
-                },
+                cfg.cut.name(),
             ));
         }
         let optics = Self::place_optics(cfg, &profile, wd_um, cy, lat_swing, &mut warnings);

@@ -381,17 +381,18 @@ fn image_view(
                 region_colour(i)
             };
             let width = if chosen == Some(i) { 2.0 } else { 1.2 };
+            let path = g.path(map);
             for edge in [0, 3] {
                 let pts: Vec<Pos2> = (0..=OUTLINE_POINTS)
                     .map(|k| first + count * k as f64 / OUTLINE_POINTS as f64 - 0.5)
                     .filter_map(|line| {
-                        let b = g.predict(map, line);
+                        let b = path.at(line);
                         b[edge].is_finite().then(|| at(line, b[edge]))
                     })
                     .collect();
                 painter.add(egui::Shape::line(pts, Stroke::new(width, colour)));
             }
-            let b = g.predict(map, first + 0.02 * count);
+            let b = path.at(first + 0.02 * count);
             if b[0].is_finite() && b[3].is_finite() {
                 let p = at(first + 0.02 * count, 0.5 * (b[0] + b[3]));
                 painter.text(

@@ -20,7 +20,7 @@ use super::link::{absorb_pieces, centre, common_drift, interpolate, link, merge_
 use super::profile::Profiles;
 use super::{Axis, StillError, StillParams, StillSetup, WallTone};
 use crate::pipeline::StageError;
-use crate::pipeline::median;
+use crate::pipeline::{median, sampled_quantiles};
 
 /// Dark and bright level quantiles of the local light window.
 const LEVEL_QUANTILES: (f64, f64) = (0.1, 0.9);
@@ -82,46 +82,70 @@ pub struct GrooveTrack {
 }
 
 impl GrooveTrack {
-    /// The four borders at `line`, interpolated linearly between the centres of the blocks
-    /// it was found in, and carried on along the image's common drift before the first and
-    /// after the last (a groove that drifts off the image is followed off it, not held at its
-    /// last place, where the next turn drifts in); NaN when it was never found.
+    /// The groove's predicted borders along the image: [`GroovePath::at`] any line.
+    #[must_use]
+    pub fn path(&self, map: &GrooveMap) -> GroovePath {
+        GroovePath {
+            found: self
+                .blocks
+                .iter()
+                .enumerate()
+                .filter_map(|(b, v)| v.map(|v| (map.block_centres[b], v)))
+                .collect(),
+            drift_per_line: map.drift_px_per_block / map.block_lines.max(1) as f64,
+        }
+    }
+
+    /// The four borders at `line` ([`GroovePath::at`]; for many lines, take [`Self::path`]
+    /// once).
     #[must_use]
     pub fn predict(&self, map: &GrooveMap, line: f64) -> [f64; 4] {
-        let found: Vec<(f64, [f64; 4])> = self
-            .blocks
-            .iter()
-            .enumerate()
-            .filter_map(|(b, v)| v.map(|v| (map.block_centres[b], v)))
-            .collect();
-        let drift_per_line = map.drift_px_per_block / map.block_lines.max(1) as f64;
-        let beyond = match (found.first(), found.last()) {
+        self.path(map).at(line)
+    }
+}
+
+/// A groove's borders in the blocks it was found in, and the image's drift per line.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GroovePath {
+    /// (block centre line, borders) of the blocks the groove was found in, in line order.
+    found: Vec<(f64, [f64; 4])>,
+    /// The image's common drift, cross px a line.
+    drift_per_line: f64,
+}
+
+impl GroovePath {
+    /// The four borders at `line`, interpolated linearly between the centres of the blocks
+    /// the groove was found in, and carried on along the image's common drift before the first
+    /// and after the last (a groove that drifts off the image is followed off it, not held at
+    /// its last place, where the next turn drifts in); NaN when it was never found.
+    #[must_use]
+    pub fn at(&self, line: f64) -> [f64; 4] {
+        let beyond = match (self.found.first(), self.found.last()) {
             (Some(&(first, _)), _) if line < first => line - first,
             (_, Some(&(last, _))) if line > last => line - last,
             _ => 0.0,
         };
-        interpolate(&found, line).map(|v| v + drift_per_line * beyond)
+        interpolate(&self.found, line).map(|v| v + self.drift_per_line * beyond)
     }
+}
 
-    /// The runs of lines on which this groove, as [`Self::predict`] follows it, lies wholly
-    /// outside the image (both land borders past the same edge): lines with no sound in this
-    /// still.
-    #[must_use]
-    pub fn outside_image(&self, map: &GrooveMap) -> Vec<Range<usize>> {
-        let last = map.cross as f64 - 1.0;
-        let mut runs: Vec<Range<usize>> = Vec::new();
-        for n in 0..map.lines {
-            let g = self.predict(map, n as f64);
-            if !(g[3] < 0.0 || g[0] > last) {
-                continue;
-            }
-            match runs.last_mut() {
-                Some(r) if r.end == n => r.end = n + 1,
-                _ => runs.push(n..n + 1),
-            }
+/// The runs of lines on which a groove's `predicted` borders (one per line) lie wholly outside
+/// an image `cross` samples across (both land borders past the same edge): lines with no
+/// sound in this still.
+#[must_use]
+pub fn outside_image(predicted: &[[f64; 4]], cross: usize) -> Vec<Range<usize>> {
+    let last = cross as f64 - 1.0;
+    let mut runs: Vec<Range<usize>> = Vec::new();
+    for (n, g) in predicted.iter().enumerate() {
+        if !(g[3] < 0.0 || g[0] > last) {
+            continue;
         }
-        runs
+        match runs.last_mut() {
+            Some(r) if r.end == n => r.end = n + 1,
+            _ => runs.push(n..n + 1),
+        }
     }
+    runs
 }
 
 /// Every groove found in a still.
@@ -358,18 +382,17 @@ pub fn detect_grooves(
         }
         both as f64 <= PAIRED_BOTTOMS_SHARE * pairs as f64
     };
-    let bottom_limit = match two_means(&gaps) {
-        Some((small, large, share))
-            if large >= GAP_CLUSTER_RATIO * small
-                && share >= GAP_CLUSTER_SHARE
-                && alternate((small * large).sqrt()) =>
-        {
-            Some((small * large).sqrt())
-        }
-        _ => median(gaps.clone())
-            .filter(|g| *g < LONE_BOTTOM_SHARE * wall_median)
-            .map(|_| LONE_BOTTOM_SHARE * wall_median),
-    };
+    let bottom_limit = two_means(&gaps)
+        .filter(|&(small, large, share)| {
+            large >= GAP_CLUSTER_RATIO * small && share >= GAP_CLUSTER_SHARE
+        })
+        .map(|(small, large, _)| (small * large).sqrt())
+        .filter(|&limit| alternate(limit))
+        .or_else(|| {
+            median(gaps.clone())
+                .filter(|g| *g < LONE_BOTTOM_SHARE * wall_median)
+                .map(|_| LONE_BOTTOM_SHARE * wall_median)
+        });
     let per_block: Vec<Vec<[f64; 4]>> = runs
         .iter()
         .map(|r| {
@@ -437,10 +460,7 @@ pub fn detect_grooves(
             && track_width.is_some_and(|w| off_width(w) <= TRACK_WIDTH_TOLERANCE)
     });
     if tracks.is_empty() {
-        let (lines_name, cross_name) = match profiles.axis {
-            Axis::Vertical => ("rows", "columns"),
-            Axis::Horizontal => ("columns", "rows"),
-        };
+        let (lines_name, cross_name) = profiles.axis.names();
         return Err(StillError::NoGroove {
             looked: format!(
                 "looked for {} walls {min_wall_px:.1}–{max_width_px:.0} px wide with at least {:.0} % contrast \
@@ -505,16 +525,10 @@ pub fn detect_grooves(
 
 /// [`GrooveMap::brightness_gain`] of a still whose block profiles are `profiles`.
 fn brightness_gain(profiles: &[f32]) -> f64 {
-    let step = profiles.len().div_ceil(BRIGHT_SAMPLES).max(1);
-    let mut sample: Vec<f32> = profiles
-        .iter()
-        .step_by(step)
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect();
-    match quantile(&mut sample, LEVEL_QUANTILES.1) {
-        Some(bright) if bright > 0.0 && f64::from(bright) < BRIGHT_LEVEL => {
-            BRIGHT_LEVEL / f64::from(bright)
+    let bright = LEVEL_QUANTILES.1;
+    match sampled_quantiles(profiles, bright, bright, BRIGHT_SAMPLES) {
+        Some((_, level)) if level > 0.0 && f64::from(level) < BRIGHT_LEVEL => {
+            BRIGHT_LEVEL / f64::from(level)
         }
         _ => 1.0,
     }

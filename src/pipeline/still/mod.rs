@@ -36,7 +36,9 @@ mod tests;
 use serde::{Deserialize, Serialize};
 
 pub use decode::{StillSignal, decode_borders};
-pub use detect::{GrooveMap, GrooveTrack, choose_groove, detect_grooves};
+pub use detect::{
+    GrooveMap, GroovePath, GrooveTrack, choose_groove, detect_grooves, outside_image,
+};
 pub use profile::{ProfileBuilder, Profiles};
 pub use ribbon::{Ribbon, RibbonBuilder};
 pub use track::{BorderTracks, track_borders};
@@ -55,6 +57,17 @@ pub enum Axis {
     Vertical,
     /// Grooves run across the image; time runs rightward.
     Horizontal,
+}
+
+impl Axis {
+    /// What the image's rows and columns are to a still of this axis: (lines, cross samples).
+    #[must_use]
+    pub fn names(self) -> (&'static str, &'static str) {
+        match self {
+            Axis::Vertical => ("rows", "columns"),
+            Axis::Horizontal => ("columns", "rows"),
+        }
+    }
 }
 
 /// Whether the walls look darker or brighter than the land.

@@ -67,9 +67,8 @@ impl RibbonBuilder {
         let Some(track) = map.grooves.get(chosen) else {
             return Err(bad_input(format!("no groove index {chosen}")));
         };
-        let predicted: Vec<[f64; 4]> = (0..map.lines)
-            .map(|n| track.predict(map, n as f64))
-            .collect();
+        let path = track.path(map);
+        let predicted: Vec<[f64; 4]> = (0..map.lines).map(|n| path.at(n as f64)).collect();
         if predicted
             .iter()
             .any(|p| !(p[0].is_finite() && p[3].is_finite()))

@@ -117,7 +117,7 @@ fn a_groove_that_drifts_off_the_image_is_silent_there_not_its_neighbour() {
     for k in [0, 2] {
         let setup = scene.setup(k).unwrap();
         let a = analyse_still(&img, &setup, Some(k + 1), &StillParams::default()).unwrap();
-        let outside = a.grooves.grooves[a.chosen].outside_image(&a.grooves);
+        let outside = detect::outside_image(&a.borders.predicted, a.grooves.cross);
         let lines: usize = outside.iter().map(ExactSizeIterator::len).sum();
         // Wholly outside once its centre is 28 µm past the edge: it starts 100 µm in and
         // drifts ±250 µm, so on (250 − 128)/500 = 24 % of the lines.
