@@ -663,7 +663,7 @@ fn the_previous_clip_stays_for_ab_and_a_range_around_the_group_reconstructs() {
     let (tmp, mut h) = settled_on(&demo_scan());
     wb_mut(&mut h).reconstruct(None);
     settle(&mut h);
-    let first = wb(&h).clip().unwrap().recovered.clone();
+    let first = wb(&h).clip().unwrap().recovered.samples.clone();
     wb_mut(&mut h).set_group(4);
     settle(&mut h);
     let mut p = wb(&h).params().clone();
@@ -677,7 +677,7 @@ fn the_previous_clip_stays_for_ab_and_a_range_around_the_group_reconstructs() {
     let buffers = wb(&h).player().buffers().unwrap();
     assert_eq!(buffers.sources.len(), 3, "clip, previous clip, reference");
     let laid = &buffers.sources[1][0];
-    assert_eq!(laid.len(), clip.recovered.len());
+    assert_eq!(laid.len(), clip.recovered.samples.len());
     // The previous clip is the first one, laid on the new clip's time axis.
     assert!(laid.iter().any(|v| *v != 0.0));
     assert!(laid.iter().all(|v| first.contains(v) || *v == 0.0));

@@ -131,7 +131,7 @@ impl ClipState {
         let reference = clip
             .reference
             .as_ref()
-            .map_or_else(Vec::new, |r| vec![r.to_vec()]);
+            .map_or_else(Vec::new, |r| vec![r.samples.to_vec()]);
         PlayBuffers {
             rate_hz: clip.rate_hz(),
             sources: vec![clip.recon.audio.channels.clone(), previous, reference],

@@ -157,15 +157,16 @@ impl MethodComparison {
                 b.rate_hz()
             )
         })?;
-        let (b_on_a, b_delay_samples) = align(&a.recovered, &by_position, a.rate_hz());
+        let (b_on_a, b_delay_samples) = align(&a.recovered.samples, &by_position, a.rate_hz());
         let difference = a
             .recovered
+            .samples
             .iter()
             .zip(&b_on_a)
             .map(|(x, y)| x - y)
             .collect();
         let rate = f64::from(a.rate_hz());
-        let n = a.recovered.len();
+        let n = a.recovered.samples.len();
         let groups = a
             .tracks
             .iter()
@@ -173,11 +174,11 @@ impl MethodComparison {
                 let (s, e) = a.group_span_secs(t.group)?;
                 let i0 = ((s * rate).round().max(0.0) as usize).min(n);
                 let i1 = ((e * rate).round().max(0.0) as usize).clamp(i0, n);
-                let (x, y) = (a.recovered.get(i0..i1)?, b_on_a.get(i0..i1)?);
+                let (x, y) = (a.recovered.samples.get(i0..i1)?, b_on_a.get(i0..i1)?);
                 (i1 > i0).then(|| agreement(t.group, x, y))
             })
             .collect();
-        let overall = agreement(a.groups.start, &a.recovered, &b_on_a);
+        let overall = agreement(a.groups.start, &a.recovered.samples, &b_on_a);
         Ok(Self {
             methods,
             a: Arc::new(a),
@@ -195,7 +196,10 @@ impl MethodComparison {
     pub fn play_buffers(&self) -> PlayBuffers {
         PlayBuffers {
             rate_hz: self.a.rate_hz(),
-            sources: vec![vec![self.a.recovered.to_vec()], vec![self.b_on_a.to_vec()]],
+            sources: vec![
+                vec![self.a.recovered.samples.to_vec()],
+                vec![self.b_on_a.to_vec()],
+            ],
         }
     }
 

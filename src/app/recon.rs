@@ -43,25 +43,41 @@ pub struct Spectrum {
     pub db: Vec<f64>,
 }
 
+/// One sound the waveform view draws: its samples, their block peaks and their spectrum.
+#[derive(Clone, Debug)]
+pub struct Trace {
+    /// Mono samples at the clip's rate.
+    pub samples: Arc<Vec<f32>>,
+    /// Peak |x| per block of [`Clip::envelope_block`] samples.
+    pub envelope: Vec<f32>,
+    /// Its spectrum.
+    pub spectrum: Spectrum,
+}
+
+impl Trace {
+    /// The trace of `samples` at `rate_hz`, with peaks per `block` samples.
+    #[must_use]
+    pub fn new(samples: Vec<f32>, block: usize, rate_hz: u32) -> Self {
+        Self {
+            envelope: block_peaks(&samples, block),
+            spectrum: clip_spectrum(&samples, rate_hz),
+            samples: Arc::new(samples),
+        }
+    }
+}
+
 /// A finished reconstruction with everything the waveform view draws.
 #[derive(Clone, Debug)]
 pub struct Clip {
     /// The engine's result.
     pub recon: Reconstruction,
-    /// Mono mix of the recovered audio.
-    pub recovered: Arc<Vec<f32>>,
-    /// The reference aligned to the recovered audio (same rate), when the scan has one.
-    pub reference: Option<Arc<Vec<f32>>>,
-    /// Samples per envelope block.
+    /// The recovered audio's mono mix.
+    pub recovered: Trace,
+    /// The reference aligned to the recovered audio (same rate and length at most), when the
+    /// scan has one.
+    pub reference: Option<Trace>,
+    /// Samples per envelope block of both traces.
     pub envelope_block: usize,
-    /// Peak |x| per block of the recovered audio.
-    pub recovered_envelope: Vec<f32>,
-    /// Peak |x| per block of the reference.
-    pub reference_envelope: Option<Vec<f32>>,
-    /// Spectrum of the recovered audio.
-    pub recovered_spectrum: Spectrum,
-    /// Spectrum of the reference.
-    pub reference_spectrum: Option<Spectrum>,
     /// Params the clip was made with (recorded in exports).
     pub params: PipelineParams,
     /// Where those params came from when the reconstruction started (recorded in exports).
@@ -160,11 +176,11 @@ impl Clip {
         }
         let offset = (offset_secs * f64::from(self.rate_hz())).round() as i64;
         Some(
-            (0..self.recovered.len())
+            (0..self.recovered.samples.len())
                 .map(|i| {
                     usize::try_from(i as i64 - offset)
                         .ok()
-                        .and_then(|k| other.recovered.get(k))
+                        .and_then(|k| other.recovered.samples.get(k))
                         .copied()
                         .unwrap_or(0.0)
                 })
@@ -218,12 +234,8 @@ pub fn make_clip(
         None => (None, None),
     };
     Clip {
-        recovered_envelope: block_peaks(&recovered, block),
-        reference_envelope: reference.as_ref().map(|r| block_peaks(r, block)),
-        recovered_spectrum: clip_spectrum(&recovered, rate),
-        reference_spectrum: reference.as_ref().map(|r| clip_spectrum(r, rate)),
-        recovered: Arc::new(recovered),
-        reference: reference.map(Arc::new),
+        recovered: Trace::new(recovered, block, rate),
+        reference: reference.map(|r| Trace::new(r, block, rate)),
         envelope_block: block,
         recon,
         params,

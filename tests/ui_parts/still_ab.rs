@@ -29,8 +29,8 @@ fn a_method_compared_with_itself_agrees_perfectly() {
     let cmp = wb(&h).comparison().expect("a comparison");
     assert_eq!(cmp.methods, [Method::Flow, Method::Flow]);
     assert_eq!(cmp.groups.len(), 3, "one agreement per group");
-    assert!(!cmp.a.recovered.is_empty());
-    assert_eq!(cmp.b_on_a.len(), cmp.a.recovered.len());
+    assert!(!cmp.a.recovered.samples.is_empty());
+    assert_eq!(cmp.b_on_a.len(), cmp.a.recovered.samples.len());
     for g in cmp.groups.iter().chain([&cmp.overall]) {
         assert!((g.r - 1.0).abs() < 1e-9, "group {}: r {}", g.group, g.r);
         assert_eq!(g.snr_db, MAX_AGREEMENT_DB, "group {}", g.group);

@@ -179,7 +179,7 @@ fn body(
         plot_ui.line(
             Line::new(
                 format!("A: {ma}"),
-                PlotPoints::from(decimate(&cmp.a.recovered, rate, t0, t1, cols)),
+                PlotPoints::from(decimate(&cmp.a.recovered.samples, rate, t0, t1, cols)),
             )
             .color(RECOVERED_COLOUR),
         );

@@ -214,7 +214,7 @@ pub fn overview_ui(
                                     Line::new(
                                         "reference",
                                         PlotPoints::from(decimate(
-                                            r,
+                                            &r.samples,
                                             rate,
                                             0.0,
                                             dur,
@@ -228,7 +228,7 @@ pub fn overview_ui(
                                 Line::new(
                                     "recovered",
                                     PlotPoints::from(decimate(
-                                        &c.recovered,
+                                        &c.recovered.samples,
                                         rate,
                                         0.0,
                                         dur,

@@ -234,7 +234,7 @@ pub fn waveform_ui(
                     plot_ui.line(
                         Line::new(
                             "reference",
-                            PlotPoints::from(decimate(r, rate, t0, t1, cols)),
+                            PlotPoints::from(decimate(&r.samples, rate, t0, t1, cols)),
                         )
                         .color(REFERENCE_COLOUR.gamma_multiply(0.7)),
                     );
@@ -251,15 +251,15 @@ pub fn waveform_ui(
                 plot_ui.line(
                     Line::new(
                         "recovered",
-                        PlotPoints::from(decimate(&c.recovered, rate, t0, t1, cols)),
+                        PlotPoints::from(decimate(&c.recovered.samples, rate, t0, t1, cols)),
                     )
                     .color(RECOVERED_COLOUR),
                 );
                 if state.show_envelopes {
                     let (up, down) = envelope_lines(
-                        &c.recovered_envelope,
+                        &c.recovered.envelope,
                         c.envelope_block,
-                        c.recovered.len(),
+                        c.recovered.samples.len(),
                         rate,
                     );
                     for (k, l) in [up, down].into_iter().enumerate() {
@@ -270,9 +270,13 @@ pub fn waveform_ui(
                                 .width(1.0),
                         );
                     }
-                    if let (true, Some(e)) = (state.show_reference, &c.reference_envelope) {
-                        let (up, down) =
-                            envelope_lines(e, c.envelope_block, c.recovered.len(), rate);
+                    if let (true, Some(e)) = (state.show_reference, &c.reference) {
+                        let (up, down) = envelope_lines(
+                            &e.envelope,
+                            c.envelope_block,
+                            c.recovered.samples.len(),
+                            rate,
+                        );
                         for (k, l) in [up, down].into_iter().enumerate() {
                             plot_ui.line(
                                 Line::new("reference envelope", PlotPoints::from(l))
@@ -342,16 +346,16 @@ pub fn waveform_ui(
                         .map(|(f, d)| [*f, *d])
                         .collect()
                 };
-                if let (true, Some(r)) = (state.show_reference, &c.reference_spectrum) {
+                if let (true, Some(r)) = (state.show_reference, &c.reference) {
                     plot_ui.line(
-                        Line::new("reference spectrum", PlotPoints::from(pts(r)))
+                        Line::new("reference spectrum", PlotPoints::from(pts(&r.spectrum)))
                             .color(REFERENCE_COLOUR),
                     );
                 }
                 plot_ui.line(
                     Line::new(
                         "recovered spectrum",
-                        PlotPoints::from(pts(&c.recovered_spectrum)),
+                        PlotPoints::from(pts(&c.recovered.spectrum)),
                     )
                     .color(RECOVERED_COLOUR),
                 );
