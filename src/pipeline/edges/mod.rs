@@ -316,8 +316,8 @@ pub struct WallEdges {
     pub velocity_mm_s: Vec<f64>,
 }
 
-/// The coarse pass of one group: the frame it read, how noisy that frame is, and the border
-/// rows it found there, which the fine fit starts from.
+/// The coarse pass of one group: the frame it read and how noisy that frame is (its border
+/// rows, which the fine fit starts from, stay inside the stage).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CoarseRead {
     /// Index in the group of the frame the coarse borders were read on.
@@ -327,8 +327,6 @@ pub struct CoarseRead {
     /// The most rows a blurred border's band read on each side (px): the noisy cap on a noisy
     /// frame (`edges::noise`).
     pub band_cap_px: f64,
-    /// Coarse border rows on the reference frame per sample (NaN = not found).
-    pub rows: Vec<StripBorders>,
 }
 
 /// The edge stage's output for one group.
@@ -664,7 +662,6 @@ pub fn detect_edges(
             frame: reference,
             pixel_noise_grey_levels,
             band_cap_px: params.max_band_half_height_px,
-            rows: coarse_rows.into_iter().map(|(_, r)| r).collect(),
         },
         borders,
         constants_um: combined.constants_um,
