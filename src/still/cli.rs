@@ -61,10 +61,8 @@ pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
         }
         None => base,
     };
-    match args.axis.as_deref() {
-        Some("vertical") => cfg.axis = Axis::Vertical,
-        Some("horizontal") => cfg.axis = Axis::Horizontal,
-        _ => {}
+    if let Some(axis) = args.axis.as_deref().and_then(Axis::from_name) {
+        cfg.axis = axis;
     }
     match args.cut.as_deref() {
         Some("lateral") => cfg.cut = Cut::Lateral,
@@ -105,10 +103,7 @@ pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
             crate::stdout::shell_quoted(&summary.image),
             t.um_per_px,
             t.rpm,
-            match t.axis {
-                Axis::Vertical => "vertical",
-                Axis::Horizontal => "horizontal",
-            }
+            t.axis.name()
         )?;
     }
     Ok(())
@@ -267,11 +262,8 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
         .as_deref()
         .map(|r| crate::io::wav::read_reference_wav(r).map(|a| (a, r)))
         .transpose()?;
-    let axis = if args.axis == "horizontal" {
-        Axis::Horizontal
-    } else {
-        Axis::Vertical
-    };
+    // clap allows only the axes' names.
+    let axis = Axis::from_name(&args.axis).unwrap_or_default();
     let cut = if args.cut == "stereo" {
         Cut::Stereo
     } else {
@@ -456,10 +448,7 @@ pub fn write_still_report(
         filters: crate::pipeline::finish::describe_still_filters(&params.dsp),
         image_width_px: run.image_px.0,
         image_height_px: run.image_px.1,
-        axis: match setup.axis {
-            Axis::Vertical => "vertical",
-            Axis::Horizontal => "horizontal",
-        },
+        axis: setup.axis.name(),
         cut: setup.cut.name(),
         reverse: setup.reverse,
         um_per_px: setup.um_per_px,

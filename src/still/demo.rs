@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Result, anyhow};
 
 use crate::io::wav::WavBits;
-use crate::pipeline::still::{Axis, StillSetup};
+use crate::pipeline::still::StillSetup;
 use crate::synth::still::StillSidecar;
 
 use super::cli::StillArgs;
@@ -85,11 +85,7 @@ impl DemoStill {
             um_per_px: s.um_per_px,
             rpm: s.rpm,
             radius_mm: s.radius_mm,
-            axis: match s.axis {
-                Axis::Vertical => "vertical",
-                Axis::Horizontal => "horizontal",
-            }
-            .into(),
+            axis: s.axis.name().into(),
             cut: s.cut.name().into(),
             groove: Some(self.groove),
             reverse: s.reverse,

@@ -308,13 +308,6 @@ fn two_means(gaps: &[f64]) -> Option<(f64, f64, f64)> {
     Some((lo.exp(), hi.exp(), share))
 }
 
-fn axis_name(axis: Axis) -> &'static str {
-    match axis {
-        Axis::Vertical => "vertical",
-        Axis::Horizontal => "horizontal",
-    }
-}
-
 /// Finds, links and numbers the grooves of a still.
 ///
 /// # Errors
@@ -334,8 +327,8 @@ pub fn detect_grooves(
             Axis::Horizontal => Axis::Vertical,
         };
         return Err(StillError::AxisContradicts {
-            given: axis_name(profiles.axis),
-            found: axis_name(other),
+            given: profiles.axis.name(),
+            found: other.name(),
             ratio: energy_ratio,
         });
     }

@@ -60,6 +60,24 @@ pub enum Axis {
 }
 
 impl Axis {
+    /// Both axes.
+    pub const ALL: [Axis; 2] = [Axis::Vertical, Axis::Horizontal];
+
+    /// The axis of `name` ([`Axis::name`]).
+    #[must_use]
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|a| a.name() == name)
+    }
+
+    /// Its name as the command line and the reports spell it.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Axis::Vertical => "vertical",
+            Axis::Horizontal => "horizontal",
+        }
+    }
+
     /// What the image's rows and columns are to a still of this axis: (lines, cross samples).
     #[must_use]
     pub fn names(self) -> (&'static str, &'static str) {
