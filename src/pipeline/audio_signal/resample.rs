@@ -3,7 +3,7 @@
 use std::f64::consts::PI;
 
 use super::*;
-use crate::pipeline::dsp::odd_extension;
+use crate::pipeline::dsp::{end_level, odd_extension, odd_extension_about};
 
 /// Sinc length of the resampler (input samples) when upsampling; scaled by the ratio when
 /// downsampling so the filter spans as many output samples.
@@ -129,8 +129,20 @@ pub fn resample(samples: &[f32], from_hz: f64, to_hz: u32) -> Result<Vec<f32>, S
     let tail_len = reach + 2;
     let cleaned = |part: &[f32]| part.iter().map(clean).collect::<Vec<f32>>();
     let n = samples.len();
-    let (lead, _) = odd_extension(&cleaned(&samples[..(pad + 1).min(n)]), pad);
-    let (_, tail) = odd_extension(&cleaned(&samples[n - (tail_len + 1).min(n)..]), tail_len);
+    // Downsampling, the reflections pivot on each end's level over about one output sample's
+    // span of input samples (`dsp::end_level`), not on the end sample: a noisy end sample
+    // (a still's border fit at 8 lines an output sample) was otherwise the first and last
+    // output samples' value, unfiltered.
+    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)] // a few samples
+    let span = ((1.0 / ratio).round() as usize).clamp(1, n);
+    let head = cleaned(&samples[..(pad + 1).max(span).min(n)]);
+    let end = cleaned(&samples[n - (tail_len + 1).max(span).min(n)..]);
+    let pivots = [
+        end_level(head.iter().take(span).copied()),
+        end_level(end.iter().rev().take(span).copied()),
+    ];
+    let (lead, _) = odd_extension_about(&head, pad, pivots);
+    let (_, tail) = odd_extension_about(&end, tail_len, pivots);
     let mut input: Vec<f64> = Vec::with_capacity(pad + n + tail_len);
     input.extend(lead.iter().map(|&v| f64::from(v)));
     input.extend(samples.iter().map(|v| f64::from(clean(v))));

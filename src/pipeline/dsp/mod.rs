@@ -404,10 +404,25 @@ fn run_forward_backward(section: &Biquad, samples: &mut [f32], pad: usize) {
 /// the extended signal meets no step there. Where `len` reaches further than the signal
 /// (`k > n − 1`), the farthest reflected value is held. Empty for an empty signal.
 pub(crate) fn odd_extension(samples: &[f32], len: usize) -> (Vec<f32>, Vec<f32>) {
-    let n = samples.len();
     let (Some(&first), Some(&last)) = (samples.first(), samples.last()) else {
         return (Vec::new(), Vec::new());
     };
+    odd_extension_about(samples, len, [first, last])
+}
+
+/// [`odd_extension`] about the levels `pivots` (start, end) instead of the end samples
+/// themselves: before the start `2·pivots[0] − x[k]`, after the end `2·pivots[1] − x[n−1−k]`.
+/// Where the end samples are noisy, a pivot read over several samples ([`end_level`]) keeps
+/// one sample's noise from becoming the level of the whole reflection.
+pub(crate) fn odd_extension_about(
+    samples: &[f32],
+    len: usize,
+    [first, last]: [f32; 2],
+) -> (Vec<f32>, Vec<f32>) {
+    let n = samples.len();
+    if n == 0 {
+        return (Vec::new(), Vec::new());
+    }
     let far = n - 1;
     let lead = (1..=len)
         .rev()
@@ -417,6 +432,30 @@ pub(crate) fn odd_extension(samples: &[f32], len: usize) -> (Vec<f32>, Vec<f32>)
         .map(|k| 2.0 * last - samples[far - k.min(far)])
         .collect();
     (lead, tail)
+}
+
+/// The level of a signal at its first sample, read from `head`, its first samples in the order
+/// the reading meets them: the least-squares line through them, at the first. One sample is
+/// its own level, and a line through two passes through both; over more, the line averages
+/// their noise away and still follows a slope.
+pub(crate) fn end_level(head: impl ExactSizeIterator<Item = f32>) -> f32 {
+    let n = head.len() as f64;
+    if n == 0.0 {
+        return 0.0;
+    }
+    let (mut sx, mut skx) = (0.0, 0.0);
+    for (k, v) in head.enumerate() {
+        sx += f64::from(v);
+        skx += k as f64 * f64::from(v);
+    }
+    // Σk = n(n−1)/2, Σk² = n(n−1)(2n−1)/6; with one sample the line is its value.
+    let (sk, skk) = (n * (n - 1.0) / 2.0, n * (n - 1.0) * (2.0 * n - 1.0) / 6.0);
+    let det = n * skk - sk * sk;
+    if det <= 0.0 {
+        return (sx / n) as f32;
+    }
+    let intercept = (skk * sx - sk * skx) / det;
+    intercept as f32
 }
 
 /// Time constants of the DC block over which [`settle_level`] reads a clip's first samples.
