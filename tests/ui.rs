@@ -115,11 +115,33 @@ fn bad_input_gives_a_message_and_keeps_the_scan() {
         assert_eq!(wb(&h).group(), 1);
         let msg = last_message(&h);
         assert!(msg.contains(says) && msg.contains("group_001"), "{msg}");
+        // Every stage says it failed and why: none waits as stale for a run that cannot come.
+        for s in Stage::ALL {
+            let status = wb(&h).stage_status(s);
+            assert_eq!(status.word(), "failed", "{name}: {s:?}");
+            assert!(format!("{status:?}").contains(says), "{name}: {status:?}");
+        }
         h.get_by_label("next >").click();
         settle(&mut h);
         assert_eq!(wb(&h).group(), 2);
         assert!(wb(&h).frames().is_some(), "frames of group 2 are loaded");
     }
+    // An unreadable frame in group 1, mended on disk: any stage's rerun reads the frames again.
+    let scan = tmp.path().join("mended");
+    write_scan(&scan, 3);
+    let frame = scan.join("group_001/f03.png");
+    let good_frame = std::fs::read(&frame).unwrap();
+    std::fs::write(&frame, b"not a png").unwrap();
+    wb_mut(&mut h).open_scan(&scan).unwrap();
+    settle(&mut h);
+    h.get_by_label("next >").click();
+    settle(&mut h);
+    assert_eq!(wb(&h).stage_status(Stage::Orientation).word(), "failed");
+    std::fs::write(&frame, good_frame).unwrap();
+    wb_mut(&mut h).rerun(Stage::Orientation);
+    settle(&mut h);
+    assert!(wb(&h).frames().is_some(), "group 1's frames are read again");
+    assert_eq!(wb(&h).stage_status(Stage::Derivatives).word(), "fresh");
     // An invalid preset.
     let preset = tmp.path().join("bad.toml");
     std::fs::write(&preset, "[flow]\nlambda = \"soft\"\n").unwrap();

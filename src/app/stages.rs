@@ -138,6 +138,14 @@ impl StageState {
         self.failed_with[stage.index()] = Some((params.clone(), group));
     }
 
+    /// The group's frames cannot be read (`msg` says why): every stage, each of which reads
+    /// them, has failed, instead of waiting as stale for a run that cannot come.
+    pub fn frames_unreadable(&mut self, msg: &str) {
+        for e in &mut self.errors {
+            *e = Some(format!("the group's frames cannot be read: {msg}"));
+        }
+    }
+
     /// Marks `stage` failed when its job ended in failure without saying why.
     pub fn fail_unexplained(&mut self, stage: Stage) {
         if let Some(e) = self.errors.get_mut(stage.index())

@@ -492,10 +492,11 @@ impl Workbench {
         self.tuning.can_undo_redo()
     }
 
-    /// Reruns `stage` and every later stage of the current group.
+    /// Reruns `stage` and every later stage of the current group (frames that could not be
+    /// read are read again by any stage's rerun).
     pub fn rerun(&mut self, stage: Stage) {
         self.stages.invalidate_from(stage);
-        if stage == Stage::Derivatives {
+        if stage == Stage::Derivatives || self.nav.load_error.is_some() {
             self.nav.forget_frames();
         }
         self.schedule();
@@ -689,6 +690,7 @@ impl Workbench {
             }
             Err(e) if current => {
                 self.error(format!("group {group}: {e}"));
+                self.stages.frames_unreadable(&e);
                 self.nav.load_error = Some(e);
                 self.nav.frames = None;
             }
