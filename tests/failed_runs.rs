@@ -382,15 +382,53 @@ fn nothing_is_written_among_a_scans_frames_or_over_a_part() {
         let args = ["--plan", s(&plan), "--shard", shard.as_str()];
         assert!(reconstruct(&demo, part, &args).status.success());
     }
-    let inside = demo.join("g00001/part");
+    // A shard's --out is the part folder it makes and fills: in a group's folder, as a group's
+    // folder (an old one altered, a new one read as a group), or as the scan itself, it would
+    // write part.gsp and report.json among the frames, --force or not.
     let args = ["--plan", s(&plan), "--shard", "0"];
-    refused(
-        &demo,
-        &inside,
-        &args,
-        &["inside a folder of the scan it reads"],
-    );
-    assert!(!inside.exists());
+    let before = names(&demo);
+    let group_before = names(&demo.join("g00005"));
+    for out in [
+        demo.join("g00001/part"),
+        demo.join("g00005"),
+        demo.join("g00020"),
+        demo.clone(),
+    ] {
+        for extra in [&[][..], &["--force"][..]] {
+            refused(
+                &demo,
+                &out,
+                &[&args[..], extra].concat(),
+                &["output folder lies inside the scan it reads", s(&out)],
+            );
+        }
+    }
+    assert_eq!(names(&demo), before);
+    assert_eq!(names(&demo.join("g00005")), group_before);
+    assert!(!demo.join("g00001/part").exists());
+    // Nor anywhere in a store.
+    let store_plan = dir.path().join("store-plan.json");
+    let o = groovescope(&[
+        "plan",
+        s(&store),
+        "--shards",
+        "2",
+        "--probe-groups",
+        "0",
+        "--out",
+        s(&store_plan),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let store_before = names(&store);
+    for out in [store.join("part"), store.join("frames"), store.clone()] {
+        refused(
+            &store,
+            &out,
+            &["--plan", s(&store_plan), "--shard", "1"],
+            &["output folder lies inside the scan it reads", s(&out)],
+        );
+    }
+    assert_eq!(names(&store), store_before);
     let part_file = parts[0].join("part.gsp");
     let kept = std::fs::read(&part_file).unwrap();
     for given in [&parts[0], &part_file] {

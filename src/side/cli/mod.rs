@@ -574,7 +574,10 @@ struct ShardReport<'a> {
 }
 
 fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<()> {
-    crate::cli::check_outside_scan(&[args.out.as_path()], &args.scan)?;
+    // --out is the part folder the shard makes and fills: anywhere in the scan (the scan
+    // itself, a group's folder, a new folder beside the groups, which would read as a group,
+    // or in a store) it would alter the scan, --force or not.
+    crate::cli::check_folder_outside_scan(&args.out, &args.scan)?;
     crate::cli::check_parent_exists(&args.out)?;
     let plan = Plan::load(plan_path)?;
     let params = if args.params.is_none() && args.path == "auto" && args.method.is_none() {
