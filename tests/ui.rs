@@ -232,6 +232,9 @@ fn reconstructs_exports_a_wav_and_reads_it_back() {
     let clip_len = clip.recon.audio.len();
     assert!(clip_len > 0);
     assert!(clip.reference.is_some(), "the scan has reference.wav");
+    let (first, _) = clip.group_span_secs(clip.groups.start + 2).unwrap();
+    let (_, last) = clip.group_span_secs(clip.groups.start + 3).unwrap();
+    let clip_groups = [clip.groups.start, clip.groups.end];
     let wav = tmp.path().join("out.wav");
     wb_mut(&mut h).set_export_bits(WavBits::Int16);
     wb_mut(&mut h).request_export_wav(wav.clone(), false);
@@ -251,6 +254,21 @@ fn reconstructs_exports_a_wav_and_reads_it_back() {
         groovescope::io::bwf::read_bext(&std::fs::read(&wav).unwrap()).unwrap();
     assert!(description.contains("lateral-cut disc at"), "{description}");
     assert!(history[1].contains(",W=16,"), "{history:?}");
+    // A selection's sidecar names the groups its stretch covers, not the whole clip's.
+    let part = tmp.path().join("part.wav");
+    wb_mut(&mut h).set_selection(Some((first + 1e-4, last - 1e-4)));
+    wb_mut(&mut h).request_export_wav(part.clone(), true);
+    h.run_ok();
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(part.with_extension("json")).unwrap())
+            .unwrap();
+    let groups: [usize; 2] = serde_json::from_value(sidecar["groups"].clone()).unwrap();
+    assert!(
+        groups[0] >= clip_groups[0] + 1 && groups[1] <= clip_groups[0] + 5,
+        "{groups:?} of {clip_groups:?}"
+    );
+    assert_eq!(sidecar["clip_groups"], serde_json::json!(clip_groups));
+    wb_mut(&mut h).set_selection(None);
     // A second export asks before replacing; "no" leaves the file alone.
     let before = std::fs::read(&wav).unwrap();
     wb_mut(&mut h).set_export_bits(WavBits::Float32);

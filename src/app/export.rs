@@ -58,8 +58,11 @@ pub struct Sidecar {
     pub generator: String,
     /// The scan folder.
     pub scan: PathBuf,
-    /// Groups reconstructed (start, end exclusive).
+    /// Groups the exported stretch covers (start, end exclusive): those whose sound overlaps
+    /// it.
     pub groups: [usize; 2],
+    /// Groups the clip was reconstructed from (start, end exclusive).
+    pub clip_groups: [usize; 2],
     /// Exported stretch (seconds from the clip start).
     pub selection_secs: [f64; 2],
     /// Sample rate written (Hz).
@@ -109,6 +112,26 @@ pub fn selection_samples(clip: &Clip, selection_secs: Option<(f64, f64)>) -> (us
             (s, e)
         }
         _ => (0, n),
+    }
+}
+
+/// The groups (start, end exclusive) whose sound overlaps `[a, b]` seconds of the clip; the
+/// clip's groups when none does (a selection over gaps only).
+fn groups_covering(clip: &Clip, a: f64, b: f64) -> [usize; 2] {
+    let (lo, hi) = clip
+        .tracks
+        .iter()
+        .filter(|t| {
+            clip.group_span_secs(t.group)
+                .is_some_and(|(s, e)| s < b && e > a)
+        })
+        .fold((usize::MAX, 0), |(lo, hi), t| {
+            (lo.min(t.group), hi.max(t.group + 1))
+        });
+    if lo < hi {
+        [lo, hi]
+    } else {
+        [clip.groups.start, clip.groups.end]
     }
 }
 
@@ -169,7 +192,8 @@ pub fn export_wav(
     let sidecar = Sidecar {
         generator: format!("groovescope {} workbench", env!("CARGO_PKG_VERSION")),
         scan: clip.scan_dir.clone(),
-        groups: [clip.groups.start, clip.groups.end],
+        groups: groups_covering(clip, s as f64 / rate, e as f64 / rate),
+        clip_groups: [clip.groups.start, clip.groups.end],
         selection_secs: [s as f64 / rate, e as f64 / rate],
         sample_rate_hz: rate_out,
         resampled_from_hz: (rate_out != clip.rate_hz()).then_some(clip.rate_hz()),
