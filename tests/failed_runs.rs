@@ -195,6 +195,57 @@ fn a_shard_stopped_by_a_damaged_frame_goes_on_past_it_with_keep_going() {
     );
 }
 
+/// A shard stopped by a damaged frame at its first group (no group finished, no journal kept)
+/// still says --keep-going would make it a gap, and leaves no part folder; a --keep-going
+/// shard prints the gap's warning on stderr as a whole run does, --quiet or not, not only in
+/// its part's report.
+#[test]
+fn a_shard_prints_its_gaps_warnings_and_names_keep_going_at_its_first_group() {
+    let (_dir, demo, work) = common::demo_and_out_folder("work");
+    // Shard 1 of 2 runs groups 6..13 of the demo's 13: its first group is damaged.
+    std::fs::write(demo.join("g00006/f002.png"), b"not a png").unwrap();
+    let part = work.join("part-1");
+    let plan = work.join("plan.json");
+    let o = groovescope(&[
+        "plan",
+        s(&demo),
+        "--shards",
+        "2",
+        "--probe-groups",
+        "0",
+        "--out",
+        s(&plan),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let shard = ["--plan", s(&plan), "--shard", "1"];
+    refused(
+        &demo,
+        &part,
+        &shard,
+        &["g00006/f002.png", "run with --keep-going"],
+    );
+    assert!(!part.exists(), "{:?}", names(&work));
+    let whole = reconstruct(&demo, &work.join("whole.wav"), &["--keep-going"]);
+    assert!(whole.status.success(), "{}", stderr(&whole));
+    let gap_lines = |o: &std::process::Output| -> Vec<String> {
+        stderr(o)
+            .lines()
+            .filter(|l| l.starts_with("warning: group "))
+            .map(str::to_owned)
+            .collect()
+    };
+    let want = gap_lines(&whole);
+    assert!(
+        want.iter()
+            .any(|l| l.contains("group 6:") && l.contains("filled with silence")),
+        "{}",
+        stderr(&whole)
+    );
+    let o = reconstruct(&demo, &part, &[&shard[..], &["--keep-going"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(gap_lines(&o), want, "{}", stderr(&o));
+}
+
 #[test]
 fn a_group_of_another_frame_size_is_named_or_with_keep_going_a_gap_that_quiet_still_shows() {
     // Group 3 of another size, then group 0: group 0's size used to be the scan's, and all

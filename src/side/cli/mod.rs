@@ -15,12 +15,11 @@ use crate::io::bwf::{BroadcastInfo, disc_words};
 use crate::io::wav::write_transfer_wav;
 use crate::io::{Scan, ScanMeta, write_json_atomic};
 use crate::pipeline::PipelineParams;
-use crate::side::part::{PART_FILE, read_part, write_part};
-use crate::side::plan::Plan;
+use crate::side::RunIdentity;
 use crate::side::run::{RangeRun, RunEvent, run_range};
-use crate::side::{RunIdentity, params_fingerprint};
 
 mod plan_merge;
+mod shard;
 pub use plan_merge::{MergeArgs, PlanArgs, run_merge, run_plan};
 
 /// `reconstruct`'s options for long runs.
@@ -338,7 +337,7 @@ fn run_with_progress(
 /// Any failure, with the file named.
 pub fn run_reconstruct_command(args: &ReconstructArgs) -> Result<()> {
     match (&args.side.plan, args.side.shard) {
-        (Some(plan), Some(shard)) => run_shard(args, plan, shard),
+        (Some(plan), Some(shard)) => shard::run_shard(args, plan, shard),
         _ => run_reconstruct(args).map(|_| ()),
     }
 }
@@ -470,7 +469,9 @@ pub fn run_reconstruct(args: &ReconstructArgs) -> Result<Reconstruction> {
 /// A failed run's error, and what becomes of its journal: one this run created (`had_journal`
 /// false, or started over by `--force`) is removed when it holds no finished group, or only
 /// groups that made no sound (nothing to go on from); a journal holding finished groups is kept
-/// and the line says how to go on; one the run was given (--resume) is never removed.
+/// and the line says how to go on; one the run was given (--resume) is never removed. A run
+/// stopped by a group whose frames do not load says --keep-going would make it a gap, whether
+/// or not groups finished before it (a shard can stop at its first group).
 fn after_failure(
     e: anyhow::Error,
     journal: &Path,
@@ -479,8 +480,30 @@ fn after_failure(
     finished: usize,
     keep_going: bool,
 ) -> anyhow::Error {
+    // A group whose frames do not load stops the run (the engine's `EngineError::Load`), and
+    // stops it again at the same group unless --keep-going makes it a gap, as it makes any such
+    // group.
+    let unreadable = !keep_going && {
+        use crate::engine::EngineError;
+        use crate::side::SideError;
+        matches!(e.downcast_ref::<EngineError>(), Some(EngineError::Load(_)))
+            || matches!(
+                e.downcast_ref::<SideError>(),
+                Some(SideError::Engine(EngineError::Load(_)))
+            )
+    };
+    let alone = |e: anyhow::Error| {
+        if unreadable {
+            anyhow::anyhow!(
+                "{e:#} (run with --keep-going to make the unreadable group a gap of silence, or \
+                 mend its frames first)"
+            )
+        } else {
+            e
+        }
+    };
     if !journal.exists() {
-        return e;
+        return alone(e);
     }
     // The journal is this run's own when it was not there, or when --force (without
     // --resume) started it over; a refused or failed --resume never loses the one it was given.
@@ -491,24 +514,12 @@ fn after_failure(
     );
     if created && (finished == 0 || no_sound) {
         let _ = std::fs::remove_file(journal);
-        return e;
+        return alone(e);
     }
     if finished == 0 {
-        return e;
+        return alone(e);
     }
-    // A group whose frames do not load stops the run (the engine's `EngineError::Load`), and
-    // stops it again at the same group unless --keep-going makes it a gap, as it makes any such
-    // group.
-    let unreadable = {
-        use crate::engine::EngineError;
-        use crate::side::SideError;
-        matches!(e.downcast_ref::<EngineError>(), Some(EngineError::Load(_)))
-            || matches!(
-                e.downcast_ref::<SideError>(),
-                Some(SideError::Engine(EngineError::Load(_)))
-            )
-    };
-    let how = if unreadable && !keep_going {
+    let how = if unreadable {
         "the same command with --resume goes on from them; add --keep-going to make the \
          unreadable group a gap, or mend its frames first"
     } else {
@@ -555,130 +566,6 @@ fn finish_message(args: &ReconstructArgs, rec: &Reconstruction, p: &RunProgress)
         } else {
             crate::say!("{line}")?;
         }
-    }
-    Ok(())
-}
-
-/// The shard's report beside its part.
-#[derive(Debug, Serialize)]
-struct ShardReport<'a> {
-    version: &'static str,
-    scan: &'a str,
-    plan: String,
-    shard: usize,
-    shards: usize,
-    groups: (usize, usize),
-    progress: RunProgress,
-    load_secs: f64,
-    warnings: Vec<String>,
-}
-
-fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<()> {
-    // --out is the part folder the shard makes and fills: anywhere in the scan (the scan
-    // itself, a group's folder, a new folder beside the groups, which would read as a group,
-    // or in a store) it would alter the scan, --force or not.
-    crate::cli::check_folder_outside_scan(&args.out, &args.scan)?;
-    crate::cli::check_parent_exists(&args.out)?;
-    let plan = Plan::load(plan_path)?;
-    let params = if args.params.is_none() && args.path == "auto" && args.method.is_none() {
-        plan.params.clone()
-    } else {
-        let mut p = load_params(args.params.as_deref())?;
-        p.path = path_choice(&args.path, plan.params.path);
-        p.method = method_choice(args.method.as_deref(), plan.params.method);
-        if params_fingerprint(&p) != plan.params_fingerprint {
-            bail!(
-                "--params/--path/--method give other params than the plan's (leave them out to run the plan's): {}",
-                plan_path.display()
-            );
-        }
-        p
-    };
-    // A shard stopped by an unreadable group goes on past it with --keep-going, as a whole run
-    // does: the merge takes parts with and without it (those without hold no such gap).
-    let keep_going = plan.keep_going || args.keep_going;
-    if args.first_group.is_some() || args.groups.is_some() {
-        bail!("--first-group/--groups do not go with --plan: the plan gives the shard's groups");
-    }
-    if args.report.is_some() || args.bits.is_some() {
-        bail!(
-            "--report/--bits do not go with --plan: a shard writes its part, and merge writes the side's WAV and report (give them to merge)"
-        );
-    }
-    let scan = Scan::open(&args.scan)?;
-    check_params_fit_scan(&params, &scan, Some(plan_path))?;
-    let (shard, id) = plan.shard(index, &scan, plan_path)?;
-    let range = shard.first_group..shard.end_group;
-    check_missing_groups(&scan, range.clone(), keep_going)?;
-    let identity = RunIdentity::new(&scan, &params, keep_going, range.clone(), Some(id));
-    std::fs::create_dir_all(&args.out).map_err(|e| {
-        anyhow::anyhow!("cannot create the part folder: {e}: {}", args.out.display())
-    })?;
-    let part_path = args.out.join(PART_FILE);
-    let _lock = lock_outputs(&[part_path.as_path()])?;
-    if part_path.exists() && !args.force {
-        if args.side.resume
-            && read_part(&args.out).is_ok_and(|p| identity.difference(&p.identity).is_none())
-        {
-            if !args.quiet {
-                crate::tell!("shard {index} is already complete: {}", part_path.display());
-            }
-            return Ok(());
-        }
-        bail!(
-            "refusing to overwrite an existing part (use --force): {}",
-            part_path.display()
-        );
-    }
-    let journal = args.out.join("journal");
-    let run = RangeRun {
-        scan: &scan,
-        params: &params,
-        keep_going,
-        range: range.clone(),
-        shard: true,
-        journal: &journal,
-        identity: identity.clone(),
-        resume: args.side.resume,
-        force: args.force,
-    };
-    let had_journal = journal.exists();
-    let mut groups = Vec::with_capacity(range.len());
-    let (result, mut run_progress) = run_with_progress(&run, args, &mut |g| groups.push(g))
-        .map_err(|e| after_failure(e, &journal, had_journal, args, groups.len(), keep_going))?;
-    run_progress.context_groups = result.context_groups;
-    let written = write_part(&args.out, &identity, &groups, args.force)?;
-    let report = ShardReport {
-        version: env!("CARGO_PKG_VERSION"),
-        scan: &identity.scan,
-        plan: plan_path.display().to_string(),
-        shard: index,
-        shards: plan.shards.len(),
-        groups: identity.groups,
-        progress: run_progress.clone(),
-        load_secs: groups.iter().map(|g| g.load_secs).sum(),
-        warnings: groups
-            .iter()
-            .filter_map(|g| g.report.as_ref().and_then(|r| r.warning.clone()))
-            .collect(),
-    };
-    write_json_atomic(&args.out.join("report.json"), &report, true)?;
-    result.journal.remove()?;
-    let text = format!(
-        "wrote {} (shard {index} of {}: groups {}..{}, {} run before them for the slope history, {:.1} s, {:.1} groups/s)",
-        written.display(),
-        plan.shards.len(),
-        range.start,
-        range.end,
-        run_progress.context_groups,
-        run_progress.elapsed_secs,
-        run_progress.groups_per_sec
-    );
-    if args.side.progress_json {
-        json_line(&serde_json::json!({"event": "done", "output": written.display().to_string()}));
-        crate::tell!("{text}");
-    } else if !args.quiet {
-        crate::say!("{text}")?;
     }
     Ok(())
 }
