@@ -247,6 +247,9 @@ fn run_native(
     native: &NativeDialogs,
 ) -> Option<PathBuf> {
     let mut d = rfd::FileDialog::new().set_title(kind.title());
+    // zenity reads a relative --filename from its own idea of the folder (it opened on Recent
+    // or the home folder for the demo's `assets/demo`): the folder goes absolute.
+    let start = start.map(|dir| std::path::absolute(&dir).unwrap_or(dir));
     let zenity_name = match (&start, &file_name) {
         (Some(dir), Some(name)) => Some(dir.join(name).display().to_string()),
         (Some(dir), None) => Some(format!("{}/", dir.display())),
