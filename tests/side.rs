@@ -245,6 +245,16 @@ fn merge_with_another_dsp_table_is_the_one_process_run_with_it() {
         e.contains("takes only a [dsp] table") && e.contains("`edges`"),
         "{e}"
     );
+    // A top-level key beside a [dsp] table was dropped unread, and the merge succeeded.
+    std::fs::write(&bad, "method = \"edges\"\n[dsp]\neq = \"riaa\"\n").unwrap();
+    let o = merge_dsp(&bad, &out);
+    let e = stderr(&o);
+    assert!(!o.status.success() && !out.exists(), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(
+        e.contains("`method` (line 1) outside it") && e.contains("bad.toml"),
+        "{e}"
+    );
 }
 
 /// The default method is `fused` (both signals per group, fused over the merged clip); `flow`

@@ -88,19 +88,35 @@ pub struct MergeArgs {
 fn finish_dsp(parts: &PipelineParams, file: &Path) -> Result<DspParams> {
     let what = "DSP settings";
     let text = crate::io::limits::read_toml_text(file, what)?;
-    // Another params table ([flow], [edges], …), with or without a [dsp] beside it.
-    if let Ok(table) = toml::from_str::<toml::Table>(&text)
-        && let Some(other) = table
+    // Another params table ([flow], [edges], …), with or without a [dsp] beside it; or, beside
+    // a [dsp] table, a top-level key (`method`, …), which the overlay would otherwise drop
+    // unread (without the table, top-level keys are read as [dsp]'s and an unknown one named).
+    if let Ok(table) = toml::from_str::<toml::Table>(&text) {
+        let has_dsp = table.get("dsp").is_some_and(toml::Value::is_table);
+        let other = table
             .iter()
-            .find(|(k, v)| *k != "dsp" && v.is_table())
-            .map(|(k, _)| k)
-    {
-        anyhow::bail!(
-            "invalid {what}: merge --dsp takes only a [dsp] table (the finish's filters), not \
-             `{other}`, which sets how the groups were made (run the plan again to change it): \
-             {}",
-            file.display()
-        );
+            .find(|(k, v)| *k != "dsp" && (v.is_table() || has_dsp))
+            .map(|(k, v)| (k, v.is_table()));
+        if let Some((other, is_table)) = other {
+            let what_it_is = if is_table {
+                format!(
+                    "`{other}`, which sets how the groups were made (run the plan again to change it)"
+                )
+            } else {
+                // `key_at` gives `KEY (line N)`: the key quoted, its line after.
+                let at = crate::toml_error::key_at(&text, None, other);
+                let line = at.strip_prefix(other.as_str()).unwrap_or("");
+                format!(
+                    "`{other}`{line} outside it, which merge cannot use (the finish takes only \
+                     the [dsp] table's keys; the others set how the groups were made)"
+                )
+            };
+            anyhow::bail!(
+                "invalid {what}: merge --dsp takes only a [dsp] table (the finish's filters), \
+                 not {what_it_is}: {}",
+                file.display()
+            );
+        }
     }
     let dsp = crate::cli::overlay_toml(&parts.dsp, file, "dsp", what, |d| d.validate())?;
     crate::pipeline::dsp::check_chain(f64::from(parts.sound.output_rate_hz), &dsp)
