@@ -21,7 +21,8 @@ use super::views::{StageStatus, View, empty_note};
 use super::workbench::Workbench;
 
 /// Colour of error lines.
-const ERROR_COLOUR: Color32 = Color32::from_rgb(235, 90, 80);
+/// Colour of error text (the status bar, the still window).
+pub(super) const ERROR_COLOUR: Color32 = Color32::from_rgb(235, 90, 80);
 /// Colour of warnings.
 const WARN_COLOUR: Color32 = Color32::from_rgb(220, 170, 60);
 /// What the health strip's colours mean.
@@ -226,14 +227,8 @@ impl Workbench {
 
     pub(super) fn status_bar(&mut self, ui: &mut Ui) {
         ui.horizontal(|ui| {
-            if let Some(m) = self.messages.last() {
-                let c = if m.error {
-                    ERROR_COLOUR
-                } else {
-                    ui.visuals().text_color()
-                };
-                ui.colored_label(c, &m.text);
-            }
+            // The right-hand part first; the last message takes the room left, cut short with
+            // the whole line on hover (drawn first, a long one ran under the audio status).
             ui.with_layout(egui::Layout::right_to_left(egui::Align::Center), |ui| {
                 match self.player.status() {
                     crate::playback::AudioStatus::Ready {
@@ -261,6 +256,16 @@ impl Workbench {
                 }
                 if !self.is_idle() {
                     ui.spinner();
+                }
+                if let Some(m) = self.messages.last() {
+                    let c = if m.error {
+                        ERROR_COLOUR
+                    } else {
+                        ui.visuals().text_color()
+                    };
+                    ui.with_layout(egui::Layout::left_to_right(egui::Align::Center), |ui| {
+                        ui.add(egui::Label::new(egui::RichText::new(&m.text).color(c)).truncate());
+                    });
                 }
             });
         });

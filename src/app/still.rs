@@ -44,6 +44,8 @@ pub enum SetupSource {
     Sidecar(PathBuf),
     /// Guessed (the axis from the image's long side); the pixel size must be checked.
     Guessed,
+    /// Typed in the window over a guess.
+    Entered,
 }
 
 /// The settings for `image` (at `path`): from a `truth.toml` written by `synth-still` beside it
@@ -124,6 +126,8 @@ pub struct StillDoc {
     pub found_with: Option<StillSetup>,
     /// The decoded groove.
     pub run: Option<Arc<StillRun>>,
+    /// Why the last decode gave no sound (cleared by the next that does).
+    pub problem: Option<String>,
 }
 
 impl StillDoc {

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use super::background::take_ended;
-use super::still::{StillDoc, StillTask, setup_for, start_still};
+use super::still::{SetupSource, StillDoc, StillTask, setup_for, start_still};
 use super::views::still_ui::{StillAction, still_window};
 use super::workbench::{Workbench, repaint_fn};
 use crate::io::lock::OutputLock;
@@ -57,11 +57,7 @@ impl Workbench {
         );
     }
 
-    fn start_still_task(
-        &mut self,
-        task: StillTask,
-        fresh: Option<(StillSetup, super::still::SetupSource)>,
-    ) {
+    fn start_still_task(&mut self, task: StillTask, fresh: Option<(StillSetup, SetupSource)>) {
         let what = match task.groove {
             Some(n) => format!("groove {n}"),
             None => "the most complete groove near the centre".into(),
@@ -85,6 +81,14 @@ impl Workbench {
     /// Decodes groove `number` (from 1; None: the decoder's pick) of the open still with the
     /// settings shown; the grooves are found again only when the settings changed.
     pub fn decode_still_groove(&mut self, number: Option<usize>) {
+        // Guessed settings changed in the window before a find are the operator's own.
+        if let Some(doc) = self.still.doc.as_mut()
+            && doc.source == SetupSource::Guessed
+            && doc.found_with.as_ref().is_some_and(|f| *f != doc.setup)
+            && self.still.job.is_none()
+        {
+            doc.source = SetupSource::Entered;
+        }
         let Some(doc) = &self.still.doc else {
             self.error("open a still image first");
             return;
@@ -169,6 +173,7 @@ impl Workbench {
                 found: None,
                 found_with: None,
                 run: None,
+                problem: None,
             });
         }
         let Some(doc) = self.still.doc.as_mut() else {
@@ -193,6 +198,7 @@ impl Workbench {
                 );
                 let warnings = run.warnings.clone();
                 doc.run = Some(run);
+                doc.problem = None;
                 if self.clip.still_heard
                     && let Some(buffers) = doc.play_buffers()
                 {
@@ -206,7 +212,10 @@ impl Workbench {
                 }
             }
             (None, _) if cancelled => self.info("still decode cancelled"),
-            (None, Some(e)) => self.error(e),
+            (None, Some(e)) => {
+                doc.problem = Some(e.clone());
+                self.error(e);
+            }
             (None, None) => {}
         }
     }

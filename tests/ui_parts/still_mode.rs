@@ -164,4 +164,14 @@ fn a_still_without_grooves_says_so_and_names_the_file() {
     assert!(msg.contains("flat.png"), "{msg}");
     let doc = wb(&h).still_doc().expect("the image is open");
     assert!(doc.found.is_none() && doc.run.is_none());
+    // The window says so too, not only the status bar.
+    assert!(
+        doc.problem.as_deref() == Some(msg.as_str()),
+        "{:?}",
+        doc.problem
+    );
+    assert!(
+        h.query_all_by_label(&msg).count() >= 2,
+        "the still window shows {msg}"
+    );
 }

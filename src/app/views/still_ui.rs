@@ -88,6 +88,9 @@ fn body(
                     SetupSource::Sidecar(p) => {
                         ui.weak(format!("settings from {}", p.display()));
                     }
+                    SetupSource::Entered => {
+                        ui.weak("settings as entered");
+                    }
                     SetupSource::Guessed => {
                         ui.colored_label(
                             Color32::from_rgb(230, 180, 60),
@@ -111,6 +114,9 @@ fn body(
     let Some(doc) = &state.doc else {
         return;
     };
+    if let Some(problem) = &doc.problem {
+        ui.colored_label(crate::app::panels::ERROR_COLOUR, problem);
+    }
     groove_row(ui, doc, busy, actions);
     ui.separator();
     image_view(ui, state, position, busy, actions);
