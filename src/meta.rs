@@ -159,7 +159,8 @@ pub struct ScanMeta {
 
 /// `v` for a message: a huge number in full is hundreds of digits, so those read `1e308`.
 fn shown(v: f64) -> String {
-    if v.abs() >= 1e9 {
+    // `{}` writes 1e-300 as 300 digits: very large and very small values as 1e-300.
+    if v.abs() >= 1e9 || (v != 0.0 && v.abs() < 1e-4) {
         format!("{v:e}")
     } else {
         v.to_string()
@@ -204,13 +205,34 @@ impl ScanMeta {
                 at_most(&format!("record.group_radius_mm[{i}]"), *r, MAX_RADIUS_MM)?;
             }
         }
+        // Lower bounds short of the numbers the stages refuse (a focal length of 1e-9 to 1e12
+        // px, a frame step of 1e-12 µm and more), so scan.toml is named with its own key.
+        fn at_least(name: &str, v: f64, least: f64) -> Result<(), String> {
+            positive(name, v)?;
+            if v >= least {
+                Ok(())
+            } else {
+                Err(format!(
+                    "{name} must be at least {}, got {}",
+                    shown(least),
+                    shown(v)
+                ))
+            }
+        }
         at_most("camera.pixel_pitch_um", self.camera.pixel_pitch_um, 1000.0)?;
+        at_least("camera.pixel_pitch_um", self.camera.pixel_pitch_um, 1e-4)?;
         at_most(
             "camera.working_distance_mm",
             self.camera.working_distance_mm,
             10_000.0,
         )?;
-        positive("motion.frame_step_um", self.motion.frame_step_um)?;
+        at_least(
+            "camera.working_distance_mm",
+            self.camera.working_distance_mm,
+            1e-8,
+        )?;
+        at_least("motion.frame_step_um", self.motion.frame_step_um, 1e-9)?;
+        at_most("motion.frame_step_um", self.motion.frame_step_um, 1e9)?;
         positive("motion.group_step_um", self.motion.group_step_um)?;
         if let Some(df) = &self.dual_focus {
             positive("dual_focus.focus_distance_mm", df.focus_distance_mm)?;
@@ -330,5 +352,59 @@ impl Geometry {
     #[must_use]
     pub fn land_flow_px(&self) -> f64 {
         -self.frame_step_um / self.pixel_pitch_um
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::ScanMeta;
+
+    #[test]
+    fn out_of_range_values_name_the_file_and_key_in_a_short_line() {
+        // 1e-13 µm passed scan.toml and was refused by a stage as `geometry.frame_step_um`,
+        // without the file; 1e-300 was written out as 300 digits.
+        for (key, from, to, shown) in [
+            (
+                "motion.frame_step_um",
+                "frame_step_um = 0.78",
+                "frame_step_um = 1e-13",
+                "1e-13",
+            ),
+            (
+                "motion.frame_step_um",
+                "frame_step_um = 0.78",
+                "frame_step_um = 1e-300",
+                "1e-300",
+            ),
+            (
+                "camera.pixel_pitch_um",
+                "pixel_pitch_um = 0.39",
+                "pixel_pitch_um = 1e-300",
+                "1e-300",
+            ),
+            (
+                "camera.working_distance_mm",
+                "working_distance_mm = 4.0",
+                "working_distance_mm = 1e-12",
+                "1e-12",
+            ),
+        ] {
+            let text = crate::io::scan::test_support::scan_toml(460.2).replace(from, to);
+            assert_ne!(
+                text,
+                crate::io::scan::test_support::scan_toml(460.2),
+                "{from}"
+            );
+            let msg = ScanMeta::from_toml_str(&text, Path::new("b20/scan.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(msg.contains(key) && msg.contains("b20/scan.toml"), "{msg}");
+            assert!(
+                msg.contains(&format!("got {shown}")) && msg.len() < 160,
+                "{msg}"
+            );
+        }
     }
 }
