@@ -483,15 +483,22 @@ fn after_failure(
     // A group whose frames do not load stops the run (the engine's `EngineError::Load`), and
     // stops it again at the same group unless --keep-going makes it a gap, as it makes any such
     // group.
-    let unreadable = !keep_going && {
+    let load = {
         use crate::engine::EngineError;
         use crate::side::SideError;
-        matches!(e.downcast_ref::<EngineError>(), Some(EngineError::Load(_)))
-            || matches!(
-                e.downcast_ref::<SideError>(),
-                Some(SideError::Engine(EngineError::Load(_)))
-            )
+        match (
+            e.downcast_ref::<EngineError>(),
+            e.downcast_ref::<SideError>(),
+        ) {
+            (Some(EngineError::Load(l)), _)
+            | (_, Some(SideError::Engine(EngineError::Load(l)))) => Some(l),
+            _ => None,
+        }
     };
+    let unreadable = !keep_going && load.is_some();
+    // A frame or group gone since the run began changes the scan's frame counts, which
+    // --resume checks: only the file put back lets it go on.
+    let gone = matches!(load, Some(crate::io::LoadError::Missing { .. }));
     let alone = |e: anyhow::Error| {
         if unreadable {
             anyhow::anyhow!(
@@ -519,7 +526,11 @@ fn after_failure(
     if finished == 0 {
         return alone(e);
     }
-    let how = if unreadable {
+    let how = if unreadable && gone {
+        "put it back and run the same command with --resume to go on from them; without it \
+         the scan is not the one they came from, and only --force --keep-going (starting over) \
+         makes the group a gap"
+    } else if unreadable {
         "the same command with --resume goes on from them; add --keep-going to make the \
          unreadable group a gap, or mend its frames first"
     } else {
