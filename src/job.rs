@@ -14,20 +14,42 @@ fn interrupt_flag() -> &'static Arc<AtomicBool> {
     FLAG.get_or_init(|| Arc::new(AtomicBool::new(false)))
 }
 
+/// A second interrupt this soon after the first is the same one delivered twice: `timeout -s
+/// INT` signals the command and then its process group, which holds the command too.
+const SAME_INTERRUPT: std::time::Duration = std::time::Duration::from_millis(200);
+
 /// Makes Ctrl-C and SIGTERM cancel the command line's jobs instead of killing the process:
 /// the first raises [`interrupted`], so a job stops at its next unit of work, removes what it
-/// had not finished (or keeps its journal) and says so; a second one exits at once (status 130).
+/// had not finished (or keeps its journal) and says so; a second one (later than
+/// [`SAME_INTERRUPT`]) says so and exits at once (status 130).
 ///
 /// # Errors
 /// When the handlers cannot be installed.
 pub fn catch_interrupts() -> std::io::Result<()> {
     use signal_hook::consts::{SIGINT, SIGTERM};
-    let flag = interrupt_flag();
-    for signal in [SIGINT, SIGTERM] {
-        // In this order: the exit only fires when the flag is already up.
-        signal_hook::flag::register_conditional_shutdown(signal, 130, Arc::clone(flag))?;
-        signal_hook::flag::register(signal, Arc::clone(flag))?;
-    }
+    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM])?;
+    let flag = Arc::clone(interrupt_flag());
+    std::thread::Builder::new()
+        .name("interrupts".into())
+        .spawn(move || {
+            let mut first: Option<std::time::Instant> = None;
+            for _ in signals.forever() {
+                match first {
+                    None => {
+                        flag.store(true, Ordering::SeqCst);
+                        first = Some(std::time::Instant::now());
+                    }
+                    Some(t) if t.elapsed() >= SAME_INTERRUPT => {
+                        crate::tell!(
+                            "interrupted again: stopped at once, without removing what was \
+                             unfinished (a journal or partial store keeps what it holds)"
+                        );
+                        std::process::exit(130);
+                    }
+                    Some(_) => {}
+                }
+            }
+        })?;
     Ok(())
 }
 

@@ -164,6 +164,9 @@ impl StoreRun<'_> {
     /// to go on. Returns the groups kept.
     pub fn ctrl_c_keeps(&self, at_least: usize, said: &[&str]) -> usize {
         let child = self.until(at_least);
+        // Twice at once, as `timeout -s INT` sends it (to the command, then to its process
+        // group): one interrupt, not a second that stops the command at once.
+        ctrl_c(&child);
         ctrl_c(&child);
         let o = child.wait_with_output().unwrap();
         let e = stderr(&o);
