@@ -496,8 +496,8 @@ fn after_failure(
         }
     };
     let unreadable = !keep_going && load.is_some();
-    // A frame or group gone since the run began changes the scan's frame counts, which
-    // --resume checks: only the file put back lets it go on.
+    // A group's last frame gone since the run began changes the scan's frame counts, which
+    // --resume checks: then only the file put back lets it go on.
     let gone = matches!(load, Some(crate::io::LoadError::Missing { .. }));
     let alone = |e: anyhow::Error| {
         if unreadable {
@@ -527,9 +527,9 @@ fn after_failure(
         return alone(e);
     }
     let how = if unreadable && gone {
-        "put it back and run the same command with --resume to go on from them; without it \
-         the scan is not the one they came from, and only --force --keep-going (starting over) \
-         makes the group a gap"
+        "the same command with --resume goes on from them; add --keep-going to make the group a \
+         gap, or put the file back first (where it was a group's last frame, the scan's frame \
+         count changed and --resume goes on only once it is back)"
     } else if unreadable {
         "the same command with --resume goes on from them; add --keep-going to make the \
          unreadable group a gap, or mend its frames first"
