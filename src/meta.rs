@@ -231,8 +231,8 @@ impl ScanMeta {
             self.camera.working_distance_mm,
             1e-8,
         )?;
+        // No upper bound here: a step past the frame's width is refused below, with the width.
         at_least("motion.frame_step_um", self.motion.frame_step_um, 1e-9)?;
-        at_most("motion.frame_step_um", self.motion.frame_step_um, 1e9)?;
         positive("motion.group_step_um", self.motion.group_step_um)?;
         if let Some(df) = &self.dual_focus {
             positive("dual_focus.focus_distance_mm", df.focus_distance_mm)?;
