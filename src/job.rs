@@ -20,8 +20,8 @@ const SAME_INTERRUPT: std::time::Duration = std::time::Duration::from_millis(200
 
 /// Makes Ctrl-C and SIGTERM cancel the command line's jobs instead of killing the process:
 /// the first raises [`interrupted`], so a job stops at its next unit of work, removes what it
-/// had not finished (or keeps its journal) and says so; a second one (later than
-/// [`SAME_INTERRUPT`]) says so and exits at once (status 130).
+/// had not finished (or keeps its journal) and says so; a second one (200 ms or more
+/// after it: sooner, it is the same one delivered twice) says so and exits at once (status 130).
 ///
 /// # Errors
 /// When the handlers cannot be installed.
