@@ -78,6 +78,8 @@ pub(super) fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) 
         if args.side.resume
             && read_part(&args.out).is_ok_and(|p| identity.difference(&p.identity).is_none())
         {
+            // A journal left beside a complete part (its removal failed) is spent.
+            let _ = std::fs::remove_file(args.out.join("journal"));
             if !args.quiet {
                 crate::tell!("shard {index} is already complete: {}", part_path.display());
             }
@@ -116,7 +118,6 @@ pub(super) fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) 
         }
     };
     run_progress.context_groups = result.context_groups;
-    let written = write_part(&args.out, &identity, &groups, args.force)?;
     let report = ShardReport {
         version: env!("CARGO_PKG_VERSION"),
         scan: &identity.scan,
@@ -131,7 +132,11 @@ pub(super) fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) 
             .filter_map(|g| g.report.as_ref().and_then(|r| r.warning.clone()))
             .collect(),
     };
+    // The report before the part: the part marks the shard complete, so a report that cannot
+    // be written (a full disk) leaves the shard to --resume from its journal, not a part that
+    // --resume calls complete without a report.
     write_json_atomic(&args.out.join("report.json"), &report, true)?;
+    let written = write_part(&args.out, &identity, &groups, args.force)?;
     result.journal.remove()?;
     // The groups' warnings as a whole run prints them, even with --quiet: a gap filled with
     // silence must not pass unseen until the merge.
