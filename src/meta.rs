@@ -2,6 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::pipeline::compact as shown;
+
 /// The scan format version this build reads and writes.
 pub const FORMAT_VERSION: u32 = 1;
 /// Fastest turntable speed a scan or a still may give (rpm): far past any record, short of the
@@ -155,16 +157,6 @@ pub struct ScanMeta {
     /// Any other tables, kept verbatim (the generator writes `[synth]`).
     #[serde(flatten)]
     pub extra: toml::Table,
-}
-
-/// `v` for a message: a huge number in full is hundreds of digits, so those read `1e308`.
-fn shown(v: f64) -> String {
-    // `{}` writes 1e-300 as 300 digits: very large and very small values as 1e-300.
-    if v.abs() >= 1e9 || (v != 0.0 && v.abs() < 1e-4) {
-        format!("{v:e}")
-    } else {
-        v.to_string()
-    }
 }
 
 impl ScanMeta {

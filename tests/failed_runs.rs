@@ -7,7 +7,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{demo_copy, groovescope, names, reconstruct, stderr};
+use common::{demo_copy, groovescope, names, reconstruct, stderr, two_shard_plan};
 use groovescope::image::Image;
 use groovescope::io::save_grey_png;
 
@@ -206,16 +206,7 @@ fn a_shard_prints_its_gaps_warnings_and_names_keep_going_at_its_first_group() {
     std::fs::write(demo.join("g00006/f002.png"), b"not a png").unwrap();
     let part = work.join("part-1");
     let plan = work.join("plan.json");
-    let o = groovescope(&[
-        "plan",
-        s(&demo),
-        "--shards",
-        "2",
-        "--probe-groups",
-        "0",
-        "--out",
-        s(&plan),
-    ]);
+    let o = groovescope(&two_shard_plan(s(&demo), s(&plan)));
     assert!(o.status.success(), "{}", stderr(&o));
     let shard = ["--plan", s(&plan), "--shard", "1"];
     refused(
@@ -459,16 +450,7 @@ fn nothing_is_written_among_a_scans_frames_or_over_a_part() {
     assert!(!demo.join("g00001/part").exists());
     // Nor anywhere in a store.
     let store_plan = dir.path().join("store-plan.json");
-    let o = groovescope(&[
-        "plan",
-        s(&store),
-        "--shards",
-        "2",
-        "--probe-groups",
-        "0",
-        "--out",
-        s(&store_plan),
-    ]);
+    let o = groovescope(&two_shard_plan(s(&store), s(&store_plan)));
     assert!(o.status.success(), "{}", stderr(&o));
     let store_before = names(&store);
     for out in [store.join("part"), store.join("frames"), store.clone()] {

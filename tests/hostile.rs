@@ -7,7 +7,10 @@ mod common;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use common::{SCAN_TOML, demo_copy, failed_with, groovescope, scan_in_tempdir, stderr, write_scan};
+use common::{
+    SCAN_TOML, demo_copy, failed_with, groovescope, scan_in_tempdir, stderr, two_shard_plan,
+    write_scan,
+};
 use groovescope::engine::{ReconstructOptions, reconstruct};
 use groovescope::io::limits::{MAX_FRAMES_PER_GROUP, MAX_TOML_BYTES, MAX_WAV_SAMPLES};
 use groovescope::io::{Scan, load_frame, load_group_frames};
@@ -410,16 +413,7 @@ fn a_groove_speed_off_by_a_unit_is_refused_naming_the_keys_before_any_group() {
             vec!["reconstruct", s(&demo), "--out", s(&out), "--quiet"],
             vec!["plan", s(&demo), "--shards", "2", "--out", s(&out)],
             // With no probe group the plan still checks it: its shards would all fail.
-            vec![
-                "plan",
-                s(&demo),
-                "--shards",
-                "2",
-                "--probe-groups",
-                "0",
-                "--out",
-                s(&out),
-            ],
+            two_shard_plan(s(&demo), s(&out)).to_vec(),
         ] {
             failed_with(
                 &groovescope_capped(&args),

@@ -121,10 +121,7 @@ fn groups_covering(clip: &Clip, a: f64, b: f64) -> [usize; 2] {
     let (lo, hi) = clip
         .tracks
         .iter()
-        .filter(|t| {
-            clip.group_span_secs(t.group)
-                .is_some_and(|(s, e)| s < b && e > a)
-        })
+        .filter(|t| clip.secs_at_um(t.span_um.0) < b && clip.secs_at_um(t.span_um.1) > a)
         .fold((usize::MAX, 0), |(lo, hi), t| {
             (lo.min(t.group), hi.max(t.group + 1))
         });

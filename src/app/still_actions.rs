@@ -81,28 +81,25 @@ impl Workbench {
     /// Decodes groove `number` (from 1; None: the decoder's pick) of the open still with the
     /// settings shown; the grooves are found again only when the settings changed.
     pub fn decode_still_groove(&mut self, number: Option<usize>) {
-        // Guessed settings changed in the window before a find are the operator's own.
-        if let Some(doc) = self.still.doc.as_mut()
-            && doc.source == SetupSource::Guessed
-            && doc.found_with.as_ref().is_some_and(|f| *f != doc.setup)
-            && self.still.job.is_none()
-        {
-            doc.source = SetupSource::Entered;
-        }
-        let Some(doc) = &self.still.doc else {
+        if self.still.doc.is_none() {
             self.error("open a still image first");
             return;
-        };
+        }
         if self
             .messages
             .refuse_if(self.is_decoding_still(), STILL_BUSY)
         {
             return;
         }
-        let found = doc
-            .found
-            .clone()
-            .filter(|_| doc.found_with.as_ref() == Some(&doc.setup));
+        let Some(doc) = self.still.doc.as_mut() else {
+            return;
+        };
+        let changed = doc.found_with.as_ref() != Some(&doc.setup);
+        // Guessed settings changed in the window before a find are the operator's own.
+        if changed && doc.found_with.is_some() && doc.source == SetupSource::Guessed {
+            doc.source = SetupSource::Entered;
+        }
+        let found = doc.found.clone().filter(|_| !changed);
         let task = StillTask {
             path: doc.path.clone(),
             image: Some(doc.image.clone()),

@@ -78,8 +78,8 @@ pub fn check_range(name: &str, value: f64, lo: f64, hi: f64) -> Result<(), Stage
 }
 
 /// `v` as a message shows it: `{}` writes 1e-300 as 300 digits, so very large and very small
-/// values are written as `1e-300`.
-fn compact(v: f64) -> String {
+/// values are written as `1e-300` (scan.toml's messages use it too).
+pub(crate) fn compact(v: f64) -> String {
     if v.abs() >= 1e9 || (v != 0.0 && v.abs() < 1e-4) {
         format!("{v:e}")
     } else {

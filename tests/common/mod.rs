@@ -51,6 +51,20 @@ pub fn groovescope(args: &[&str]) -> Output {
         .unwrap()
 }
 
+/// The arguments of `plan SCAN --shards 2 --probe-groups 0 --out OUT`: two shards, no probe.
+pub fn two_shard_plan<'a>(scan: &'a str, out: &'a str) -> [&'a str; 8] {
+    [
+        "plan",
+        scan,
+        "--shards",
+        "2",
+        "--probe-groups",
+        "0",
+        "--out",
+        out,
+    ]
+}
+
 /// Sends the child a Ctrl-C (SIGINT).
 pub fn ctrl_c(child: &std::process::Child) {
     let pid = child.id().to_string();

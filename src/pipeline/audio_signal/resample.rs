@@ -3,7 +3,7 @@
 use std::f64::consts::PI;
 
 use super::*;
-use crate::pipeline::dsp::{end_level, odd_extension, odd_extension_about};
+use crate::pipeline::dsp::{end_level, odd_extension, reflect_after, reflect_before};
 
 /// Sinc length of the resampler (input samples) when upsampling; scaled by the ratio when
 /// downsampling so the filter spans as many output samples.
@@ -137,12 +137,12 @@ pub fn resample(samples: &[f32], from_hz: f64, to_hz: u32) -> Result<Vec<f32>, S
     let span = ((1.0 / ratio).round() as usize).clamp(1, n);
     let head = cleaned(&samples[..(pad + 1).max(span).min(n)]);
     let end = cleaned(&samples[n - (tail_len + 1).max(span).min(n)..]);
-    let pivots = [
-        end_level(head.iter().take(span).copied()),
+    let lead = reflect_before(&head, pad, end_level(head.iter().take(span).copied()));
+    let tail = reflect_after(
+        &end,
+        tail_len,
         end_level(end.iter().rev().take(span).copied()),
-    ];
-    let (lead, _) = odd_extension_about(&head, pad, pivots);
-    let (_, tail) = odd_extension_about(&end, tail_len, pivots);
+    );
     let mut input: Vec<f64> = Vec::with_capacity(pad + n + tail_len);
     input.extend(lead.iter().map(|&v| f64::from(v)));
     input.extend(samples.iter().map(|v| f64::from(clean(v))));

@@ -407,31 +407,35 @@ pub(crate) fn odd_extension(samples: &[f32], len: usize) -> (Vec<f32>, Vec<f32>)
     let (Some(&first), Some(&last)) = (samples.first(), samples.last()) else {
         return (Vec::new(), Vec::new());
     };
-    odd_extension_about(samples, len, [first, last])
+    (
+        reflect_before(samples, len, first),
+        reflect_after(samples, len, last),
+    )
 }
 
-/// [`odd_extension`] about the levels `pivots` (start, end) instead of the end samples
-/// themselves: before the start `2·pivots[0] − x[k]`, after the end `2·pivots[1] − x[n−1−k]`.
-/// Where the end samples are noisy, a pivot read over several samples ([`end_level`]) keeps
-/// one sample's noise from becoming the level of the whole reflection.
-pub(crate) fn odd_extension_about(
-    samples: &[f32],
-    len: usize,
-    [first, last]: [f32; 2],
-) -> (Vec<f32>, Vec<f32>) {
-    let n = samples.len();
-    if n == 0 {
-        return (Vec::new(), Vec::new());
-    }
-    let far = n - 1;
-    let lead = (1..=len)
+/// The lead of [`odd_extension`] about the level `pivot` instead of the first sample itself:
+/// `2·pivot − x[k]` for `k = len … 1`. Where the first sample is noisy, a pivot read over
+/// several samples ([`end_level`]) keeps its noise from becoming the level of the whole
+/// reflection. Empty for an empty signal.
+pub(crate) fn reflect_before(samples: &[f32], len: usize, pivot: f32) -> Vec<f32> {
+    let Some(far) = samples.len().checked_sub(1) else {
+        return Vec::new();
+    };
+    (1..=len)
         .rev()
-        .map(|k| 2.0 * first - samples[k.min(far)])
-        .collect();
-    let tail = (1..=len)
-        .map(|k| 2.0 * last - samples[far - k.min(far)])
-        .collect();
-    (lead, tail)
+        .map(|k| 2.0 * pivot - samples[k.min(far)])
+        .collect()
+}
+
+/// The tail of [`odd_extension`] about the level `pivot`: `2·pivot − x[n−1−k]` for
+/// `k = 1 … len` (see [`reflect_before`]).
+pub(crate) fn reflect_after(samples: &[f32], len: usize, pivot: f32) -> Vec<f32> {
+    let Some(far) = samples.len().checked_sub(1) else {
+        return Vec::new();
+    };
+    (1..=len)
+        .map(|k| 2.0 * pivot - samples[far - k.min(far)])
+        .collect()
 }
 
 /// The level of a signal at its first sample, read from `head`, its first samples in the order

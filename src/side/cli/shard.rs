@@ -30,6 +30,7 @@ struct ShardReport<'a> {
     warnings: Vec<String>,
 }
 
+/// Runs shard `index` of the plan at `plan_path` into the part folder `args.out`.
 pub(super) fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) -> Result<()> {
     // --out is the part folder the shard makes and fills: anywhere in the scan (the scan
     // itself, a group's folder, a new folder beside the groups, which would read as a group,
@@ -74,12 +75,13 @@ pub(super) fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) 
     })?;
     let part_path = args.out.join(PART_FILE);
     let lock = lock_outputs(&[part_path.as_path()])?;
+    let journal = args.out.join("journal");
     if part_path.exists() && !args.force {
         if args.side.resume
             && read_part(&args.out).is_ok_and(|p| identity.difference(&p.identity).is_none())
         {
             // A journal left beside a complete part (its removal failed) is spent.
-            let _ = std::fs::remove_file(args.out.join("journal"));
+            let _ = std::fs::remove_file(&journal);
             if !args.quiet {
                 crate::tell!("shard {index} is already complete: {}", part_path.display());
             }
@@ -90,7 +92,6 @@ pub(super) fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) 
             part_path.display()
         );
     }
-    let journal = args.out.join("journal");
     let run = RangeRun {
         scan: &scan,
         params: &params,
