@@ -58,7 +58,8 @@ pub enum Command {
         /// Output folder (must not exist or be empty).
         #[arg(long)]
         out: PathBuf,
-        /// Scene settings TOML (missing keys take defaults).
+        /// Scene settings TOML: a `[scene]` table, or its keys at the top level (missing keys
+        /// take defaults; a key outside `[scene]` beside it is refused).
         #[arg(long)]
         config: Option<PathBuf>,
     },
@@ -198,7 +199,8 @@ pub struct SynthArgs {
     /// Output scan folder (must not exist or be empty).
     #[arg(long)]
     pub out: PathBuf,
-    /// Generator settings TOML (the `[synth]` keys; missing keys take the preset's values).
+    /// Generator settings TOML: a `[synth]` table, or its keys at the top level (missing keys
+    /// take the preset's values; a key outside `[synth]` beside it is refused).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Starting settings: paper (1280×1024, the paper's optics), quick (small frames), demo, dual-focus.
@@ -381,8 +383,9 @@ pub fn load_params(path: Option<&Path>) -> Result<PipelineParams> {
     Ok(params)
 }
 
-/// `base` with the keys of the TOML file `path` (optionally under a `[table]`) laid over it,
-/// then checked by `validate`.
+/// `base` with the keys of the TOML file `path` (optionally under a `[table]`) laid over it
+/// ([`crate::toml_error::overlay`]: a key it cannot use is refused, never dropped), then
+/// checked by `validate`.
 ///
 /// # Errors
 /// When the file cannot be read, a key or value is invalid, or `validate` refuses the result:
@@ -398,35 +401,8 @@ where
     T: serde::Serialize + serde::de::DeserializeOwned,
 {
     let text = crate::io::limits::read_toml_text(path, what)?;
-    let fail = |problem: String| anyhow::anyhow!("invalid {what}: {problem}: {}", path.display());
-    let base: toml::Table = toml::Table::try_from(base).map_err(|e| fail(e.to_string()))?;
-    let user: toml::Table =
-        toml::from_str(&text).map_err(|e| fail(crate::toml_error::located(&text, &e)))?;
-    let (user, under) = match user.get(table) {
-        Some(toml::Value::Table(t)) => (t.clone(), Some(table)),
-        _ => (user, None),
-    };
-    let over = |keys: &toml::Table| {
-        let mut merged = base.clone();
-        merged.extend(keys.clone());
-        toml::Value::Table(merged).try_into::<T>()
-    };
-    let merged = over(&user).map_err(|e| {
-        // The merged table has no positions: name the first of the user's keys that fails
-        // on its own, with its line in the file.
-        let key = user.iter().find_map(|(k, v)| {
-            let one = toml::Table::from_iter([(k.clone(), v.clone())]);
-            over(&one).is_err().then_some(k.as_str())
-        });
-        match key {
-            Some(k) => fail(format!(
-                "{}: {}",
-                crate::toml_error::key_at(&text, under, k),
-                e.message()
-            )),
-            None => fail(e.message().to_string()),
-        }
-    })?;
+    let merged = crate::toml_error::overlay(base, &text, table)
+        .map_err(|problem| anyhow::anyhow!("invalid {what}: {problem}: {}", path.display()))?;
     // A value out of range names the file it came from, as a type error does.
     validate(&merged).map_err(|e| anyhow::anyhow!("{e}: {}", path.display()))?;
     Ok(merged)

@@ -25,9 +25,11 @@ pub fn located(text: &str, error: &toml::de::Error) -> String {
     // The key of a `key = value` line, under the last `[table]` header above it.
     let key = key_of(line).filter(|k| !k.is_empty() && !k.starts_with('['));
     let table = text[..line_start].lines().rev().find_map(header);
-    match key {
-        Some(k) => format!("{} (line {line_no}): {message}", qualified(table, k)),
-        None => format!("line {line_no}: {message}"),
+    match (key, header(line)) {
+        (Some(k), _) => format!("{} (line {line_no}): {message}", qualified(table, k)),
+        // A table's header (`[dsp.foo]`, which [dsp] has no field for): the table it names.
+        (None, Some(t)) => format!("{t} (line {line_no}): {message}"),
+        (None, None) => format!("line {line_no}: {message}"),
     }
 }
 
@@ -79,19 +81,107 @@ fn qualified(table: Option<&str>, key: &str) -> String {
 
 /// `key` of `text`'s `[table]` (top-level keys with `table` None) named with its line, as
 /// [`located`] names a parse error: `table.key (line N)`; without the line when the key is
-/// not written as `key = …` there (a merged table's keys have no positions of their own).
+/// written neither as `key = …` there nor as a `[table.key]` header (a merged table's keys
+/// have no positions of their own).
 #[must_use]
 pub fn key_at(text: &str, table: Option<&str>, key: &str) -> String {
+    let name = qualified(table, key);
+    match line_of(text, table, key) {
+        Some(n) => format!("{name} (line {n})"),
+        None => name,
+    }
+}
+
+/// The line (from 1) where `text` writes `key` of `[table]`: a `key = …` line under that
+/// table's header, or the header of the table `key` names (`[table.key]`, `[[table.key]]`, or
+/// one of its subtables).
+fn line_of(text: &str, table: Option<&str>, key: &str) -> Option<usize> {
     let name = qualified(table, key);
     let mut current = None;
     for (i, line) in text.lines().enumerate() {
         if let Some(t) = header(line) {
+            if t == name
+                || t.strip_prefix(name.as_str())
+                    .is_some_and(|r| r.starts_with('.'))
+            {
+                return Some(i + 1);
+            }
             current = Some(t);
         } else if current == table && key_of(line) == Some(key) {
-            return format!("{name} (line {})", i + 1);
+            return Some(i + 1);
         }
     }
-    name
+    None
+}
+
+/// `base` with the TOML `text` laid over it: the keys of its `[table]` where it has one, else
+/// its top-level keys. Tables merge key by key, so `[synth.damage]` with one key keeps the
+/// base's others. No key the file writes is dropped unread: a key `T` has no field for is
+/// refused by its `deny_unknown_fields`, and beside a `[table]` any other top-level key or
+/// table (`seed = 3` above `[synth]`, which nothing would read) is refused.
+///
+/// # Errors
+/// The problem as one line naming the key and its line (`table.key (line N): …`); the caller
+/// adds the file.
+pub fn overlay<T>(base: &T, text: &str, table: &str) -> Result<T, String>
+where
+    T: serde::Serialize + serde::de::DeserializeOwned,
+{
+    let base = toml::Table::try_from(base).map_err(|e| e.to_string())?;
+    let mut user: toml::Table = toml::from_str(text).map_err(|e| located(text, &e))?;
+    let under = match user.remove(table) {
+        Some(toml::Value::Table(keys)) => {
+            // The first of the others in the file (the table's order is alphabetical).
+            let outside = user
+                .keys()
+                .min_by_key(|k| line_of(text, None, k).unwrap_or(usize::MAX));
+            if let Some(k) = outside {
+                let at = key_at(text, None, k);
+                let line = at.strip_prefix(k.as_str()).unwrap_or("");
+                return Err(format!(
+                    "`{k}`{line} is outside the [{table}] table, and only [{table}]'s keys are                      read when the file has one (move it under [{table}], or remove it)"
+                ));
+            }
+            user = keys;
+            Some(table)
+        }
+        // `table = 3`: read as a top-level key, which `T` names as unknown.
+        Some(other) => {
+            user.insert(table.to_string(), other);
+            None
+        }
+        None => None,
+    };
+    let over = |keys: &toml::Table| {
+        let mut merged = base.clone();
+        merge_into(&mut merged, keys.clone());
+        toml::Value::Table(merged).try_into::<T>()
+    };
+    over(&user).map_err(|e| {
+        // The merged table has no positions: name the first of the user's keys that fails
+        // on its own, with its line in the file.
+        let key = user.iter().find_map(|(k, v)| {
+            let one = toml::Table::from_iter([(k.clone(), v.clone())]);
+            over(&one).is_err().then_some(k.as_str())
+        });
+        match key {
+            Some(k) => format!("{}: {}", key_at(text, under, k), e.message()),
+            None => e.message().to_string(),
+        }
+    })
+}
+
+/// `over`'s keys laid into `base`: a table into the base's table of that name key by key,
+/// anything else (a value, an array, a table where the base has none) replacing it whole.
+fn merge_into(base: &mut toml::Table, over: toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_into(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -162,5 +252,120 @@ mod tests {
         assert!(line.starts_with("flow.max_iterations (line 2): "), "{line}");
         let line = error_of("[flow\nmax_iterations = 3\n");
         assert!(line.starts_with("line 1: "), "{line}");
+    }
+
+    /// A base with a nested table, as the generator's settings have (`[synth.damage]`).
+    #[derive(Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+    #[serde(default, deny_unknown_fields)]
+    struct Inner {
+        dust: f64,
+        scratches: f64,
+    }
+
+    #[derive(Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+    #[serde(default, deny_unknown_fields)]
+    struct Outer {
+        seed: u32,
+        damage: Inner,
+    }
+
+    impl Default for Inner {
+        fn default() -> Self {
+            Self {
+                dust: 0.0,
+                scratches: 0.0,
+            }
+        }
+    }
+
+    impl Default for Outer {
+        fn default() -> Self {
+            Self {
+                seed: 1,
+                damage: Inner::default(),
+            }
+        }
+    }
+
+    fn preset() -> Outer {
+        Outer {
+            seed: 7,
+            damage: Inner {
+                dust: 2.0,
+                scratches: 3.0,
+            },
+        }
+    }
+
+    #[test]
+    fn a_key_beside_the_table_is_refused_with_its_line_not_dropped() {
+        // `seed` above [synth] was dropped unread, and the preset's seed used.
+        let text = "# mine\nseed = 3\n[synth]\ndamage.dust = 1.0\n";
+        let e = overlay(&preset(), text, "synth").unwrap_err();
+        assert!(
+            e.starts_with("`seed` (line 2) is outside the [synth] table"),
+            "{e}"
+        );
+        // A table beside it (scan.toml's [record], or [damage] for [synth.damage]): the first
+        // one in the file is named.
+        let text = "[synth]\nseed = 3\n[zebra]\nx = 1\n[damage]\ndust = 1.0\n";
+        let e = overlay(&preset(), text, "synth").unwrap_err();
+        assert!(e.starts_with("`zebra` (line 3) is outside"), "{e}");
+        // Without the table, top-level keys are its keys, and an unknown one is named.
+        let got = overlay(&preset(), "seed = 3\n", "synth").unwrap();
+        assert_eq!(got.seed, 3);
+        let e = overlay(&preset(), "seed = 3\nseeed = 4\n", "synth").unwrap_err();
+        assert!(
+            e.starts_with("seeed (line 2): unknown field `seeed`"),
+            "{e}"
+        );
+        let e = overlay(&preset(), "[synth]\nseeed = 4\n", "synth").unwrap_err();
+        assert!(
+            e.starts_with("synth.seeed (line 2): unknown field `seeed`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_nested_table_keeps_the_bases_other_keys() {
+        // [synth.damage] with one key replaced the preset's whole damage table by defaults.
+        let got = overlay(&preset(), "[synth.damage]\ndust = 5.0\n", "synth").unwrap();
+        assert_eq!(
+            got,
+            Outer {
+                seed: 7,
+                damage: Inner {
+                    dust: 5.0,
+                    scratches: 3.0
+                }
+            }
+        );
+        // The demo preset's scratches and chunks stay when the file sets only its dust.
+        let demo = crate::synth::SynthConfig::demo();
+        let text = "[synth.damage]\ndust_per_mm2 = 1.0\n";
+        let got = overlay(&demo, text, "synth").unwrap();
+        assert_eq!(got.damage.dust_per_mm2, 1.0);
+        assert_eq!(got.damage.scratches_per_mm, demo.damage.scratches_per_mm);
+        assert_eq!(
+            got.damage.missing_wall_chunks_per_mm,
+            demo.damage.missing_wall_chunks_per_mm
+        );
+        let e = overlay(&preset(), "[synth]\n[synth.damage]\ndusst = 5.0\n", "synth").unwrap_err();
+        assert!(
+            e.starts_with("synth.damage (line 2): unknown field `dusst`"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_tables_header_names_it() {
+        // It was `line 3: unknown field `extra``, the table unnamed.
+        let text = "seed = 1\n[damage]\ndust = 1.0\n[damage.extra]\n";
+        let e = toml::from_str::<Outer>(text).unwrap_err();
+        let line = located(text, &e);
+        assert!(
+            line.starts_with("damage.extra (line 4): unknown field `extra`"),
+            "{line}"
+        );
     }
 }

@@ -325,7 +325,7 @@ fn a_land_flow_past_the_frame_is_named_not_silently_zero() {
 #[test]
 fn a_config_key_of_the_wrong_name_type_or_range_is_named_with_its_file() {
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&[&str], &str, &str); 4] = [
+    let cases: [(&[&str], &str, &str); 8] = [
         (
             &["synth", "--tone", "440"],
             "[synth]\n# a test\nwidth_px = 64\nheight_pxx = 9\n",
@@ -340,6 +340,28 @@ fn a_config_key_of_the_wrong_name_type_or_range_is_named_with_its_file() {
             &["synth-scene", "cube"],
             "frames = 30\nkind = \"cube\"\n",
             "kind (line 2): unknown field `kind`",
+        ),
+        // A key above the table was dropped unread (the preset's seed used, no word said).
+        (
+            &["synth", "--tone", "440"],
+            "seed = 3\n[synth]\nwidth_px = 64\n",
+            "`seed` (line 1) is outside the [synth] table",
+        ),
+        (
+            &["synth-still"],
+            "# mine\nseed = 3\n[still]\nseed = 4\n",
+            "`seed` (line 2) is outside the [still] table",
+        ),
+        (
+            &["synth-scene", "cube"],
+            "frames = 30\n[scene]\nwidth_px = 64\n",
+            "`frames` (line 1) is outside the [scene] table",
+        ),
+        // A whole scan.toml: its other tables are no generator settings.
+        (
+            &["synth", "--tone", "440"],
+            "[record]\nrpm = 78.0\n[synth]\nwidth_px = 64\n",
+            "`record` (line 1) is outside the [synth] table",
         ),
         // In range is checked on the merged settings, which have no lines.
         (

@@ -18,7 +18,8 @@ pub struct SynthStillArgs {
     /// Output folder (must not exist or be empty): still.png|tif, grooveN.wav, truth.toml.
     #[arg(long)]
     pub out: PathBuf,
-    /// Still settings TOML (the `[still]` keys; missing keys take the preset's values).
+    /// Still settings TOML: a `[still]` table, or its keys at the top level (missing keys
+    /// take the preset's values; a key outside `[still]` beside it is refused).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Starting settings: test (1000×4000 px, 7 grooves) or demo (the bundled 80 000 px strip).
