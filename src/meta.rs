@@ -106,6 +106,10 @@ pub enum GlassSide {
     Bottom,
 }
 
+/// How far from the working distance (as a factor either way) a dual-focus focal plane may
+/// lie: real ones lie a groove's depth, a few per cent, beyond the land.
+pub const MAX_FOCUS_RATIO: f64 = 2.0;
+
 /// The optional `[dual_focus]` table: a cover glass over part of the view gives a second focal depth.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -229,6 +233,33 @@ impl ScanMeta {
         if let Some(df) = &self.dual_focus {
             positive("dual_focus.focus_distance_mm", df.focus_distance_mm)?;
             positive("dual_focus.glass_thickness_mm", df.glass_thickness_mm)?;
+            // Both focal planes lie in the groove, a fraction of a millimetre beyond the land:
+            // far from it, the wall depths and the sample grid built on them are nonsense (a
+            // focus distance in µm would ask for millions of samples a group).
+            let wd = self.camera.working_distance_mm;
+            let ratio = |r: f64| {
+                if (1e-3..1e3).contains(&r) {
+                    format!("{r:.3}")
+                } else {
+                    format!("{r:.2e}")
+                }
+            };
+            for (name, d) in [
+                ("dual_focus.focus_distance_mm", df.focus_distance_mm),
+                (
+                    "the focal plane under the glass (dual_focus.focus_distance_mm + glass_thickness_mm × (1 − 1/glass_index))",
+                    df.focal_distances_mm().1,
+                ),
+            ] {
+                if !(d >= wd / MAX_FOCUS_RATIO && d <= wd * MAX_FOCUS_RATIO) {
+                    return Err(format!(
+                        "{name} = {} mm is {} times camera.working_distance_mm = {} mm, outside 1/{MAX_FOCUS_RATIO} to {MAX_FOCUS_RATIO}: both focal planes lie in the groove, near the land (distances from the optical centre, in mm)",
+                        shown(d),
+                        ratio(d / wd),
+                        shown(wd)
+                    ));
+                }
+            }
             if !(df.glass_index.is_finite() && df.glass_index >= 1.0) {
                 return Err(format!(
                     "dual_focus.glass_index must be at least 1 (a real glass), got {}",
@@ -397,6 +428,46 @@ mod tests {
                 msg.contains(&format!("got {shown}")) && msg.len() < 160,
                 "{msg}"
             );
+        }
+    }
+
+    /// A focal plane far from the land (a focus distance in µm, a glass in metres) is refused
+    /// when the scan opens, naming the key: it once grew a group's sample grid past 14 GB.
+    #[test]
+    fn a_focal_plane_far_from_the_land_is_refused() {
+        let base = format!(
+            "{}\n[dual_focus]\nfocus_distance_mm = 4.05\nglass_thickness_mm = 0.11\nglass_index = 1.515\nglass_edge_row = 300\n",
+            crate::io::scan::test_support::scan_toml(460.2)
+        );
+        assert!(ScanMeta::from_toml_str(&base, Path::new("s/scan.toml")).is_ok());
+        for (from, to, key) in [
+            (
+                "focus_distance_mm = 4.05",
+                "focus_distance_mm = 1e300",
+                "dual_focus.focus_distance_mm = 1e300",
+            ),
+            (
+                "focus_distance_mm = 4.05",
+                "focus_distance_mm = 4050",
+                "dual_focus.focus_distance_mm = 4050",
+            ),
+            (
+                "focus_distance_mm = 4.05",
+                "focus_distance_mm = 1e-300",
+                "dual_focus.focus_distance_mm = 1e-300",
+            ),
+            (
+                "glass_thickness_mm = 0.11",
+                "glass_thickness_mm = 110",
+                "the focal plane under the glass",
+            ),
+        ] {
+            let text = base.replace(from, to);
+            let msg = ScanMeta::from_toml_str(&text, Path::new("s/scan.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(msg.contains(key) && msg.contains("s/scan.toml"), "{msg}");
+            assert!(msg.contains("camera.working_distance_mm = 4 mm"), "{msg}");
         }
     }
 }

@@ -368,7 +368,8 @@ fn run_orientation(r: &StageRun<'_>) -> Result<StageOutput, StageError> {
             d.ix.width,
             zp,
             &params.sound,
-        );
+            stage.name(),
+        )?;
         let o = orient_from_lines(
             &stripes.lines,
             d.ix.width,
@@ -391,7 +392,8 @@ fn run_orientation(r: &StageRun<'_>) -> Result<StageOutput, StageError> {
             depth.map.z_um.width,
             zp,
             &params.sound,
-        );
+            stage.name(),
+        )?;
         let o = orient_from_depth(
             &depth.map,
             &depth.walls,

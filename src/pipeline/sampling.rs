@@ -3,6 +3,7 @@
 use crate::meta::ScanMeta;
 
 use super::audio_signal::SoundParams;
+use super::{StageError, compact};
 
 /// Columns kept clear of each frame edge when placing samples (px): pre-warping clamps there.
 pub const SAMPLE_MARGIN_PX: f64 = 8.0;
@@ -36,6 +37,11 @@ pub fn native_spacing_um(meta: &ScanMeta, sound: &SoundParams) -> f64 {
 /// memory. A slow disc at a high rate stays far below it (8⅓ rpm at 40 mm, 192 kHz and 0.78 µm
 /// pixels: 4.3 a pixel).
 pub const MAX_SAMPLES_PER_PX: f64 = 16.0;
+
+/// Most samples one column of a frame may carry at the walls' depth: twice
+/// [`MAX_SAMPLES_PER_PX`], which holds at the land, so walls up to twice the working distance
+/// from the camera pass (real walls lie a groove's depth, a few per cent, beyond it).
+pub const MAX_SAMPLES_PER_COLUMN: f64 = 2.0 * MAX_SAMPLES_PER_PX;
 
 /// Why a scan's native sample grid is too fine for its frames ([`check_sample_density`]).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -81,8 +87,8 @@ pub fn check_sample_density(meta: &ScanMeta, sound: &SoundParams) -> Result<(), 
                 } else {
                     "record.radius_mm"
                 },
-                meta.radius_mm(0),
-                meta.record.rpm,
+                compact(meta.radius_mm(0)),
+                compact(meta.record.rpm),
                 meta.groove_speed_mm_s(0),
                 sound.output_rate_hz
             ),
@@ -90,8 +96,15 @@ pub fn check_sample_density(meta: &ScanMeta, sound: &SoundParams) -> Result<(), 
     })
 }
 
-/// Places the scan's global sample grid on the columns of one frame of one group.
-#[must_use]
+/// Places the scan's global sample grid on the columns of one frame of one group, whose walls
+/// lie `projection_depth_um` from the optical centre.
+///
+/// # Errors
+/// [`StageError::NotFound`] (for `stage`) when that depth puts more than
+/// [`MAX_SAMPLES_PER_COLUMN`] samples on a column: [`check_sample_density`] holds at the land,
+/// so only a depth far beyond the working distance (a focus distance off by a unit in
+/// scan.toml, a depth map gone wrong) does that, and it would ask for millions of samples a
+/// group.
 pub fn sample_grid(
     meta: &ScanMeta,
     group: usize,
@@ -99,7 +112,8 @@ pub fn sample_grid(
     width: usize,
     projection_depth_um: f64,
     sound: &SoundParams,
-) -> SampleGrid {
+    stage: &'static str,
+) -> Result<SampleGrid, StageError> {
     let geom = meta.geometry();
     let cx = (width as f64 - 1.0) / 2.0;
     let cam_s = group as f64 * meta.motion.group_step_um
@@ -112,16 +126,57 @@ pub fn sample_grid(
     let hi = column0_um + (width as f64 - 1.0 - SAMPLE_MARGIN_PX) * um_per_px;
     let mut columns = Vec::new();
     if spacing > 0.0 && hi > lo {
+        // Counted in f64 first: a wild depth makes it too large for any integer.
+        let count = (hi / spacing).floor() - (lo / spacing).ceil() + 1.0;
+        if count.is_nan() || count > MAX_SAMPLES_PER_COLUMN * width as f64 {
+            return Err(StageError::NotFound {
+                stage,
+                problem: format!(
+                    "the walls' depth of {} µm is {:.3e}× the working distance of {} µm, which puts {count:.3e} samples on {width} columns, more than {MAX_SAMPLES_PER_COLUMN} a column (is the focus distance or the depth map far off?)",
+                    compact(projection_depth_um),
+                    projection_depth_um / geom.working_distance_um,
+                    compact(geom.working_distance_um),
+                ),
+            });
+        }
         let first = (lo / spacing).ceil() as i64;
         let last = (hi / spacing).floor() as i64;
         for j in first..=last {
             columns.push(((j as f64 * spacing - column0_um) / um_per_px) as f32);
         }
     }
-    SampleGrid {
+    Ok(SampleGrid {
         frame_index,
         column0_um,
         um_per_px,
         columns,
+    })
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)] // tests may panic
+mod tests {
+    use super::sample_grid;
+    use crate::io::scan::test_support::scan_meta;
+    use crate::pipeline::audio_signal::SoundParams;
+
+    /// Walls at the working distance get one sample every few columns; walls 1e300 µm away (a
+    /// focus distance far off) are refused before the grid is built, where they once asked for
+    /// a vector that grew past 14 GB.
+    #[test]
+    fn a_wild_wall_depth_is_refused_before_the_grid_is_built() {
+        let meta = scan_meta(460.2);
+        let sound = SoundParams::default();
+        let wd_um = meta.geometry().working_distance_um;
+        let grid = sample_grid(&meta, 3, 2, 1280, wd_um * 1.02, &sound, "orientation").unwrap();
+        assert!(!grid.columns.is_empty());
+        assert!(grid.columns.windows(2).all(|c| c[1] > c[0]));
+        // About 0.02 samples a pixel at the land: 1e5 times deeper is over the limit.
+        for depth in [1e300, wd_um * 1e5] {
+            let e = sample_grid(&meta, 3, 2, 1280, depth, &sound, "orientation").unwrap_err();
+            let msg = e.to_string();
+            assert!(msg.starts_with("orientation: the walls' depth of"), "{msg}");
+            assert!(msg.contains("a column"), "{msg}");
+        }
     }
 }
