@@ -282,6 +282,10 @@ fn run_synth(args: &SynthArgs) -> Result<()> {
     } else {
         None
     };
+    // Hidden folders of earlier runs killed outright (kill -9): removed or named, not silent.
+    for line in crate::synth::earlier_unfinished_runs(&args.out) {
+        crate::tell!("{line}");
+    }
     let summary = match (builtin, &args.sound) {
         (Some(sound), _) => render_scan(&sound, &cfg, &args.out, job)?,
         (None, Some(path)) => write_scan(&Groove::from_wav(path, &cfg)?, &args.out, job)?,
@@ -339,6 +343,9 @@ fn run_synth_scene(kind: &str, out: &Path, config: Option<&Path>) -> Result<()> 
         )?,
         None => SceneConfig::default(),
     };
+    for line in crate::synth::earlier_unfinished_runs(out) {
+        crate::tell!("{line}");
+    }
     let meta = render_scene(kind, &cfg, out, Job::reporting(&|_, _| {}))?;
     crate::say!(
         "wrote {} ({} frames with true depth)",

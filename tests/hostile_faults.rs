@@ -268,3 +268,76 @@ fn two_windows_saving_one_preset_or_exporting_one_file_do_not_interleave() {
     groovescope::app::tuning::save_preset(&params, &preset, false).unwrap();
     assert_eq!(names(dir.path()), vec!["preset.toml".to_string()]);
 }
+
+/// Sets the modification time of `dir` and of each entry directly in it to two hours ago.
+fn age_two_hours(dir: &Path) {
+    let old = std::time::SystemTime::now() - Duration::from_secs(7200);
+    let mut paths: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    paths.push(dir.to_path_buf());
+    for p in paths {
+        std::fs::File::open(&p).unwrap().set_modified(old).unwrap();
+    }
+}
+
+/// A `synth` killed with `kill -9` cannot remove its hidden `.NAME.synth-PID.tmp` folder: a
+/// rerun into the same place names it (it was kept in silence), and once nothing has written
+/// to it for an hour (another machine's run may use the same name) a rerun removes it, saying
+/// so. The rerun is never blocked.
+#[test]
+fn a_synth_killed_outright_leaves_a_folder_the_next_run_names_and_then_removes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_groovescope"))
+        .args([
+            "synth",
+            "--preset",
+            "paper",
+            "--tone",
+            "1000",
+            "--duration",
+            "1",
+        ])
+        .args(["--max-groups", "400", "--quiet", "--out", s(&out)])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let temp = dir.path().join(format!(".s.synth-{}.tmp", child.id()));
+    let start = Instant::now();
+    // Killed once its first group is written into the hidden folder.
+    while !temp.join("g000").is_dir() && !temp.join("g00000").is_dir() {
+        assert!(start.elapsed() < Duration::from_secs(120), "no group yet");
+        assert!(child.try_wait().unwrap().is_none(), "ended before the kill");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(temp.is_dir() && !out.exists());
+    let quick = |out: &Path| {
+        let args = ["synth", "--preset", "quick", "--tone", "1000", "--quiet"];
+        common::groovescope(&[&args[..], &["--out", s(out)]].concat())
+    };
+    let o = quick(&out);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains("kept the unfinished folder of an earlier generator run")
+            && e.contains(&temp.display().to_string()),
+        "{e}"
+    );
+    assert!(temp.is_dir() && out.join("scan.toml").is_file());
+    age_two_hours(&temp);
+    std::fs::remove_dir_all(&out).unwrap();
+    let o = quick(&out);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains("removed an unfinished folder left by an earlier, killed generator run")
+            && e.contains(&temp.display().to_string()),
+        "{e}"
+    );
+    assert!(!temp.exists() && out.join("scan.toml").is_file());
+}

@@ -90,6 +90,9 @@ pub fn run_synth_still(args: &SynthStillArgs) -> Result<()> {
         }
         (_, e) => e.into(),
     })?;
+    for line in crate::synth::earlier_unfinished_runs(&args.out) {
+        crate::tell!("{line}");
+    }
     let summary = write_still(&scene, &args.out)?;
     if !args.quiet {
         let t = &summary.truth;

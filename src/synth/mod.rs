@@ -176,6 +176,77 @@ pub(crate) fn fill_out_dir<T>(
 /// The kind in the names of the generators' temporary folders (`.NAME.synth-PID.tmp`).
 const SYNTH_KIND: &str = "synth";
 
+/// What the earlier generator runs into `dir` that never finished (killed outright, so they
+/// could not clean up) left beside it: a line for each hidden `.NAME.synth-PID.tmp` folder.
+/// Those whose process is gone and that nothing touched for an hour are removed
+/// ([`crate::io::staged::remove_stale`], as `fill_out_dir` and the video import do); the others
+/// are kept, since the process id may be another machine's run writing the same shared
+/// folder, and named with why, so that a rerun is never confused by them in silence. A
+/// command calls this before its run; the lines go to standard error.
+#[must_use]
+pub fn earlier_unfinished_runs(dir: &Path) -> Vec<String> {
+    let removed = crate::io::staged::remove_stale(dir, SYNTH_KIND);
+    let mut lines: Vec<String> = removed
+        .iter()
+        .map(|p| {
+            format!(
+                "removed an unfinished folder left by an earlier, killed generator run: {}",
+                p.display()
+            )
+        })
+        .collect();
+    // The names `io::staged` gives a writer of SYNTH_KIND beside `dir`.
+    let name = dir
+        .file_name()
+        .map_or_else(|| "scan".into(), |n| n.to_string_lossy().into_owned());
+    let parent = match dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let prefix = format!(".{name}.{SYNTH_KIND}-");
+    let Ok(entries) = std::fs::read_dir(&parent) else {
+        return lines;
+    };
+    let mut kept: Vec<(PathBuf, u32)> = entries
+        .flatten()
+        .filter_map(|e| {
+            let file_name = e.file_name();
+            let pid = file_name
+                .to_str()?
+                .strip_prefix(&prefix)?
+                .strip_suffix(".tmp")?
+                .parse::<u32>()
+                .ok()?;
+            (pid != std::process::id() && e.path().is_dir()).then(|| (e.path(), pid))
+        })
+        .collect();
+    kept.sort();
+    // Without /proc (not Linux) whether a process runs is not known, and nothing was removed.
+    let proc_fs = Path::new("/proc/self").exists();
+    for (path, pid) in kept {
+        let path = path.display();
+        lines.push(if !proc_fs {
+            format!(
+                "warning: an unfinished folder of another generator run (process {pid}: killed, or \
+                 still writing) lies beside the output; remove it once no run writes it: {path}"
+            )
+        } else if Path::new("/proc").join(pid.to_string()).exists() {
+            format!(
+                "warning: process {pid} may be writing this output now (its unfinished folder \
+                 lies beside it): {path}"
+            )
+        } else {
+            format!(
+                "warning: kept the unfinished folder of an earlier generator run (process {pid}, \
+                 not running here: killed, or another machine's run still writing it); a later \
+                 run removes it once nothing has written to it for an hour, or remove it \
+                 yourself: {path}"
+            )
+        });
+    }
+    lines
+}
+
 /// The folder name of group `g` in a scan whose group numbers are padded to `digits`
 /// (`g00012`): the generator, the video import's folders and its stores name groups alike.
 #[must_use]
