@@ -33,9 +33,9 @@ pub enum Command {
     Reconstruct(ReconstructArgs),
     /// Score a recovered WAV against a reference WAV (r, envelope r, SNR).
     Eval {
-        /// The recovered sound.
+        /// The recovered sound (a WAV file).
         recovered: PathBuf,
-        /// The reference sound.
+        /// The reference sound (a WAV file).
         reference: PathBuf,
         /// Print JSON instead of text.
         #[arg(long)]
@@ -66,7 +66,7 @@ pub enum Command {
     /// Run one group through every stage and dump each intermediate output (PNG) and the
     /// per-sample wall tilts (samples.csv) into a folder.
     Inspect {
-        /// Scan folder.
+        /// The scan: a folder holding scan.toml, or a Zarr store (`pack`, `import-video --zarr`).
         scan: PathBuf,
         /// Group index.
         #[arg(long, default_value_t = 0)]
@@ -113,11 +113,12 @@ pub enum Command {
     Merge(crate::side::cli::MergeArgs),
     /// Convert a scan folder to a Zarr store (one zstd chunk per group) and check it.
     Pack(crate::pack_cli::PackArgs),
-    /// Import a microscope video clip (AVI/MP4) as a scan folder (needs the `video` feature).
+    /// Import a microscope video clip (AVI/MP4) as a scan folder or Zarr store (needs the `video` feature).
     ImportVideo(crate::video_cli::ImportVideoArgs),
     /// Open the workbench (optionally on a scan).
     Gui {
-        /// Scan folder to open, or a still image (PNG or TIFF) to open in the still window.
+        /// A scan to open (a folder holding scan.toml, or a Zarr store), or a still image (PNG or
+        /// TIFF) to open in the still window.
         scan: Option<PathBuf>,
     },
 }
@@ -125,7 +126,7 @@ pub enum Command {
 /// Arguments of `reconstruct`.
 #[derive(Debug, clap::Args)]
 pub struct ReconstructArgs {
-    /// Scan folder (holds scan.toml).
+    /// The scan: a folder holding scan.toml, or a Zarr store (`pack`, `import-video --zarr`).
     pub scan: PathBuf,
     /// Output WAV file.
     #[arg(long)]

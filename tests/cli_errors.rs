@@ -412,3 +412,20 @@ fn synth_says_when_a_group_limit_cuts_the_sound_short() {
         stderr(&o)
     );
 }
+
+/// Every command that reads a scan reads a folder or a Zarr store, and its help says so
+/// (`reconstruct --help` said "Scan folder"); `pack` converts a folder only, and says that.
+#[test]
+fn a_scan_arguments_help_names_both_forms() {
+    for command in ["reconstruct", "inspect", "plan", "gui"] {
+        let o = groovescope(&[command, "--help"]);
+        let help = String::from_utf8_lossy(&o.stdout).into_owned();
+        let scan = help
+            .lines()
+            .find(|l| l.trim_start().starts_with("<SCAN>") || l.trim_start().starts_with("[SCAN]"))
+            .unwrap_or_else(|| panic!("{command}: {help}"));
+        assert!(scan.contains("Zarr store"), "{command}: {scan}");
+    }
+    let o = groovescope(&["pack", "--help"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("Scan folder to convert"));
+}
