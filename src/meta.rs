@@ -229,42 +229,49 @@ impl ScanMeta {
         )?;
         // No upper bound here: a step past the frame's width is refused below, with the width.
         at_least("motion.frame_step_um", self.motion.frame_step_um, 1e-9)?;
-        positive("motion.group_step_um", self.motion.group_step_um)?;
+        at_least("motion.group_step_um", self.motion.group_step_um, 1e-9)?;
         if let Some(df) = &self.dual_focus {
             positive("dual_focus.focus_distance_mm", df.focus_distance_mm)?;
             positive("dual_focus.glass_thickness_mm", df.glass_thickness_mm)?;
-            // Both focal planes lie in the groove, a fraction of a millimetre beyond the land:
-            // far from it, the wall depths and the sample grid built on them are nonsense (a
-            // focus distance in µm would ask for millions of samples a group).
-            let wd = self.camera.working_distance_mm;
-            let ratio = |r: f64| {
-                if (1e-3..1e3).contains(&r) {
-                    format!("{r:.3}")
-                } else {
-                    format!("{r:.2e}")
-                }
-            };
-            for (name, d) in [
-                ("dual_focus.focus_distance_mm", df.focus_distance_mm),
-                (
-                    "the focal plane under the glass (dual_focus.focus_distance_mm + glass_thickness_mm × (1 − 1/glass_index))",
-                    df.focal_distances_mm().1,
-                ),
-            ] {
-                if !(d >= wd / MAX_FOCUS_RATIO && d <= wd * MAX_FOCUS_RATIO) {
-                    return Err(format!(
-                        "{name} = {} mm is {} times camera.working_distance_mm = {} mm, outside 1/{MAX_FOCUS_RATIO} to {MAX_FOCUS_RATIO}: both focal planes lie in the groove, near the land (distances from the optical centre, in mm)",
-                        shown(d),
-                        ratio(d / wd),
-                        shown(wd)
-                    ));
-                }
-            }
             if !(df.glass_index.is_finite() && df.glass_index >= 1.0) {
                 return Err(format!(
                     "dual_focus.glass_index must be at least 1 (a real glass), got {}",
                     shown(df.glass_index)
                 ));
+            }
+            // Both focal planes lie in the groove, a fraction of a millimetre beyond the land:
+            // far from it, the wall depths and the sample grid built on them are nonsense (a
+            // focus distance in µm would ask for millions of samples a group).
+            let wd = self.camera.working_distance_mm;
+            // Computed numbers (the plane under the glass, the ratios) to three decimals.
+            let figures = |r: f64| {
+                if (1e-3..1e6).contains(&r.abs()) {
+                    format!("{}", (r * 1e3).round() / 1e3)
+                } else {
+                    format!("{r:.3e}")
+                }
+            };
+            let under = df.focal_distances_mm().1;
+            for (name, d, typed) in [
+                (
+                    "dual_focus.focus_distance_mm",
+                    df.focus_distance_mm,
+                    shown(df.focus_distance_mm),
+                ),
+                (
+                    "the focal plane under the glass (dual_focus.focus_distance_mm + glass_thickness_mm × (1 − 1/glass_index))",
+                    under,
+                    figures(under),
+                ),
+            ] {
+                if !(d >= wd / MAX_FOCUS_RATIO && d <= wd * MAX_FOCUS_RATIO) {
+                    return Err(format!(
+                        "{name} = {} mm is {} times camera.working_distance_mm = {} mm, outside 1/{MAX_FOCUS_RATIO} to {MAX_FOCUS_RATIO}: both focal planes lie in the groove, near the land (distances from the optical centre, in mm)",
+                        typed,
+                        figures(d / wd),
+                        shown(wd)
+                    ));
+                }
             }
             if !df.glass_edge_row.is_finite() || df.glass_edge_row < 0.0 {
                 return Err(format!(
@@ -469,5 +476,23 @@ mod tests {
             assert!(msg.contains(key) && msg.contains("s/scan.toml"), "{msg}");
             assert!(msg.contains("camera.working_distance_mm = 4 mm"), "{msg}");
         }
+        // A glass index below 1 is named as such, not as the plane it would put behind the camera.
+        let text = base.replace("glass_index = 1.515", "glass_index = 0");
+        let msg = ScanMeta::from_toml_str(&text, Path::new("s/scan.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("dual_focus.glass_index must be at least 1"),
+            "{msg}"
+        );
+        // A group step of 1e-300 µm (13 groups on one spot) is refused like a frame step.
+        let text = crate::io::scan::test_support::scan_toml(1e-300);
+        let msg = ScanMeta::from_toml_str(&text, Path::new("s/scan.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("motion.group_step_um must be at least 1e-9"),
+            "{msg}"
+        );
     }
 }
