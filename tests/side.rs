@@ -692,6 +692,113 @@ fn a_run_killed_at_a_random_group_resumes_to_the_same_bytes() {
     );
 }
 
+/// The start of every whole frame of a journal (its header first), and where the last ends.
+fn journal_frames(bytes: &[u8]) -> (Vec<usize>, usize) {
+    let magic = groovescope::side::journal::JOURNAL_MAGIC.len();
+    let ends: Vec<usize> = groovescope::side::record::read_frames(bytes, magic)
+        .into_iter()
+        .map(|(_, end)| end)
+        .collect();
+    let starts = std::iter::once(magic).chain(ends.iter().copied()).collect();
+    (starts, ends.last().copied().unwrap_or(magic))
+}
+
+/// A shard's journal with a record damaged in its middle is refused, in one line naming the
+/// journal, the record's byte offset and what to do, and left as it was: cutting it short would
+/// drop the finished groups after that record without a word. A torn last record (a run
+/// stopped while writing it) is dropped with a line saying so. Either way the part merges to
+/// the one-process bytes, the damaged journal once cut where the line says.
+#[test]
+fn a_journal_damaged_in_its_middle_is_refused_and_a_torn_last_record_is_dropped_aloud() {
+    let (_keep, scan, one, _) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let p = tmp.path().join("plan.json");
+    plan(scan, 2, &p, &[]);
+    let shard0 = |out: &Path| {
+        groovescope(&[
+            "reconstruct",
+            s(scan),
+            "--plan",
+            s(&p),
+            "--shard",
+            "0",
+            "--out",
+            s(out),
+            "--resume",
+        ])
+    };
+    let damaged = tmp.path().join("damaged");
+    let k = random_group(12, GROUPS / 2 - 10);
+    eprintln!("killing shard 0 at its group {k}");
+    assert!(kill_at(
+        &[
+            "reconstruct",
+            s(scan),
+            "--plan",
+            s(&p),
+            "--shard",
+            "0",
+            "--out",
+            s(&damaged),
+        ],
+        k
+    ));
+    let journal = damaged.join("journal");
+    let original = std::fs::read(&journal).unwrap();
+    let (starts, whole_end) = journal_frames(&original);
+    assert!(starts.len() > 10, "{} frames", starts.len());
+
+    // The torn case first, in a copy: the last whole record cut 5 bytes short.
+    let torn = tmp.path().join("torn");
+    std::fs::create_dir(&torn).unwrap();
+    std::fs::write(torn.join("journal"), &original[..whole_end - 5]).unwrap();
+    let o = shard0(&torn);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(
+        e.contains("the journal's last record") && e.contains("dropped, and its group runs again"),
+        "{e}"
+    );
+
+    // A byte flipped in a record in the middle: refused, the journal untouched, no part.
+    let middle = starts[starts.len() / 2];
+    let mut bytes = original.clone();
+    bytes[middle + 20] ^= 0x40;
+    std::fs::write(&journal, &bytes).unwrap();
+    let o = shard0(&damaged);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "resumed past a damaged record: {e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    assert!(
+        e.contains("damaged journal")
+            && e.contains(&format!("at byte {middle}"))
+            && e.contains(&format!("truncate -s {middle} "))
+            && e.contains("delete it to run the shard from its start")
+            && e.contains(s(&journal)),
+        "{e}"
+    );
+    assert!(std::fs::read(&journal).unwrap() == bytes, "journal altered");
+    assert!(!damaged.join("part.gsp").exists());
+
+    // Cut where the line says, it resumes from the records before the damage.
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&journal)
+        .unwrap()
+        .set_len(middle as u64)
+        .unwrap();
+    let o = shard0(&damaged);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let part1 = tmp.path().join("part-1");
+    run_shard(scan, &p, 1, &part1);
+    for part0 in [damaged, torn] {
+        let merged = tmp.path().join("merged.wav");
+        let what = format!("{}", part0.display());
+        assert_merges_to(&[part0, part1.clone()], &merged, one, &what);
+        std::fs::remove_file(&merged).unwrap();
+    }
+}
+
 fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();
     for e in std::fs::read_dir(from).unwrap() {

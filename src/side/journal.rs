@@ -3,8 +3,10 @@
 //! It lies beside the output (`OUT.wav.journal`, or `journal` inside a shard's part folder)
 //! and is removed once the output is in place. A killed run leaves it; the same command with
 //! `--resume` checks its header against the run's identity (another scan, other params,
-//! another plan or shard: refused, never mixed), drops a torn last record, and continues after
-//! the last group it holds. Records reach the file as each group finishes, so a `kill -9`
+//! another plan or shard: refused, never mixed), drops a torn last record (and says so), and
+//! continues after the last group it holds. A journal damaged before its end (a record that
+//! does not read with records after it that do) is refused, never cut short: that would drop
+//! finished groups without a word. Records reach the file as each group finishes, so a `kill -9`
 //! loses none; `fsync` every [`SYNC_INTERVAL_SECS`] bounds what a power cut can take.
 
 use std::fs::{File, OpenOptions};
@@ -12,8 +14,10 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use super::record::{Record, decode, encode, read_frames, write_frame};
+use super::record::{Record, decode, encode, next_record, read_frames, write_frame};
+use super::run::SlopeSeed;
 use super::{RunIdentity, SideError};
+use crate::engine::GroupOutcome;
 
 /// First bytes of a journal.
 pub const JOURNAL_MAGIC: &[u8] = b"GROOVESCOPE JOURNAL 1\n";
@@ -28,12 +32,49 @@ pub struct Journal {
     last_sync: Instant,
 }
 
-/// A record file read back: its identity, each record with the offset just past it, and the
-/// length of the valid part.
-pub type RecordFile = (RunIdentity, Vec<(Record, usize)>, usize);
+/// A record file read back up to its first frame that does not read.
+#[derive(Debug)]
+pub struct RecordFile {
+    /// Its identity header.
+    pub identity: RunIdentity,
+    /// Each record with the offset just past it.
+    pub records: Vec<(Record, usize)>,
+    /// The offset just past the header.
+    pub header_end: usize,
+    /// The byte length of the valid part (the offset of the first frame that does not read).
+    pub valid: usize,
+    /// Why the frame at `valid` did not decode when it is whole and passes its checksum (a
+    /// record of another build); None when it is short or damaged, or there is none.
+    pub undecodable: Option<String>,
+}
+
+/// The end of a journal that a run stopped while writing its last record left: dropped on
+/// `--resume`, which says so.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TornTail {
+    /// Where it starts.
+    pub offset: usize,
+    /// Its length.
+    pub bytes: usize,
+}
+
+/// A journal opened to continue its run (see [`Journal::resume`]).
+#[derive(Debug)]
+pub struct Resumed {
+    /// The journal, positioned to append.
+    pub journal: Journal,
+    /// The shard's slope history, when the journal holds it.
+    pub seed: Option<SlopeSeed>,
+    /// Its finished groups, in order from the range's first.
+    pub groups: Vec<GroupOutcome>,
+    /// The journal's run had another `[dsp]` table (which only the finish reads).
+    pub other_finish: bool,
+    /// A torn last record, cut off the file.
+    pub torn_tail: Option<TornTail>,
+}
 
 /// Reads a file that starts with `magic` and an identity header: the identity, the records
-/// after it (up to a torn or damaged tail), and the byte length of what was valid.
+/// after it (up to the first frame that does not read), and where that is.
 ///
 /// # Errors
 /// [`SideError::Refused`] when the file is not of that kind or its header is damaged.
@@ -60,6 +101,7 @@ pub fn read_record_file(
         .map_err(|e| SideError::refused(format!("the {what}'s header does not read: {e}"), path))?;
     let mut records = Vec::with_capacity(rest.len());
     let mut valid = *header_end;
+    let mut undecodable = None;
     for (payload, end) in rest {
         match decode(payload) {
             Ok(r) => {
@@ -67,10 +109,154 @@ pub fn read_record_file(
                 valid = *end;
             }
             // A checksummed record that does not decode comes from another build: stop there.
-            Err(_) => break,
+            Err(e) => {
+                undecodable = Some(e);
+                break;
+            }
         }
     }
-    Ok((identity, records, valid))
+    Ok(RecordFile {
+        identity,
+        records,
+        header_end: *header_end,
+        valid,
+        undecodable,
+    })
+}
+
+/// What to do about a damaged journal, in words: the groups before `at` are sound (cut the
+/// file there and resume to keep them), or delete it to run again from the start.
+fn damaged(problem: &str, at: usize, groups_before: usize, shard: bool, path: &Path) -> SideError {
+    let whole = if shard { "the shard" } else { "the run" };
+    SideError::refused(
+        format!(
+            "damaged journal: {problem}; nothing was dropped. To keep the {groups_before} \
+             finished groups before it, cut it there (truncate -s {at} {}) and --resume, or \
+             delete it to run {whole} from its start",
+            crate::stdout::shell_quoted(path)
+        ),
+        path,
+    )
+}
+
+/// The group whose record ends at or before `at`, in words ("after group G's").
+fn after_group(records: &[(Record, usize)], at: usize) -> String {
+    records
+        .iter()
+        .rev()
+        .find_map(|(r, end)| match r {
+            Record::Group(g) if *end <= at => Some(format!("after group {}'s", g.group)),
+            _ => None,
+        })
+        .unwrap_or_else(|| "before any group's".to_string())
+}
+
+/// Checks what follows a journal's last record that reads. Nothing: None. A frame that is cut
+/// short or damaged with no record that reads after it: the torn tail a run stopped while
+/// writing leaves, returned to be dropped. Anything else is damage inside the file (a record
+/// that does not read followed by ones that do, or one this build cannot read), refused: a
+/// resume past it would drop finished groups without a word.
+///
+/// # Errors
+/// [`SideError::Refused`] naming the journal, the record's byte offset and what to do.
+fn check_tail(bytes: &[u8], file: &RecordFile, path: &Path) -> Result<Option<TornTail>, SideError> {
+    let at = file.valid;
+    if at >= bytes.len() {
+        return Ok(None);
+    }
+    let shard = file.identity.shard.is_some();
+    let groups = file
+        .records
+        .iter()
+        .filter(|(r, _)| matches!(r, Record::Group(_)))
+        .count();
+    let number = file.records.len() + 1;
+    let which = format!(
+        "record {number} (at byte {at}, {})",
+        after_group(&file.records, at)
+    );
+    if let Some(e) = &file.undecodable {
+        return Err(damaged(
+            &format!(
+                "{which} passes its checksum but does not read ({e}; the journal was written \
+                 by groovescope {}, this is {})",
+                file.identity.groovescope,
+                env!("CARGO_PKG_VERSION")
+            ),
+            at,
+            groups,
+            shard,
+            path,
+        ));
+    }
+    if let Some(next) = next_record(bytes, at + 1) {
+        return Err(damaged(
+            &format!(
+                "{which} is damaged, yet a record that reads follows at byte {next}, so this is \
+                 not the torn end of a stopped run"
+            ),
+            at,
+            groups,
+            shard,
+            path,
+        ));
+    }
+    Ok(Some(TornTail {
+        offset: at,
+        bytes: bytes.len() - at,
+    }))
+}
+
+/// The journal's records as its run wrote them: for a shard, its slope history first, then
+/// the range's groups in order from its first, none past its end. Any other order is damage
+/// (records do not go missing or change places in a file only ever appended to), refused.
+///
+/// # Errors
+/// [`SideError::Refused`] naming the journal and the record's byte offset.
+fn in_order(
+    file: RecordFile,
+    path: &Path,
+) -> Result<(Option<SlopeSeed>, Vec<GroupOutcome>), SideError> {
+    let (lo, hi) = file.identity.groups;
+    let shard = file.identity.shard.is_some();
+    let mut seed = None;
+    let mut groups: Vec<GroupOutcome> = Vec::new();
+    let mut start = file.header_end;
+    for (number, (record, end)) in file.records.into_iter().enumerate() {
+        let expected = lo + groups.len();
+        let found = match record {
+            Record::Seed(h) if shard && seed.is_none() && groups.is_empty() => {
+                seed = Some(h);
+                None
+            }
+            Record::Group(g) if g.group == expected && expected < hi => {
+                groups.push(g);
+                None
+            }
+            Record::Group(g) => Some(format!("group {}'s", g.group)),
+            Record::Seed(_) => Some("a slope history".to_string()),
+            Record::End { .. } => Some("a part's end record".to_string()),
+        };
+        if let Some(found) = found {
+            let wanted = if expected < hi {
+                format!("group {expected}'s")
+            } else {
+                format!("none (the range {lo}..{hi} is complete)")
+            };
+            return Err(damaged(
+                &format!(
+                    "record {} (at byte {start}) is {found}, where {wanted} should be",
+                    number + 1
+                ),
+                start,
+                groups.len(),
+                shard,
+                path,
+            ));
+        }
+        start = end;
+    }
+    Ok((seed, groups))
 }
 
 impl Journal {
@@ -95,30 +281,30 @@ impl Journal {
         })
     }
 
-    /// Opens the journal at `path` to continue `identity`'s run: its records (a torn last one
-    /// is cut off the file), positioned to append after them, and whether the journal's run
-    /// had another `[dsp]` table (which only the finish reads: its groups are this run's).
+    /// Opens the journal at `path` to continue `identity`'s run: its slope history and groups,
+    /// positioned to append after them, whether the journal's run had another `[dsp]` table
+    /// (which only the finish reads: its groups are this run's), and the torn last record cut
+    /// off the file, if there was one.
     ///
     /// # Errors
     /// [`SideError::Refused`] naming the journal when it belongs to another run (another scan,
     /// other params beyond `[dsp]` or another version, another plan, shard or range, or
-    /// `--keep-going` where `identity` lacks it) or is not a journal.
-    pub fn resume(
-        path: &Path,
-        identity: &RunIdentity,
-    ) -> Result<(Self, Vec<Record>, bool), SideError> {
+    /// `--keep-going` where `identity` lacks it), is not a journal, or is damaged before its
+    /// end (a record that does not read with records after it that do, one this build cannot
+    /// read, records out of order): it is left as it was.
+    pub fn resume(path: &Path, identity: &RunIdentity) -> Result<Resumed, SideError> {
         let bytes =
             std::fs::read(path).map_err(|e| SideError::io("cannot read the journal", &e, path))?;
-        let (mut found, records, valid) = read_record_file(&bytes, JOURNAL_MAGIC, "journal", path)?;
+        let mut file = read_record_file(&bytes, JOURNAL_MAGIC, "journal", path)?;
         // A run without --keep-going stops at the first unreadable group, so its journal holds
         // only groups that read, each as a run with --keep-going makes it: such a run goes on
         // from them (past a damaged frame that stopped it), never the other way round.
         if identity.keep_going {
-            found.keep_going = true;
+            file.identity.keep_going = true;
         }
-        let difference = identity.difference(&found);
+        let difference = identity.difference(&file.identity);
         if let Some(diff) = &difference
-            && !identity.same_groups_as(&found)
+            && !identity.same_groups_as(&file.identity)
         {
             return Err(SideError::refused(
                 format!(
@@ -128,6 +314,9 @@ impl Journal {
                 path,
             ));
         }
+        let torn_tail = check_tail(&bytes, &file, path)?;
+        let valid = file.valid;
+        let (seed, groups) = in_order(file, path)?;
         let file = OpenOptions::new()
             .write(true)
             .open(path)
@@ -141,8 +330,13 @@ impl Journal {
             last_sync: Instant::now(),
         };
         journal.seek_end()?;
-        let records = records.into_iter().map(|(r, _)| r).collect();
-        Ok((journal, records, difference.is_some()))
+        Ok(Resumed {
+            journal,
+            seed,
+            groups,
+            other_finish: difference.is_some(),
+            torn_tail,
+        })
     }
 
     fn seek_end(&mut self) -> Result<(), SideError> {
@@ -227,8 +421,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("o.wav.journal");
         Journal::create(&path, &identity(false)).unwrap();
-        let (_, records, other_finish) = Journal::resume(&path, &identity(true)).unwrap();
-        assert!(records.is_empty() && !other_finish);
+        let r = Journal::resume(&path, &identity(true)).unwrap();
+        assert!(r.groups.is_empty() && r.seed.is_none() && !r.other_finish);
         Journal::create(&path, &identity(true)).unwrap();
         let e = Journal::resume(&path, &identity(false))
             .unwrap_err()

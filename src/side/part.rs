@@ -117,8 +117,7 @@ pub fn read_part_header(path: &Path) -> Result<RunIdentity, SideError> {
             .read_to_end(&mut head)
             .map_err(io_err)?;
     }
-    let (identity, _, _) = read_record_file(&head, PART_MAGIC, "part", &file)?;
-    Ok(identity)
+    Ok(read_record_file(&head, PART_MAGIC, "part", &file)?.identity)
 }
 
 /// Reads and checks a part (a folder or its `part.gsp`).
@@ -130,7 +129,12 @@ pub fn read_part(path: &Path) -> Result<Part, SideError> {
     let file = existing_part_file(path)?;
     let bytes =
         std::fs::read(&file).map_err(|e| SideError::io("cannot read the part", &e, &file))?;
-    let (identity, records, valid) = read_record_file(&bytes, PART_MAGIC, "part", &file)?;
+    let super::journal::RecordFile {
+        identity,
+        records,
+        valid,
+        ..
+    } = read_record_file(&bytes, PART_MAGIC, "part", &file)?;
     let (lo, hi) = identity.groups;
     let mut groups = Vec::with_capacity(hi.saturating_sub(lo));
     let mut end = None;

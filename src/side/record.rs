@@ -5,7 +5,8 @@
 //! record whose first byte says its kind: a group (its report row, its signal with exact f32
 //! and f64 bits, what it added to the slope reference, its timings), the slope history a shard
 //! starts from, or the end of a part (the group count and a CRC-32 of every byte before it).
-//! A reader stops at the first frame that is short or fails its checksum: a torn tail.
+//! A reader stops at the first frame that is short or fails its checksum; whether that is a torn
+//! tail (nothing readable after it) or damage inside the file, [`next_record`] tells.
 
 use std::io::Write;
 
@@ -50,35 +51,50 @@ pub fn write_frame(out: &mut impl Write, bytes: &[u8]) -> std::io::Result<()> {
     out.write_all(&crc32fast::hash(bytes).to_le_bytes())
 }
 
+/// The whole frame at `offset` whose checksum holds: its payload and the offset just past it.
+/// An empty payload is no frame: no header or record is empty, and zeros (what a file system
+/// may leave past the last write after a power cut) would otherwise read as empty frames, the
+/// CRC-32 of nothing being 0.
+fn frame_at(bytes: &[u8], offset: usize) -> Option<(&[u8], usize)> {
+    let len = bytes
+        .get(offset..offset.checked_add(4)?)
+        .and_then(|b| <[u8; 4]>::try_from(b).ok())
+        .map(|b| u32::from_le_bytes(b) as usize)?;
+    if len == 0 || len > MAX_FRAME_BYTES {
+        return None;
+    }
+    let start = offset + 4;
+    let payload = bytes.get(start..start + len)?;
+    let crc = bytes
+        .get(start + len..start + len + 4)
+        .and_then(|b| <[u8; 4]>::try_from(b).ok())?;
+    (crc32fast::hash(payload) == u32::from_le_bytes(crc)).then_some((payload, start + len + 4))
+}
+
 /// The frames of `bytes` from `offset` on: each payload with the offset just past it. Stops
-/// at the first short or damaged frame.
+/// at the first short, empty or damaged frame.
 #[must_use]
 pub fn read_frames(bytes: &[u8], mut offset: usize) -> Vec<(&[u8], usize)> {
     let mut out = Vec::new();
-    while let Some(len) = bytes
-        .get(offset..offset + 4)
-        .and_then(|b| <[u8; 4]>::try_from(b).ok())
-        .map(|b| u32::from_le_bytes(b) as usize)
-    {
-        if len > MAX_FRAME_BYTES {
-            break;
-        }
-        let start = offset + 4;
-        let (Some(payload), Some(crc)) = (
-            bytes.get(start..start + len),
-            bytes
-                .get(start + len..start + len + 4)
-                .and_then(|b| <[u8; 4]>::try_from(b).ok()),
-        ) else {
-            break;
-        };
-        if crc32fast::hash(payload) != u32::from_le_bytes(crc) {
-            break;
-        }
-        offset = start + len + 4;
+    while let Some((payload, end)) = frame_at(bytes, offset) {
+        offset = end;
         out.push((payload, offset));
     }
     out
+}
+
+/// Where the first frame at or after `from` lies that is whole, passes its checksum and decodes
+/// as a record: after a frame that does not read, one found means the file is damaged inside
+/// (records that read follow the bad one), none means its tail is torn (a run stopped while
+/// writing its last record). Each byte is tried, since a damaged length cannot be followed; a
+/// chance match needs a record kind byte and a CRC-32 to agree, and then to decode.
+#[must_use]
+pub fn next_record(bytes: &[u8], from: usize) -> Option<usize> {
+    (from..bytes.len()).find(|&at| {
+        let kind = bytes.get(at + 4);
+        matches!(kind, Some(&(TAG_GROUP | TAG_SEED | TAG_END)))
+            && frame_at(bytes, at).is_some_and(|(payload, _)| decode(payload).is_ok())
+    })
 }
 
 fn side_code(side: WallSide) -> u8 {
@@ -466,6 +482,18 @@ mod tests {
         let mid = damaged.len() / 2;
         damaged[mid] ^= 0x40;
         assert_eq!(read_frames(&damaged, 0).len(), 1);
+        // Records that read follow the damaged one: the next starts where the third frame does.
+        let third = read_frames(&file, 0)[1].1;
+        assert_eq!(
+            next_record(&damaged, read_frames(&damaged, 0)[0].1 + 1),
+            Some(third)
+        );
+        // A torn tail has none after it, nor do zeros past it (which no longer read as frames).
+        let mut torn = file[..file.len() - 7].to_vec();
+        assert_eq!(next_record(&torn, third + 1), None);
+        torn.extend_from_slice(&[0; 64]);
+        assert_eq!(read_frames(&torn, 0).len(), 2);
+        assert_eq!(next_record(&torn, third + 1), None);
         assert!(decode(&[TAG_GROUP, 1, 2]).is_err());
         assert!(decode(&[99]).is_err());
     }

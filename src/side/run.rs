@@ -4,7 +4,7 @@ use std::ops::Range;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-use super::journal::Journal;
+use super::journal::{Journal, Resumed, TornTail};
 use super::record::Record;
 use super::{RunIdentity, SideError};
 use crate::engine::{EngineError, GroupOutcome, GroupStream, SlopeEntry, SlopeMode, run_groups};
@@ -121,6 +121,9 @@ pub enum RunEvent<'a> {
         groups: usize,
         /// The journal's run had another `[dsp]` table: this run finishes with its own.
         other_finish: bool,
+        /// The torn last record a run stopped while writing it left, cut off the journal
+        /// (its group runs again).
+        torn_tail: Option<TornTail>,
     },
     /// Running groups before the range for the slope history.
     Context(Range<usize>),
@@ -150,7 +153,7 @@ pub fn run_range(
 ) -> Result<RangeResult, SideError> {
     run.params.validate_for_clip().map_err(EngineError::from)?;
     let exists = run.journal.exists();
-    let (mut journal, records, other_finish) = if exists && run.resume {
+    let resumed = if exists && run.resume {
         Journal::resume(run.journal, &run.identity)?
     } else if exists && !run.force {
         return Err(SideError::refused(
@@ -159,28 +162,27 @@ pub fn run_range(
             run.journal,
         ));
     } else {
-        (
-            Journal::create(run.journal, &run.identity)?,
-            Vec::new(),
-            false,
-        )
-    };
-    let mut seed = None;
-    let mut resumed_groups: Vec<GroupOutcome> = Vec::new();
-    for record in records {
-        match record {
-            Record::Seed(h) if resumed_groups.is_empty() => seed = Some(h),
-            Record::Group(g) if g.group == run.range.start + resumed_groups.len() => {
-                resumed_groups.push(g);
-            }
-            _ => break,
+        Resumed {
+            journal: Journal::create(run.journal, &run.identity)?,
+            seed: None,
+            groups: Vec::new(),
+            other_finish: false,
+            torn_tail: None,
         }
-    }
+    };
+    let Resumed {
+        mut journal,
+        seed,
+        groups: resumed_groups,
+        other_finish,
+        torn_tail,
+    } = resumed;
     let resumed = resumed_groups.len();
-    if resumed > 0 || seed.is_some() {
+    if resumed > 0 || seed.is_some() || torn_tail.is_some() {
         on_event(RunEvent::Resumed {
             groups: resumed,
             other_finish,
+            torn_tail,
         });
     }
     let mut context_groups = 0;

@@ -190,10 +190,24 @@ impl ProgressOut {
             RunEvent::Resumed {
                 groups: n,
                 other_finish,
+                torn_tail,
             } => {
                 self.resumed = n;
                 self.bar.set_position(n as u64);
                 self.bar.reset_eta();
+                // Said even with --quiet: what became of the journal's bytes is the archive's
+                // business, and this is the one line about it.
+                if let Some(t) = torn_tail {
+                    self.bar.suspend(|| {
+                        crate::tell!(
+                            "the journal's last record ({} bytes at byte {}) is incomplete, as a \
+                             run stopped while writing it leaves it: dropped, and its group runs \
+                             again",
+                            t.bytes,
+                            t.offset
+                        );
+                    });
+                }
                 let finish = if other_finish {
                     " (its run had another [dsp] table, which only the finish reads: this run \
                      finishes with its own)"
@@ -207,7 +221,8 @@ impl ProgressOut {
                     self.line(&serde_json::json!({
                         "event": "resumed",
                         "groups": n,
-                        "other_finish": other_finish
+                        "other_finish": other_finish,
+                        "torn_tail_bytes": torn_tail.map(|t| t.bytes),
                     }));
                 }
             }
