@@ -301,6 +301,7 @@ fn the_still_command_writes_sound_and_a_report() {
     assert_eq!(r.spec().sample_rate, 44_100);
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(json["groove"], 2);
+    assert_eq!(json["status"], "ok");
     let filters = json["filters"].as_str().unwrap();
     assert!(filters.contains("low-pass 3000 Hz (2nd-order Butterworth, forward and backward"));
     assert_eq!(json["grooves_found"].as_array().unwrap().len(), 3);
@@ -358,6 +359,56 @@ fn still_error(image: &Path, radius: &str, extra: &[&str]) -> String {
     assert_eq!(err.matches(head.as_str()).count(), 1, "said twice: {err}");
     assert!(!wav.exists());
     err
+}
+
+/// A failed decode with `--report` writes a report saying why (it wrote none, and a batch had
+/// nothing to read): `status` "failed", the error line, what was asked; no WAV; the exit
+/// fails with the one line. An existing report is not replaced without `--force`.
+#[test]
+fn a_failed_still_writes_its_report_saying_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, image, radius) = small_still(dir.path(), Axis::Vertical, Cut::Lateral, "png");
+    let radius = radius.to_string();
+    let wav = dir.path().join("o.wav");
+    let report = dir.path().join("o.json");
+    let mut args = still_args(s(&image), s(&wav), &radius);
+    args.extend(["--groove", "9", "--report", s(&report)]);
+    let out = groovescope(&args);
+    let err = stderr(&out);
+    assert!(!out.status.success() && !wav.exists(), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert_eq!(json["status"], "failed");
+    assert_eq!(json["error"], err.trim().trim_start_matches("error: "));
+    assert!(
+        json["error"].as_str().unwrap().contains("groove 9"),
+        "{json}"
+    );
+    assert_eq!(json["image"], s(&image));
+    assert_eq!(json["groove"], 9);
+    assert_eq!(json["output_written"], false);
+    // A number the flags got wrong is kept; one that is not finite is null.
+    let before = std::fs::read(&report).unwrap();
+    let again = groovescope(&args);
+    assert!(
+        stderr(&again).contains("refusing to overwrite"),
+        "{}",
+        stderr(&again)
+    );
+    assert_eq!(std::fs::read(&report).unwrap(), before, "not replaced");
+    let mut args = still_args(s(&image), s(&wav), "nan");
+    args.extend(["--report", s(&report), "--force"]);
+    let out = groovescope(&args);
+    assert!(!out.status.success() && !wav.exists());
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+    assert!(
+        json["error"].as_str().unwrap().contains("--radius-mm"),
+        "{json}"
+    );
+    assert!(
+        json["radius_mm"].is_null() && json["um_per_px"] == 1.0,
+        "{json}"
+    );
 }
 
 #[test]

@@ -196,6 +196,8 @@ struct GapLine {
 #[derive(Debug, serde::Serialize)]
 struct StillReport<'a> {
     version: &'static str,
+    /// "ok" (a failed run's report says "failed": [`StillFailureReport`]).
+    status: &'static str,
     image: String,
     output: String,
     params_file: Option<String>,
@@ -247,7 +249,10 @@ fn still_progress(quiet: bool) -> indicatif::ProgressBar {
 /// Runs `still`.
 ///
 /// # Errors
-/// Any failure as one line naming the file.
+/// Any failure as one line naming the file. With `--report`, a failure after the outputs were
+/// checked (bad params, an image without grooves, a groove lost, a WAV that cannot be written)
+/// is also recorded there ([`StillFailureReport`]), for a batch to read why; a Ctrl-C writes
+/// nothing.
 pub fn run_still(args: &StillArgs) -> Result<()> {
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
         .chain(args.report.as_deref())
@@ -259,6 +264,78 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
     crate::cli::check_outputs(&outputs, &inputs, args.force)?;
     // One writer an output, taken before the decode: a folder it cannot write in is said now.
     let _locks = crate::side::cli::lock_outputs(&outputs)?;
+    let done = match decode_and_write_wav(args) {
+        Ok(done) => done,
+        Err(e) => return Err(record_failure(args, e)),
+    };
+    let Decoded {
+        run,
+        setup,
+        params,
+        scores,
+    } = done;
+    if let Some(path) = &args.report {
+        let what = ReportInputs {
+            image: &args.image,
+            out: &args.out,
+            params_file: args.params.as_deref(),
+            reference: args.reference.as_deref(),
+            scores: scores.clone(),
+            chosen_automatically: args.groove.is_none(),
+        };
+        crate::cli::undo_first_on_error(
+            &args.out,
+            write_still_report(path, &run, &setup, &params, &what, args.force),
+        )?;
+    }
+    let a = &run.analysis;
+    let groove = &a.grooves.grooves[a.chosen];
+    crate::cli::print_warnings(&run.warnings);
+    if let (Some(path), Some(all)) = (&args.reference, &scores)
+        && all.iter().any(Option::is_none)
+    {
+        crate::tell!(
+            "warning: too few samples overlap the sound to score against the reference: {}",
+            path.display()
+        );
+    }
+    if !args.quiet {
+        let details = format!(
+            "{}, groove {} of {} found, {:.1} s",
+            run.audio.channels_label(),
+            groove.number,
+            a.grooves.grooves.len(),
+            run.timings.total_secs
+        );
+        crate::say!(
+            "{}",
+            crate::cli::wrote_sound(&args.out, &run.audio, &details)
+        )?;
+        for (c, s) in scores.iter().flatten().enumerate() {
+            if let Some(s) = s {
+                let channel = if run.audio.channels.len() > 1 {
+                    format!(" (channel {c})")
+                } else {
+                    String::new()
+                };
+                crate::say!("vs reference{channel}: {}", s.line())?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A still decoded and its WAV written: what the report and the summary need.
+struct Decoded {
+    run: super::StillRun,
+    setup: crate::pipeline::still::StillSetup,
+    params: crate::pipeline::PipelineParams,
+    scores: Option<Vec<Option<crate::pipeline::eval::Scores>>>,
+}
+
+/// `still`'s work once its outputs are checked and locked: the params, the reference and the
+/// settings read and checked, the still decoded and scored, its WAV written.
+fn decode_and_write_wav(args: &StillArgs) -> Result<Decoded> {
     let params = crate::cli::load_params(args.params.as_deref())?;
     // The reference is read first, so that a bad one is said before the decode, not after.
     let reference = args
@@ -319,55 +396,80 @@ pub fn run_still(args: &StillArgs) -> Result<()> {
         .transpose()?;
     let info = still_transfer_info(&args.image, &run, &setup, &params, args.bits);
     crate::io::wav::write_transfer_wav(&args.out, &run.audio, args.bits, args.force, &info)?;
-    if let Some(path) = &args.report {
-        let what = ReportInputs {
-            image: &args.image,
-            out: &args.out,
-            params_file: args.params.as_deref(),
-            reference: args.reference.as_deref(),
-            scores: scores.clone(),
-            chosen_automatically: args.groove.is_none(),
-        };
-        crate::cli::undo_first_on_error(
-            &args.out,
-            write_still_report(path, &run, &setup, &params, &what, args.force),
-        )?;
+    Ok(Decoded {
+        run,
+        setup,
+        params,
+        scores,
+    })
+}
+
+/// The JSON report of a `still` that failed (`status` "failed"): the one-line error and what
+/// the run was asked to do. No WAV was written.
+#[derive(Debug, serde::Serialize)]
+pub struct StillFailureReport<'a> {
+    /// groovescope version.
+    pub version: &'static str,
+    /// Always "failed" (a decoded still's report says "ok").
+    pub status: &'static str,
+    /// The line the command printed (without `error: `).
+    pub error: String,
+    /// The still.
+    pub image: String,
+    /// The WAV asked for, not written.
+    pub output: String,
+    /// Always false.
+    pub output_written: bool,
+    /// The params file given, if any.
+    pub params_file: Option<String>,
+    /// The reference given, if any.
+    pub reference: Option<String>,
+    /// The settings given (`--axis`, `--cut`, `--reverse`, `--um-per-px`, `--rpm`,
+    /// `--radius-mm`, `--groove`; an unusable number is null).
+    pub axis: &'a str,
+    /// `--cut`.
+    pub cut: &'a str,
+    /// `--reverse`.
+    pub reverse: bool,
+    /// `--um-per-px`.
+    pub um_per_px: f64,
+    /// `--rpm`.
+    pub rpm: f64,
+    /// `--radius-mm`.
+    pub radius_mm: f64,
+    /// `--groove` (None: the decoder was to choose).
+    pub groove: Option<usize>,
+}
+
+/// `e`, after recording it in the `--report` file when one was asked for and the run was not
+/// stopped by Ctrl-C (which writes nothing); a report that cannot be written is said on the
+/// same line.
+fn record_failure(args: &StillArgs, e: anyhow::Error) -> anyhow::Error {
+    let stopped = crate::job::interrupted().load(std::sync::atomic::Ordering::Relaxed);
+    let Some(path) = args.report.as_deref().filter(|_| !stopped) else {
+        return e;
+    };
+    let report = StillFailureReport {
+        version: env!("CARGO_PKG_VERSION"),
+        status: "failed",
+        error: format!("{e:#}"),
+        image: args.image.display().to_string(),
+        output: args.out.display().to_string(),
+        output_written: false,
+        params_file: args.params.as_ref().map(|p| p.display().to_string()),
+        reference: args.reference.as_ref().map(|p| p.display().to_string()),
+        axis: &args.axis,
+        cut: &args.cut,
+        reverse: args.reverse,
+        um_per_px: args.um_per_px,
+        rpm: args.rpm,
+        radius_mm: args.radius_mm,
+        groove: args.groove,
+    };
+    match crate::io::write_json_atomic(path, &report, args.force) {
+        Ok(()) => e,
+        Err(w) => anyhow::anyhow!("{e:#}; the report of the failure was not written either: {w}"),
     }
-    let a = &run.analysis;
-    let groove = &a.grooves.grooves[a.chosen];
-    crate::cli::print_warnings(&run.warnings);
-    if let (Some(path), Some(all)) = (&args.reference, &scores)
-        && all.iter().any(Option::is_none)
-    {
-        crate::tell!(
-            "warning: too few samples overlap the sound to score against the reference: {}",
-            path.display()
-        );
-    }
-    if !args.quiet {
-        let details = format!(
-            "{}, groove {} of {} found, {:.1} s",
-            run.audio.channels_label(),
-            groove.number,
-            a.grooves.grooves.len(),
-            run.timings.total_secs
-        );
-        crate::say!(
-            "{}",
-            crate::cli::wrote_sound(&args.out, &run.audio, &details)
-        )?;
-        for (c, s) in scores.iter().flatten().enumerate() {
-            if let Some(s) = s {
-                let channel = if run.audio.channels.len() > 1 {
-                    format!(" (channel {c})")
-                } else {
-                    String::new()
-                };
-                crate::say!("vs reference{channel}: {}", s.line())?;
-            }
-        }
-    }
-    Ok(())
 }
 
 /// What a still report says beyond the decode itself.
@@ -446,6 +548,7 @@ pub fn write_still_report(
     let names = ["land|wall", "wall|bottom", "bottom|wall", "wall|land"];
     let report = StillReport {
         version: env!("CARGO_PKG_VERSION"),
+        status: "ok",
         image: what.image.display().to_string(),
         output: what.out.display().to_string(),
         params_file: what.params_file.map(|p| p.display().to_string()),
