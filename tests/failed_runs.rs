@@ -113,6 +113,37 @@ fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
     assert_eq!(names(&work), ["a.wav"]);
 }
 
+/// A shard that fails after its groups ran (here its report cannot be written) keeps its
+/// journal and says so with the same advice as a failure among the groups: how many groups are
+/// kept, where, and that --resume goes on from them; it then does, to a complete part.
+#[test]
+fn a_shard_failing_at_its_finish_keeps_its_groups_and_says_resume() {
+    let (_dir, demo, work) = common::demo_and_out_folder("work");
+    let plan = work.join("plan.json");
+    let o = groovescope(&two_shard_plan(s(&demo), s(&plan)));
+    assert!(o.status.success(), "{}", stderr(&o));
+    // Shard 1 of 2 runs groups 6..13 of the demo's 13; a folder where its report goes.
+    let part = work.join("part-1");
+    std::fs::create_dir_all(part.join("report.json")).unwrap();
+    let shard = ["--plan", s(&plan), "--shard", "1"];
+    refused(
+        &demo,
+        &part,
+        &shard,
+        &[
+            "report.json",
+            "7 finished groups are kept in",
+            "part-1/journal",
+            "the same command with --resume goes on from them",
+        ],
+    );
+    assert_eq!(names(&part), ["journal", "report.json"]);
+    std::fs::remove_dir(part.join("report.json")).unwrap();
+    let o = reconstruct(&demo, &part, &[&shard[..], &["--resume"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(names(&part), ["part.gsp", "report.json"]);
+}
+
 /// A run stopped by a damaged frame goes on past it with `--resume --keep-going` (its journal
 /// holds only groups that read, as a run with --keep-going makes them), to the sound a run with
 /// --keep-going from the start makes.

@@ -135,10 +135,16 @@ pub(super) fn run_shard(args: &ReconstructArgs, plan_path: &Path, index: usize) 
     };
     // The report before the part: the part marks the shard complete, so a report that cannot
     // be written (a full disk) leaves the shard to --resume from its journal, not a part that
-    // --resume calls complete without a report.
-    write_json_atomic(&args.out.join("report.json"), &report, true)?;
-    let written = write_part(&args.out, &identity, &groups, args.force)?;
-    result.journal.remove()?;
+    // --resume called complete without a report. A failure here, after the groups ran, says
+    // what is kept and how to go on, as a failure among the groups does.
+    let finish = || -> Result<std::path::PathBuf> {
+        write_json_atomic(&args.out.join("report.json"), &report, true)?;
+        let written = write_part(&args.out, &identity, &groups, args.force)?;
+        result.journal.remove()?;
+        Ok(written)
+    };
+    let written = finish()
+        .map_err(|e| after_failure(e, &journal, had_journal, args, groups.len(), keep_going))?;
     // The groups' warnings as a whole run prints them, even with --quiet: a gap filled with
     // silence must not pass unseen until the merge.
     crate::cli::print_warnings(&report.warnings);
