@@ -37,7 +37,8 @@ pub enum Command {
         recovered: PathBuf,
         /// The reference sound (a WAV file).
         reference: PathBuf,
-        /// Print JSON instead of text.
+        /// Print JSON instead of text: one object, `channels` holding each channel pair's
+        /// scores (a single pair's also at the top level) and `mixed_to_mono`.
         #[arg(long)]
         json: bool,
         /// Longest lag searched, in milliseconds.

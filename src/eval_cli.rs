@@ -13,7 +13,21 @@ type ChannelPair<'a> = (Cow<'a, [f32]>, Cow<'a, [f32]>);
 /// Below this |r| the scores say the sounds are hardly alike (see [`run_eval`]'s warning).
 const LOW_R: f64 = 0.3;
 
-/// Runs `eval`: prints the scores as text or JSON (an array for a stereo pair).
+/// What `eval --json` prints: one object whatever the channels.
+#[derive(serde::Serialize)]
+struct EvalJson<'a> {
+    /// A single comparison's scores (mono, or channels mixed to mono) at the top level too,
+    /// as `eval --json` printed them before `channels` came.
+    #[serde(flatten)]
+    only: Option<&'a crate::pipeline::eval::Scores>,
+    /// Channels that did not pair up (stereo against mono) were mixed to mono.
+    mixed_to_mono: bool,
+    /// Each channel pair's scores in order: one for mono, two for a stereo pair.
+    channels: &'a [crate::pipeline::eval::Scores],
+}
+
+/// Runs `eval`: prints the scores as text or JSON (one object: [`EvalJson`]; it was an object
+/// for a mono comparison and an array for a stereo one).
 ///
 /// # Errors
 /// An unreadable or non-finite sound, channels that do not pair up, too few overlapping
@@ -97,10 +111,14 @@ pub fn run_eval(recovered: &Path, reference: &Path, json: bool, max_lag_ms: f64)
     }
     let mut text = String::new();
     if json {
-        text = match all.as_slice() {
-            [one] => serde_json::to_string_pretty(one)?,
-            _ => serde_json::to_string_pretty(&all)?,
-        };
+        text = serde_json::to_string_pretty(&EvalJson {
+            only: match all.as_slice() {
+                [one] => Some(one),
+                _ => None,
+            },
+            mixed_to_mono: mixed,
+            channels: &all,
+        })?;
         text.push('\n');
     } else {
         for (k, scores) in all.iter().enumerate() {

@@ -260,16 +260,30 @@ fn eval_scores_stereo_per_channel_and_refuses_nan_samples() {
     write_wav(&pair, &audio, WavBits::Float32, false).unwrap();
     let out = groovescope(&["eval", s(&pair), s(&pair), "--json"]);
     assert!(out.status.success(), "{}", stderr(&out));
+    // One object whatever the channels (a stereo pair's scores came as a bare array).
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let channels = json.as_array().unwrap();
+    let channels = json["channels"].as_array().unwrap();
     assert_eq!(channels.len(), 2);
     assert!(
         channels.iter().all(|c| c["r"].as_f64().unwrap() > 0.9999),
         "{json}"
     );
+    assert!(
+        json["r"].is_null() && json["mixed_to_mono"] == false,
+        "{json}"
+    );
     // Channels that do not pair up are mixed, and it says so.
     let mono = dir.path().join("mono.wav");
     common::write_raw_wav(&mono, 44_100, &sine);
+    // Mono: the one pair's scores at the top level as before, and in `channels`.
+    let out = groovescope(&["eval", s(&mono), s(&mono), "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["channels"].as_array().unwrap().len(), 1, "{json}");
+    assert_eq!(json["samples"], json["channels"][0]["samples"], "{json}");
+    assert!(json["r"].as_f64().unwrap() > 0.9999, "{json}");
+    let out = groovescope(&["eval", s(&pair), s(&mono), "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(json["mixed_to_mono"] == true && json["channels"].as_array().unwrap().len() == 1);
     let o = succeeded_saying(
         &["eval", s(&pair), s(&mono)],
         "2 channels and the reference 1: scored as their mono mixes",
