@@ -74,6 +74,50 @@ fn outputs_are_checked_before_any_group_runs() {
     assert_eq!(names(&work), ["a-folder"], "nothing written, no journal");
 }
 
+/// A folder this process cannot write: a read-only one, or where that does not stop it (root),
+/// `/sys`; None when neither is to be had.
+fn unwritable_folder(dir: &Path) -> Option<PathBuf> {
+    use std::os::unix::fs::PermissionsExt;
+    let ro = dir.join("read-only");
+    std::fs::create_dir(&ro).unwrap();
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
+    let writes = |d: &Path| std::fs::write(d.join("probe"), b"").is_ok();
+    if !writes(&ro) {
+        return Some(ro);
+    }
+    let _ = std::fs::remove_file(ro.join("probe"));
+    let sys = PathBuf::from("/sys");
+    (sys.is_dir() && !writes(&sys)).then_some(sys)
+}
+
+/// `plan --out` into a folder it cannot write is refused before the scan is opened and the
+/// probe runs its groups (minutes on a side), naming the plan file: a missing scan is not even
+/// reached.
+#[test]
+fn a_plan_into_an_unwritable_folder_is_refused_before_its_probe() {
+    let (dir, demo, _work) = common::demo_and_out_folder("work");
+    let Some(folder) = unwritable_folder(dir.path()) else {
+        eprintln!("skipped: no folder this process cannot write");
+        return;
+    };
+    let plan = folder.join("plan.json");
+    let missing = dir.path().join("no-scan-here");
+    for scan in [&demo, &missing] {
+        let o = groovescope(&[
+            "plan",
+            s(scan),
+            "--shards",
+            "2",
+            "--probe-groups",
+            "13",
+            "--out",
+            s(&plan),
+        ]);
+        common::failed_with(&o, &["cannot lock the output", s(&plan)]);
+    }
+    assert!(!plan.exists());
+}
+
 #[test]
 fn a_failed_run_keeps_its_journal_only_with_groups_to_go_on_from() {
     let (_dir, demo, work) = common::demo_and_out_folder("work");

@@ -278,6 +278,10 @@ pub fn run_plan(args: &PlanArgs) -> Result<()> {
     let inputs: Vec<&Path> = args.params.as_deref().into_iter().collect();
     crate::cli::check_outside_scan(&[args.out.as_path()], &args.scan)?;
     check_outputs(&[args.out.as_path()], &inputs, args.force)?;
+    // The output's lock, as reconstruct and merge take theirs: a second plan writing the same
+    // file is refused, and a folder that cannot be written is named now, before the scan is
+    // opened and the probe runs its groups (minutes on a side), not when the plan is written.
+    let _lock = lock_outputs(&[args.out.as_path()])?;
     let mut params = load_params(args.params.as_deref())?;
     params.path = path_choice(&args.path, params.path);
     let scan = Scan::open(&args.scan)?;
