@@ -44,10 +44,12 @@ impl Workbench {
     /// # Errors
     /// The message shown (an existing file without `overwrite`, a failed write).
     pub fn save_preset_to(&mut self, path: &Path, overwrite: bool) -> Result<(), String> {
+        let replaces = overwrite && path.exists();
         match super::tuning::save_preset(self.tuning.params(), path, overwrite) {
             Ok(()) => {
                 self.tuning.saved_as(path);
-                self.info(format!("saved preset {}", path.display()));
+                let done = if replaces { "replaced" } else { "saved" };
+                self.info(format!("{done} preset {}", path.display()));
                 Ok(())
             }
             Err(e) => {
@@ -236,9 +238,12 @@ impl Workbench {
             None
         };
         let rate = self.views.wave.export_rate_hz;
+        // Said plainly when a file is replaced, so no replacement passes unnoticed.
+        let replaces = overwrite && export::would_overwrite(path);
         match export::export_wav(&clip, path, bits, rate, sel, overwrite) {
             Ok(()) => {
-                self.info(format!("exported {}", path.display()));
+                let done = if replaces { "replaced" } else { "exported" };
+                self.info(format!("{done} {}", path.display()));
                 Ok(())
             }
             Err(e) => {
@@ -328,34 +333,58 @@ impl Workbench {
         });
     }
 
-    /// Acts on a path chosen in a dialog (native or in-app).
-    pub fn use_dialog_path(&mut self, kind: DialogKind, path: PathBuf) {
+    /// Acts on a path chosen in a dialog. `asked` is true when a native save dialog chose it:
+    /// such a dialog asks before it returns an existing file (rfd runs zenity with
+    /// `--confirm-overwrite`; the desktop portals ask too), so replacing that very file is not
+    /// asked about again. A file it did not name is still asked about: the report beside a WAV
+    /// that is new, or a name that had its extension added. The in-app path field asks nothing
+    /// itself, so its paths come with `asked` false and every replacement is asked about.
+    pub fn use_dialog_path(&mut self, kind: DialogKind, path: PathBuf, asked: bool) {
+        // True when the dialog asked before replacing `target`, the file written.
+        let agreed = |target: &Path| asked && target == path && target.exists();
         match kind {
             DialogKind::OpenScan => {
                 let _ = self.open_scan(&path);
             }
             DialogKind::ExportWav(sel) => {
-                self.request_export_wav(path.with_extension("wav"), sel);
+                let wav = path.with_extension("wav");
+                if agreed(&wav) {
+                    let bits = self.views.wave.bits;
+                    let _ = self.export_wav_to(&wav, bits, sel, true);
+                } else {
+                    self.request_export_wav(wav, sel);
+                }
             }
             DialogKind::LoadPreset => {
                 let _ = self.load_preset_from(&path);
             }
             DialogKind::SavePreset => {
-                let path = path.with_extension("toml");
-                if path.exists() {
-                    self.files.confirm = Some(Confirm::SavePreset(path));
+                let toml = path.with_extension("toml");
+                if agreed(&toml) {
+                    let _ = self.save_preset_to(&toml, true);
+                } else if toml.exists() {
+                    self.files.confirm = Some(Confirm::SavePreset(toml));
                 } else {
-                    let _ = self.save_preset_to(&path, false);
+                    let _ = self.save_preset_to(&toml, false);
                 }
             }
             DialogKind::OpenStill => self.open_still(&path),
-            DialogKind::ExportStillWav => self.request_export_still(path.with_extension("wav")),
-            DialogKind::ExportPng(view) => {
-                let path = path.with_extension("png");
-                if path.exists() {
-                    self.files.confirm = Some(Confirm::ExportPng(path, view));
+            DialogKind::ExportStillWav => {
+                let wav = path.with_extension("wav");
+                if agreed(&wav) {
+                    let _ = self.export_still_to(&wav, true);
                 } else {
-                    self.capture_view(path, view, false);
+                    self.request_export_still(wav);
+                }
+            }
+            DialogKind::ExportPng(view) => {
+                let png = path.with_extension("png");
+                if agreed(&png) {
+                    self.capture_view(png, view, true);
+                } else if png.exists() {
+                    self.files.confirm = Some(Confirm::ExportPng(png, view));
+                } else {
+                    self.capture_view(png, view, false);
                 }
             }
             #[cfg(feature = "video")]

@@ -467,7 +467,8 @@ impl Workbench {
                     return;
                 };
                 match typed_path(&p.text) {
-                    Some(path) => self.use_dialog_path(p.kind, path),
+                    // Nothing asked about replacing it yet: the app asks.
+                    Some(path) => self.use_dialog_path(p.kind, path, false),
                     None => {
                         self.error("no path typed");
                         self.files.prompt = Some(p);

@@ -16,11 +16,20 @@ pub const MOVIE_FRAME_SECS: f64 = 0.12;
 
 impl Workbench {
     fn poll_dialog(&mut self) {
-        let Some((kind, answer)) = self.files.dialogs.poll() else {
-            return;
-        };
+        if let Some((kind, answer)) = self.files.dialogs.poll() {
+            self.answer_dialog(kind, answer);
+        }
+    }
+
+    /// Acts on how a native dialog ended (what the dialog thread sends back). A save dialog
+    /// asked before returning an existing file, so that file is replaced without a second
+    /// question ([`Workbench::use_dialog_path`]).
+    pub fn answer_dialog(&mut self, kind: DialogKind, answer: DialogAnswer) {
         match answer {
-            DialogAnswer::Picked(p) => self.use_dialog_path(kind, p),
+            DialogAnswer::Picked(p) => {
+                let asked = kind.saves();
+                self.use_dialog_path(kind, p, asked);
+            }
             DialogAnswer::Unavailable(why) => self.offer_path_field(kind, why),
             DialogAnswer::Closed {
                 maybe_unshown: true,

@@ -242,9 +242,11 @@ impl Workbench {
     /// # Errors
     /// A message naming the file (also shown in the message area).
     pub fn export_still_to(&mut self, path: &Path, overwrite: bool) -> Result<(), String> {
+        let replaces = overwrite && super::export::would_overwrite(path);
         let result = self.export_still_inner(path, overwrite);
+        let done = if replaces { "replaced" } else { "exported" };
         match &result {
-            Ok(()) => self.info(format!("exported {}", path.display())),
+            Ok(()) => self.info(format!("{done} {}", path.display())),
             Err(e) => self.error(e.clone()),
         }
         result
