@@ -78,6 +78,7 @@ impl Workbench {
                 if ui
                     .add_enabled(self.nav.scan.is_some(), egui::Button::new("Compare methods…"))
                     .on_hover_text("the clip with two methods: both waveforms, their difference, the agreement per group, listen to either")
+                    .on_disabled_hover_text(super::views::transport_ui::NO_SCAN_TO_RECONSTRUCT)
                     .clicked()
                 {
                     self.open_compare();

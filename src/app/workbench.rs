@@ -21,8 +21,8 @@ use super::recon::Clip;
 use super::screenshot::Capture;
 use super::stages::StageState;
 use super::tuning::{ParamState, Tuning};
+use super::views::View;
 use super::views::states::ViewStates;
-use super::views::{StageStatus, View};
 use super::worker::{Job, JobInput, Outcome, StageDone, WorkerEvent};
 use crate::image::Image;
 use crate::io::Scan;
@@ -296,25 +296,6 @@ impl Workbench {
         self.max_busy_frame
     }
 
-    /// Status of `stage` for the current group.
-    #[must_use]
-    pub fn stage_status(&self, stage: Stage) -> StageStatus {
-        let params = self.tuning.params();
-        self.stages.status(
-            stage,
-            self.nav.group,
-            params,
-            self.nav.uses_dual(params),
-            self.jobs.running_stage(),
-        )
-    }
-
-    /// Status of every stage.
-    #[must_use]
-    pub fn statuses(&self) -> [StageStatus; super::stages::STAGES] {
-        Stage::ALL.map(|s| self.stage_status(s))
-    }
-
     pub(super) fn info(&mut self, text: impl Into<String>) {
         self.messages.info(text);
     }
@@ -490,16 +471,6 @@ impl Workbench {
     #[must_use]
     pub fn can_undo_redo(&self) -> (bool, bool) {
         self.tuning.can_undo_redo()
-    }
-
-    /// Reruns `stage` and every later stage of the current group (frames that could not be
-    /// read are read again by any stage's rerun).
-    pub fn rerun(&mut self, stage: Stage) {
-        self.stages.invalidate_from(stage);
-        if stage == Stage::Derivatives || self.nav.load_error.is_some() {
-            self.nav.forget_frames();
-        }
-        self.schedule();
     }
 
     // ----- the worker -----

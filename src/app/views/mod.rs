@@ -118,6 +118,8 @@ pub enum StageStatus {
     Failed(String),
     /// The current path does not use it.
     Unused,
+    /// No scan is open: there is nothing to run it on.
+    NoScan,
 }
 
 impl StageStatus {
@@ -130,6 +132,7 @@ impl StageStatus {
             StageStatus::Running => "running",
             StageStatus::Failed(_) => "failed",
             StageStatus::Unused => "not used",
+            StageStatus::NoScan => "no scan",
         }
     }
 
@@ -141,7 +144,7 @@ impl StageStatus {
             StageStatus::Stale => Color32::from_rgb(200, 170, 60),
             StageStatus::Running => Color32::from_rgb(90, 160, 240),
             StageStatus::Failed(_) => Color32::from_rgb(235, 80, 70),
-            StageStatus::Unused => Color32::GRAY,
+            StageStatus::Unused | StageStatus::NoScan => Color32::GRAY,
         }
     }
 

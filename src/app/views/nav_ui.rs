@@ -102,6 +102,10 @@ pub fn nav_ui(
     out
 }
 
+/// Why the stages cannot be rerun with no scan open.
+pub const NO_SCAN_TO_RERUN: &str =
+    "no scan open: nothing to rerun (File > Open scan…, or drop a scan folder here)";
+
 /// The stage list: one `name: status` line per stage, timing, error text and a rerun button.
 pub fn stages_ui(
     ui: &mut Ui,
@@ -121,9 +125,12 @@ pub fn stages_ui(
                     ui.weak(format!("{:.0} ms", t.as_secs_f64() * 1000.0));
                 }
             }
+            // With no scan there is nothing to run: the button says why instead.
+            let open = *st != StageStatus::NoScan;
             if ui
-                .small_button("rerun")
+                .add_enabled(open, egui::Button::new("rerun").small())
                 .on_hover_text(format!("rerun {} and later stages", s.name()))
+                .on_disabled_hover_text(NO_SCAN_TO_RERUN)
                 .clicked()
             {
                 out.push(NavAction::Rerun(s));

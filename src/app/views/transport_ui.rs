@@ -181,6 +181,10 @@ fn run_progress_text(r: &crate::app::recon::ReconRun) -> String {
     format!("group {} / {} · {eta}", r.done, r.total)
 }
 
+/// Why nothing can be reconstructed with no scan open.
+pub const NO_SCAN_TO_RECONSTRUCT: &str =
+    "no scan open: nothing to reconstruct (File > Open scan…, or drop a scan folder here)";
+
 /// Reconstruct (all, a range, around the current group) or its progress and cancel; the
 /// export format and buttons.
 pub fn clip_controls_ui(
@@ -213,37 +217,53 @@ pub fn clip_controls_ui(
                 actions.push(WaveAction::PlaySoFar);
             }
         } else {
-            if ui.button("Reconstruct clip").clicked() {
+            // With no scan (no groups) there is nothing to reconstruct: the buttons say why.
+            let open = groups > 0;
+            if ui
+                .add_enabled(open, egui::Button::new("Reconstruct clip"))
+                .on_disabled_hover_text(NO_SCAN_TO_RECONSTRUCT)
+                .clicked()
+            {
                 let range = state.use_range.then(|| {
                     state.range.0.min(state.range.1)..state.range.1.max(state.range.0) + 1
                 });
                 actions.push(WaveAction::Reconstruct(range));
             }
-            ui.checkbox(&mut state.use_range, "only groups");
+            ui.add_enabled(
+                open,
+                egui::Checkbox::new(&mut state.use_range, "only groups"),
+            );
             let last = groups.saturating_sub(1);
             let from = ui.label("from");
             ui.add_enabled(
-                state.use_range,
+                open && state.use_range,
                 egui::DragValue::new(&mut state.range.0).range(0..=last),
             )
             .labelled_by(from.id);
             let to = ui.label("to");
             ui.add_enabled(
-                state.use_range,
+                open && state.use_range,
                 egui::DragValue::new(&mut state.range.1).range(0..=last),
             )
             .labelled_by(to.id);
             ui.separator();
             if ui
-                .button(format!("Reconstruct around group {current_group}"))
+                .add_enabled(
+                    open,
+                    egui::Button::new(format!("Reconstruct around group {current_group}")),
+                )
                 .on_hover_text("only the groups near the one shown: quick to hear a change")
+                .on_disabled_hover_text(NO_SCAN_TO_RECONSTRUCT)
                 .clicked()
             {
                 actions.push(WaveAction::ReconstructAround(state.around));
             }
             let l = ui.label("±");
-            ui.add(egui::DragValue::new(&mut state.around).range(0..=groups))
-                .labelled_by(l.id);
+            ui.add_enabled(
+                open,
+                egui::DragValue::new(&mut state.around).range(0..=groups),
+            )
+            .labelled_by(l.id);
         }
         ui.separator();
         let wav = ui.label("WAV");
