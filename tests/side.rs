@@ -812,6 +812,82 @@ fn copy_dir(from: &Path, to: &Path) {
     }
 }
 
+/// Ctrl-C while a shard runs the groups before its range (for its slope history) says so, and
+/// that the same command starts the shard again; it does, and its rate and ETA count from its
+/// own first group, not from the start of the groups before it (which made the first ETA tens
+/// of times too long).
+#[test]
+fn a_shard_stopped_before_its_own_groups_says_so_and_its_eta_counts_only_its_own() {
+    let (_keep, scan, _, _) = shared();
+    let tmp = tempfile::tempdir().unwrap();
+    let p = tmp.path().join("plan.json");
+    plan(scan, 2, &p, &[]);
+    let part = tmp.path().join("part-1");
+    let args = [
+        "reconstruct",
+        s(scan),
+        "--plan",
+        s(&p),
+        "--shard",
+        "1",
+        "--out",
+        s(&part),
+        "--progress-json",
+    ];
+    let spawn = || {
+        Command::new(env!("CARGO_BIN_EXE_groovescope"))
+            .args(args)
+            .env_remove("DISPLAY")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let events = |line: std::io::Result<String>| -> serde_json::Value {
+        serde_json::from_str(&line.unwrap()).unwrap()
+    };
+    // Shard 1 runs groups 75..150 after 11..75, for the slope history.
+    let mut child = spawn();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let first = events(lines.next().unwrap());
+    assert_eq!(first["event"], "context", "{first}");
+    common::ctrl_c(&child);
+    let rest: Vec<serde_json::Value> = lines.map(events).collect();
+    let o = child.wait_with_output().unwrap();
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        rest.iter().all(|v| v["event"] != "group"),
+        "stopped too late: {rest:?}"
+    );
+    assert!(
+        e.contains("cancelled while running groups 11..75 before the shard")
+            && e.contains("slope history")
+            && e.contains("the same command starts the shard again"),
+        "{e}"
+    );
+    assert!(!part.exists(), "{:?}", common::names(tmp.path()));
+
+    let mut child = spawn();
+    let lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let groups: Vec<serde_json::Value> = lines
+        .map(events)
+        .filter(|v| v["event"] == "group")
+        .collect();
+    assert!(child.wait().unwrap().success());
+    assert_eq!(groups.len(), GROUPS - GROUPS / 2);
+    // The first group's rate over its own time: the 64 groups before it took far longer.
+    let g = &groups[0];
+    let own_secs = 1.0 / g["groups_per_sec"].as_f64().unwrap();
+    let elapsed = g["elapsed_secs"].as_f64().unwrap();
+    assert!(own_secs * 4.0 < elapsed, "{g}");
+    let eta = g["eta_secs"].as_f64().unwrap();
+    assert!(
+        (eta - own_secs * (groups.len() - 1) as f64).abs() < 1e-6 * eta,
+        "{g}"
+    );
+}
+
 #[test]
 fn ctrl_c_stops_at_the_next_group_keeps_the_journal_and_says_so() {
     let (_keep, scan, one, _) = shared();

@@ -127,6 +127,11 @@ pub enum RunEvent<'a> {
     },
     /// Running groups before the range for the slope history.
     Context(Range<usize>),
+    /// A group before the range finished (its slope entries kept, nothing else).
+    ContextGroup(usize),
+    /// The range's own groups (after those read back) start running now: what came before
+    /// (the groups before the range) is not their time.
+    Groups(Range<usize>),
     /// A group of the range finished (`done` of `total`, counting resumed ones).
     Group {
         /// The group.
@@ -207,6 +212,7 @@ pub fn run_range(
     let mut done = resumed;
     let total = run.range.len();
     let next = run.range.start + resumed;
+    on_event(RunEvent::Groups(next..run.range.end));
     run_groups(
         &GroupStream {
             scan: run.scan,
@@ -286,6 +292,7 @@ pub fn seed_before(
             &mut scratch,
             cancel,
             &mut |o| {
+                on_event(RunEvent::ContextGroup(o.group));
                 block.push(o.slopes);
                 Ok(())
             },

@@ -6,19 +6,20 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Result, bail};
-use indicatif::ProgressBar;
 use serde::Serialize;
 
-use crate::cli::{ReconstructArgs, load_params, method_choice, path_choice, progress_bar};
+use crate::cli::{ReconstructArgs, load_params, method_choice, path_choice};
 use crate::engine::{ClipGroups, GroupOutcome, Reconstruction, StageTimings, finish_scan_clip};
 use crate::io::bwf::{BroadcastInfo, disc_words};
 use crate::io::wav::write_transfer_wav;
 use crate::io::{Scan, ScanMeta, write_json_atomic};
 use crate::pipeline::PipelineParams;
 use crate::side::RunIdentity;
-use crate::side::run::{RangeRun, RunEvent, run_range};
+use crate::side::run::{RangeRun, run_range};
+use progress::ProgressOut;
 
 mod plan_merge;
+mod progress;
 mod shard;
 pub use plan_merge::{MergeArgs, PlanArgs, run_merge, run_plan};
 
@@ -151,134 +152,6 @@ pub fn make_report<'a>(
     }
 }
 
-/// Terminal progress: an indicatif bar (groups/s, ETA), or with `--progress-json` one JSON
-/// line per event on stdout.
-struct ProgressOut {
-    bar: ProgressBar,
-    json: bool,
-    quiet: bool,
-    started: Instant,
-    resumed: usize,
-    context: usize,
-}
-
-impl ProgressOut {
-    fn new(total: usize, args: &ReconstructArgs) -> Self {
-        let json = args.side.progress_json;
-        Self {
-            bar: progress_bar(total, args.quiet || json),
-            json,
-            quiet: args.quiet,
-            started: Instant::now(),
-            resumed: 0,
-            context: 0,
-        }
-    }
-
-    fn line(&self, value: &serde_json::Value) {
-        json_line(value);
-    }
-
-    fn note(&self, text: &str) {
-        if self.json || !self.quiet {
-            self.bar.suspend(|| crate::tell!("{text}"));
-        }
-    }
-
-    fn event(&mut self, event: RunEvent<'_>) {
-        match event {
-            RunEvent::Resumed {
-                groups: n,
-                other_finish,
-                torn_tail,
-            } => {
-                self.resumed = n;
-                self.bar.set_position(n as u64);
-                self.bar.reset_eta();
-                // Said even with --quiet: what became of the journal's bytes is the archive's
-                // business, and this is the one line about it.
-                if let Some(t) = torn_tail {
-                    self.bar.suspend(|| {
-                        crate::tell!(
-                            "the journal's last record ({} bytes at byte {}) is incomplete, as a \
-                             run stopped while writing it leaves it: dropped, and its group runs \
-                             again",
-                            t.bytes,
-                            t.offset
-                        );
-                    });
-                }
-                let finish = if other_finish {
-                    " (its run had another [dsp] table, which only the finish reads: this run \
-                     finishes with its own)"
-                } else {
-                    ""
-                };
-                self.note(&format!(
-                    "resuming after {n} groups read back from the journal{finish}"
-                ));
-                if self.json {
-                    self.line(&serde_json::json!({
-                        "event": "resumed",
-                        "groups": n,
-                        "other_finish": other_finish,
-                        "torn_tail_bytes": torn_tail.map(|t| t.bytes),
-                    }));
-                }
-            }
-            RunEvent::Context(r) => {
-                self.context += r.len();
-                self.note(&format!(
-                    "running groups {}..{} for the slope history before the shard",
-                    r.start, r.end
-                ));
-                if self.json {
-                    self.line(&serde_json::json!({"event": "context", "first_group": r.start, "end_group": r.end}));
-                }
-            }
-            RunEvent::Group {
-                outcome,
-                done,
-                total,
-            } => {
-                self.bar.set_position(done as u64);
-                if self.json {
-                    let elapsed = self.started.elapsed().as_secs_f64();
-                    let run = (done - self.resumed) as f64;
-                    let rate = if elapsed > 0.0 { run / elapsed } else { 0.0 };
-                    let eta = if rate > 0.0 {
-                        (total - done) as f64 / rate
-                    } else {
-                        0.0
-                    };
-                    self.line(&serde_json::json!({
-                        "event": "group", "group": outcome.group, "done": done, "total": total,
-                        "elapsed_secs": elapsed, "groups_per_sec": rate, "eta_secs": eta,
-                        "failed": outcome.signal.is_none(),
-                    }));
-                }
-            }
-        }
-    }
-
-    fn summary(&self, groups_run: usize) -> RunProgress {
-        self.bar.finish_and_clear();
-        let elapsed = self.started.elapsed().as_secs_f64();
-        let n = groups_run + self.context;
-        RunProgress {
-            groups_run,
-            resumed_groups: self.resumed,
-            context_groups: self.context,
-            elapsed_secs: elapsed,
-            groups_per_sec: if elapsed > 0.0 {
-                n as f64 / elapsed
-            } else {
-                0.0
-            },
-        }
-    }
-}
-
 /// Prints one JSON line on stdout and flushes it; a closed stdout (the reader went away) is
 /// not an error of the run.
 fn json_line(value: &serde_json::Value) {
@@ -341,7 +214,10 @@ fn run_with_progress(
         }
         Err(e) => {
             progress.bar.finish_and_clear();
-            Err(e.into())
+            match progress.cancelled_early(&e) {
+                Some(line) => Err(anyhow::anyhow!(line)),
+                None => Err(e.into()),
+            }
         }
     }
 }
