@@ -5,6 +5,8 @@
 #![allow(clippy::unwrap_used)] // tests may panic
 
 mod gui_common;
+#[path = "ui_parts/layout.rs"]
+mod layout;
 #[path = "ui_parts/no_scan.rs"]
 mod no_scan;
 #[path = "ui_parts/overwrite.rs"]

@@ -133,6 +133,7 @@ impl Workbench {
         }
         let actions = compare_window(
             ctx,
+            self.views.tool_place,
             &mut self.methods,
             self.tuning.params().method,
             &self.player,

@@ -117,7 +117,13 @@ impl Workbench {
     }
 
     pub(super) fn side_panel(&mut self, ui: &mut Ui, statuses: &[StageStatus; STAGES]) {
-        egui::ScrollArea::vertical().show(ui, |ui| {
+        // On a small window the panel is narrower than its knobs: it scrolls sideways too, with
+        // its scroll bars shown (a wide one keeps the panel as wide as its content).
+        let compact = self.views.compact;
+        if compact {
+            ui.spacing_mut().scroll = egui::style::ScrollStyle::thin();
+        }
+        egui::ScrollArea::new([compact, true]).show(ui, |ui| {
             ui.heading("navigate");
             let mut actions = nav_ui(
                 ui,
@@ -283,6 +289,28 @@ impl Workbench {
             }
         });
         ui.separator();
+        // Below the tabs the view scrolls (each view its own offset), so a small window loses
+        // none of it.
+        let viewport_top = ui.cursor().top();
+        let left = ui.max_rect().left();
+        if self.views.compact {
+            // Scroll bars shown: on a small window much of a view lies out of sight.
+            ui.spacing_mut().scroll = egui::style::ScrollStyle::thin();
+        }
+        egui::ScrollArea::both()
+            .id_salt(("central", self.view.name()))
+            .auto_shrink(false)
+            .show(ui, |ui| self.central_view(ui, statuses));
+        // Tool windows open below the tabs, and in the waveform view below its toolbar.
+        let top = match self.view {
+            View::Waveform => self.views.wave.toolbar_bottom.max(viewport_top),
+            _ => viewport_top,
+        };
+        self.views.tool_place.corner = egui::pos2(left, top);
+    }
+
+    /// The central view below its tabs: the guidance line and the view itself.
+    fn central_view(&mut self, ui: &mut Ui, statuses: &[StageStatus; STAGES]) {
         let frames = self.nav.frames().cloned();
         let params = self.tuning.params().clone();
         guidance_ui(ui, self.view, self.nav.uses_dual(&params));
@@ -347,7 +375,9 @@ impl Workbench {
                 }
             }
         }
-        self.capture.view_rect = egui::Rect::from_min_max(top, ui.min_rect().max);
+        // A view export keeps what is on screen of the view.
+        self.capture.view_rect =
+            egui::Rect::from_min_max(top, ui.min_rect().max).intersect(ui.clip_rect());
         if let Some(view) = open_view {
             self.view = view;
         }

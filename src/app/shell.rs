@@ -13,6 +13,12 @@ use super::workbench::Workbench;
 
 /// Seconds per frame when playing a group as a movie.
 pub const MOVIE_FRAME_SECS: f64 = 0.12;
+/// The side panel's width on a wide window (points).
+pub const SIDE_PANEL_DEFAULT: f32 = 330.0;
+/// The narrowest the side panel gets (points).
+pub const SIDE_PANEL_MIN: f32 = 200.0;
+/// The largest share of the window's width the side panel takes (above its narrowest).
+pub const SIDE_PANEL_SHARE: f32 = 0.4;
 
 impl Workbench {
     fn poll_dialog(&mut self) {
@@ -244,11 +250,22 @@ impl eframe::App for Workbench {
         self.shortcuts(&ctx);
         self.step_movie(&ctx);
         let statuses = self.statuses();
-        egui::Panel::top("menu").show(ui, |ui| self.menu_bar(ui));
-        egui::Panel::bottom("status").show(ui, |ui| self.status_bar(ui));
+        let width = ui.available_width();
+        let small = super::views::states::COMPACT_BELOW;
+        self.views.compact = width < small.x || ui.available_height() < small.y;
+        let menu = egui::Panel::top("menu").show(ui, |ui| self.menu_bar(ui));
+        let status = egui::Panel::bottom("status").show(ui, |ui| self.status_bar(ui));
+        // Tool windows stay between the menu bar and the status bar.
+        let (menu, status) = (menu.response.rect, status.response.rect);
+        self.views.tool_place.area = egui::Rect::from_x_y_ranges(
+            menu.x_range(),
+            menu.bottom()..=status.top().max(menu.bottom()),
+        );
+        // On a narrow window the side panel is narrower, so the central view keeps room.
         egui::Panel::left("side")
             .resizable(true)
-            .default_size(330.0)
+            .default_size(SIDE_PANEL_DEFAULT)
+            .size_range(SIDE_PANEL_MIN..=(width * SIDE_PANEL_SHARE).max(SIDE_PANEL_MIN))
             .show(ui, |ui| self.side_panel(ui, &statuses));
         egui::CentralPanel::default().show(ui, |ui| self.central(ui, &statuses));
         self.compare_step(&ctx);

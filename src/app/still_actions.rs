@@ -305,7 +305,8 @@ impl Workbench {
         }
         let position = self.clip.still_heard.then(|| self.player.position_secs());
         let playing = self.clip.still_heard && self.player.is_playing();
-        let actions = still_window(ctx, &mut self.still, position, playing);
+        let place = self.views.tool_place;
+        let actions = still_window(ctx, place, &mut self.still, position, playing);
         for a in actions {
             match a {
                 StillAction::Open => self.show_dialog(super::dialogs::DialogKind::OpenStill),

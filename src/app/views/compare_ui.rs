@@ -65,13 +65,14 @@ fn method_picker(ui: &mut Ui, id: &str, label: &str, m: &mut Method) {
 /// player holds the comparison's sound.
 pub fn compare_window(
     ctx: &egui::Context,
+    place: super::ToolPlace,
     state: &mut CompareState,
     current: Method,
     player: &Player,
     heard: bool,
 ) -> Vec<CompareAction> {
     let mut actions = Vec::new();
-    state.open = COMPARE_WINDOW.show(ctx, state.open, |ui| {
+    state.open = COMPARE_WINDOW.show(ctx, state.open, place, |ui| {
         body(ui, state, current, player, heard, &mut actions);
     });
     actions

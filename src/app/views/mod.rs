@@ -360,39 +360,101 @@ where
     Color32::from_rgb(c(0), c(1), c(2))
 }
 
-/// A closable tool window: its title, and its size and place when first shown (points).
+/// A closable tool window: its title and its size when first shown (points).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ToolWindow {
     /// The title (also the window's id).
     pub title: &'static str,
-    /// Default size.
+    /// Default size (less where the room is smaller).
     pub size: [f32; 2],
-    /// Default place of its top left corner.
-    pub pos: [f32; 2],
 }
 
 /// The "Compare methods" window.
 pub const COMPARE_WINDOW: ToolWindow = ToolWindow {
     title: "Compare methods",
     size: [1100.0, 620.0],
-    pos: [300.0, 90.0],
 };
 
 /// The still window.
 pub const STILL_WINDOW: ToolWindow = ToolWindow {
     title: "Still image",
-    size: [1240.0, 800.0],
-    pos: [300.0, 60.0],
+    size: [1240.0, 700.0],
 };
 
+/// Height a tool window opens with at least (points): where less room is left below the
+/// toolbars (a small screen), it opens higher, still below the menu bar.
+pub const TOOL_MIN_OPEN_HEIGHT: f32 = 280.0;
+/// Width a tool window opens with at least (points), likewise.
+pub const TOOL_MIN_OPEN_WIDTH: f32 = 360.0;
+
+/// Where tool windows go, measured as each frame is drawn: the room between the menu bar and
+/// the status bar, which they never leave (so they cover neither, and fit a small window), and
+/// the corner they open at, below the central view's tabs and toolbar (the waveform's transport
+/// and export rows in the waveform view), so they cover neither when first shown.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ToolPlace {
+    /// The room windows stay in.
+    pub area: egui::Rect,
+    /// Where a window's top left corner goes when it first opens.
+    pub corner: egui::Pos2,
+}
+
+impl Default for ToolPlace {
+    /// Before the first frame measured it: the whole window, from its top left.
+    fn default() -> Self {
+        Self {
+            area: egui::Rect::EVERYTHING,
+            corner: egui::Pos2::ZERO,
+        }
+    }
+}
+
+impl ToolPlace {
+    /// The rect a window of `size` opens in: at the corner, no larger than the room left
+    /// there; moved up or left (never out of the area) where that leaves less than
+    /// [`TOOL_MIN_OPEN_HEIGHT`] × [`TOOL_MIN_OPEN_WIDTH`].
+    #[must_use]
+    pub fn open_rect(&self, size: [f32; 2]) -> egui::Rect {
+        let a = self.area;
+        let x = self
+            .corner
+            .x
+            .min(a.right() - TOOL_MIN_OPEN_WIDTH)
+            .max(a.left());
+        let y = self
+            .corner
+            .y
+            .min(a.bottom() - TOOL_MIN_OPEN_HEIGHT)
+            .max(a.top());
+        let min = egui::pos2(x, y);
+        let room = (a.max - min).max(egui::Vec2::ZERO);
+        egui::Rect::from_min_size(min, egui::vec2(size[0], size[1]).min(room))
+    }
+}
+
 impl ToolWindow {
-    /// Draws the window, `body` inside, while `open`; returns whether it is still open.
-    pub fn show(&self, ctx: &egui::Context, open: bool, body: impl FnOnce(&mut Ui)) -> bool {
+    /// Draws the window, `body` inside, while `open`; returns whether it is still open. It
+    /// opens where `place` says and stays in its room; its content scrolls when the window is
+    /// smaller than it (a small screen), so all of it can be reached.
+    pub fn show(
+        &self,
+        ctx: &egui::Context,
+        open: bool,
+        place: ToolPlace,
+        body: impl FnOnce(&mut Ui),
+    ) -> bool {
         let mut open = open;
+        let area = if place.area.is_finite() {
+            place.area
+        } else {
+            ctx.content_rect()
+        };
+        let place = ToolPlace { area, ..place };
         egui::Window::new(self.title)
             .open(&mut open)
-            .default_size(self.size)
-            .default_pos(self.pos)
+            .default_rect(place.open_rect(self.size))
+            .constrain_to(area)
+            .scroll(true)
             .show(ctx, body);
         open
     }

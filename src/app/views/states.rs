@@ -27,7 +27,14 @@ pub struct ViewStates {
     pub toml: super::params_ui::TomlEditor,
     /// The metadata form, while edited.
     pub meta_form: Option<super::meta_ui::MetaForm>,
+    /// Where the tool windows open and stay, measured each frame.
+    pub tool_place: super::ToolPlace,
+    /// The window is small ([`COMPACT_BELOW`]): the panels scroll both ways, scroll bars shown.
+    pub compact: bool,
 }
+
+/// A window narrower or shorter than this (points) is laid out compact ([`ViewStates::compact`]).
+pub const COMPACT_BELOW: egui::Vec2 = egui::vec2(900.0, 640.0);
 
 impl ViewStates {
     /// Forgets the hover read-outs (they describe another group).

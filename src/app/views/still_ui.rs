@@ -50,12 +50,13 @@ pub enum StillAction {
 /// position (s) while the player holds the still's sound.
 pub fn still_window(
     ctx: &egui::Context,
+    place: super::ToolPlace,
     state: &mut StillState,
     position: Option<f64>,
     playing: bool,
 ) -> Vec<StillAction> {
     let mut actions = Vec::new();
-    state.open = STILL_WINDOW.show(ctx, state.open, |ui| {
+    state.open = STILL_WINDOW.show(ctx, state.open, place, |ui| {
         body(ui, state, position, playing, &mut actions);
     });
     actions

@@ -57,6 +57,9 @@ pub struct WaveViewState {
     pub use_range: bool,
     /// That range (start, end inclusive).
     pub range: (usize, usize),
+    /// Where the view's toolbar (reconstruct, transport, scores) ended last frame (y, points):
+    /// the tool windows open below it.
+    pub toolbar_bottom: f32,
 }
 
 impl Default for WaveViewState {
@@ -73,6 +76,7 @@ impl Default for WaveViewState {
             show_previous: true,
             use_range: false,
             range: (0, 0),
+            toolbar_bottom: 0.0,
         }
     }
 }

@@ -191,6 +191,7 @@ pub fn waveform_ui(
         });
         super::guidance::warnings_ui(ui, &c.recon.warnings, 3);
     }
+    state.toolbar_bottom = ui.cursor().top();
     let partial = clips
         .run
         .as_ref()
