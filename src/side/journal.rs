@@ -260,20 +260,31 @@ fn in_order(
 }
 
 impl Journal {
-    /// Starts a new journal for `identity` at `path` (an existing file is replaced).
+    /// Starts a new journal for `identity` at `path` (an existing file is replaced). The header
+    /// is written beside it and renamed into place, so a run stopped as it starts (`kill -9`, a
+    /// power cut) leaves a whole journal or none, never one without a header that `--resume`
+    /// must refuse.
     ///
     /// # Errors
     /// [`SideError::Load`] when the file cannot be written.
     pub fn create(path: &Path, identity: &RunIdentity) -> Result<Self, SideError> {
         let header = serde_json::to_vec(identity)
             .map_err(|e| SideError::refused(format!("cannot encode the header: {e}"), path))?;
-        let mut file =
-            File::create(path).map_err(|e| SideError::io("cannot create the journal", &e, path))?;
+        let mut name = std::ffi::OsString::from(".");
+        name.push(path.file_name().unwrap_or_default());
+        name.push(".new");
+        let staged = path.with_file_name(name);
+        let mut file = File::create(&staged)
+            .map_err(|e| SideError::io("cannot create the journal", &e, &staged))?;
         let mut head = JOURNAL_MAGIC.to_vec();
         write_frame(&mut head, &header).map_err(|e| SideError::io("journal", &e, path))?;
         file.write_all(&head)
             .and_then(|()| file.sync_data())
-            .map_err(|e| SideError::io("cannot write the journal", &e, path))?;
+            .and_then(|()| std::fs::rename(&staged, path))
+            .map_err(|e| {
+                let _ = std::fs::remove_file(&staged);
+                SideError::io("cannot write the journal", &e, path)
+            })?;
         Ok(Self {
             file,
             path: path.to_path_buf(),
@@ -295,7 +306,18 @@ impl Journal {
     pub fn resume(path: &Path, identity: &RunIdentity) -> Result<Resumed, SideError> {
         let bytes =
             std::fs::read(path).map_err(|e| SideError::io("cannot read the journal", &e, path))?;
-        let mut file = read_record_file(&bytes, JOURNAL_MAGIC, "journal", path)?;
+        let mut file =
+            read_record_file(&bytes, JOURNAL_MAGIC, "journal", path).map_err(|e| match e {
+                // No header: no finished group can be read from it (a journal of an older
+                // build stopped as it started, or another file in its place).
+                SideError::Refused { problem, path } => SideError::Refused {
+                    problem: format!(
+                        "{problem}, so no finished group can be read from it; delete it to run from the start"
+                    ),
+                    path,
+                },
+                other => other,
+            })?;
         // A run without --keep-going stops at the first unreadable group, so its journal holds
         // only groups that read, each as a run with --keep-going makes it: such a run goes on
         // from them (past a damaged frame that stopped it), never the other way round.
@@ -433,5 +455,33 @@ mod tests {
             ) && e.contains("o.wav.journal"),
             "{e}"
         );
+    }
+
+    /// A new journal appears whole, its header renamed into place with nothing left beside it;
+    /// one without a header (an older build's, stopped as it started) is refused saying that no
+    /// group can be read from it and to delete it.
+    #[test]
+    fn a_journal_appears_with_its_header_and_one_without_is_refused_with_advice() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("o.wav.journal");
+        Journal::create(&path, &identity(false)).unwrap();
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("o.wav.journal")]);
+        for torn in [&[][..], &JOURNAL_MAGIC[..3]] {
+            std::fs::write(&path, torn).unwrap();
+            let e = Journal::resume(&path, &identity(false))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(
+                    "no finished group can be read from it; delete it to run from the start"
+                ) && e.ends_with("o.wav.journal"),
+                "{e}"
+            );
+            assert_eq!(std::fs::read(&path).unwrap(), torn);
+        }
     }
 }
