@@ -1,4 +1,5 @@
-//! The workbench's actions on presets, the scan's metadata, the clip and files: save and load
+//! The workbench's actions on stages, presets, the scan's metadata, the clip and files: each
+//! stage's status and rerun (with no scan open they say so and do nothing), save and load
 //! presets, save `scan.toml`, reconstruct, play, export, dialogs, captures and video import.
 
 use std::path::{Path, PathBuf};
@@ -9,7 +10,8 @@ use super::dialogs::DialogKind;
 use super::export;
 use super::files::{Confirm, PathPrompt};
 use super::recon::{Clip, ReconRun};
-use super::views::View;
+use super::stages::STAGES;
+use super::views::{StageStatus, View};
 use super::workbench::{Workbench, repaint_fn};
 use crate::engine::ReconstructOptions;
 use crate::io::ScanMeta;
@@ -457,5 +459,42 @@ impl Workbench {
     #[must_use]
     pub fn is_importing_video(&self) -> bool {
         self.video_import.run.is_some()
+    }
+}
+
+impl Workbench {
+    /// Status of `stage` for the current group ([`StageStatus::NoScan`] with no scan open).
+    #[must_use]
+    pub fn stage_status(&self, stage: Stage) -> StageStatus {
+        if self.nav.scan.is_none() {
+            return StageStatus::NoScan;
+        }
+        let params = self.tuning.params();
+        self.stages.status(
+            stage,
+            self.nav.group,
+            params,
+            self.nav.uses_dual(params),
+            self.jobs.running_stage(),
+        )
+    }
+
+    /// Status of every stage.
+    #[must_use]
+    pub fn statuses(&self) -> [StageStatus; STAGES] {
+        Stage::ALL.map(|s| self.stage_status(s))
+    }
+
+    /// Reruns `stage` and every later stage of the current group (frames that could not be
+    /// read are read again by any stage's rerun); with no scan open there is nothing to run.
+    pub fn rerun(&mut self, stage: Stage) {
+        if self.nav.scan.is_none() {
+            return;
+        }
+        self.stages.invalidate_from(stage);
+        if stage == Stage::Derivatives || self.nav.load_error.is_some() {
+            self.nav.forget_frames();
+        }
+        self.schedule();
     }
 }

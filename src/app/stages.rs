@@ -1,14 +1,12 @@
 //! The stage results on screen for the current group: the stage cache the worker fills, each
 //! stage's error, time and run count, the textures rendered from its outputs, and which inputs
-//! a failed stage failed with (so it is not retried until one of them changes); and the
-//! workbench's stage status and rerun, which with no scan open say so and do nothing.
+//! a failed stage failed with (so it is not retried until one of them changes).
 
 use std::sync::Arc;
 use std::time::Duration;
 
 use super::textures::Textures;
 use super::views::StageStatus;
-use super::workbench::Workbench;
 use super::worker::StageResult;
 use crate::pipeline::{PipelineParams, Stage, StageCache};
 
@@ -155,42 +153,5 @@ impl StageState {
         {
             *e = Some("failed".into());
         }
-    }
-}
-
-impl Workbench {
-    /// Status of `stage` for the current group ([`StageStatus::NoScan`] with no scan open).
-    #[must_use]
-    pub fn stage_status(&self, stage: Stage) -> StageStatus {
-        if self.nav.scan.is_none() {
-            return StageStatus::NoScan;
-        }
-        let params = self.tuning.params();
-        self.stages.status(
-            stage,
-            self.nav.group,
-            params,
-            self.nav.uses_dual(params),
-            self.jobs.running_stage(),
-        )
-    }
-
-    /// Status of every stage.
-    #[must_use]
-    pub fn statuses(&self) -> [StageStatus; STAGES] {
-        Stage::ALL.map(|s| self.stage_status(s))
-    }
-
-    /// Reruns `stage` and every later stage of the current group (frames that could not be
-    /// read are read again by any stage's rerun); with no scan open there is nothing to run.
-    pub fn rerun(&mut self, stage: Stage) {
-        if self.nav.scan.is_none() {
-            return;
-        }
-        self.stages.invalidate_from(stage);
-        if stage == Stage::Derivatives || self.nav.load_error.is_some() {
-            self.nav.forget_frames();
-        }
-        self.schedule();
     }
 }
