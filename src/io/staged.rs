@@ -122,35 +122,41 @@ fn recently_touched(dir: &Path) -> bool {
 /// writer's folder must never go.
 #[must_use]
 pub fn remove_stale(out_dir: &Path, kind: &str) -> Vec<PathBuf> {
-    let proc_fs = Path::new("/proc/self");
-    if !proc_fs.exists() {
+    if !Path::new("/proc/self").exists() {
         return Vec::new();
     }
+    let mut removed = Vec::new();
+    for (path, pid) in unfinished(out_dir, kind) {
+        let alive = pid == std::process::id() || Path::new("/proc").join(pid.to_string()).exists();
+        if !alive && !recently_touched(&path) && std::fs::remove_dir_all(&path).is_ok() {
+            removed.push(path);
+        }
+    }
+    removed
+}
+
+/// The temporary folders beside `out_dir` of writers of `kind`, each with the id of the
+/// process that made it, sorted by path.
+#[must_use]
+pub fn unfinished(out_dir: &Path, kind: &str) -> Vec<(PathBuf, u32)> {
     let (parent, prefix) = parent_and_prefix(out_dir, kind);
     let Ok(entries) = std::fs::read_dir(&parent) else {
         return Vec::new();
     };
-    let mut removed = Vec::new();
-    for entry in entries.flatten() {
-        let file_name = entry.file_name();
-        let Some(pid) = file_name
-            .to_str()
-            .and_then(|n| n.strip_prefix(&prefix))
-            .and_then(|n| n.strip_suffix(TEMP_SUFFIX))
-            .and_then(|n| n.parse::<u32>().ok())
-        else {
-            continue;
-        };
-        let path = entry.path();
-        let alive = pid == std::process::id() || Path::new("/proc").join(pid.to_string()).exists();
-        if !alive
-            && path.is_dir()
-            && !recently_touched(&path)
-            && std::fs::remove_dir_all(&path).is_ok()
-        {
-            removed.push(path);
-        }
-    }
-    removed.sort();
-    removed
+    let mut found: Vec<(PathBuf, u32)> = entries
+        .flatten()
+        .filter_map(|entry| {
+            let pid = entry
+                .file_name()
+                .to_str()?
+                .strip_prefix(&prefix)?
+                .strip_suffix(TEMP_SUFFIX)?
+                .parse::<u32>()
+                .ok()?;
+            let path = entry.path();
+            path.is_dir().then_some((path, pid))
+        })
+        .collect();
+    found.sort();
+    found
 }

@@ -195,32 +195,9 @@ pub fn earlier_unfinished_runs(dir: &Path) -> Vec<String> {
             )
         })
         .collect();
-    // The names `io::staged` gives a writer of SYNTH_KIND beside `dir`.
-    let name = dir
-        .file_name()
-        .map_or_else(|| "scan".into(), |n| n.to_string_lossy().into_owned());
-    let parent = match dir.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let prefix = format!(".{name}.{SYNTH_KIND}-");
-    let Ok(entries) = std::fs::read_dir(&parent) else {
-        return lines;
-    };
-    let mut kept: Vec<(PathBuf, u32)> = entries
-        .flatten()
-        .filter_map(|e| {
-            let file_name = e.file_name();
-            let pid = file_name
-                .to_str()?
-                .strip_prefix(&prefix)?
-                .strip_suffix(".tmp")?
-                .parse::<u32>()
-                .ok()?;
-            (pid != std::process::id() && e.path().is_dir()).then(|| (e.path(), pid))
-        })
-        .collect();
-    kept.sort();
+    let kept = crate::io::staged::unfinished(dir, SYNTH_KIND)
+        .into_iter()
+        .filter(|&(_, pid)| pid != std::process::id());
     // Without /proc (not Linux) whether a process runs is not known, and nothing was removed.
     let proc_fs = Path::new("/proc/self").exists();
     for (path, pid) in kept {
