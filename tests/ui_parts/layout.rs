@@ -35,25 +35,29 @@ fn tool_windows_open_below_the_menu_bar_and_the_toolbar_inside_the_window() {
             .fold(0.0, f32::max);
         wb_mut(&mut h).open_compare();
         h.run_ok();
-        let r = window_rect(&h, "Compare methods");
-        assert!(
-            r.top() >= menu_bottom,
-            "{size:?}: {r:?} covers the menu bar"
-        );
-        if size == SIZE {
+        // Below the menu bar, and at the full size below `bar` too; above the status bar,
+        // inside the window.
+        let check = |h: &H, title: &str, bar: (&str, f32)| {
+            let r = window_rect(h, title);
+            let (bar_name, bar_bottom) = bar;
             assert!(
-                r.top() >= toolbar_bottom,
-                "{size:?}: {r:?} covers the waveform toolbar (to {toolbar_bottom})"
+                r.top() >= menu_bottom,
+                "{size:?}: {title} {r:?} covers the menu bar"
             );
-        }
-        assert!(
-            r.bottom() <= status_top + 1.0,
-            "{size:?}: {r:?} covers the status bar"
-        );
-        assert!(
-            r.right() <= size[0] + 0.5,
-            "{size:?}: {r:?} leaves the window"
-        );
+            assert!(
+                size != SIZE || r.top() >= bar_bottom,
+                "{size:?}: {title} {r:?} covers the {bar_name} (to {bar_bottom})"
+            );
+            assert!(
+                r.bottom() <= status_top + 1.0,
+                "{size:?}: {title} {r:?} covers the status bar"
+            );
+            assert!(
+                r.right() <= size[0] + 0.5,
+                "{size:?}: {title} {r:?} leaves the window"
+            );
+        };
+        check(&h, "Compare methods", ("waveform toolbar", toolbar_bottom));
         // The still window: below the menu bar and the view tabs, inside the window.
         let tabs_bottom = h.get_by_label("export PNG…").rect().bottom();
         let still = tmp.path().join("blank.png");
@@ -61,25 +65,7 @@ fn tool_windows_open_below_the_menu_bar_and_the_toolbar_inside_the_window() {
             .unwrap();
         wb_mut(&mut h).open_still(&still);
         settle(&mut h);
-        let r = window_rect(&h, "Still image");
-        assert!(
-            r.top() >= menu_bottom,
-            "{size:?}: {r:?} covers the menu bar"
-        );
-        if size == SIZE {
-            assert!(
-                r.top() >= tabs_bottom,
-                "{size:?}: {r:?} covers the view tabs"
-            );
-        }
-        assert!(
-            r.bottom() <= status_top + 1.0,
-            "{size:?}: {r:?} covers the status bar"
-        );
-        assert!(
-            r.right() <= size[0] + 0.5,
-            "{size:?}: {r:?} leaves the window"
-        );
+        check(&h, "Still image", ("view tabs", tabs_bottom));
     }
 }
 
