@@ -447,6 +447,11 @@ mod tests {
             crate::io::scan::test_support::scan_toml(460.2)
         );
         assert!(ScanMeta::from_toml_str(&base, Path::new("s/scan.toml")).is_ok());
+        let refusal = |text: &str| {
+            ScanMeta::from_toml_str(text, Path::new("s/scan.toml"))
+                .unwrap_err()
+                .to_string()
+        };
         for (from, to, key) in [
             (
                 "focus_distance_mm = 4.05",
@@ -469,27 +474,18 @@ mod tests {
                 "the focal plane under the glass",
             ),
         ] {
-            let text = base.replace(from, to);
-            let msg = ScanMeta::from_toml_str(&text, Path::new("s/scan.toml"))
-                .unwrap_err()
-                .to_string();
+            let msg = refusal(&base.replace(from, to));
             assert!(msg.contains(key) && msg.contains("s/scan.toml"), "{msg}");
             assert!(msg.contains("camera.working_distance_mm = 4 mm"), "{msg}");
         }
         // A glass index below 1 is named as such, not as the plane it would put behind the camera.
-        let text = base.replace("glass_index = 1.515", "glass_index = 0");
-        let msg = ScanMeta::from_toml_str(&text, Path::new("s/scan.toml"))
-            .unwrap_err()
-            .to_string();
+        let msg = refusal(&base.replace("glass_index = 1.515", "glass_index = 0"));
         assert!(
             msg.contains("dual_focus.glass_index must be at least 1"),
             "{msg}"
         );
         // A group step of 1e-300 µm (13 groups on one spot) is refused like a frame step.
-        let text = crate::io::scan::test_support::scan_toml(1e-300);
-        let msg = ScanMeta::from_toml_str(&text, Path::new("s/scan.toml"))
-            .unwrap_err()
-            .to_string();
+        let msg = refusal(&crate::io::scan::test_support::scan_toml(1e-300));
         assert!(
             msg.contains("motion.group_step_um must be at least 1e-9"),
             "{msg}"
