@@ -26,7 +26,7 @@ struct EvalJson<'a> {
     channels: &'a [crate::pipeline::eval::Scores],
 }
 
-/// Runs `eval`: prints the scores as text or JSON (one object: [`EvalJson`]; it was an object
+/// Runs `eval`: prints the scores as text or JSON (one object, `EvalJson`; it was an object
 /// for a mono comparison and an array for a stereo one).
 ///
 /// # Errors

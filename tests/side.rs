@@ -102,18 +102,23 @@ fn plan(scan: &Path, shards: usize, out: &Path, extra: &[&str]) {
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
-fn run_shard(scan: &Path, plan: &Path, k: usize, out: &Path) {
-    let o = groovescope(&[
+/// `reconstruct SCAN --plan PLAN --shard K --out OUT`: how every shard's command line starts.
+fn shard_args<'a>(scan: &'a Path, plan: &'a Path, k: &'a str, out: &'a Path) -> [&'a str; 8] {
+    [
         "reconstruct",
         s(scan),
         "--plan",
         s(plan),
         "--shard",
-        &k.to_string(),
+        k,
         "--out",
         s(out),
-        "--quiet",
-    ]);
+    ]
+}
+
+fn run_shard(scan: &Path, plan: &Path, k: usize, out: &Path) {
+    let k_text = k.to_string();
+    let o = groovescope(&[&shard_args(scan, plan, &k_text, out)[..], &["--quiet"]].concat());
     assert!(o.status.success(), "shard {k}: {}", stderr(&o));
 }
 
@@ -500,18 +505,8 @@ fn a_plan_for_another_scan_and_a_shard_out_of_range_are_refused() {
     let other = t.join("other");
     copy_dir(scan, &other);
     std::fs::remove_dir_all(other.join("g00149")).unwrap();
-    let run = |scan: &Path, k: &str| {
-        groovescope(&[
-            "reconstruct",
-            s(scan),
-            "--plan",
-            s(&p),
-            "--shard",
-            k,
-            "--out",
-            s(&t.join("part")),
-        ])
-    };
+    let part = t.join("part");
+    let run = |scan: &Path, k: &str| groovescope(&shard_args(scan, &p, k, &part));
     let o = run(&other, "0");
     assert!(!o.status.success());
     let e = stderr(&o);
@@ -714,35 +709,12 @@ fn a_journal_damaged_in_its_middle_is_refused_and_a_torn_last_record_is_dropped_
     let tmp = tempfile::tempdir().unwrap();
     let p = tmp.path().join("plan.json");
     plan(scan, 2, &p, &[]);
-    let shard0 = |out: &Path| {
-        groovescope(&[
-            "reconstruct",
-            s(scan),
-            "--plan",
-            s(&p),
-            "--shard",
-            "0",
-            "--out",
-            s(out),
-            "--resume",
-        ])
-    };
+    let shard0 =
+        |out: &Path| groovescope(&[&shard_args(scan, &p, "0", out)[..], &["--resume"]].concat());
     let damaged = tmp.path().join("damaged");
     let k = random_group(12, GROUPS / 2 - 10);
     eprintln!("killing shard 0 at its group {k}");
-    assert!(kill_at(
-        &[
-            "reconstruct",
-            s(scan),
-            "--plan",
-            s(&p),
-            "--shard",
-            "0",
-            "--out",
-            s(&damaged),
-        ],
-        k
-    ));
+    assert!(kill_at(&shard_args(scan, &p, "0", &damaged), k));
     let journal = damaged.join("journal");
     let original = std::fs::read(&journal).unwrap();
     let (starts, whole_end) = journal_frames(&original);
@@ -823,20 +795,10 @@ fn a_shard_stopped_before_its_own_groups_says_so_and_its_eta_counts_only_its_own
     let p = tmp.path().join("plan.json");
     plan(scan, 2, &p, &[]);
     let part = tmp.path().join("part-1");
-    let args = [
-        "reconstruct",
-        s(scan),
-        "--plan",
-        s(&p),
-        "--shard",
-        "1",
-        "--out",
-        s(&part),
-        "--progress-json",
-    ];
+    let args = [&shard_args(scan, &p, "1", &part)[..], &["--progress-json"]].concat();
     let spawn = || {
         Command::new(env!("CARGO_BIN_EXE_groovescope"))
-            .args(args)
+            .args(&args)
             .env_remove("DISPLAY")
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
