@@ -464,11 +464,14 @@ pub(crate) fn progress_bar(total: usize, quiet: bool) -> ProgressBar {
         return ProgressBar::hidden();
     }
     let pb = ProgressBar::new(total as u64);
+    // The message says what is counted: "groups", unless a run sets another (a shard's
+    // groups before its range).
     if let Ok(style) = ProgressStyle::with_template(
-        "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} groups ({per_sec}, ETA {eta})",
+        "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} {msg} ({per_sec}, ETA {eta})",
     ) {
         pb.set_style(style);
     }
+    pb.set_message("groups");
     pb
 }
 

@@ -257,11 +257,30 @@ impl Workbench {
 
     /// Exports to `path`, asking first when it would replace a file.
     pub fn request_export_wav(&mut self, path: PathBuf, selection: bool) {
-        if export::would_overwrite(&path) {
-            self.files.confirm = Some(Confirm::ExportWav { path, selection });
+        self.write_or_ask(Confirm::ExportWav { path, selection }, None);
+    }
+
+    /// Writes the file `c` stands for, or asks first (`c` becomes the open confirmation) when
+    /// that would replace one: the WAV or its sidecar report, the preset, the PNG. Not asked
+    /// again when `agreed` names the very file a native save dialog already asked about
+    /// replacing. `c` that writes no file (switching scans) is always asked.
+    pub(super) fn write_or_ask(&mut self, c: Confirm, agreed: Option<&Path>) {
+        let (target, replaces) = match &c {
+            Confirm::ExportWav { path, .. } | Confirm::ExportStill(path) => {
+                (path.as_path(), export::would_overwrite(path))
+            }
+            Confirm::SavePreset(path) | Confirm::ExportPng(path, _) => {
+                (path.as_path(), path.exists())
+            }
+            Confirm::SwitchScan(_) => {
+                self.files.confirm = Some(c);
+                return;
+            }
+        };
+        if replaces && !(agreed == Some(target) && target.exists()) {
+            self.files.confirm = Some(c);
         } else {
-            let bits = self.views.wave.bits;
-            let _ = self.export_wav_to(&path, bits, selection, false);
+            self.write_confirmed(c, replaces);
         }
     }
 
@@ -342,52 +361,27 @@ impl Workbench {
     /// that is new, or a name that had its extension added. The in-app path field asks nothing
     /// itself, so its paths come with `asked` false and every replacement is asked about.
     pub fn use_dialog_path(&mut self, kind: DialogKind, path: PathBuf, asked: bool) {
-        // True when the dialog asked before replacing `target`, the file written.
-        let agreed = |target: &Path| asked && target == path && target.exists();
+        let agreed = asked.then_some(path.as_path());
         match kind {
             DialogKind::OpenScan => {
                 let _ = self.open_scan(&path);
             }
-            DialogKind::ExportWav(sel) => {
-                let wav = path.with_extension("wav");
-                if agreed(&wav) {
-                    let bits = self.views.wave.bits;
-                    let _ = self.export_wav_to(&wav, bits, sel, true);
-                } else {
-                    self.request_export_wav(wav, sel);
-                }
+            DialogKind::ExportWav(selection) => {
+                let path = path.with_extension("wav");
+                self.write_or_ask(Confirm::ExportWav { path, selection }, agreed);
             }
             DialogKind::LoadPreset => {
                 let _ = self.load_preset_from(&path);
             }
             DialogKind::SavePreset => {
-                let toml = path.with_extension("toml");
-                if agreed(&toml) {
-                    let _ = self.save_preset_to(&toml, true);
-                } else if toml.exists() {
-                    self.files.confirm = Some(Confirm::SavePreset(toml));
-                } else {
-                    let _ = self.save_preset_to(&toml, false);
-                }
+                self.write_or_ask(Confirm::SavePreset(path.with_extension("toml")), agreed);
             }
             DialogKind::OpenStill => self.open_still(&path),
             DialogKind::ExportStillWav => {
-                let wav = path.with_extension("wav");
-                if agreed(&wav) {
-                    let _ = self.export_still_to(&wav, true);
-                } else {
-                    self.request_export_still(wav);
-                }
+                self.write_or_ask(Confirm::ExportStill(path.with_extension("wav")), agreed);
             }
             DialogKind::ExportPng(view) => {
-                let png = path.with_extension("png");
-                if agreed(&png) {
-                    self.capture_view(png, view, true);
-                } else if png.exists() {
-                    self.files.confirm = Some(Confirm::ExportPng(png, view));
-                } else {
-                    self.capture_view(png, view, false);
-                }
+                self.write_or_ask(Confirm::ExportPng(path.with_extension("png"), view), agreed);
             }
             #[cfg(feature = "video")]
             DialogKind::VideoClip | DialogKind::VideoOut => {
@@ -408,17 +402,23 @@ impl Workbench {
             });
             return;
         }
+        self.write_confirmed(c, true);
+    }
+
+    /// Does what `c` stands for; a file is replaced only with `overwrite` (else one that
+    /// appeared meanwhile is refused).
+    fn write_confirmed(&mut self, c: Confirm, overwrite: bool) {
         match c {
             Confirm::ExportWav { path, selection } => {
                 let bits = self.views.wave.bits;
-                let _ = self.export_wav_to(&path, bits, selection, true);
+                let _ = self.export_wav_to(&path, bits, selection, overwrite);
             }
             Confirm::SavePreset(path) => {
-                let _ = self.save_preset_to(&path, true);
+                let _ = self.save_preset_to(&path, overwrite);
             }
-            Confirm::ExportPng(path, view) => self.capture_view(path, view, true),
+            Confirm::ExportPng(path, view) => self.capture_view(path, view, overwrite),
             Confirm::ExportStill(path) => {
-                let _ = self.export_still_to(&path, true);
+                let _ = self.export_still_to(&path, overwrite);
             }
             Confirm::SwitchScan(dir) => self.open_scan_anyway(&dir),
         }

@@ -291,11 +291,7 @@ impl Workbench {
 
     /// Exports to `path`, asking first when it would replace a file.
     pub fn request_export_still(&mut self, path: PathBuf) {
-        if super::export::would_overwrite(&path) {
-            self.files.confirm = Some(super::files::Confirm::ExportStill(path));
-        } else {
-            let _ = self.export_still_to(&path, false);
-        }
+        self.write_or_ask(super::files::Confirm::ExportStill(path), None);
     }
 
     /// Draws the still window (when open) and does what was asked in it.

@@ -261,30 +261,22 @@ fn in_order(
 
 impl Journal {
     /// Starts a new journal for `identity` at `path` (an existing file is replaced). The header
-    /// is written beside it and renamed into place, so a run stopped as it starts (`kill -9`, a
-    /// power cut) leaves a whole journal or none, never one without a header that `--resume`
-    /// must refuse.
+    /// is written atomically ([`crate::io::write_atomic`]), so a run stopped as it starts
+    /// (`kill -9`, a power cut) leaves a whole journal or none, never one without a header that
+    /// `--resume` must refuse; records are appended to it after.
     ///
     /// # Errors
     /// [`SideError::Load`] when the file cannot be written.
     pub fn create(path: &Path, identity: &RunIdentity) -> Result<Self, SideError> {
         let header = serde_json::to_vec(identity)
             .map_err(|e| SideError::refused(format!("cannot encode the header: {e}"), path))?;
-        let mut name = std::ffi::OsString::from(".");
-        name.push(path.file_name().unwrap_or_default());
-        name.push(".new");
-        let staged = path.with_file_name(name);
-        let mut file = File::create(&staged)
-            .map_err(|e| SideError::io("cannot create the journal", &e, &staged))?;
         let mut head = JOURNAL_MAGIC.to_vec();
         write_frame(&mut head, &header).map_err(|e| SideError::io("journal", &e, path))?;
-        file.write_all(&head)
-            .and_then(|()| file.sync_data())
-            .and_then(|()| std::fs::rename(&staged, path))
-            .map_err(|e| {
-                let _ = std::fs::remove_file(&staged);
-                SideError::io("cannot write the journal", &e, path)
-            })?;
+        crate::io::write_atomic(path, &head, true)?;
+        let file = OpenOptions::new()
+            .append(true)
+            .open(path)
+            .map_err(|e| SideError::io("cannot open the journal", &e, path))?;
         Ok(Self {
             file,
             path: path.to_path_buf(),

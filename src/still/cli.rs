@@ -251,8 +251,8 @@ fn still_progress(quiet: bool) -> indicatif::ProgressBar {
 /// # Errors
 /// Any failure as one line naming the file. With `--report`, a failure after the outputs were
 /// checked (bad params, an image without grooves, a groove lost, a WAV that cannot be written)
-/// is also recorded there ([`StillFailureReport`]), for a batch to read why; a Ctrl-C writes
-/// nothing.
+/// is also recorded there (`"status": "failed"` and the error line), for a batch to read why;
+/// a Ctrl-C writes nothing.
 pub fn run_still(args: &StillArgs) -> Result<()> {
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path())
         .chain(args.report.as_deref())
@@ -407,38 +407,38 @@ fn decode_and_write_wav(args: &StillArgs) -> Result<Decoded> {
 /// The JSON report of a `still` that failed (`status` "failed"): the one-line error and what
 /// the run was asked to do. No WAV was written.
 #[derive(Debug, serde::Serialize)]
-pub struct StillFailureReport<'a> {
+struct StillFailureReport<'a> {
     /// groovescope version.
-    pub version: &'static str,
+    version: &'static str,
     /// Always "failed" (a decoded still's report says "ok").
-    pub status: &'static str,
+    status: &'static str,
     /// The line the command printed (without `error: `).
-    pub error: String,
+    error: String,
     /// The still.
-    pub image: String,
+    image: String,
     /// The WAV asked for, not written.
-    pub output: String,
+    output: String,
     /// Always false.
-    pub output_written: bool,
+    output_written: bool,
     /// The params file given, if any.
-    pub params_file: Option<String>,
+    params_file: Option<String>,
     /// The reference given, if any.
-    pub reference: Option<String>,
+    reference: Option<String>,
     /// The settings given (`--axis`, `--cut`, `--reverse`, `--um-per-px`, `--rpm`,
     /// `--radius-mm`, `--groove`; an unusable number is null).
-    pub axis: &'a str,
+    axis: &'a str,
     /// `--cut`.
-    pub cut: &'a str,
+    cut: &'a str,
     /// `--reverse`.
-    pub reverse: bool,
+    reverse: bool,
     /// `--um-per-px`.
-    pub um_per_px: f64,
+    um_per_px: f64,
     /// `--rpm`.
-    pub rpm: f64,
+    rpm: f64,
     /// `--radius-mm`.
-    pub radius_mm: f64,
+    radius_mm: f64,
     /// `--groove` (None: the decoder was to choose).
-    pub groove: Option<usize>,
+    groove: Option<usize>,
 }
 
 /// `e`, after recording it in the `--report` file when one was asked for and the run was not

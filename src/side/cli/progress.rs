@@ -34,17 +34,8 @@ pub(super) struct ProgressOut {
 impl ProgressOut {
     pub(super) fn new(total: usize, args: &ReconstructArgs) -> Self {
         let json = args.side.progress_json;
-        let bar = progress_bar(total, args.quiet || json);
-        // The bar's own template with a message: "groups", or what the groups before the
-        // shard are for while they hold the bar.
-        if let Ok(style) = indicatif::ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} {msg} ({per_sec}, ETA {eta})",
-        ) {
-            bar.set_style(style);
-        }
-        bar.set_message("groups");
         Self {
-            bar,
+            bar: progress_bar(total, args.quiet || json),
             json,
             quiet: args.quiet,
             started: Instant::now(),
